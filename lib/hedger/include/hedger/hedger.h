@@ -1,0 +1,361 @@
+// SPDX-License-Identifier: MIT
+/// hedger/hedger.h — HEDGER: fixed-memory Q-value function approximation for one continuous action.
+///
+/// Q(s, a) is a memory of points x_i = (s_i, a_i) with values q_i (Smart & Kaelbling, ICML 2000;
+/// ICRA 2002 section III; design: shared/design/hedger.md). Each query fits a fresh local model:
+/// locally weighted regression (LWR), guarded by the independent-variable-hull (IVH) test and by
+/// value bounds derived from the rewards seen, falling back to locally weighted averaging (LWA),
+/// which never extrapolates. With fewer than k_min usable neighbours the answer is "unknown".
+///
+/// Coordinates. Raw inputs (state in the caller's units, action in the actuator's units, e.g.
+/// rad/s) are divided per dimension by cfg.input_scale[] ("one scaled unit = input_scale raw
+/// units"; a good choice is each dimension's range). Every distance, the bandwidth and the merge
+/// radius are in these scaled units. Index 0..state_dim-1 is the state, index state_dim the action.
+///
+/// Memory. Everything lives in one block provided by the caller (hedger_storage_size(),
+/// hedger_init()) or allocated once by hedger_create(). After init no function allocates;
+/// predict / greedy / update run in bounded time. The footprint is linear in cfg.capacity and
+/// cfg.fresh_capacity; hedger_storage_size() is the exact formula and the benchmark prints the
+/// measured bytes per stored point.
+///
+/// Determinism. Results are a pure function of (config, call sequence): no clocks, no global
+/// state, an explicitly seeded generator, and neighbour sets ordered by (distance, slot) so that
+/// the internal kd-tree layout never changes a result. Same binary + same calls = bit-identical
+/// outputs and saved bytes.
+///
+/// Threads. An instance is not thread-safe; use one instance per thread or lock around it.
+/// Distinct instances share nothing.
+///
+/// Errors. Functions return hedger_status_t: 0 = OK, 1 = an outcome the caller must handle (no
+/// known action), >= 2 errors. A failed call leaves the learned state unchanged (only the
+/// monotonic fault counters move).
+///
+/// Typical tick (phase two):
+/// @code
+///   hedger_update_info_t info;
+///   hedger_update(h, s_prev, a_prev, r, s, terminal, &info);   // learns; greedy at s done once
+///   double a = (info.next_status == HEDGER_OK) ? info.next_action : fallback_action;
+///   a = explore(a);                                            // caller's seeded exploration
+/// @endcode
+#ifndef HEDGER_HEDGER_H
+#define HEDGER_HEDGER_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/// Largest state dimension (compile-time ceiling; the runtime value is cfg.state_dim).
+#define HEDGER_MAX_STATE_DIM 8U
+/// Largest input dimension D = state_dim + 1 (state + action).
+#define HEDGER_MAX_INPUT_DIM (HEDGER_MAX_STATE_DIM + 1U)
+/// Largest neighbourhood (ceiling of cfg.k_max).
+#define HEDGER_MAX_K 64U
+/// Largest number of evenly spaced actions of the coarse greedy scan.
+#define HEDGER_MAX_COARSE_ACTIONS 64U
+/// Largest number of refinement evaluations of the greedy search.
+#define HEDGER_MAX_REFINE_ITERS 32U
+/// Largest eviction candidate set.
+#define HEDGER_MAX_EVICT_CANDIDATES 32U
+/// Largest sample store (ceiling of cfg.capacity).
+#define HEDGER_MAX_CAPACITY (1U << 24)
+/// Largest fresh-point buffer (ceiling of cfg.fresh_capacity).
+#define HEDGER_MAX_FRESH 4096U
+/// Largest run buffer for backward replay (ceiling of cfg.run_capacity).
+#define HEDGER_MAX_RUN 65536U
+/// Alignment (bytes) the storage given to hedger_init() must have.
+#define HEDGER_STORAGE_ALIGN 64U
+/// Version of the byte format written by hedger_save(). hedger_load() accepts only this version.
+#define HEDGER_FORMAT_VERSION 1U
+
+/// Result codes. 0 is success; 1 is an outcome, not an error; >= 2 are errors.
+typedef enum hedger_status {
+  HEDGER_OK = 0,
+  /// hedger_greedy() / hedger_update_info_t::next_status: every candidate action's value is
+  /// unknown (fewer than k_min neighbours). The outputs hold the action-range midpoint and
+  /// cfg.default_value; the caller decides (phase one: the example policy; phase two: the
+  /// advisor or a default action).
+  HEDGER_NO_KNOWN_ACTION = 1,
+  HEDGER_ERR_INVALID_ARG = 2,      ///< NULL pointer, bad config field, or value outside its documented range.
+  HEDGER_ERR_NON_FINITE = 3,       ///< An input was NaN or infinite; nothing was stored or changed.
+  HEDGER_ERR_CAPACITY = 4,         ///< A caller buffer or storage block is too small; nothing was written.
+  HEDGER_ERR_ALIGNMENT = 5,        ///< Storage not aligned to HEDGER_STORAGE_ALIGN.
+  HEDGER_ERR_NO_MEMORY = 6,        ///< hedger_create() only: its one allocation failed.
+  HEDGER_ERR_FORMAT = 7,           ///< hedger_load(): not a HEDGER buffer (bad magic) or inconsistent contents.
+  HEDGER_ERR_VERSION = 8,          ///< hedger_load(): written by another format version.
+  HEDGER_ERR_TRUNCATED = 9,        ///< hedger_load(): the buffer is shorter than the length it declares.
+  HEDGER_ERR_CHECKSUM = 10,        ///< hedger_load(): CRC-32 mismatch (corrupted bytes).
+  HEDGER_ERR_CONFIG_MISMATCH = 11, ///< hedger_load(): saved under an incompatible config (see hedger_load()).
+} hedger_status_t;
+
+/// How a value was obtained.
+typedef enum hedger_kind {
+  HEDGER_KIND_UNKNOWN = 0, ///< fewer than k_min usable neighbours: value = cfg.default_value
+  HEDGER_KIND_LWA = 1,     ///< locally weighted average (outside hull, implausible or singular LWR)
+  HEDGER_KIND_LWR = 2,     ///< locally weighted ridge regression, inside the hull and within bounds
+} hedger_kind_t;
+
+/// Why LWR fell back to LWA (HEDGER_FALLBACK_NONE for LWR and for unknown).
+typedef enum hedger_fallback {
+  HEDGER_FALLBACK_NONE = 0,
+  HEDGER_FALLBACK_HULL = 1,        ///< query outside the independent-variable hull
+  HEDGER_FALLBACK_IMPLAUSIBLE = 2, ///< LWR value outside [Q_min, Q_max]
+  HEDGER_FALLBACK_SINGULAR = 3,    ///< normal equations numerically singular (e.g. < D+1 independent points)
+} hedger_fallback_t;
+
+/// Weighting of the design matrix of the IVH test (hedger.md step 4 "(choice)").
+typedef enum hedger_ivh_mode {
+  /// Rows [x_i, 1]: Cook's hull of the neighbourhood points (every usable neighbour counts equally).
+  HEDGER_IVH_UNWEIGHTED = 0,
+  /// Rows sqrt(w_i)[x_i, 1]: the ellipsoid of the points the regression weights; a query is
+  /// compared with the largest weighted leverage h_ii = w_i x_i^T (X^T W X)^-1 x_i (stricter).
+  HEDGER_IVH_WEIGHTED = 1,
+} hedger_ivh_mode_t;
+
+/// What the store did with the new point of an update / insert.
+typedef enum hedger_store_op {
+  HEDGER_STORE_NONE = 0,     ///< nothing stored (error, or the call stores nothing)
+  HEDGER_STORE_INSERTED = 1, ///< into a free slot
+  HEDGER_STORE_MERGED = 2,   ///< folded into its nearest neighbour (closer than merge_radius, or the
+                             ///< most redundant point when the store is full)
+  HEDGER_STORE_REPLACED = 3, ///< the store was full: the most redundant candidate was evicted
+} hedger_store_op_t;
+
+/// Flags of a stored point (hedger_point_t::flags, hedger_insert()).
+#define HEDGER_POINT_PROTECTED 0x01U ///< carries a non-zero reward or a terminal transition: evicted last
+
+/// Configuration. Start from hedger_config_default() and change what you need. Fixed at init.
+/// Units: "scaled" = raw / input_scale (see the file comment).
+typedef struct hedger_config {
+  uint32_t state_dim;    ///< state dimension, 1..HEDGER_MAX_STATE_DIM. Default 3.
+  double action_min;     ///< action lower bound (caller units, e.g. rad/s), finite. Default -1.
+  double action_max;     ///< action upper bound, finite, > action_min. Default 1.
+  uint32_t capacity;     ///< stored points, 1..HEDGER_MAX_CAPACITY; memory is linear in it. Default 8192.
+  uint32_t k_min;        ///< fewer usable neighbours than this → unknown; 1..k_max. Default 3.
+  uint32_t k_max;        ///< neighbourhood ceiling, 1..HEDGER_MAX_K. Default 16.
+  double bandwidth;      ///< Gaussian kernel width h (scaled units), w = exp(-d^2/h^2), > 0. Default 0.2.
+  double weight_epsilon; ///< neighbours with kernel weight below this are not used, (0, 1). With the
+                         ///< fixed h this is a radius h*sqrt(ln(1/eps)). Default 0.01 (2.15 h).
+  double ridge;          ///< ridge λ added to the slope terms (not the intercept) of X^T W X, >= 0,
+                         ///< in units of kernel weight × scaled distance^2. Default 1e-6.
+  double alpha;          ///< learning rate α, (0, 1]. Default 0.2.
+  double gamma;          ///< discount γ, [0, 1). Default 0.99.
+  double input_scale[HEDGER_MAX_INPUT_DIM]; ///< raw→scaled divisor per dimension, finite > 0;
+                         ///< [0..state_dim-1] state, [state_dim] action; the rest ignored. Default 1.
+  double default_value;  ///< value of unknown queries, finite. Default 0.
+  uint64_t seed;         ///< seed of the eviction-candidate generator (any value). Default 1.
+  uint32_t greedy_coarse_actions; ///< M evenly spaced actions scanned by greedy, 2..HEDGER_MAX_COARSE_ACTIONS. Default 9.
+  uint32_t greedy_refine_iters;   ///< golden-section evaluations around the best coarse action,
+                                  ///< 0..HEDGER_MAX_REFINE_ITERS. Default 6.
+  hedger_ivh_mode_t ivh_mode;     ///< IVH design-matrix weighting. Default HEDGER_IVH_UNWEIGHTED.
+  double merge_radius;   ///< a new point closer than this (scaled) to its nearest stored point is
+                         ///< merged into it instead of stored, >= 0. Default 0.02.
+  uint32_t evict_candidates; ///< candidates examined per eviction, 1..HEDGER_MAX_EVICT_CANDIDATES. Default 8.
+  uint32_t fresh_capacity;   ///< fresh-point buffer (points not yet in the kd-tree, scanned linearly),
+                             ///< 8..HEDGER_MAX_FRESH. Default 256.
+  uint32_t rebuild_work_per_update; ///< kd-tree rebuild work units per update (1 unit ≈ one point
+                             ///< visited in one pass); 0 = automatic (a rebuild of a full store
+                             ///< finishes within fresh_capacity/2 updates). Default 0.
+  uint32_t run_capacity; ///< run buffer length (experiences) for backward replay, 0..HEDGER_MAX_RUN.
+                         ///< 0 disables the buffer. Default 0.
+  uint32_t replay;       ///< 1: hedger_end_run() replays the recorded run backwards (newest first)
+                         ///< through the training update; 0: it only clears the buffer. Default 0.
+} hedger_config_t;
+
+/// One prediction.
+typedef struct hedger_prediction {
+  double value;              ///< Q estimate (reward units); cfg.default_value when unknown
+  hedger_kind_t kind;        ///< how it was obtained
+  hedger_fallback_t fallback;///< why LWR was not used (LWA only)
+  uint32_t n_neighbours;     ///< usable neighbours (weight >= weight_epsilon, at most k_max)
+} hedger_prediction_t;
+
+/// What hedger_update() did.
+typedef struct hedger_update_info {
+  /// Greedy result at s_next, computed once before learning, for reuse as the next action.
+  /// HEDGER_OK: next_action is the best known action; HEDGER_NO_KNOWN_ACTION: all unknown (or
+  /// the transition was terminal, then next_kind = UNKNOWN and nothing was searched).
+  hedger_status_t next_status;
+  double next_action;        ///< greedy action at s_next (action units), in [action_min, action_max]
+  double next_value;         ///< Q(s_next, next_action); default_value when unknown
+  hedger_kind_t next_kind;   ///< how next_value was obtained
+  double q_next;             ///< q' used in the target: 0 if terminal, else next_value
+  double q_old;              ///< Q(s, a) before the update
+  hedger_kind_t kind;        ///< how q_old was obtained
+  double target;             ///< r + γ q'
+  double q_new;              ///< q_old + α (target − q_old): the value stored for (s, a)
+  uint32_t n_pulled;         ///< neighbours of (s, a) pulled toward q_new
+  hedger_store_op_t store_op;///< what the store did with (s, a)
+} hedger_update_info_t;
+
+/// Monotonic counters (never decrease, never reset, not restored by hedger_load()), plus gauges
+/// marked "gauge".
+typedef struct hedger_counters_s {
+  uint64_t predictions_lwr;     ///< predictions answered by LWR (including those inside greedy/update)
+  uint64_t predictions_lwa;     ///< ... by LWA
+  uint64_t predictions_unknown; ///< ... unknown
+  uint64_t fallback_hull;       ///< LWA because outside the IVH
+  uint64_t fallback_implausible;///< LWA because the LWR value was outside [Q_min, Q_max]
+  uint64_t fallback_singular;   ///< LWA because the normal equations were singular
+  uint64_t greedy_calls;        ///< greedy searches (hedger_greedy and inside hedger_update)
+  uint64_t greedy_all_unknown;  ///< ... that found no known action
+  uint64_t updates;             ///< successful training updates (including replayed ones)
+  uint64_t replayed_updates;    ///< updates performed by backward replay
+  uint64_t run_overflows;       ///< experiences dropped from a full run buffer (the oldest go first)
+  uint64_t inserts;             ///< points stored into a free slot
+  uint64_t merges;              ///< points folded into a close neighbour
+  uint64_t evictions;           ///< points evicted from a full store
+  uint64_t protected_evictions; ///< ... of which were protected (only if every candidate was)
+  uint64_t rebuilds;            ///< kd-tree rebuilds completed (swapped in)
+  uint64_t forced_rebuild_work; ///< work units done outside the per-update budget (fresh buffer full)
+  uint64_t rejected_non_finite; ///< calls refused because an input was NaN or infinite
+  uint64_t loads;               ///< successful hedger_load() calls
+  uint32_t max_rebuild_work;    ///< largest rebuild work done within one call (units)
+  uint32_t store_fill;          ///< gauge: stored points (<= capacity)
+  uint32_t store_protected;     ///< gauge: stored points with HEDGER_POINT_PROTECTED
+  uint32_t fresh_fill;          ///< gauge: entries in the fresh buffer
+  uint32_t run_fill;            ///< gauge: experiences in the run buffer
+  double reward_min;            ///< gauge: smallest reward seen (0 before any)
+  double reward_max;            ///< gauge: largest reward seen (0 before any)
+} hedger_counters_t;
+
+/// One stored point, in raw (unscaled) units (hedger_get_point()).
+typedef struct hedger_point {
+  double state[HEDGER_MAX_STATE_DIM]; ///< first state_dim entries valid
+  double action;
+  double value;
+  uint32_t flags;                     ///< HEDGER_POINT_* bits
+} hedger_point_t;
+
+/// Opaque instance. Internals are C++/Eigen.
+typedef struct hedger hedger_t;
+
+/// The default configuration (values documented per field). O(1).
+hedger_config_t hedger_config_default(void);
+
+/// Checks every field of cfg. Returns HEDGER_OK or HEDGER_ERR_INVALID_ARG. O(state_dim).
+hedger_status_t hedger_config_validate(const hedger_config_t* cfg);
+
+/// Bytes of storage hedger_init() needs for cfg (aligned to HEDGER_STORAGE_ALIGN), or 0 if cfg is
+/// invalid. Linear in capacity, fresh_capacity and run_capacity. O(log capacity), no allocation.
+size_t hedger_storage_size(const hedger_config_t* cfg);
+
+/// Placement-initialises an instance into storage (caller-owned; must outlive the instance and be
+/// aligned to HEDGER_STORAGE_ALIGN). *out receives the handle (it points into storage). The store
+/// starts empty, rewards seen = none. O(capacity) (clears the store), no allocation.
+/// Errors: INVALID_ARG (NULL or invalid cfg), ALIGNMENT, CAPACITY (storage_size too small).
+hedger_status_t hedger_init(hedger_t** out, void* storage, size_t storage_size, const hedger_config_t* cfg);
+
+/// Convenience: allocates hedger_storage_size(cfg) bytes once (aligned) and initialises them.
+/// Release with hedger_destroy(). Errors: as hedger_init(), plus NO_MEMORY.
+hedger_status_t hedger_create(hedger_t** out, const hedger_config_t* cfg);
+
+/// Frees an instance made by hedger_create() (NULL is a no-op). Never call it on an instance made
+/// by hedger_init(): that storage belongs to the caller, who just stops using it.
+void hedger_destroy(hedger_t* self);
+
+/// The config the instance was initialised with (never NULL for a valid self).
+const hedger_config_t* hedger_get_config(const hedger_t* self);
+
+/// Q(state, action). state: state_dim raw values; action: raw. *out receives value, kind,
+/// fallback and neighbour count. Cost O(log n + k_max·D + fresh·D + k_max·D^2 + D^3) with
+/// n = stored points, D = state_dim + 1; no allocation. Counts the prediction.
+/// Errors: INVALID_ARG (NULL), NON_FINITE (then *out is untouched).
+hedger_status_t hedger_predict(hedger_t* self, const double* state, double action, hedger_prediction_t* out);
+
+/// As hedger_predict(), and also writes the usable neighbours, nearest first (ties: lower slot),
+/// into caller buffers of capacity cap: slots[] (store slot, 0..fill-1, see hedger_get_point()) and
+/// weights[] (kernel weights in (0, 1]). Either buffer may be NULL. If cap < out->n_neighbours
+/// only the first cap are written. Same cost as hedger_predict().
+hedger_status_t hedger_predict_ex(hedger_t* self, const double* state, double action, hedger_prediction_t* out,
+                                  uint32_t* slots, double* weights, uint32_t cap);
+
+/// Greedy action at state: scans greedy_coarse_actions evenly spaced actions over
+/// [action_min, action_max] (both ends included), then golden-section refines around the best
+/// known one within its neighbouring grid interval (greedy_refine_iters evaluations). Unknown
+/// values never beat known ones; ties go to the smaller action (earlier evaluation).
+/// Returns HEDGER_OK with the best action/value/kind, or HEDGER_NO_KNOWN_ACTION (action =
+/// midpoint, value = default_value, kind = UNKNOWN). Any output pointer may be NULL except none
+/// are required. Cost: (M + R) predictions, no allocation. Errors: INVALID_ARG, NON_FINITE.
+hedger_status_t hedger_greedy(hedger_t* self, const double* state, double* action, double* value,
+                              hedger_kind_t* kind);
+
+/// One training update with experience (s, a, r, s_next, terminal) (hedger.md steps 1–6):
+/// 1. q' = 0 if terminal, else greedy value at s_next (default_value if all unknown);
+/// 2. q = Q(s, a) with neighbourhood K and kernel weights κ;
+/// 3. q_new = q + α (r + γ q' − q);
+/// 4. store (s, a) with q_new (merge / insert / evict, see the source for the rule);
+/// 5. pull each neighbour in K: q_i ← q_i + α κ_i (q_new − q_i);
+/// 6. r_min, r_max ← min/max with r (they bound plausible values: Q_min = min(r_min,0)/(1−γ),
+///    Q_max = max(r_max,0)/(1−γ)).
+/// Points of transitions with r != 0 or terminal are protected from eviction. With a run buffer,
+/// the experience is also recorded for hedger_end_run(). info (may be NULL) receives the greedy
+/// result at s_next for reuse as the next action, and what was stored.
+/// s_next is ignored (may be NULL) when terminal != 0. Cost: greedy (M + R predictions) + one
+/// prediction + eviction (evict_candidates nearest-neighbour queries when full) + at most
+/// rebuild_work_per_update rebuild units; no allocation. Errors: INVALID_ARG, NON_FINITE (nothing
+/// changed).
+hedger_status_t hedger_update(hedger_t* self, const double* state, double action, double reward,
+                              const double* state_next, int terminal, hedger_update_info_t* info);
+
+/// Ends the current run. With cfg.replay = 1, replays the recorded experiences newest first
+/// through the training update (propagates a sparse final reward back along the run in one
+/// pass); then clears the run buffer. *replayed (may be NULL) receives the number of replayed
+/// updates. Cost: run_fill updates (bounded by run_capacity), no allocation. Call it between runs,
+/// not inside a tick.
+hedger_status_t hedger_end_run(hedger_t* self, uint32_t* replayed);
+
+/// Stores a point directly with value q (seeding, tests, offline tools), through the same
+/// merge/evict rule as an update; no neighbour is pulled. flags: HEDGER_POINT_* bits. op (may be
+/// NULL) receives what the store did. O(evict_candidates · log n), no allocation.
+/// Errors: INVALID_ARG, NON_FINITE.
+hedger_status_t hedger_insert(hedger_t* self, const double* state, double action, double q, uint32_t flags,
+                              hedger_store_op_t* op);
+
+/// Stored points (<= capacity). Slots 0..fill-1 are all occupied. O(1).
+uint32_t hedger_size(const hedger_t* self);
+
+/// Reads stored point `slot` (0..hedger_size()-1) in raw units (scaled × input_scale, so within
+/// rounding of what was given). Errors: INVALID_ARG. O(D).
+hedger_status_t hedger_get_point(const hedger_t* self, uint32_t slot, hedger_point_t* out);
+
+/// Counters (monotonic) and gauges; the pointer stays valid for the instance's life. O(1).
+const hedger_counters_t* hedger_counters(const hedger_t* self);
+
+/// Exact bytes hedger_save() writes for the current state. O(1).
+size_t hedger_serialized_size(const hedger_t* self);
+
+/// Largest hedger_serialized_size() any instance with cfg can reach (a full store), or 0 if cfg
+/// is invalid: size a save buffer once with it. O(1).
+size_t hedger_serialized_max_size(const hedger_config_t* cfg);
+
+/// Writes the learned state (config, stored points with values and flags, rewards seen, the
+/// eviction generator's state) into buf: little-endian, versioned (HEDGER_FORMAT_VERSION),
+/// CRC-32 (IEEE 802.3) over all preceding bytes at the end. *written (may be NULL) receives the
+/// byte count. The run buffer and counters are not saved. O(n·D), no allocation, no file I/O
+/// (write the bytes atomically yourself: write, fsync, rename).
+/// Errors: INVALID_ARG, CAPACITY (size < hedger_serialized_size(); nothing written).
+hedger_status_t hedger_save(const hedger_t* self, void* buf, size_t size, size_t* written);
+
+/// Replaces the learned state with the one in buf (from hedger_save()). Checks, in order: magic
+/// (FORMAT), version (VERSION), declared length vs size (TRUNCATED), CRC-32 (CHECKSUM), config
+/// compatibility (CONFIG_MISMATCH: state_dim, action bounds, input scales, gamma must be equal
+/// bit for bit, and the saved points must fit cfg.capacity), then contents (FORMAT: non-finite or
+/// out-of-range fields). Any failure leaves the instance unchanged. On success the run buffer is
+/// cleared and the kd-tree rebuilt at once: O(n log n), no allocation; not for inside a tick.
+/// Bytes after the declared length are ignored.
+hedger_status_t hedger_load(hedger_t* self, const void* buf, size_t size);
+
+/// A constant English description of a status ("ok", "invalid argument", ...). Never NULL.
+const char* hedger_status_str(hedger_status_t status);
+
+/// A constant name of a kind: "unknown", "lwa", "lwr". Never NULL.
+const char* hedger_kind_str(hedger_kind_t kind);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif  // HEDGER_HEDGER_H
