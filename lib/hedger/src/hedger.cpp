@@ -1,14 +1,220 @@
 // SPDX-License-Identifier: MIT
-// HEDGER C API (skeleton: config, storage, status strings; learning is being implemented).
+// HEDGER C API: argument checks, storage layout, dimension dispatch, byte format.
 #include "hedger/hedger.h"
 
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <new>
+#include <type_traits>
+
+#include "core.hpp"
+
+namespace {
+
+using hg::Layout;
+
+constexpr size_t kAlign = HEDGER_STORAGE_ALIGN;
+
+size_t align_up(size_t n) { return (n + kAlign - 1) / kAlign * kAlign; }
+
+bool finite_all(const double* v, uint32_t n) {
+  for (uint32_t i = 0; i < n; ++i) {
+    if (!std::isfinite(v[i])) return false;
+  }
+  return true;
+}
+
+bool valid_config(const hedger_config_t* c) {
+  if (c == nullptr) return false;
+  if (c->state_dim < 1 || c->state_dim > HEDGER_MAX_STATE_DIM) return false;
+  if (!std::isfinite(c->action_min) || !std::isfinite(c->action_max) || !(c->action_min < c->action_max)) return false;
+  if (c->capacity < 1 || c->capacity > HEDGER_MAX_CAPACITY) return false;
+  if (c->k_max < 1 || c->k_max > HEDGER_MAX_K || c->k_min < 1 || c->k_min > c->k_max) return false;
+  if (!std::isfinite(c->bandwidth) || !(c->bandwidth > 0.0)) return false;
+  if (!(c->weight_epsilon > 0.0 && c->weight_epsilon < 1.0)) return false;
+  if (!std::isfinite(c->ridge) || !(c->ridge >= 0.0)) return false;
+  if (!(c->alpha > 0.0 && c->alpha <= 1.0)) return false;
+  if (!(c->gamma >= 0.0 && c->gamma < 1.0)) return false;
+  for (uint32_t i = 0; i <= c->state_dim; ++i) {
+    if (!std::isfinite(c->input_scale[i]) || !(c->input_scale[i] > 0.0)) return false;
+  }
+  if (!std::isfinite(c->default_value)) return false;
+  if (c->greedy_coarse_actions < 2 || c->greedy_coarse_actions > HEDGER_MAX_COARSE_ACTIONS) return false;
+  if (c->greedy_refine_iters > HEDGER_MAX_REFINE_ITERS) return false;
+  if (c->ivh_mode != HEDGER_IVH_UNWEIGHTED && c->ivh_mode != HEDGER_IVH_WEIGHTED) return false;
+  if (!std::isfinite(c->merge_radius) || !(c->merge_radius >= 0.0)) return false;
+  if (c->evict_candidates < 1 || c->evict_candidates > HEDGER_MAX_EVICT_CANDIDATES) return false;
+  if (c->fresh_capacity < 8 || c->fresh_capacity > HEDGER_MAX_FRESH) return false;
+  if (c->run_capacity > HEDGER_MAX_RUN) return false;
+  if (c->replay > 1 || (c->replay == 1 && c->run_capacity == 0)) return false;
+  return true;
+}
+
+/// The storage block: [hedger | store arrays | fresh | 2 × (tree points, ids, nodes) | run].
+Layout make_layout(const hedger_config_t& c) {
+  Layout l{};
+  const size_t d = c.state_dim + 1u;
+  const size_t cap = c.capacity;
+  l.max_nodes = hg::kd_max_nodes(c.capacity);
+  l.run_stride = 2u * c.state_dim + 3u;
+  size_t off = align_up(sizeof(hedger));
+  auto take = [&off](size_t bytes) {
+    const size_t at = off;
+    off = align_up(off + bytes);
+    return at;
+  };
+  l.pts = take(cap * d * sizeof(double));
+  l.val = take(cap * sizeof(double));
+  l.seq = take(cap * sizeof(uint64_t));
+  l.flags = take(cap);
+  l.fresh = take(static_cast<size_t>(c.fresh_capacity) * sizeof(hg::FreshEntry));
+  for (int t = 0; t < 2; ++t) {
+    l.tpts[t] = take(cap * d * sizeof(double));
+    l.tids[t] = take(cap * sizeof(uint32_t));
+    l.tnodes[t] = take(static_cast<size_t>(l.max_nodes) * sizeof(hg::Node));
+  }
+  l.run = take(static_cast<size_t>(c.run_capacity) * l.run_stride * sizeof(double));
+  l.total = off;
+  return l;
+}
+
+bool live(const hedger_t* h) { return h != nullptr && h->magic == hg::kMagic; }
+
+template <class F>
+decltype(auto) with_dim(uint32_t d, F&& f) {
+  switch (d) {
+    case 2:
+      return f(std::integral_constant<int, 2>{});
+    case 3:
+      return f(std::integral_constant<int, 3>{});
+    case 4:
+      return f(std::integral_constant<int, 4>{});
+    case 5:
+      return f(std::integral_constant<int, 5>{});
+    case 6:
+      return f(std::integral_constant<int, 6>{});
+    case 7:
+      return f(std::integral_constant<int, 7>{});
+    case 8:
+      return f(std::integral_constant<int, 8>{});
+    default:
+      return f(std::integral_constant<int, 9>{});
+  }
+}
+
+void refresh_gauges(hedger_t* h) {
+  h->counters.store_fill = h->fill;
+  h->counters.store_protected = h->n_protected;
+  h->counters.fresh_fill = h->n_fresh;
+  h->counters.run_fill = h->run_count;
+}
+
+hedger_status_t reject_non_finite(hedger_t* h) {
+  ++h->counters.rejected_non_finite;
+  return HEDGER_ERR_NON_FINITE;
+}
+
+void reset_learned_state(hedger_t* h) {
+  h->fill = 0;
+  h->n_protected = 0;
+  h->seq_counter = 0;
+  h->n_fresh = 0;
+  h->active = 0;
+  h->building = 0;
+  h->run_head = 0;
+  h->run_count = 0;
+  h->r_min = 0.0;
+  h->r_max = 0.0;
+  h->reward_seen = 0;
+}
+
+// ---- Byte format ----------------------------------------------------------------------------
+// Little-endian. Offsets: 0 magic "HDGR", 4 u32 version, 8 u64 total length (with CRC), 16 u32
+// state_dim, 20 u32 capacity, 24 u32 count, 28 u32 reward_seen, 32 f64 action_min, 40 f64
+// action_max, 48 f64 gamma, 56 f64 r_min, 64 f64 r_max, 72 u64 generator state, 80 f64
+// input_scale[D], then count × (D f64 scaled coordinates, f64 value, u32 flags), then u32 CRC-32
+// (IEEE 802.3, reflected 0xEDB88320, init and final xor 0xFFFFFFFF) of all preceding bytes.
+constexpr uint8_t kFileMagic[4] = {'H', 'D', 'G', 'R'};
+constexpr size_t kHeaderFixed = 80;
+
+size_t format_size(uint32_t d, uint32_t count) {
+  return kHeaderFixed + 8u * static_cast<size_t>(d) + static_cast<size_t>(count) * (8u * d + 12u) + 4u;
+}
+
+struct Crc32Table {
+  uint32_t t[256];
+  constexpr Crc32Table() : t() {
+    for (uint32_t i = 0; i < 256; ++i) {
+      uint32_t c = i;
+      for (int k = 0; k < 8; ++k) c = (c & 1u) ? (0xEDB88320u ^ (c >> 1)) : (c >> 1);
+      t[i] = c;
+    }
+  }
+};
+constexpr Crc32Table kCrc;
+
+uint32_t crc32(const uint8_t* p, size_t n) {
+  uint32_t c = 0xFFFFFFFFu;
+  for (size_t i = 0; i < n; ++i) c = kCrc.t[(c ^ p[i]) & 0xFFu] ^ (c >> 8);
+  return c ^ 0xFFFFFFFFu;
+}
+
+void put_u32(uint8_t* p, uint32_t v) {
+  for (int i = 0; i < 4; ++i) p[i] = static_cast<uint8_t>(v >> (8 * i));
+}
+void put_u64(uint8_t* p, uint64_t v) {
+  for (int i = 0; i < 8; ++i) p[i] = static_cast<uint8_t>(v >> (8 * i));
+}
+void put_f64(uint8_t* p, double v) {
+  uint64_t u;
+  std::memcpy(&u, &v, sizeof u);
+  put_u64(p, u);
+}
+uint32_t get_u32(const uint8_t* p) {
+  uint32_t v = 0;
+  for (int i = 0; i < 4; ++i) v |= static_cast<uint32_t>(p[i]) << (8 * i);
+  return v;
+}
+uint64_t get_u64(const uint8_t* p) {
+  uint64_t v = 0;
+  for (int i = 0; i < 8; ++i) v |= static_cast<uint64_t>(p[i]) << (8 * i);
+  return v;
+}
+double get_f64(const uint8_t* p) {
+  const uint64_t u = get_u64(p);
+  double v;
+  std::memcpy(&v, &u, sizeof v);
+  return v;
+}
+bool same_bits(double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; }
+
+// ---- Entry points (noexcept: nothing inside throws; the library builds with -fno-exceptions) --
+
+hedger_status_t predict_impl(hedger_t* self, const double* state, double action, hedger_prediction_t* out,
+                             uint32_t* slots, double* weights, uint32_t cap) noexcept {
+  if (!live(self) || state == nullptr || out == nullptr) return HEDGER_ERR_INVALID_ARG;
+  if (!finite_all(state, self->cfg.state_dim) || !std::isfinite(action)) return reject_non_finite(self);
+  with_dim(self->dim, [&](auto dc) {
+    constexpr int D = decltype(dc)::value;
+    double x[static_cast<size_t>(D)];
+    hg::scale_input<D>(*self, state, action, x);
+    hg::Neigh nb;
+    hg::predict_x<D>(*self, x, nb, *out);
+    const uint32_t n = nb.n < cap ? nb.n : cap;
+    for (uint32_t i = 0; i < n; ++i) {
+      if (slots != nullptr) slots[i] = nb.nb[i].id;
+      if (weights != nullptr) weights[i] = nb.w[i];
+    }
+  });
+  return HEDGER_OK;
+}
+
+}  // namespace
 
 extern "C" {
 
-hedger_config_t hedger_config_default(void) {
+hedger_config_t hedger_config_default(void) HEDGER_NOEXCEPT {
   hedger_config_t c;
   std::memset(&c, 0, sizeof c);
   c.state_dim = 3;
@@ -37,32 +243,327 @@ hedger_config_t hedger_config_default(void) {
   return c;
 }
 
-hedger_status_t hedger_config_validate(const hedger_config_t* cfg) { return cfg ? HEDGER_OK : HEDGER_ERR_INVALID_ARG; }
-size_t hedger_storage_size(const hedger_config_t*) { return 0; }
-hedger_status_t hedger_init(hedger_t**, void*, size_t, const hedger_config_t*) { return HEDGER_ERR_INVALID_ARG; }
-hedger_status_t hedger_create(hedger_t**, const hedger_config_t*) { return HEDGER_ERR_INVALID_ARG; }
-void hedger_destroy(hedger_t*) {}
-const hedger_config_t* hedger_get_config(const hedger_t*) { return nullptr; }
-hedger_status_t hedger_predict(hedger_t*, const double*, double, hedger_prediction_t*) { return HEDGER_ERR_INVALID_ARG; }
-hedger_status_t hedger_predict_ex(hedger_t*, const double*, double, hedger_prediction_t*, uint32_t*, double*, uint32_t) {
-  return HEDGER_ERR_INVALID_ARG;
+hedger_status_t hedger_config_validate(const hedger_config_t* cfg) HEDGER_NOEXCEPT {
+  return valid_config(cfg) ? HEDGER_OK : HEDGER_ERR_INVALID_ARG;
 }
-hedger_status_t hedger_greedy(hedger_t*, const double*, double*, double*, hedger_kind_t*) { return HEDGER_ERR_INVALID_ARG; }
-hedger_status_t hedger_update(hedger_t*, const double*, double, double, const double*, int, hedger_update_info_t*) {
-  return HEDGER_ERR_INVALID_ARG;
+
+size_t hedger_storage_size(const hedger_config_t* cfg) HEDGER_NOEXCEPT {
+  return valid_config(cfg) ? make_layout(*cfg).total : 0;
 }
-hedger_status_t hedger_end_run(hedger_t*, uint32_t*) { return HEDGER_ERR_INVALID_ARG; }
-hedger_status_t hedger_insert(hedger_t*, const double*, double, double, uint32_t, hedger_store_op_t*) {
-  return HEDGER_ERR_INVALID_ARG;
+
+hedger_status_t hedger_init(hedger_t** out, void* storage, size_t storage_size, const hedger_config_t* cfg)
+    HEDGER_NOEXCEPT {
+  if (out == nullptr || storage == nullptr || !valid_config(cfg)) return HEDGER_ERR_INVALID_ARG;
+  if (reinterpret_cast<uintptr_t>(storage) % kAlign != 0) return HEDGER_ERR_ALIGNMENT;
+  const Layout l = make_layout(*cfg);
+  if (storage_size < l.total) return HEDGER_ERR_CAPACITY;
+  uint8_t* base = static_cast<uint8_t*>(storage);
+  std::memset(base, 0, l.total);
+  hedger_t* h = new (base) hedger_t;
+  std::memset(static_cast<void*>(h), 0, sizeof *h);
+  h->cfg = *cfg;
+  h->dim = cfg->state_dim + 1;
+  h->h2 = cfg->bandwidth * cfg->bandwidth;
+  h->r2max = h->h2 * std::log(1.0 / cfg->weight_epsilon);
+  h->merge_r2 = cfg->merge_radius * cfg->merge_radius;
+  h->fresh_cap = cfg->fresh_capacity;
+  h->fresh_start = cfg->fresh_capacity / 4;
+  if (cfg->rebuild_work_per_update > 0) {
+    h->rebuild_budget = cfg->rebuild_work_per_update;
+  } else {
+    const uint64_t per = cfg->fresh_capacity / 2;
+    const uint64_t est = hg::kd_build_work_estimate(cfg->capacity);
+    h->rebuild_budget = (est + per - 1) / per;
+    if (h->rebuild_budget < 64) h->rebuild_budget = 64;
+  }
+  h->cap = cfg->capacity;
+  h->pts = reinterpret_cast<double*>(base + l.pts);
+  h->val = reinterpret_cast<double*>(base + l.val);
+  h->seq = reinterpret_cast<uint64_t*>(base + l.seq);
+  h->flags = base + l.flags;
+  h->fresh = reinterpret_cast<hg::FreshEntry*>(base + l.fresh);
+  for (int t = 0; t < 2; ++t) {
+    hg::kd_bind(h->tree[t], reinterpret_cast<double*>(base + l.tpts[t]), reinterpret_cast<uint32_t*>(base + l.tids[t]),
+                    reinterpret_cast<hg::Node*>(base + l.tnodes[t]), cfg->capacity);
+  }
+  h->run = reinterpret_cast<double*>(base + l.run);
+  h->run_cap = cfg->run_capacity;
+  h->run_stride = l.run_stride;
+  h->rng = cfg->seed ^ 0x9E3779B97F4A7C15ull;
+  if (h->rng == 0) h->rng = 0x9E3779B97F4A7C15ull;
+  reset_learned_state(h);
+  refresh_gauges(h);
+  h->magic = hg::kMagic;
+  *out = h;
+  return HEDGER_OK;
 }
-uint32_t hedger_size(const hedger_t*) { return 0; }
-hedger_status_t hedger_get_point(const hedger_t*, uint32_t, hedger_point_t*) { return HEDGER_ERR_INVALID_ARG; }
-const hedger_counters_t* hedger_counters(const hedger_t*) { return nullptr; }
-size_t hedger_serialized_size(const hedger_t*) { return 0; }
-size_t hedger_serialized_max_size(const hedger_config_t*) { return 0; }
-hedger_status_t hedger_save(const hedger_t*, void*, size_t, size_t*) { return HEDGER_ERR_INVALID_ARG; }
-hedger_status_t hedger_load(hedger_t*, const void*, size_t) { return HEDGER_ERR_INVALID_ARG; }
-const char* hedger_status_str(hedger_status_t) { return "unknown status"; }
-const char* hedger_kind_str(hedger_kind_t) { return "unknown"; }
+
+hedger_status_t hedger_create(hedger_t** out, const hedger_config_t* cfg) HEDGER_NOEXCEPT {
+  if (out == nullptr || !valid_config(cfg)) return HEDGER_ERR_INVALID_ARG;
+  const size_t n = make_layout(*cfg).total;
+  void* mem = std::aligned_alloc(kAlign, n);
+  if (mem == nullptr) return HEDGER_ERR_NO_MEMORY;
+  const hedger_status_t st = hedger_init(out, mem, n, cfg);
+  if (st != HEDGER_OK) {
+    std::free(mem);
+    return st;
+  }
+  (*out)->owned = 1;
+  return HEDGER_OK;
+}
+
+void hedger_destroy(hedger_t* self) HEDGER_NOEXCEPT {
+  if (!live(self) || !self->owned) return;
+  self->magic = 0;
+  std::free(self);
+}
+
+const hedger_config_t* hedger_get_config(const hedger_t* self) HEDGER_NOEXCEPT {
+  return live(self) ? &self->cfg : nullptr;
+}
+
+hedger_status_t hedger_predict(hedger_t* self, const double* state, double action, hedger_prediction_t* out)
+    HEDGER_NOEXCEPT {
+  return predict_impl(self, state, action, out, nullptr, nullptr, 0);
+}
+
+hedger_status_t hedger_predict_ex(hedger_t* self, const double* state, double action, hedger_prediction_t* out,
+                                  uint32_t* slots, double* weights, uint32_t cap) HEDGER_NOEXCEPT {
+  return predict_impl(self, state, action, out, slots, weights, cap);
+}
+
+hedger_status_t hedger_greedy(hedger_t* self, const double* state, double* action, double* value,
+                              hedger_kind_t* kind) HEDGER_NOEXCEPT {
+  if (!live(self) || state == nullptr) return HEDGER_ERR_INVALID_ARG;
+  if (!finite_all(state, self->cfg.state_dim)) return reject_non_finite(self);
+  const hg::GreedyResult g =
+      with_dim(self->dim, [&](auto dc) { return hg::greedy_at<decltype(dc)::value>(*self, state); });
+  if (action != nullptr) *action = g.action;
+  if (value != nullptr) *value = g.value;
+  if (kind != nullptr) *kind = g.kind;
+  return g.status;
+}
+
+hedger_status_t hedger_update(hedger_t* self, const double* state, double action, double reward,
+                              const double* state_next, int terminal, hedger_update_info_t* info) HEDGER_NOEXCEPT {
+  if (!live(self) || state == nullptr || (!terminal && state_next == nullptr)) return HEDGER_ERR_INVALID_ARG;
+  const uint32_t sd = self->cfg.state_dim;
+  if (!finite_all(state, sd) || !std::isfinite(action) || !std::isfinite(reward) ||
+      (!terminal && !finite_all(state_next, sd))) {
+    return reject_non_finite(self);
+  }
+  hedger_update_info_t local;
+  hedger_update_info_t& inf = (info != nullptr) ? *info : local;
+  with_dim(self->dim, [&](auto dc) {
+    hg::update<decltype(dc)::value>(*self, state, action, reward, state_next, terminal ? 1 : 0, inf);
+  });
+  refresh_gauges(self);
+  return HEDGER_OK;
+}
+
+hedger_status_t hedger_end_run(hedger_t* self, uint32_t* replayed) HEDGER_NOEXCEPT {
+  if (!live(self)) return HEDGER_ERR_INVALID_ARG;
+  uint32_t n = 0;
+  if (self->cfg.replay && self->run_count > 0) {
+    n = with_dim(self->dim, [&](auto dc) { return hg::replay_run<decltype(dc)::value>(*self); });
+  }
+  self->run_head = 0;
+  self->run_count = 0;
+  refresh_gauges(self);
+  if (replayed != nullptr) *replayed = n;
+  return HEDGER_OK;
+}
+
+hedger_status_t hedger_insert(hedger_t* self, const double* state, double action, double q, uint32_t flags,
+                              hedger_store_op_t* op) HEDGER_NOEXCEPT {
+  if (!live(self) || state == nullptr || (flags & ~HEDGER_POINT_PROTECTED) != 0) return HEDGER_ERR_INVALID_ARG;
+  if (!finite_all(state, self->cfg.state_dim) || !std::isfinite(action) || !std::isfinite(q)) {
+    return reject_non_finite(self);
+  }
+  const hedger_store_op_t r = with_dim(self->dim, [&](auto dc) {
+    return hg::insert<decltype(dc)::value>(*self, state, action, q, static_cast<uint8_t>(flags));
+  });
+  refresh_gauges(self);
+  if (op != nullptr) *op = r;
+  return HEDGER_OK;
+}
+
+hedger_status_t hedger_observe_reward(hedger_t* self, double reward) HEDGER_NOEXCEPT {
+  if (!live(self)) return HEDGER_ERR_INVALID_ARG;
+  if (!std::isfinite(reward)) return reject_non_finite(self);
+  hg::track_reward(*self, reward);
+  return HEDGER_OK;
+}
+
+uint32_t hedger_size(const hedger_t* self) HEDGER_NOEXCEPT { return live(self) ? self->fill : 0; }
+
+hedger_status_t hedger_get_point(const hedger_t* self, uint32_t slot, hedger_point_t* out) HEDGER_NOEXCEPT {
+  if (!live(self) || out == nullptr || slot >= self->fill) return HEDGER_ERR_INVALID_ARG;
+  std::memset(out, 0, sizeof *out);
+  const uint32_t d = self->dim;
+  const double* p = self->pts + static_cast<size_t>(slot) * d;
+  for (uint32_t i = 0; i + 1 < d; ++i) out->state[i] = p[i] * self->cfg.input_scale[i];
+  out->action = p[d - 1] * self->cfg.input_scale[d - 1];
+  out->value = self->val[slot];
+  out->flags = self->flags[slot];
+  return HEDGER_OK;
+}
+
+const hedger_counters_t* hedger_counters(const hedger_t* self) HEDGER_NOEXCEPT {
+  return live(self) ? &self->counters : nullptr;
+}
+
+size_t hedger_serialized_size(const hedger_t* self) HEDGER_NOEXCEPT {
+  return live(self) ? format_size(self->dim, self->fill) : 0;
+}
+
+size_t hedger_serialized_max_size(const hedger_config_t* cfg) HEDGER_NOEXCEPT {
+  return valid_config(cfg) ? format_size(cfg->state_dim + 1, cfg->capacity) : 0;
+}
+
+hedger_status_t hedger_save(const hedger_t* self, void* buf, size_t size, size_t* written) HEDGER_NOEXCEPT {
+  if (!live(self) || buf == nullptr) return HEDGER_ERR_INVALID_ARG;
+  const uint32_t d = self->dim;
+  const size_t total = format_size(d, self->fill);
+  if (size < total) return HEDGER_ERR_CAPACITY;
+  uint8_t* p = static_cast<uint8_t*>(buf);
+  std::memcpy(p, kFileMagic, 4);
+  put_u32(p + 4, HEDGER_FORMAT_VERSION);
+  put_u64(p + 8, total);
+  put_u32(p + 16, self->cfg.state_dim);
+  put_u32(p + 20, self->cfg.capacity);
+  put_u32(p + 24, self->fill);
+  put_u32(p + 28, self->reward_seen);
+  put_f64(p + 32, self->cfg.action_min);
+  put_f64(p + 40, self->cfg.action_max);
+  put_f64(p + 48, self->cfg.gamma);
+  put_f64(p + 56, self->r_min);
+  put_f64(p + 64, self->r_max);
+  put_u64(p + 72, self->rng);
+  size_t off = kHeaderFixed;
+  for (uint32_t i = 0; i < d; ++i, off += 8) put_f64(p + off, self->cfg.input_scale[i]);
+  for (uint32_t s = 0; s < self->fill; ++s) {
+    const double* x = self->pts + static_cast<size_t>(s) * d;
+    for (uint32_t i = 0; i < d; ++i, off += 8) put_f64(p + off, x[i]);
+    put_f64(p + off, self->val[s]);
+    off += 8;
+    put_u32(p + off, self->flags[s]);
+    off += 4;
+  }
+  put_u32(p + off, crc32(p, off));
+  if (written != nullptr) *written = total;
+  return HEDGER_OK;
+}
+
+hedger_status_t hedger_load(hedger_t* self, const void* buf, size_t size) HEDGER_NOEXCEPT {
+  if (!live(self) || buf == nullptr) return HEDGER_ERR_INVALID_ARG;
+  const uint8_t* p = static_cast<const uint8_t*>(buf);
+  // Magic first (on what is there), then version, then the declared length.
+  const size_t nm = size < 4 ? size : 4;
+  if (std::memcmp(p, kFileMagic, nm) != 0) return HEDGER_ERR_FORMAT;
+  if (size < 8) return HEDGER_ERR_TRUNCATED;
+  if (get_u32(p + 4) != HEDGER_FORMAT_VERSION) return HEDGER_ERR_VERSION;
+  if (size < 16) return HEDGER_ERR_TRUNCATED;
+  const uint64_t total = get_u64(p + 8);
+  if (total < kHeaderFixed + 8u + 4u) return HEDGER_ERR_FORMAT;
+  if (total > size) return HEDGER_ERR_TRUNCATED;
+  const size_t n = static_cast<size_t>(total);
+  if (get_u32(p + n - 4) != crc32(p, n - 4)) return HEDGER_ERR_CHECKSUM;
+  // Compatibility with this instance's config.
+  const uint32_t sd = get_u32(p + 16);
+  const uint32_t count = get_u32(p + 24);
+  if (sd != self->cfg.state_dim) return HEDGER_ERR_CONFIG_MISMATCH;
+  const uint32_t d = sd + 1;
+  if (!same_bits(get_f64(p + 32), self->cfg.action_min) || !same_bits(get_f64(p + 40), self->cfg.action_max) ||
+      !same_bits(get_f64(p + 48), self->cfg.gamma)) {
+    return HEDGER_ERR_CONFIG_MISMATCH;
+  }
+  for (uint32_t i = 0; i < d; ++i) {
+    if (!same_bits(get_f64(p + kHeaderFixed + 8u * i), self->cfg.input_scale[i])) return HEDGER_ERR_CONFIG_MISMATCH;
+  }
+  if (count > self->cfg.capacity) return HEDGER_ERR_CONFIG_MISMATCH;
+  // Contents.
+  if (total != format_size(d, count)) return HEDGER_ERR_FORMAT;
+  const uint32_t seen = get_u32(p + 28);
+  const double rmin = get_f64(p + 56), rmax = get_f64(p + 64);
+  const uint64_t rng = get_u64(p + 72);
+  if (seen > 1 || !std::isfinite(rmin) || !std::isfinite(rmax) || rmin > rmax || rng == 0) return HEDGER_ERR_FORMAT;
+  const size_t rec = 8u * d + 12u;
+  const size_t first = kHeaderFixed + 8u * d;
+  for (uint32_t s = 0; s < count; ++s) {
+    const uint8_t* r = p + first + s * rec;
+    for (uint32_t i = 0; i <= d; ++i) {
+      if (!std::isfinite(get_f64(r + 8u * i))) return HEDGER_ERR_FORMAT;
+    }
+    if ((get_u32(r + 8u * d + 8u) & ~HEDGER_POINT_PROTECTED) != 0) return HEDGER_ERR_FORMAT;
+  }
+  // Valid: replace the learned state.
+  reset_learned_state(self);
+  uint32_t prot = 0;
+  for (uint32_t s = 0; s < count; ++s) {
+    const uint8_t* r = p + first + s * rec;
+    double* x = self->pts + static_cast<size_t>(s) * d;
+    for (uint32_t i = 0; i < d; ++i) x[i] = get_f64(r + 8u * i);
+    self->val[s] = get_f64(r + 8u * d);
+    self->flags[s] = static_cast<uint8_t>(get_u32(r + 8u * d + 8u));
+    self->seq[s] = 1;
+    prot += self->flags[s] & HEDGER_POINT_PROTECTED;
+  }
+  self->fill = count;
+  self->n_protected = prot;
+  self->seq_counter = 1;
+  self->reward_seen = seen;
+  self->r_min = rmin;
+  self->r_max = rmax;
+  self->counters.reward_min = rmin < 0.0 ? rmin : 0.0;
+  self->counters.reward_max = rmax > 0.0 ? rmax : 0.0;
+  self->rng = rng;
+  with_dim(self->dim, [&](auto dc) { hg::rebuild_now<decltype(dc)::value>(*self); });
+  ++self->counters.loads;
+  refresh_gauges(self);
+  return HEDGER_OK;
+}
+
+const char* hedger_status_str(hedger_status_t status) HEDGER_NOEXCEPT {
+  switch (status) {
+    case HEDGER_OK:
+      return "ok";
+    case HEDGER_NO_KNOWN_ACTION:
+      return "no known action (every candidate action's value is unknown)";
+    case HEDGER_ERR_INVALID_ARG:
+      return "invalid argument (NULL pointer or value out of range)";
+    case HEDGER_ERR_NON_FINITE:
+      return "non-finite input (NaN or infinity) refused";
+    case HEDGER_ERR_CAPACITY:
+      return "buffer or storage too small";
+    case HEDGER_ERR_ALIGNMENT:
+      return "storage not aligned to HEDGER_STORAGE_ALIGN";
+    case HEDGER_ERR_NO_MEMORY:
+      return "out of memory";
+    case HEDGER_ERR_FORMAT:
+      return "not a HEDGER state buffer, or inconsistent contents";
+    case HEDGER_ERR_VERSION:
+      return "unsupported HEDGER format version";
+    case HEDGER_ERR_TRUNCATED:
+      return "HEDGER state buffer truncated";
+    case HEDGER_ERR_CHECKSUM:
+      return "HEDGER state buffer corrupted (CRC-32 mismatch)";
+    case HEDGER_ERR_CONFIG_MISMATCH:
+      return "HEDGER state saved under an incompatible config";
+  }
+  return "unknown status";
+}
+
+const char* hedger_kind_str(hedger_kind_t kind) HEDGER_NOEXCEPT {
+  switch (kind) {
+    case HEDGER_KIND_UNKNOWN:
+      return "unknown";
+    case HEDGER_KIND_LWA:
+      return "lwa";
+    case HEDGER_KIND_LWR:
+      return "lwr";
+  }
+  return "invalid";
+}
 
 }  // extern "C"

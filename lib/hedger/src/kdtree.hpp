@@ -28,7 +28,7 @@
 #include <cstdint>
 #include <limits>
 
-namespace hedger {
+namespace hg {
 
 /// Largest input dimension handled by the templates.
 constexpr int kMaxDim = 9;
@@ -486,6 +486,6 @@ void brute_query(const double* pts, uint32_t n, const double* q, Set& rs) {
   }
 }
 
-}  // namespace hedger
+}  // namespace hg
 
 #endif  // HEDGER_KDTREE_HPP

@@ -17,11 +17,11 @@ extern "C" {
 
 namespace {
 
-using hedger::KdTree;
-using hedger::KnnSet;
-using hedger::Neighbour;
-using hedger::Node;
-using hedger::RadiusSet;
+using hg::KdTree;
+using hg::KnnSet;
+using hg::Neighbour;
+using hg::Node;
+using hg::RadiusSet;
 
 uint64_t splitmix(uint64_t& s) {
   uint64_t z = (s += 0x9E3779B97F4A7C15ull);
@@ -37,8 +37,8 @@ struct TreeMem {
   std::vector<Node> nodes;
   KdTree t{};
   explicit TreeMem(uint32_t cap, int dim)
-      : pts(static_cast<size_t>(cap) * static_cast<size_t>(dim) + 1), ids(cap + 1), nodes(hedger::kd_max_nodes(cap)) {
-    hedger::kd_bind(t, pts.data(), ids.data(), nodes.data(), cap);
+      : pts(static_cast<size_t>(cap) * static_cast<size_t>(dim) + 1), ids(cap + 1), nodes(hg::kd_max_nodes(cap)) {
+    hg::kd_bind(t, pts.data(), ids.data(), nodes.data(), cap);
   }
 };
 
@@ -62,12 +62,12 @@ void check_dim(uint32_t n, bool grid, uint64_t seed, uint64_t slice) {
   const std::vector<double> pts = make_points(n, D, grid, seed);
   TreeMem mem(n, D);
   if (slice == 0) {
-    hedger::kd_build_all<D>(mem.t, pts.data(), nullptr, n, 0);
+    hg::kd_build_all<D>(mem.t, pts.data(), nullptr, n, 0);
   } else {
-    hedger::kd_begin_build(mem.t, pts.data(), nullptr, n, 0);
+    hg::kd_begin_build(mem.t, pts.data(), nullptr, n, 0);
     uint64_t steps = 0;
-    while (!hedger::kd_done(mem.t)) {
-      const uint64_t w = hedger::kd_build_step<D>(mem.t, slice);
+    while (!hg::kd_done(mem.t)) {
+      const uint64_t w = hg::kd_build_step<D>(mem.t, slice);
       // A slice may overrun its budget by at most one unit of bookkeeping.
       assert_true(w <= slice + 1);
       ++steps;
@@ -95,17 +95,17 @@ void check_dim(uint32_t n, bool grid, uint64_t seed, uint64_t slice) {
       for (double r : radii) {
         const double r2 = r * r;
         KnnSet sa(a, k, r2), sb(b, k, r2);
-        hedger::kd_query<D>(mem.t, q, sa, all);
-        hedger::brute_query<D>(pts.data(), n, q, sb);
+        hg::kd_query<D>(mem.t, q, sa, all);
+        hg::brute_query<D>(pts.data(), n, q, sb);
         expect_same(a, sa.size(), b, sb.size());
       }
     }
     for (double r : radii) {
       RadiusSet sa(ra.data(), n, r * r), sb(rb.data(), n, r * r);
-      hedger::kd_query<D>(mem.t, q, sa, all);
-      hedger::brute_query<D>(pts.data(), n, q, sb);
+      hg::kd_query<D>(mem.t, q, sa, all);
+      hg::brute_query<D>(pts.data(), n, q, sb);
       assert_int_equal(sa.total(), sb.total());
-      auto by_d_id = [](const Neighbour& x, const Neighbour& y) { return hedger::nb_less(x.d2, x.id, y.d2, y.id); };
+      auto by_d_id = [](const Neighbour& x, const Neighbour& y) { return hg::nb_less(x.d2, x.id, y.d2, y.id); };
       std::sort(ra.begin(), ra.begin() + sa.size(), by_d_id);
       std::sort(rb.begin(), rb.begin() + sb.size(), by_d_id);
       expect_same(ra.data(), sa.size(), rb.data(), sb.size());
@@ -150,7 +150,7 @@ void test_kdtree_predicate_filters_entries(void**) {
   const uint32_t n = 2000;
   const std::vector<double> pts = make_points(n, D, false, 99);
   TreeMem mem(n, D);
-  hedger::kd_build_all<D>(mem.t, pts.data(), nullptr, n, 0);
+  hg::kd_build_all<D>(mem.t, pts.data(), nullptr, n, 0);
   auto odd_out = [](uint32_t id) { return (id % 3u) != 1u; };
   uint64_t qs = 5;
   for (int qi = 0; qi < 100; ++qi) {
@@ -158,9 +158,9 @@ void test_kdtree_predicate_filters_entries(void**) {
     for (double& x : q) x = uniform(qs) * 2.0 - 1.0;
     Neighbour a[16], b[16];
     KnnSet sa(a, 16, 1e300), sb(b, 16, 1e300);
-    hedger::kd_query<D>(mem.t, q, sa, odd_out);
+    hg::kd_query<D>(mem.t, q, sa, odd_out);
     for (uint32_t i = 0; i < n; ++i) {
-      if (odd_out(i)) sb.add(hedger::dist2<D>(q, pts.data() + static_cast<size_t>(i) * static_cast<size_t>(D)), i);
+      if (odd_out(i)) sb.add(hg::dist2<D>(q, pts.data() + static_cast<size_t>(i) * static_cast<size_t>(D)), i);
     }
     expect_same(a, sa.size(), b, sb.size());
   }
@@ -174,7 +174,7 @@ void test_kdtree_snapshot_filter_copies_old_points_only(void**) {
   std::vector<uint64_t> seq(n);
   for (uint32_t i = 0; i < n; ++i) seq[i] = i + 1;
   TreeMem mem(n, D);
-  hedger::kd_build_all<D>(mem.t, pts.data(), seq.data(), n, 60);
+  hg::kd_build_all<D>(mem.t, pts.data(), seq.data(), n, 60);
   assert_int_equal(mem.t.n, 60);
   for (uint32_t i = 0; i < mem.t.n; ++i) assert_true(mem.t.ids[i] < 60);
 }
@@ -199,8 +199,8 @@ void test_kdtree_queries_do_not_allocate(void**) {
   const std::vector<double> pts = make_points(n, D, false, 8);
   TreeMem mem(n, D);
   alloc_counter_begin();
-  hedger::kd_begin_build(mem.t, pts.data(), nullptr, n, 0);
-  while (!hedger::kd_done(mem.t)) hedger::kd_build_step<D>(mem.t, 1000);
+  hg::kd_begin_build(mem.t, pts.data(), nullptr, n, 0);
+  while (!hg::kd_done(mem.t)) hg::kd_build_step<D>(mem.t, 1000);
   uint64_t qs = 1;
   Neighbour a[32];
   double sum = 0.0;
@@ -208,7 +208,7 @@ void test_kdtree_queries_do_not_allocate(void**) {
     double q[static_cast<size_t>(D)];
     for (double& x : q) x = uniform(qs) * 2.0 - 1.0;
     KnnSet s(a, 32, 0.25);
-    hedger::kd_query<D>(mem.t, q, s, [](uint32_t) { return true; });
+    hg::kd_query<D>(mem.t, q, s, [](uint32_t) { return true; });
     sum += s.size() ? a[0].d2 : 0.0;
   }
   assert_int_equal(alloc_counter_end(), 0);
@@ -222,8 +222,8 @@ void test_kdtree_node_count_formula_exact(void**) {
   for (uint32_t n : sizes) {
     const std::vector<double> pts = make_points(n, D, false, n);
     TreeMem mem(n, D);
-    hedger::kd_build_all<D>(mem.t, pts.data(), nullptr, n, 0);
-    assert_int_equal(mem.t.n_nodes, hedger::kd_nodes_for(n));
+    hg::kd_build_all<D>(mem.t, pts.data(), nullptr, n, 0);
+    assert_int_equal(mem.t.n_nodes, hg::kd_nodes_for(n));
   }
 }
 

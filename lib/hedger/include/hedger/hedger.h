@@ -44,7 +44,11 @@
 #include <stdint.h>
 
 #ifdef __cplusplus
+/// C++ callers see every function as noexcept: no exception ever crosses the C boundary.
+#define HEDGER_NOEXCEPT noexcept
 extern "C" {
+#else
+#define HEDGER_NOEXCEPT
 #endif
 
 /// Largest state dimension (compile-time ceiling; the runtime value is cfg.state_dim).
@@ -233,44 +237,44 @@ typedef struct hedger_point {
 typedef struct hedger hedger_t;
 
 /// The default configuration (values documented per field). O(1).
-hedger_config_t hedger_config_default(void);
+hedger_config_t hedger_config_default(void) HEDGER_NOEXCEPT;
 
 /// Checks every field of cfg. Returns HEDGER_OK or HEDGER_ERR_INVALID_ARG. O(state_dim).
-hedger_status_t hedger_config_validate(const hedger_config_t* cfg);
+hedger_status_t hedger_config_validate(const hedger_config_t* cfg) HEDGER_NOEXCEPT;
 
 /// Bytes of storage hedger_init() needs for cfg (aligned to HEDGER_STORAGE_ALIGN), or 0 if cfg is
 /// invalid. Linear in capacity, fresh_capacity and run_capacity. O(log capacity), no allocation.
-size_t hedger_storage_size(const hedger_config_t* cfg);
+size_t hedger_storage_size(const hedger_config_t* cfg) HEDGER_NOEXCEPT;
 
 /// Placement-initialises an instance into storage (caller-owned; must outlive the instance and be
 /// aligned to HEDGER_STORAGE_ALIGN). *out receives the handle (it points into storage). The store
 /// starts empty, rewards seen = none. O(capacity) (clears the store), no allocation.
 /// Errors: INVALID_ARG (NULL or invalid cfg), ALIGNMENT, CAPACITY (storage_size too small).
-hedger_status_t hedger_init(hedger_t** out, void* storage, size_t storage_size, const hedger_config_t* cfg);
+hedger_status_t hedger_init(hedger_t** out, void* storage, size_t storage_size, const hedger_config_t* cfg) HEDGER_NOEXCEPT;
 
 /// Convenience: allocates hedger_storage_size(cfg) bytes once (aligned) and initialises them.
 /// Release with hedger_destroy(). Errors: as hedger_init(), plus NO_MEMORY.
-hedger_status_t hedger_create(hedger_t** out, const hedger_config_t* cfg);
+hedger_status_t hedger_create(hedger_t** out, const hedger_config_t* cfg) HEDGER_NOEXCEPT;
 
 /// Frees an instance made by hedger_create() (NULL is a no-op). Never call it on an instance made
 /// by hedger_init(): that storage belongs to the caller, who just stops using it.
-void hedger_destroy(hedger_t* self);
+void hedger_destroy(hedger_t* self) HEDGER_NOEXCEPT;
 
 /// The config the instance was initialised with (never NULL for a valid self).
-const hedger_config_t* hedger_get_config(const hedger_t* self);
+const hedger_config_t* hedger_get_config(const hedger_t* self) HEDGER_NOEXCEPT;
 
 /// Q(state, action). state: state_dim raw values; action: raw. *out receives value, kind,
 /// fallback and neighbour count. Cost O(log n + k_max·D + fresh·D + k_max·D^2 + D^3) with
 /// n = stored points, D = state_dim + 1; no allocation. Counts the prediction.
 /// Errors: INVALID_ARG (NULL), NON_FINITE (then *out is untouched).
-hedger_status_t hedger_predict(hedger_t* self, const double* state, double action, hedger_prediction_t* out);
+hedger_status_t hedger_predict(hedger_t* self, const double* state, double action, hedger_prediction_t* out) HEDGER_NOEXCEPT;
 
 /// As hedger_predict(), and also writes the usable neighbours, nearest first (ties: lower slot),
 /// into caller buffers of capacity cap: slots[] (store slot, 0..fill-1, see hedger_get_point()) and
 /// weights[] (kernel weights in (0, 1]). Either buffer may be NULL. If cap < out->n_neighbours
 /// only the first cap are written. Same cost as hedger_predict().
 hedger_status_t hedger_predict_ex(hedger_t* self, const double* state, double action, hedger_prediction_t* out,
-                                  uint32_t* slots, double* weights, uint32_t cap);
+                                  uint32_t* slots, double* weights, uint32_t cap) HEDGER_NOEXCEPT;
 
 /// Greedy action at state: scans greedy_coarse_actions evenly spaced actions over
 /// [action_min, action_max] (both ends included), then golden-section refines around the best
@@ -280,7 +284,7 @@ hedger_status_t hedger_predict_ex(hedger_t* self, const double* state, double ac
 /// midpoint, value = default_value, kind = UNKNOWN). Any output pointer may be NULL except none
 /// are required. Cost: (M + R) predictions, no allocation. Errors: INVALID_ARG, NON_FINITE.
 hedger_status_t hedger_greedy(hedger_t* self, const double* state, double* action, double* value,
-                              hedger_kind_t* kind);
+                              hedger_kind_t* kind) HEDGER_NOEXCEPT;
 
 /// One training update with experience (s, a, r, s_next, terminal) (hedger.md steps 1–6):
 /// 1. q' = 0 if terminal, else greedy value at s_next (default_value if all unknown);
@@ -298,38 +302,43 @@ hedger_status_t hedger_greedy(hedger_t* self, const double* state, double* actio
 /// rebuild_work_per_update rebuild units; no allocation. Errors: INVALID_ARG, NON_FINITE (nothing
 /// changed).
 hedger_status_t hedger_update(hedger_t* self, const double* state, double action, double reward,
-                              const double* state_next, int terminal, hedger_update_info_t* info);
+                              const double* state_next, int terminal, hedger_update_info_t* info) HEDGER_NOEXCEPT;
 
 /// Ends the current run. With cfg.replay = 1, replays the recorded experiences newest first
 /// through the training update (propagates a sparse final reward back along the run in one
 /// pass); then clears the run buffer. *replayed (may be NULL) receives the number of replayed
 /// updates. Cost: run_fill updates (bounded by run_capacity), no allocation. Call it between runs,
 /// not inside a tick.
-hedger_status_t hedger_end_run(hedger_t* self, uint32_t* replayed);
+hedger_status_t hedger_end_run(hedger_t* self, uint32_t* replayed) HEDGER_NOEXCEPT;
 
 /// Stores a point directly with value q (seeding, tests, offline tools), through the same
 /// merge/evict rule as an update; no neighbour is pulled. flags: HEDGER_POINT_* bits. op (may be
 /// NULL) receives what the store did. O(evict_candidates · log n), no allocation.
 /// Errors: INVALID_ARG, NON_FINITE.
 hedger_status_t hedger_insert(hedger_t* self, const double* state, double action, double q, uint32_t flags,
-                              hedger_store_op_t* op);
+                              hedger_store_op_t* op) HEDGER_NOEXCEPT;
+
+/// Records r as a reward seen (step 6 of the update alone): widens [r_min, r_max] and thus the
+/// plausible value range. For seeding with hedger_insert() and for tests. O(1).
+/// Errors: INVALID_ARG, NON_FINITE.
+hedger_status_t hedger_observe_reward(hedger_t* self, double reward) HEDGER_NOEXCEPT;
 
 /// Stored points (<= capacity). Slots 0..fill-1 are all occupied. O(1).
-uint32_t hedger_size(const hedger_t* self);
+uint32_t hedger_size(const hedger_t* self) HEDGER_NOEXCEPT;
 
 /// Reads stored point `slot` (0..hedger_size()-1) in raw units (scaled × input_scale, so within
 /// rounding of what was given). Errors: INVALID_ARG. O(D).
-hedger_status_t hedger_get_point(const hedger_t* self, uint32_t slot, hedger_point_t* out);
+hedger_status_t hedger_get_point(const hedger_t* self, uint32_t slot, hedger_point_t* out) HEDGER_NOEXCEPT;
 
 /// Counters (monotonic) and gauges; the pointer stays valid for the instance's life. O(1).
-const hedger_counters_t* hedger_counters(const hedger_t* self);
+const hedger_counters_t* hedger_counters(const hedger_t* self) HEDGER_NOEXCEPT;
 
 /// Exact bytes hedger_save() writes for the current state. O(1).
-size_t hedger_serialized_size(const hedger_t* self);
+size_t hedger_serialized_size(const hedger_t* self) HEDGER_NOEXCEPT;
 
 /// Largest hedger_serialized_size() any instance with cfg can reach (a full store), or 0 if cfg
 /// is invalid: size a save buffer once with it. O(1).
-size_t hedger_serialized_max_size(const hedger_config_t* cfg);
+size_t hedger_serialized_max_size(const hedger_config_t* cfg) HEDGER_NOEXCEPT;
 
 /// Writes the learned state (config, stored points with values and flags, rewards seen, the
 /// eviction generator's state) into buf: little-endian, versioned (HEDGER_FORMAT_VERSION),
@@ -337,7 +346,7 @@ size_t hedger_serialized_max_size(const hedger_config_t* cfg);
 /// byte count. The run buffer and counters are not saved. O(n·D), no allocation, no file I/O
 /// (write the bytes atomically yourself: write, fsync, rename).
 /// Errors: INVALID_ARG, CAPACITY (size < hedger_serialized_size(); nothing written).
-hedger_status_t hedger_save(const hedger_t* self, void* buf, size_t size, size_t* written);
+hedger_status_t hedger_save(const hedger_t* self, void* buf, size_t size, size_t* written) HEDGER_NOEXCEPT;
 
 /// Replaces the learned state with the one in buf (from hedger_save()). Checks, in order: magic
 /// (FORMAT), version (VERSION), declared length vs size (TRUNCATED), CRC-32 (CHECKSUM), config
@@ -346,13 +355,13 @@ hedger_status_t hedger_save(const hedger_t* self, void* buf, size_t size, size_t
 /// out-of-range fields). Any failure leaves the instance unchanged. On success the run buffer is
 /// cleared and the kd-tree rebuilt at once: O(n log n), no allocation; not for inside a tick.
 /// Bytes after the declared length are ignored.
-hedger_status_t hedger_load(hedger_t* self, const void* buf, size_t size);
+hedger_status_t hedger_load(hedger_t* self, const void* buf, size_t size) HEDGER_NOEXCEPT;
 
 /// A constant English description of a status ("ok", "invalid argument", ...). Never NULL.
-const char* hedger_status_str(hedger_status_t status);
+const char* hedger_status_str(hedger_status_t status) HEDGER_NOEXCEPT;
 
 /// A constant name of a kind: "unknown", "lwa", "lwr". Never NULL.
-const char* hedger_kind_str(hedger_kind_t kind);
+const char* hedger_kind_str(hedger_kind_t kind) HEDGER_NOEXCEPT;
 
 #ifdef __cplusplus
 }

@@ -1,0 +1,33 @@
+// SPDX-License-Identifier: MIT
+// Helpers shared by the HEDGER unit tests (C): a seeded generator and instance set-up.
+#ifndef HEDGER_TEST_UTIL_H
+#define HEDGER_TEST_UTIL_H
+
+#include <hedger/hedger.h>
+#include <stdint.h>
+#include <stdlib.h>
+
+/// splitmix64: the tests' only source of randomness (fixed seeds).
+static inline uint64_t ht_next(uint64_t* s) {
+  uint64_t z = (*s += 0x9E3779B97F4A7C15ull);
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+
+/// Uniform in [lo, hi).
+static inline double ht_uniform(uint64_t* s, double lo, double hi) {
+  return lo + (hi - lo) * ((double)(ht_next(s) >> 11) * 0x1.0p-53);
+}
+
+/// Standard normal (Box–Muller; uses two draws).
+double ht_normal(uint64_t* s);
+
+/// hedger_create() that must succeed.
+static inline hedger_t* ht_create(const hedger_config_t* cfg) {
+  hedger_t* h = NULL;
+  if (hedger_create(&h, cfg) != HEDGER_OK) abort();
+  return h;
+}
+
+#endif  // HEDGER_TEST_UTIL_H

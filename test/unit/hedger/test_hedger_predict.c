@@ -1,0 +1,247 @@
+// SPDX-License-Identifier: MIT
+// Prediction: LWR reproduces linear data, the IVH test, the plausibility bounds, unknown.
+#include <math.h>
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include <cmocka.h>
+
+#include "hedger_test_util.h"
+
+// q(s, a) = 1 + 2 s0 − 3 s1 + 0.5 a: a known linear function.
+static double lin(const double* s, double a) { return 1.0 + 2.0 * s[0] - 3.0 * s[1] + 0.5 * a; }
+
+static hedger_config_t lin_config(void) {
+  hedger_config_t c = hedger_config_default();
+  c.state_dim = 2;
+  c.capacity = 2000;
+  c.k_min = 4;
+  c.k_max = 32;
+  c.bandwidth = 0.3;
+  c.ridge = 0.0;
+  c.gamma = 0.9;
+  c.merge_radius = 0.0;
+  return c;
+}
+
+// Fills [0,1]^2 × [-1,1] with a grid of points valued by lin(); rewards seen [-1, 1] so that
+// the plausible range is [-10, 10].
+static hedger_t* make_linear(void) {
+  const hedger_config_t c = lin_config();
+  hedger_t* h = ht_create(&c);
+  for (int i = 0; i <= 10; ++i) {
+    for (int j = 0; j <= 10; ++j) {
+      for (int k = 0; k <= 8; ++k) {
+        const double s[2] = {0.1 * i, 0.1 * j};
+        const double a = -1.0 + 0.25 * k;
+        assert_int_equal(hedger_insert(h, s, a, lin(s, a), 0, NULL), HEDGER_OK);
+      }
+    }
+  }
+  assert_int_equal(hedger_observe_reward(h, -1.0), HEDGER_OK);
+  assert_int_equal(hedger_observe_reward(h, 1.0), HEDGER_OK);
+  return h;
+}
+
+// Inside the data, LWR reproduces the linear function to rounding.
+static void test_predict_linear_data_lwr_exact(void** state) {
+  (void)state;
+  hedger_t* h = make_linear();
+  uint64_t rs = 42;
+  for (int i = 0; i < 200; ++i) {
+    const double s[2] = {ht_uniform(&rs, 0.1, 0.9), ht_uniform(&rs, 0.1, 0.9)};
+    const double a = ht_uniform(&rs, -0.8, 0.8);
+    hedger_prediction_t p;
+    assert_int_equal(hedger_predict(h, s, a, &p), HEDGER_OK);
+    assert_int_equal(p.kind, HEDGER_KIND_LWR);
+    assert_int_equal(p.fallback, HEDGER_FALLBACK_NONE);
+    assert_true(p.n_neighbours >= 4 && p.n_neighbours <= 32);
+    assert_true(fabs(p.value - lin(s, a)) < 1e-9);
+  }
+  assert_int_equal(hedger_counters(h)->predictions_lwr, 200);
+  hedger_destroy(h);
+}
+
+// The IVH test accepts a query inside the data and rejects a far extrapolation (LWA instead).
+static void test_predict_far_extrapolation_outside_hull_lwa(void** state) {
+  (void)state;
+  hedger_config_t c = lin_config();
+  c.bandwidth = 1.0;  // neighbours reach 2.1 scaled units: far queries still have neighbours
+  hedger_t* h = ht_create(&c);
+  for (int i = 0; i <= 4; ++i) {
+    for (int j = 0; j <= 4; ++j) {
+      for (int k = 0; k <= 4; ++k) {
+        const double s[2] = {0.25 * i, 0.25 * j};
+        const double a = -0.5 + 0.25 * k;
+        assert_int_equal(hedger_insert(h, s, a, lin(s, a), 0, NULL), HEDGER_OK);
+      }
+    }
+  }
+  hedger_observe_reward(h, -10.0);
+  hedger_observe_reward(h, 10.0);
+  hedger_prediction_t p;
+  const double inside[2] = {0.5, 0.5};
+  assert_int_equal(hedger_predict(h, inside, 0.0, &p), HEDGER_OK);
+  assert_int_equal(p.kind, HEDGER_KIND_LWR);
+  const double outside[2] = {2.0, 0.5};  // 1 unit beyond the data along s0
+  assert_int_equal(hedger_predict(h, outside, 0.0, &p), HEDGER_OK);
+  assert_true(p.n_neighbours >= c.k_min);
+  assert_int_equal(p.kind, HEDGER_KIND_LWA);
+  assert_int_equal(p.fallback, HEDGER_FALLBACK_HULL);
+  // LWA never extrapolates: the value lies within the stored values' range.
+  assert_true(p.value <= lin((const double[]){1.0, 0.0}, 0.5) + 1e-12);
+  assert_int_equal(hedger_counters(h)->fallback_hull, 1);
+  hedger_destroy(h);
+}
+
+// An LWR value outside [Q_min, Q_max] falls back to the weighted average of the neighbours.
+static void test_predict_implausible_value_falls_back_to_lwa(void** state) {
+  (void)state;
+  // Rewards seen bound values to [0, 1] while the data (lin) reach 3.5.
+  const hedger_config_t c = lin_config();
+  hedger_t* h = ht_create(&c);
+  for (int i = 0; i <= 10; ++i) {
+    for (int k = 0; k <= 8; ++k) {
+      for (int j = 0; j <= 10; ++j) {
+        const double s[2] = {0.1 * i, 0.1 * j};
+        const double a = -1.0 + 0.25 * k;
+        hedger_insert(h, s, a, lin(s, a), 0, NULL);
+      }
+    }
+  }
+  hedger_observe_reward(h, 0.1);  // Q_max = 0.1 / (1 − 0.9) = 1
+  const double s[2] = {0.8, 0.2};   // lin = 1 + 1.6 − 0.6 + 0 = 2 > 1
+  uint32_t slots[32];
+  double w[32];
+  hedger_prediction_t p;
+  assert_int_equal(hedger_predict_ex(h, s, 0.0, &p, slots, w, 32), HEDGER_OK);
+  assert_int_equal(p.kind, HEDGER_KIND_LWA);
+  assert_int_equal(p.fallback, HEDGER_FALLBACK_IMPLAUSIBLE);
+  double sw = 0.0, swq = 0.0;
+  for (uint32_t i = 0; i < p.n_neighbours; ++i) {
+    hedger_point_t pt;
+    assert_int_equal(hedger_get_point(h, slots[i], &pt), HEDGER_OK);
+    sw += w[i];
+    swq += w[i] * pt.value;
+  }
+  assert_true(fabs(p.value - swq / sw) < 1e-12);
+  assert_int_equal(hedger_counters(h)->fallback_implausible, 1);
+  hedger_destroy(h);
+}
+
+// Before any reward, Q_min = Q_max = 0: any non-zero LWR value is implausible.
+static void test_predict_no_reward_seen_bounds_are_zero(void** state) {
+  (void)state;
+  const hedger_config_t c = lin_config();
+  hedger_t* h = ht_create(&c);
+  for (int i = 0; i <= 5; ++i) {
+    for (int k = 0; k <= 5; ++k) {
+      const double s[2] = {0.2 * i, 0.5};
+      hedger_insert(h, s, -1.0 + 0.4 * k, 1.0 + 0.01 * i, 0, NULL);
+      const double s2[2] = {0.2 * i, 0.6};
+      hedger_insert(h, s2, -1.0 + 0.4 * k, 1.0 + 0.01 * k, 0, NULL);
+    }
+  }
+  hedger_prediction_t p;
+  const double q[2] = {0.5, 0.55};
+  assert_int_equal(hedger_predict(h, q, 0.0, &p), HEDGER_OK);
+  assert_int_equal(p.kind, HEDGER_KIND_LWA);
+  assert_int_equal(p.fallback, HEDGER_FALLBACK_IMPLAUSIBLE);
+  hedger_destroy(h);
+}
+
+// Fewer than k_min usable neighbours → unknown with the default value.
+static void test_predict_fewer_than_kmin_unknown(void** state) {
+  (void)state;
+  hedger_config_t c = lin_config();
+  c.default_value = -7.5;
+  hedger_t* h = ht_create(&c);
+  hedger_prediction_t p;
+  const double s[2] = {0.0, 0.0};
+  assert_int_equal(hedger_predict(h, s, 0.0, &p), HEDGER_OK);  // empty store
+  assert_int_equal(p.kind, HEDGER_KIND_UNKNOWN);
+  assert_true(p.value == -7.5);
+  assert_int_equal(p.n_neighbours, 0);
+  for (int i = 0; i < 3; ++i) {
+    const double si[2] = {0.05 * i, 0.0};
+    hedger_insert(h, si, 0.0, 1.0, 0, NULL);
+  }
+  assert_int_equal(hedger_predict(h, s, 0.0, &p), HEDGER_OK);  // 3 < k_min = 4
+  assert_int_equal(p.kind, HEDGER_KIND_UNKNOWN);
+  assert_int_equal(p.n_neighbours, 3);
+  const double si[2] = {0.0, 0.05};
+  hedger_insert(h, si, 0.0, 1.0, 0, NULL);
+  assert_int_equal(hedger_predict(h, s, 0.0, &p), HEDGER_OK);  // 4 = k_min: known
+  assert_int_equal(p.n_neighbours, 4);
+  assert_true(p.kind != HEDGER_KIND_UNKNOWN);
+  // Far away (beyond h·sqrt(ln(1/eps))): no usable neighbour.
+  const double far[2] = {5.0, 5.0};
+  assert_int_equal(hedger_predict(h, far, 0.0, &p), HEDGER_OK);
+  assert_int_equal(p.kind, HEDGER_KIND_UNKNOWN);
+  assert_int_equal(p.n_neighbours, 0);
+  assert_int_equal(hedger_counters(h)->predictions_unknown, 3);
+  hedger_destroy(h);
+}
+
+// Neighbourhoods hold at most k_max points, nearest first, with weights exp(-d^2/h^2).
+static void test_predict_neighbours_sorted_weights_gaussian(void** state) {
+  (void)state;
+  hedger_t* h = make_linear();
+  const double s[2] = {0.52, 0.47};
+  uint32_t slots[64];
+  double w[64];
+  hedger_prediction_t p;
+  assert_int_equal(hedger_predict_ex(h, s, 0.1, &p, slots, w, 64), HEDGER_OK);
+  assert_int_equal(p.n_neighbours, 32);
+  for (uint32_t i = 0; i < p.n_neighbours; ++i) {
+    hedger_point_t pt;
+    hedger_get_point(h, slots[i], &pt);
+    const double d2 = (pt.state[0] - s[0]) * (pt.state[0] - s[0]) + (pt.state[1] - s[1]) * (pt.state[1] - s[1]) +
+                      (pt.action - 0.1) * (pt.action - 0.1);
+    assert_true(fabs(w[i] - exp(-d2 / 0.09)) < 1e-12);
+    if (i > 0) assert_true(w[i] <= w[i - 1]);
+  }
+  hedger_destroy(h);
+}
+
+// The weighted IVH variant also accepts inside (exact LWR) and rejects extrapolation.
+static void test_predict_weighted_ivh_mode_works(void** state) {
+  (void)state;
+  hedger_config_t c = lin_config();
+  c.ivh_mode = HEDGER_IVH_WEIGHTED;
+  hedger_t* h = ht_create(&c);
+  for (int i = 0; i <= 10; ++i) {
+    for (int j = 0; j <= 10; ++j) {
+      for (int k = 0; k <= 8; ++k) {
+        const double s[2] = {0.1 * i, 0.1 * j};
+        hedger_insert(h, s, -1.0 + 0.25 * k, lin(s, -1.0 + 0.25 * k), 0, NULL);
+      }
+    }
+  }
+  hedger_observe_reward(h, -1.0);
+  hedger_observe_reward(h, 1.0);
+  hedger_prediction_t p;
+  const double in[2] = {0.5, 0.5};
+  hedger_predict(h, in, 0.0, &p);
+  assert_int_equal(p.kind, HEDGER_KIND_LWR);
+  assert_true(fabs(p.value - lin(in, 0.0)) < 1e-9);
+  const double out[2] = {1.3, 0.5};
+  hedger_predict(h, out, 0.0, &p);
+  assert_int_equal(p.kind, HEDGER_KIND_LWA);
+  hedger_destroy(h);
+}
+
+int main(void) {
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_predict_linear_data_lwr_exact),
+      cmocka_unit_test(test_predict_far_extrapolation_outside_hull_lwa),
+      cmocka_unit_test(test_predict_implausible_value_falls_back_to_lwa),
+      cmocka_unit_test(test_predict_no_reward_seen_bounds_are_zero),
+      cmocka_unit_test(test_predict_fewer_than_kmin_unknown),
+      cmocka_unit_test(test_predict_neighbours_sorted_weights_gaussian),
+      cmocka_unit_test(test_predict_weighted_ivh_mode_works),
+  };
+  return cmocka_run_group_tests_name("hedger.predict", tests, NULL, NULL);
+}
