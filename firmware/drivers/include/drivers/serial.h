@@ -1,0 +1,99 @@
+// SPDX-License-Identifier: MIT
+/// drivers/serial.h — Raw 8N1 serial port over a file descriptor (termios), with write pacing.
+///
+/// Works the same on /dev/ttyS*, USB adapters and pseudo-terminals (the emulator's devices):
+/// raw mode, 8 data bits, no parity, 1 stop bit, no hardware or software flow control,
+/// non-blocking reads. Baud rates: 9600, 19200, 38400, 57600, 115200, 230400, 500000.
+///
+/// Pacing: some devices lose bytes when fed too fast. The rFLEX wants about 1 ms after each
+/// write chunk (drv_serial_set_pacing(p, 0, 1000, 0)); the LMS200 at 500 kBd wants >= 55 µs
+/// between bytes (drv_serial_set_pacing(p, 0, 0, 55)). Pacing sleeps, so drv_serial_write()
+/// blocks for about n × byte_gap_us + chunk_gap_us.
+///
+/// Not thread-safe. No allocation. Errors are returned as negative errno values, with a
+/// human-readable message in the caller's buffer where a function takes one.
+#ifndef DRIVERS_SERIAL_H
+#define DRIVERS_SERIAL_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <sys/types.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/// @name Line settings of the robot's devices (protocols.md A.1, B.1)
+/// @{
+#define DRV_SERIAL_RFLEX_BAUD 115200U           ///< rFLEX base controller.
+#define DRV_SERIAL_RFLEX_CHUNK_GAP_US 1000U     ///< Pause after each write chunk to the rFLEX.
+#define DRV_SERIAL_LMS_POWERUP_BAUD 9600U       ///< LMS200 after power-up.
+#define DRV_SERIAL_LMS_500K_BYTE_GAP_US 55U     ///< Byte spacing to the LMS200 at 500 kBd.
+/// @}
+
+/// Counters of a serial port. Never decrease.
+typedef struct drv_serial_counters {
+  uint64_t bytes_read;
+  uint64_t bytes_written;
+  uint64_t read_errors;    ///< read() failures other than EAGAIN/EINTR.
+  uint64_t write_errors;   ///< write() failures other than EAGAIN/EINTR, and write timeouts.
+  uint64_t baud_changes;
+} drv_serial_counters_t;
+
+/// An open serial port. Fields are read-only for callers.
+typedef struct drv_serial {
+  int fd;                  ///< -1 when closed.
+  bool owns_fd;            ///< drv_serial_close() closes fd.
+  uint32_t baud;           ///< Current rate.
+  uint32_t chunk_bytes;    ///< Pacing: bytes per chunk (0 = whole write is one chunk).
+  uint32_t chunk_gap_us;   ///< Pacing: sleep after each chunk.
+  uint32_t byte_gap_us;    ///< Pacing: minimum spacing between bytes (0 = none).
+  drv_serial_counters_t counters;
+} drv_serial_t;
+
+/// True for the rates listed above. O(1).
+bool drv_serial_baud_supported(uint32_t baud);
+
+/// Opens `path` (O_RDWR | O_NOCTTY | O_NONBLOCK), sets raw 8N1 at `baud`, flushes both queues.
+/// @return 0, or a negative errno (ENOENT, EACCES, ENOTTY for a non-terminal, EINVAL for an
+///         unsupported baud) with a message naming the path and the cause in err (if not NULL).
+int drv_serial_open(drv_serial_t* port, const char* path, uint32_t baud, char* err, size_t err_len);
+
+/// Configures an already open terminal descriptor (e.g. a pseudo-terminal inherited from the
+/// emulator) exactly as drv_serial_open() does and sets it non-blocking.
+/// @param take_ownership if true, drv_serial_close() closes fd.
+int drv_serial_attach(drv_serial_t* port, int fd, uint32_t baud, bool take_ownership, char* err,
+                      size_t err_len);
+
+/// Changes the line rate after the output queue has drained (tcdrain), as the LMS200 needs
+/// after acknowledging a baud-change request. @return 0 or a negative errno.
+int drv_serial_set_baud(drv_serial_t* port, uint32_t baud);
+
+/// Sets write pacing (see file comment). O(1).
+void drv_serial_set_pacing(drv_serial_t* port, uint32_t chunk_bytes, uint32_t chunk_gap_us,
+                           uint32_t byte_gap_us);
+
+/// Non-blocking read. @return bytes read (> 0), 0 when nothing is available, -EPIPE on a
+/// hang-up (e.g. the other side of a pseudo-terminal has closed), or another negative errno.
+ssize_t drv_serial_read(drv_serial_t* port, uint8_t* buf, size_t cap);
+
+/// Writes all n bytes with pacing, waiting (poll) while the output queue is full, for at most
+/// timeout_ms in total. @return 0, -ETIMEDOUT, or another negative errno.
+int drv_serial_write(drv_serial_t* port, const uint8_t* data, size_t n, int timeout_ms);
+
+/// Waits until bytes are readable or timeout_ms passes (-1 = forever). @return 1 readable,
+/// 0 timeout, negative errno.
+int drv_serial_wait_readable(drv_serial_t* port, int timeout_ms);
+
+/// Discards unread input (tcflush TCIFLUSH). @return 0 or a negative errno.
+int drv_serial_flush_input(drv_serial_t* port);
+
+/// Closes the descriptor if owned; the struct may be reopened afterwards. Idempotent.
+void drv_serial_close(drv_serial_t* port);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif  // DRIVERS_SERIAL_H
