@@ -415,25 +415,48 @@ void write_slot(hedger& h, uint32_t slot, const double* x, double q, uint8_t fl)
   add_fresh<D>(h, slot);
 }
 
-/// Folds a new value into stored point j at squared distance d2: q_j += κ (q − q_j) with the
-/// kernel weight κ between them (≈ 1 for a merge within merge_radius << h); flags are OR-ed so
-/// a reward-bearing transition protects the point it is merged into.
-inline void merge_into(hedger& h, uint32_t j, double d2, double q, uint8_t fl) noexcept {
-  const double k = std::exp(-d2 / h.h2);
-  h.val[j] += k * (q - h.val[j]);
+/// Folds a new experience into stored point j (at squared distance d2 from the new point).
+/// Update (td): j stands for the new point as in state aggregation, so it gets the Q-learning
+/// step itself, q_j += α (target − q_j); this keeps the whole update even when j is not very
+/// close (a full small store merges most new points). Insert: q_j += κ (q − q_j) with the kernel
+/// weight κ between them. Flags are OR-ed, so a reward-bearing transition protects the point it
+/// is merged into.
+inline void merge_into(hedger& h, uint32_t j, double d2, double q, bool td, double target, uint8_t fl) noexcept {
+  if (td) {
+    h.val[j] += h.cfg.alpha * (target - h.val[j]);
+  } else {
+    h.val[j] += std::exp(-d2 / h.h2) * (q - h.val[j]);
+  }
   if ((fl & HEDGER_POINT_PROTECTED) && !(h.flags[j] & HEDGER_POINT_PROTECTED)) ++h.n_protected;
   h.flags[j] = static_cast<uint8_t>(h.flags[j] | fl);
   ++h.counters.merges;
 }
 
-/// Squared distance from stored point c to its nearest other stored point (+inf if alone).
+/// Where a new point goes (store_point() arguments): value, flags, nearest stored point and the
+/// new point's redundancy; for an update also the Q-learning target (merge rule).
+struct NewPoint {
+  double q;
+  uint8_t flags;
+  bool td;
+  double target;
+  bool have_near;
+  uint32_t near_slot;
+  double near_d2;
+  double red_d2;  ///< squared distance to its k_min-th nearest stored point (+inf if fewer)
+};
+
+/// Redundancy of stored point c: squared distance to its k-th nearest other stored point
+/// (k = k_min; +inf if it has fewer than k others). Small = many points close by.
 template <int D>
-double nearest_other_d2(const hedger& h, uint32_t c) noexcept {
-  Neighbour buf[2];
-  KnnSet rs(buf, 2, std::numeric_limits<double>::infinity());
+double redundancy_d2(const hedger& h, uint32_t c) noexcept {
+  Neighbour buf[HEDGER_MAX_K + 1];
+  const uint32_t k = h.cfg.k_min;
+  KnnSet rs(buf, k + 1, std::numeric_limits<double>::infinity());
   query_store<D>(h, h.pts + static_cast<size_t>(c) * static_cast<size_t>(D), rs);
+  uint32_t others = 0;
   for (uint32_t i = 0; i < rs.size(); ++i) {
-    if (buf[i].id != c) return buf[i].d2;
+    if (buf[i].id == c) continue;
+    if (++others == k) return buf[i].d2;
   }
   return std::numeric_limits<double>::infinity();
 }
@@ -443,50 +466,55 @@ double nearest_other_d2(const hedger& h, uint32_t c) noexcept {
 ///  2. insert into the next free slot while the store is not full;
 ///  3. full: draw 4·C slots from the seeded generator, keep the first C distinct unprotected ones
 ///     (protected ones only if none is unprotected); the most redundant candidate is the one
-///     closest to its own nearest neighbour (ties: lower slot). If the new point is closer to
-///     its nearest neighbour than that, the new point is the most redundant: merge it;
-///     otherwise evict the candidate and store the new point in its slot.
-/// Dense regions are thinned first (coverage kept); reward-bearing / terminal points are
+///     with the smallest distance to its k_min-th nearest other point (ties: lower slot). If the
+///     new point's own k_min-th neighbour is closer than that, the new point is the most
+///     redundant: merge it into its nearest; otherwise evict the candidate and store the new
+///     point in its slot.
+/// Dense regions are thinned first while every region keeps about k_min points, so it stays
+/// known (measured: with the nearest-neighbour distance instead, a region holding 90 % of the
+/// stream was thinned to a single point, i.e. unknown). Reward-bearing / terminal points are
 /// evicted only when every candidate drawn is protected.
 template <int D>
-hedger_store_op_t store_point(hedger& h, const double* x, double q, uint8_t fl, bool have_near, uint32_t near_slot,
-                              double near_d2) noexcept {
-  if (have_near && near_d2 <= h.merge_r2) {
-    merge_into(h, near_slot, near_d2, q, fl);
+hedger_store_op_t store_point(hedger& h, const double* x, const NewPoint& np, uint32_t* merged) noexcept {
+  *merged = kNone;
+  if (np.have_near && np.near_d2 <= h.merge_r2) {
+    merge_into(h, np.near_slot, np.near_d2, np.q, np.td, np.target, np.flags);
+    *merged = np.near_slot;
     return HEDGER_STORE_MERGED;
   }
   if (h.fill < h.cap) {
     const uint32_t slot = h.fill++;
-    write_slot<D>(h, slot, x, q, fl);
+    write_slot<D>(h, slot, x, np.q, np.flags);
     ++h.counters.inserts;
     return HEDGER_STORE_INSERTED;
   }
   const uint32_t c_max = h.cfg.evict_candidates;
   uint32_t cand[HEDGER_MAX_EVICT_CANDIDATES];
   uint32_t prot[HEDGER_MAX_EVICT_CANDIDATES];
-  uint32_t nc = 0, np = 0;
+  uint32_t nc = 0, npr = 0;
   for (uint32_t draw = 0; draw < 4 * c_max; ++draw) {
     const uint32_t s = rng_below(h.rng, h.fill);
     const bool is_prot = (h.flags[s] & HEDGER_POINT_PROTECTED) != 0;
     uint32_t* list = is_prot ? prot : cand;
-    uint32_t& n = is_prot ? np : nc;
+    uint32_t& n = is_prot ? npr : nc;
     bool dup = false;
     for (uint32_t i = 0; i < n; ++i) dup = dup || (list[i] == s);
     if (!dup && n < c_max) list[n++] = s;
   }
   const uint32_t* pool = (nc > 0) ? cand : prot;
-  const uint32_t npool = (nc > 0) ? nc : np;
+  const uint32_t npool = (nc > 0) ? nc : npr;
   uint32_t victim = pool[0];
-  double vd2 = nearest_other_d2<D>(h, victim);
+  double vd2 = redundancy_d2<D>(h, victim);
   for (uint32_t i = 1; i < npool; ++i) {
-    const double d2 = nearest_other_d2<D>(h, pool[i]);
+    const double d2 = redundancy_d2<D>(h, pool[i]);
     if (d2 < vd2 || (!(vd2 < d2) && pool[i] < victim)) {
       vd2 = d2;
       victim = pool[i];
     }
   }
-  if (have_near && near_d2 < vd2) {
-    merge_into(h, near_slot, near_d2, q, fl);
+  if (np.have_near && np.red_d2 < vd2) {
+    merge_into(h, np.near_slot, np.near_d2, np.q, np.td, np.target, np.flags);
+    *merged = np.near_slot;
     return HEDGER_STORE_MERGED;
   }
   if (h.flags[victim] & HEDGER_POINT_PROTECTED) {
@@ -494,7 +522,7 @@ hedger_store_op_t store_point(hedger& h, const double* x, double q, uint8_t fl, 
     ++h.counters.protected_evictions;
   }
   ++h.counters.evictions;
-  write_slot<D>(h, victim, x, q, fl);
+  write_slot<D>(h, victim, x, np.q, np.flags);
   return HEDGER_STORE_REPLACED;
 }
 
@@ -565,13 +593,17 @@ void update(hedger& h, const double* s, double a, double r, const double* sn, in
   uint64_t nseq[HEDGER_MAX_K];
   for (uint32_t i = 0; i < nb.n; ++i) nseq[i] = h.seq[nb.nb[i].id];
   const uint8_t fl = (terminal || !(r >= 0.0 && r <= 0.0)) ? HEDGER_POINT_PROTECTED : 0;
-  info.store_op = store_point<D>(h, x, q_new, fl, nb.n > 0, nb.n > 0 ? nb.nb[0].id : 0,
-                                 nb.n > 0 ? nb.nb[0].d2 : 0.0);
-  // 5. Pull each neighbour toward q_new by α κ_i.
+  const uint32_t km = h.cfg.k_min;
+  const bool have = nb.n > 0;
+  const NewPoint np{q_new, fl, true, info.target, have, have ? nb.nb[0].id : 0, have ? nb.nb[0].d2 : 0.0,
+                    nb.n >= km ? nb.nb[km - 1].d2 : std::numeric_limits<double>::infinity()};
+  uint32_t merged;
+  info.store_op = store_point<D>(h, x, np, &merged);
+  // 5. Pull each neighbour toward q_new by α κ_i (a merged point had its update already).
   uint32_t pulled = 0;
   for (uint32_t i = 0; i < nb.n; ++i) {
     const uint32_t sl = nb.nb[i].id;
-    if (h.seq[sl] != nseq[i]) continue;
+    if (h.seq[sl] != nseq[i] || sl == merged) continue;
     h.val[sl] += h.cfg.alpha * nb.w[i] * (q_new - h.val[sl]);
     ++pulled;
   }
@@ -593,10 +625,15 @@ hedger_store_op_t insert(hedger& h, const double* s, double a, double q, uint8_t
   h.call_work = 0;
   double x[static_cast<size_t>(D)];
   scale_input<D>(h, s, a, x);
-  Neighbour buf[1];
-  KnnSet rs(buf, 1, std::numeric_limits<double>::infinity());
+  Neighbour buf[HEDGER_MAX_K];
+  const uint32_t km = h.cfg.k_min;
+  KnnSet rs(buf, km, std::numeric_limits<double>::infinity());
   query_store<D>(h, x, rs);
-  const hedger_store_op_t op = store_point<D>(h, x, q, fl, rs.size() > 0, buf[0].id, buf[0].d2);
+  const bool have = rs.size() > 0;
+  const NewPoint np{q, fl, false, 0.0, have, have ? buf[0].id : 0, have ? buf[0].d2 : 0.0,
+                    rs.size() >= km ? buf[km - 1].d2 : std::numeric_limits<double>::infinity()};
+  uint32_t merged;
+  const hedger_store_op_t op = store_point<D>(h, x, np, &merged);
   maintain<D>(h);
   return op;
 }
