@@ -180,7 +180,7 @@ void predict_from(hedger& h, const double* x, const Neigh& nb, hedger_prediction
   Mat xtx = Mat::Zero();
   Vec xtwq = Vec::Zero();
   double sw = 0.0, swq = 0.0;
-  const bool unweighted_ivh = (h.cfg.ivh_mode == HEDGER_IVH_UNWEIGHTED);
+  const bool unweighted_ivh = (h.cfg.ivh_mode == static_cast<uint32_t>(HEDGER_IVH_UNWEIGHTED));
   for (uint32_t i = 0; i < nb.n; ++i) {
     const uint32_t s = nb.nb[i].id;
     const double* xi = h.pts + static_cast<size_t>(s) * static_cast<size_t>(D);

@@ -42,7 +42,7 @@ bool valid_config(const hedger_config_t* c) {
   if (!std::isfinite(c->default_value)) return false;
   if (c->greedy_coarse_actions < 2 || c->greedy_coarse_actions > HEDGER_MAX_COARSE_ACTIONS) return false;
   if (c->greedy_refine_iters > HEDGER_MAX_REFINE_ITERS) return false;
-  if (c->ivh_mode != HEDGER_IVH_UNWEIGHTED && c->ivh_mode != HEDGER_IVH_WEIGHTED) return false;
+  if (c->ivh_mode != static_cast<uint32_t>(HEDGER_IVH_UNWEIGHTED) && c->ivh_mode != static_cast<uint32_t>(HEDGER_IVH_WEIGHTED)) return false;
   if (!std::isfinite(c->merge_radius) || !(c->merge_radius >= 0.0)) return false;
   if (c->evict_candidates < 1 || c->evict_candidates > HEDGER_MAX_EVICT_CANDIDATES) return false;
   if (c->fresh_capacity < 8 || c->fresh_capacity > HEDGER_MAX_FRESH) return false;
@@ -233,7 +233,7 @@ hedger_config_t hedger_config_default(void) HEDGER_NOEXCEPT {
   c.seed = 1;
   c.greedy_coarse_actions = 9;
   c.greedy_refine_iters = 6;
-  c.ivh_mode = HEDGER_IVH_UNWEIGHTED;
+  c.ivh_mode = static_cast<uint32_t>(HEDGER_IVH_UNWEIGHTED);
   c.merge_radius = 0.02;
   c.evict_candidates = 8;
   c.fresh_capacity = 256;

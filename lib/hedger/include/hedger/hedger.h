@@ -153,7 +153,9 @@ typedef struct hedger_config {
   uint32_t greedy_coarse_actions; ///< M evenly spaced actions scanned by greedy, 2..HEDGER_MAX_COARSE_ACTIONS. Default 9.
   uint32_t greedy_refine_iters;   ///< golden-section evaluations around the best coarse action,
                                   ///< 0..HEDGER_MAX_REFINE_ITERS. Default 6.
-  hedger_ivh_mode_t ivh_mode;     ///< IVH design-matrix weighting. Default HEDGER_IVH_UNWEIGHTED.
+  uint32_t ivh_mode;              ///< IVH design-matrix weighting, a hedger_ivh_mode_t value (stored as
+                                  ///< uint32_t so that any value a C caller writes is checkable).
+                                  ///< Default HEDGER_IVH_UNWEIGHTED.
   double merge_radius;   ///< a new point closer than this (scaled) to its nearest stored point is
                          ///< merged into it instead of stored, >= 0. Default 0.02.
   uint32_t evict_candidates; ///< candidates examined per eviction, 1..HEDGER_MAX_EVICT_CANDIDATES. Default 8.
