@@ -6,8 +6,10 @@
 // Data (all inside the caller's storage block, see make_layout()):
 //   store   pts[cap × D] scaled coordinates, val[cap] values, seq[cap] sequence numbers,
 //           flags[cap]; slots 0..fill-1 are occupied (eviction replaces in place).
-//   fresh   [fresh_cap] (slot, seq) of points stored after the active tree's snapshot; scanned
-//           linearly by every query.
+//   fresh   [fresh_cap] slots and coordinates of the points stored after the active tree's
+//           snapshot, scanned linearly (contiguously) by every query; fresh_pos[cap] maps a slot
+//           to its fresh entry, so a slot rewritten again updates its entry in place and every
+//           entry is always current (no per-entry validity check in the scan).
 //   trees   two kd-trees (kdtree.hpp): `active` answers queries, the other is rebuilt in slices.
 //           A tree entry is valid while its slot's seq <= the tree's snapshot (replaced slots
 //           are skipped; their new point is in `fresh`).
@@ -36,23 +38,35 @@
 namespace hg {
 
 constexpr uint32_t kMagic = 0x48444752u;  // "HDGR": a live instance
-/// Smallest reciprocal condition number (LDLT estimate, 1-norm) accepted for the IVH and the LWR
-/// normal equations; below it the neighbourhood is treated as singular (LWA).
-constexpr double kRcondMin = 1e-12;
+/// Smallest ratio min|d_i| / max|d_i| of the pivots of the (pivoted) LDLT factorisation accepted
+/// for the IVH and the LWR normal equations; below it (or with a non-positive pivot) the
+/// neighbourhood is treated as singular (LWA). For these small SPD matrices the pivot ratio is a
+/// cheap proxy of 1/cond; exact collinearity (e.g. every neighbour with the same action) gives a
+/// ratio near 1e-17.
+constexpr double kPivotRatioMin = 1e-12;
+
+/// Factorises a symmetric matrix; false if it is not numerically positive definite.
+template <class Mat>
+bool factor_spd(Eigen::LDLT<Mat>& ldlt, const Mat& m) noexcept {
+  ldlt.compute(m);
+  if (ldlt.info() != Eigen::Success) return false;
+  const auto d = ldlt.vectorD();
+  double dmin = d[0], dmax = d[0];
+  for (int i = 1; i < d.size(); ++i) {
+    if (d[i] < dmin) dmin = d[i];
+    if (d[i] > dmax) dmax = d[i];
+  }
+  return dmin > 0.0 && dmin > kPivotRatioMin * dmax;
+}
 /// Relative tolerance of the IVH comparison, so that a query exactly at the point of largest
 /// leverage is inside despite rounding.
 constexpr double kIvhTol = 1e-9;
 
-struct FreshEntry {
-  uint64_t seq;
-  uint32_t slot;
-  uint32_t pad;
-};
 
 /// Offsets of every array in the storage block (bytes from its start).
 struct Layout {
   size_t total;
-  size_t pts, val, seq, flags, fresh, run;
+  size_t pts, val, seq, flags, fresh_pos, fresh_slot, fresh_pts, run;
   size_t tpts[2], tids[2], tnodes[2];
   uint32_t max_nodes;
   uint32_t run_stride;  ///< doubles per run record: s, a, r, s', terminal
@@ -83,7 +97,9 @@ struct hedger {
   uint8_t* flags;
   uint64_t seq_counter;
   // Fresh buffer.
-  hg::FreshEntry* fresh;
+  uint32_t* fresh_pos;   ///< [cap] entry of each slot, or kNone
+  uint32_t* fresh_slot;  ///< [fresh_cap]
+  double* fresh_pts;     ///< [fresh_cap × D]
   uint32_t n_fresh;
   uint32_t fresh_cap;
   // Trees.
@@ -139,13 +155,12 @@ void scale_input(const hedger& h, const double* state, double action, double* x)
 /// Adds every valid stored point (fresh buffer + active tree) to the set.
 template <int D, class Set>
 void query_store(const hedger& h, const double* x, Set& rs) noexcept {
-  const uint64_t* seq = h.seq;
-  for (uint32_t i = 0; i < h.n_fresh; ++i) {
-    const FreshEntry& e = h.fresh[i];
-    if (seq[e.slot] != e.seq) continue;
-    const double d = dist2<D>(x, h.pts + static_cast<size_t>(e.slot) * static_cast<size_t>(D));
-    if (d <= rs.worst()) rs.add(d, e.slot);
+  const double* fp = h.fresh_pts;
+  for (uint32_t i = 0; i < h.n_fresh; ++i, fp += D) {
+    const double d = dist2<D>(x, fp);
+    if (d <= rs.worst()) rs.add(d, h.fresh_slot[i]);
   }
+  const uint64_t* seq = h.seq;
   const KdTree& t = h.tree[h.active];
   const uint64_t snap = t.snapshot;
   kd_query<D>(t, x, rs, [seq, snap](uint32_t id) { return seq[id] <= snap; });
@@ -202,8 +217,8 @@ void predict_from(hedger& h, const double* x, const Neigh& nb, hedger_prediction
   {
     // Independent-variable hull: inside iff e^T V^-1 e <= max_i h_ii.
     const Mat& v = unweighted_ivh ? xtx : xtwx;
-    Eigen::LDLT<Mat> ldlt(v);
-    if (ldlt.info() != Eigen::Success || !(ldlt.rcond() >= kRcondMin)) {
+    Eigen::LDLT<Mat> ldlt;
+    if (!factor_spd(ldlt, v)) {
       fb = HEDGER_FALLBACK_SINGULAR;
     } else {
       const Mat vinv = ldlt.solve(Mat::Identity());
@@ -221,8 +236,8 @@ void predict_from(hedger& h, const double* x, const Neigh& nb, hedger_prediction
     // Ridge LWR: (X^T W X + λ diag(1…1, 0)) β = X^T W q; the intercept is not shrunk.
     Mat a = xtwx;
     for (int j = 0; j < D; ++j) a(j, j) += h.cfg.ridge;
-    Eigen::LDLT<Mat> ldlt(a);
-    if (ldlt.info() != Eigen::Success || !(ldlt.rcond() >= kRcondMin)) {
+    Eigen::LDLT<Mat> ldlt;
+    if (!factor_spd(ldlt, a)) {
       fb = HEDGER_FALLBACK_SINGULAR;
     } else {
       const Vec beta = ldlt.solve(xtwq);
@@ -358,16 +373,27 @@ void start_build(hedger& h) noexcept {
   h.building = 1;
 }
 
-/// Swaps the finished shadow tree in and drops the fresh entries it covers (or that are stale).
-inline uint64_t swap_trees(hedger& h) noexcept {
+/// Swaps the finished shadow tree in and drops the fresh entries it covers.
+template <int D>
+uint64_t swap_trees(hedger& h) noexcept {
   h.active = 1 - h.active;
   h.building = 0;
   ++h.counters.rebuilds;
   const uint64_t snap = h.tree[h.active].snapshot;
   uint32_t n = 0;
   for (uint32_t i = 0; i < h.n_fresh; ++i) {
-    const FreshEntry e = h.fresh[i];
-    if (e.seq > snap && h.seq[e.slot] == e.seq) h.fresh[n++] = e;
+    const uint32_t slot = h.fresh_slot[i];
+    if (h.seq[slot] <= snap) {
+      h.fresh_pos[slot] = kNone;
+      continue;
+    }
+    if (n != i) {
+      h.fresh_slot[n] = slot;
+      double* dst = h.fresh_pts + static_cast<size_t>(n) * static_cast<size_t>(D);
+      const double* src = h.fresh_pts + static_cast<size_t>(i) * static_cast<size_t>(D);
+      for (int j = 0; j < D; ++j) dst[j] = src[j];
+    }
+    h.fresh_pos[slot] = n++;
   }
   const uint64_t work = h.n_fresh;
   h.n_fresh = n;
@@ -379,16 +405,25 @@ template <int D>
 void force_rebuild(hedger& h) noexcept {
   if (!h.building) start_build<D>(h);
   uint64_t w = kd_build_step<D>(h.tree[1 - h.active], std::numeric_limits<uint64_t>::max());
-  w += swap_trees(h);
+  w += swap_trees<D>(h);
   h.counters.forced_rebuild_work += w;
   note_work(h, w);
 }
 
+/// Records slot (just written) in the fresh buffer: in place if it is there already.
 template <int D>
 void add_fresh(hedger& h, uint32_t slot) noexcept {
-  // Two forced rebuilds at most: the first covers everything stored before it started.
-  for (int tries = 0; tries < 2 && h.n_fresh >= h.fresh_cap; ++tries) force_rebuild<D>(h);
-  h.fresh[h.n_fresh++] = FreshEntry{h.seq[slot], slot, 0};
+  uint32_t pos = h.fresh_pos[slot];
+  if (pos == kNone) {
+    // Two forced rebuilds at most: the first covers everything stored before it started.
+    for (int tries = 0; tries < 2 && h.n_fresh >= h.fresh_cap; ++tries) force_rebuild<D>(h);
+    pos = h.n_fresh++;
+    h.fresh_slot[pos] = slot;
+    h.fresh_pos[slot] = pos;
+  }
+  const double* p = h.pts + static_cast<size_t>(slot) * static_cast<size_t>(D);
+  double* f = h.fresh_pts + static_cast<size_t>(pos) * static_cast<size_t>(D);
+  for (int j = 0; j < D; ++j) f[j] = p[j];
 }
 
 /// Per-update rebuild work: start a rebuild when enough fresh points wait, then advance it by
@@ -399,7 +434,7 @@ void maintain(hedger& h) noexcept {
   if (h.building) {
     KdTree& t = h.tree[1 - h.active];
     uint64_t w = kd_build_step<D>(t, h.rebuild_budget);
-    if (kd_done(t)) w += swap_trees(h);
+    if (kd_done(t)) w += swap_trees<D>(h);
     note_work(h, w);
   }
 }
@@ -664,6 +699,7 @@ void rebuild_now(hedger& h) noexcept {
   h.building = 0;
   kd_build_all<D>(h.tree[0], h.pts, h.seq, h.fill, h.seq_counter);
   kd_bind(h.tree[1], h.tree[1].pts, h.tree[1].ids, h.tree[1].nodes, h.tree[1].cap);
+  for (uint32_t i = 0; i < h.n_fresh; ++i) h.fresh_pos[h.fresh_slot[i]] = kNone;
   h.n_fresh = 0;
 }
 

@@ -51,7 +51,8 @@ bool valid_config(const hedger_config_t* c) {
   return true;
 }
 
-/// The storage block: [hedger | store arrays | fresh | 2 × (tree points, ids, nodes) | run].
+/// The storage block: [hedger | store arrays | fresh (pos per slot, slots, points) | 2 × (tree
+/// points, ids, nodes) | run].
 Layout make_layout(const hedger_config_t& c) {
   Layout l{};
   const size_t d = c.state_dim + 1u;
@@ -68,7 +69,9 @@ Layout make_layout(const hedger_config_t& c) {
   l.val = take(cap * sizeof(double));
   l.seq = take(cap * sizeof(uint64_t));
   l.flags = take(cap);
-  l.fresh = take(static_cast<size_t>(c.fresh_capacity) * sizeof(hg::FreshEntry));
+  l.fresh_pos = take(cap * sizeof(uint32_t));
+  l.fresh_slot = take(static_cast<size_t>(c.fresh_capacity) * sizeof(uint32_t));
+  l.fresh_pts = take(static_cast<size_t>(c.fresh_capacity) * d * sizeof(double));
   for (int t = 0; t < 2; ++t) {
     l.tpts[t] = take(cap * d * sizeof(double));
     l.tids[t] = take(cap * sizeof(uint32_t));
@@ -116,6 +119,7 @@ hedger_status_t reject_non_finite(hedger_t* h) {
 }
 
 void reset_learned_state(hedger_t* h) {
+  for (uint32_t i = 0; i < h->n_fresh; ++i) h->fresh_pos[h->fresh_slot[i]] = hg::kNone;
   h->fill = 0;
   h->n_protected = 0;
   h->seq_counter = 0;
@@ -225,7 +229,7 @@ hedger_config_t hedger_config_default(void) HEDGER_NOEXCEPT {
   c.k_max = 16;
   c.bandwidth = 0.2;
   c.weight_epsilon = 0.01;
-  c.ridge = 1e-6;
+  c.ridge = 1e-3;
   c.alpha = 0.2;
   c.gamma = 0.99;
   for (double& s : c.input_scale) s = 1.0;
@@ -236,7 +240,7 @@ hedger_config_t hedger_config_default(void) HEDGER_NOEXCEPT {
   c.ivh_mode = static_cast<uint32_t>(HEDGER_IVH_UNWEIGHTED);
   c.merge_radius = 0.02;
   c.evict_candidates = 8;
-  c.fresh_capacity = 256;
+  c.fresh_capacity = 512;
   c.rebuild_work_per_update = 0;
   c.run_capacity = 0;
   c.replay = 0;
@@ -281,7 +285,10 @@ hedger_status_t hedger_init(hedger_t** out, void* storage, size_t storage_size, 
   h->val = reinterpret_cast<double*>(base + l.val);
   h->seq = reinterpret_cast<uint64_t*>(base + l.seq);
   h->flags = base + l.flags;
-  h->fresh = reinterpret_cast<hg::FreshEntry*>(base + l.fresh);
+  h->fresh_pos = reinterpret_cast<uint32_t*>(base + l.fresh_pos);
+  std::memset(h->fresh_pos, 0xFF, static_cast<size_t>(cfg->capacity) * sizeof(uint32_t));  // kNone
+  h->fresh_slot = reinterpret_cast<uint32_t*>(base + l.fresh_slot);
+  h->fresh_pts = reinterpret_cast<double*>(base + l.fresh_pts);
   for (int t = 0; t < 2; ++t) {
     hg::kd_bind(h->tree[t], reinterpret_cast<double*>(base + l.tpts[t]), reinterpret_cast<uint32_t*>(base + l.tids[t]),
                     reinterpret_cast<hg::Node*>(base + l.tnodes[t]), cfg->capacity);

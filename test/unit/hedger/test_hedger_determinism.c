@@ -64,7 +64,7 @@ static void test_determinism_two_instances_bit_identical(void** state) {
   hedger_t* a = ht_create(&c);
   hedger_t* b = ht_create(&c);
   uint64_t ra = 99, rb = 99;
-  for (int t = 0; t < 2000; ++t) {
+  for (int t = 0; t < 1000; ++t) {
     step_out_t oa, ob;
     step(a, &ra, t, &oa);
     step(b, &rb, t, &ob);
@@ -104,10 +104,10 @@ static void test_determinism_no_allocation_after_init(void** state) {
   uint8_t* buf = malloc(cap);
   uint64_t rs = 5;
   alloc_counter_begin();
-  for (int t = 0; t < 4000; ++t) {
+  for (int t = 0; t < 2500; ++t) {
     step_out_t o;
     step(h, &rs, t, &o);
-    if (t % 1000 == 999) {
+    if (t % 800 == 799) {
       size_t n = 0;
       assert_int_equal(hedger_save(h, buf, cap, &n), HEDGER_OK);
       assert_int_equal(hedger_load(h, buf, n), HEDGER_OK);

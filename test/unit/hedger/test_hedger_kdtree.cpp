@@ -82,7 +82,7 @@ void check_dim(uint32_t n, bool grid, uint64_t seed, uint64_t slice) {
   Neighbour a[64], b[64];
   std::vector<Neighbour> ra(n + 1), rb(n + 1);
   auto all = [](uint32_t) { return true; };
-  for (int qi = 0; qi < 40; ++qi) {
+  for (int qi = 0; qi < 24; ++qi) {
     double q[static_cast<size_t>(D)];
     // Half the queries sit exactly on a stored point (zero distances, ties).
     if (n > 0 && (qi % 2) == 0) {
