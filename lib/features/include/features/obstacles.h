@@ -1,0 +1,121 @@
+// SPDX-License-Identifier: MIT
+/// features/obstacles.h — Obstacle-avoidance state from a laser scan and odometry (paper §V-B).
+///
+/// State (paper Fig. 8: "the direction and distance to the goal state and the obstacles"):
+/// - goal_bearing_rad: bearing of the goal in the robot frame, CCW positive, (-pi, pi];
+///   goal_distance_m: distance from the robot centre to the goal [m]. Both from odometry: the
+///   goal is a point given in the same frame as the odometry pose (see features_odom_to_task).
+/// - obstacle[k].bearing_rad / distance_m: the k-th nearest obstacle (k = 0 nearest), measured
+///   from the robot centre: distance to the obstacle's nearest laser return (its surface, not its
+///   centre), bearing = mean direction of the returns within 0.03 m of that distance (around its
+///   nearest point a surface is flat in range, so the single nearest return would wander over
+///   several beams with range noise). Only what the laser sees can be reported: with the laser
+///   0.15 m ahead of the centre, the surface point nearest to the centre of an obstacle beside
+///   the robot may be hidden from it.
+/// - Accuracy (test/unit/features, synthetic LMS200 scans, 1 cm noise, up to 10 % dropouts):
+///   distance within 0.04 m and bearing within 0.05 rad of the nearest visible surface point
+///   (0.1 rad beyond +-1.1 rad, where the view of the obstacle is cut off); every obstacle with
+///   6 or more beams on it found; no wall of the arena ever reported as an obstacle.
+///
+/// Segmentation: valid beams are turned into points in the robot frame; consecutive valid points
+/// (missing beams skipped, they neither split nor join) form a cluster while the gap between
+/// neighbours is at most cluster_gap_m. A cluster is an obstacle when
+///   (a) it has at least min_cluster_points points,
+///   (b) its extent (first to last point) is at most max_obstacle_width_m (longer = wall), and
+///   (c) it stands out from its background: on each side, the nearest valid point outside the
+///       cluster is at least standout_m farther from the laser than the cluster's end point, or
+///       there is no valid point on that side (field-of-view edge, or only missing beams).
+/// (c) rejects wall fragments (split by grazing incidence or dropouts) whose neighbours continue
+/// the wall, and a corner. Known limit: an obstacle touching a wall with no range jump merges
+/// into the wall and is not reported.
+///
+/// Convention when fewer obstacles are visible than slots: the empty slot has visible = 0,
+/// distance_m = no_obstacle_distance_m (default 8.0 m, the edge of sensing) and bearing_rad = pi
+/// ("behind": an obstacle that left the 180° field of view is most likely behind the robot). The
+/// value pi never occurs for a visible obstacle (the field of view is at most 180° forward), so
+/// the learner sees "no obstacle" as its own region of the state space.
+///
+/// Cost: O(n_beams), no allocation, < 1 KB of stack. Pure and reentrant. Never NaN.
+#ifndef B21R_FEATURES_OBSTACLES_H
+#define B21R_FEATURES_OBSTACLES_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "features/scan.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/// Obstacle slots reported (nearest first).
+#define FEATURES_MAX_OBSTACLES 2
+
+/// State dimensions for the paper's task (one obstacle): goal bearing, goal distance, obstacle
+/// bearing, obstacle distance. With two obstacles it is 6 (features_obstacles_state).
+#define FEATURES_OBSTACLES_STATE_DIM 4
+
+/// Configuration of the obstacle feature extractor.
+typedef struct features_obstacles_config {
+  features_scan_config_t scan;    ///< beam filtering and laser mount
+  double cluster_gap_m;           ///< max gap between neighbouring points of one cluster, default 0.25
+  double max_obstacle_width_m;    ///< clusters wider than this are walls [m], default 1.0
+  double standout_m;              ///< range jump that separates an obstacle from its background
+                                  ///< [m], default 0.3
+  uint16_t min_cluster_points;    ///< fewer points = noise, default 3
+  double no_obstacle_distance_m;  ///< distance reported for an empty slot [m], default 8.0, > 0
+} features_obstacles_config_t;
+
+/// One obstacle slot.
+typedef struct features_obstacle {
+  double bearing_rad;  ///< bearing of the nearest return, robot frame [rad]; pi if not visible
+  double distance_m;   ///< robot centre to the nearest return [m]; no_obstacle_distance_m if not
+  double width_m;      ///< extent of the cluster [m]; 0 if not visible
+  double centre_x_m;   ///< mean of the cluster's points, robot frame [m]; 0 if not visible
+  double centre_y_m;   ///< (same) [m]
+  uint16_t n_points;   ///< returns in the cluster; 0 if not visible
+  uint8_t visible;     ///< 1 if this slot holds a segmented obstacle
+} features_obstacle_t;
+
+/// The obstacle-task state and diagnostics. All doubles finite in every case.
+typedef struct features_obstacles {
+  double goal_bearing_rad;  ///< goal bearing in the robot frame [rad], (-pi, pi]
+  double goal_distance_m;   ///< robot centre to goal [m], >= 0
+  features_obstacle_t obstacle[FEATURES_MAX_OBSTACLES];  ///< nearest first
+  uint8_t n_visible;        ///< obstacles segmented (may exceed FEATURES_MAX_OBSTACLES; capped 255)
+  uint8_t valid;            ///< 1 if the goal part is valid (pose given and finite)
+  uint8_t scan_valid;       ///< 1 if the scan had at least one valid return
+  uint16_t n_points;        ///< valid returns
+  uint16_t n_clusters;      ///< clusters found
+  uint16_t n_wall_clusters; ///< clusters rejected as walls/background
+  double nearest_any_m;     ///< nearest valid return of any kind (walls too) from the robot centre
+                            ///< [m]; no_obstacle_distance_m if none
+  double nearest_any_bearing_rad;  ///< its bearing [rad]; pi if none
+} features_obstacles_t;
+
+/// Fills cfg with the defaults documented on each field. O(1). cfg must not be NULL.
+void features_obstacles_config_default(features_obstacles_config_t* cfg);
+
+/// Computes the obstacle-task state.
+/// - pose: robot pose in some frame (odometry, or the task frame), NULL if unknown (then
+///   valid = 0 and the goal fields are 0). goal_x_m, goal_y_m: the goal in the same frame.
+/// Returns FEATURES_OK (check out->valid / out->scan_valid), or FEATURES_ERR_INVALID_ARG for NULL
+/// cfg/scan/out, n_beams > FEATURES_MAX_BEAMS, a bad increment or configuration; then out (if
+/// not NULL) holds the empty state. O(n_beams), pure.
+features_status_t features_obstacles_compute(const features_obstacles_config_t* cfg,
+                                             const features_scan_t* scan,
+                                             const features_pose_t* pose, double goal_x_m,
+                                             double goal_y_m, features_obstacles_t* out);
+
+/// Writes the learner's state vector: goal_bearing, goal_distance, then (bearing, distance) of
+/// the first n_obstacles slots (1 = the paper's task, 4 values; 2 gives 6). Returns the number
+/// of values written, or 0 if n_obstacles is 0 or > FEATURES_MAX_OBSTACLES or capacity is too
+/// small (nothing written). O(1).
+size_t features_obstacles_state(const features_obstacles_t* f, uint32_t n_obstacles, double* state,
+                                size_t capacity);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif  // B21R_FEATURES_OBSTACLES_H

@@ -1,0 +1,372 @@
+// SPDX-License-Identifier: MIT
+// Obstacle-task features against the exact geometry of a synthetic arena: goal from odometry,
+// obstacles segmented from seeded noisy LMS200 scans, walls never reported as obstacles.
+#include <b21r_test/alloc_counter.h>
+#include <b21r_test/synthetic_world.h>
+#include <features/features.h>
+
+#include <math.h>
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+
+#include <cmocka.h>
+
+#include "scan_fill.h"
+
+#define PI 3.14159265358979323846
+
+// Stated tolerances for a visible obstacle (1° or 0.5° beams, sigma 1 cm, dropouts <= 10 %):
+// distance from the robot centre to the obstacle's nearest visible surface point, and its
+// bearing. (The visible nearest point is within 0.03 m / 0.1 rad of the true nearest point when
+// the obstacle is beside the robot, because the laser sits 0.15 m ahead of the centre.)
+#define TOL_DIST_M 0.04
+#define TOL_BEARING_RAD 0.05
+// Beside the robot (|bearing| > 1.1 rad) the nearest visible point is where the laser's view of
+// the obstacle is cut off; the returns near it are one-sided, so the bearing is looser there.
+#define TOL_BEARING_SIDE_RAD 0.1
+#define SIDE_BEARING_RAD 1.1
+#define MIN_DETECT_RATE 0.99  // obstacles with >= 6 beams on them that are reported
+
+// The arena of the obstacle task (tasks spec defaults): walls of a 7 m x 7 m room.
+#define ARENA_MIN_X -5.0
+#define ARENA_MAX_X 2.0
+#define ARENA_MIN_Y -3.5
+#define ARENA_MAX_Y 3.5
+
+static double urange(synth_rng_t* r, double lo, double hi) {
+  return lo + (hi - lo) * synth_rng_uniform(r);
+}
+
+static int all_finite(const features_obstacles_t* f) {
+  int ok = isfinite(f->goal_bearing_rad) && isfinite(f->goal_distance_m) &&
+           isfinite(f->nearest_any_m) && isfinite(f->nearest_any_bearing_rad);
+  for (int k = 0; k < FEATURES_MAX_OBSTACLES; ++k) {
+    const features_obstacle_t* o = &f->obstacle[k];
+    ok = ok && isfinite(o->bearing_rad) && isfinite(o->distance_m) && isfinite(o->width_m) &&
+         isfinite(o->centre_x_m) && isfinite(o->centre_y_m);
+  }
+  return ok;
+}
+
+// Beams of the scan that hit circle `index` first (exact ray casts, no noise), and the hit point
+// nearest to the robot centre: the visible part of the obstacle nearest to the robot. (The laser
+// sits ahead of the centre, so for an obstacle beside the robot the surface point nearest to the
+// centre can be hidden from it; features can only report what the laser sees.)
+static int beams_on_circle(const synth_world_t* w, const synth_lidar_config_t* lidar,
+                           features_pose_t p, uint32_t index, double* near_d, double* near_b) {
+  const double lx = p.x_m + cos(p.theta_rad) * lidar->mount_x_m;
+  const double ly = p.y_m + sin(p.theta_rad) * lidar->mount_x_m;
+  int n = 0;
+  *near_d = INFINITY;
+  *near_b = 0.0;
+  for (int i = 0; i < lidar->n_beams; ++i) {
+    synth_hit_t hit;
+    const double a = p.theta_rad + lidar->angle_min_rad + i * lidar->angle_increment_rad;
+    const double r = synth_world_raycast(w, lx, ly, a, &hit);
+    if (hit.kind == SYNTH_HIT_CIRCLE && hit.index == index && r < lidar->max_range_m) {
+      ++n;
+      const double hx = lx + r * cos(a) - p.x_m, hy = ly + r * sin(a) - p.y_m;
+      if (hypot(hx, hy) < *near_d) {
+        *near_d = hypot(hx, hy);
+        *near_b = features_angle_wrap(atan2(hy, hx) - p.theta_rad);
+      }
+    }
+  }
+  return n;
+}
+
+typedef struct sweep_stats {
+  int n, eligible, detected, false_pos, nonfinite;
+  double max_dist_err, max_bearing_err, max_side_bearing_err, max_goal_err;
+  int bad;
+} sweep_stats_t;
+
+// Random robot poses in the arena, one obstacle (radius 0.15..0.35 m) placed 0.5..4 m away
+// within +-80° of the heading; the goal somewhere in the arena.
+static void sweep(uint64_t seed, int n_poses, double res_deg, double dropout, double codes,
+                  sweep_stats_t* st) {
+  memset(st, 0, sizeof *st);
+  synth_rng_t rng;
+  synth_rng_seed(&rng, seed);
+  synth_lidar_config_t lidar;
+  assert_int_equal(synth_lidar_config_lms200(&lidar, 180, res_deg), 0);
+  lidar.dropout_prob = dropout;
+  lidar.error_code_prob = codes;
+  features_obstacles_config_t cfg;
+  features_obstacles_config_default(&cfg);
+  static features_scan_t scan;
+  for (int k = 0; k < n_poses; ++k) {
+    features_pose_t p = {urange(&rng, -4.0, 1.0), urange(&rng, -2.5, 2.5), urange(&rng, -PI, PI)};
+    const double rad = urange(&rng, 0.15, 0.35);
+    const double dist = urange(&rng, 0.5, 4.0);
+    const double brg = urange(&rng, -1.4, 1.4);
+    const double cx = p.x_m + (dist + rad) * cos(p.theta_rad + brg);
+    const double cy = p.y_m + (dist + rad) * sin(p.theta_rad + brg);
+    const double gx = urange(&rng, -4.5, 1.5), gy = urange(&rng, -3.0, 3.0);
+    synth_world_t w;
+    synth_world_init(&w);
+    assert_int_equal(synth_world_add_box(&w, ARENA_MIN_X, ARENA_MIN_Y, ARENA_MAX_X, ARENA_MAX_Y), 0);
+    // Keep the obstacle inside the room and clear of the walls by 0.6 m (a gap the robot fits).
+    const int placed = cx - rad > ARENA_MIN_X + 0.6 && cx + rad < ARENA_MAX_X - 0.6 &&
+                       cy - rad > ARENA_MIN_Y + 0.6 && cy + rad < ARENA_MAX_Y - 0.6;
+    if (placed) {
+      assert_int_equal(synth_world_add_circle(&w, cx, cy, rad), 0);
+    }
+    assert_true(scan_fill(&scan, &w, &lidar, &rng, p) > 0);
+    features_obstacles_t f;
+    assert_int_equal(features_obstacles_compute(&cfg, &scan, &p, gx, gy, &f), FEATURES_OK);
+    ++st->n;
+    if (!all_finite(&f) || f.valid != 1U) {
+      ++st->nonfinite;
+      continue;
+    }
+    const double gd = hypot(gx - p.x_m, gy - p.y_m);
+    const double gb = features_angle_wrap(atan2(gy - p.y_m, gx - p.x_m) - p.theta_rad);
+    st->max_goal_err = fmax(st->max_goal_err, fmax(fabs(f.goal_distance_m - gd),
+                                                   fabs(features_angle_wrap(f.goal_bearing_rad - gb))));
+    double true_d = 0.0, true_b = 0.0;
+    const int on = placed ? beams_on_circle(&w, &lidar, p, 0U, &true_d, &true_b) : 0;
+    if (on >= 6) {
+      ++st->eligible;
+      if (f.obstacle[0].visible) {
+        ++st->detected;
+        const double ed = fabs(f.obstacle[0].distance_m - true_d);
+        const double eb = fabs(features_angle_wrap(f.obstacle[0].bearing_rad - true_b));
+        const double tol_b = fabs(true_b) > SIDE_BEARING_RAD ? TOL_BEARING_SIDE_RAD : TOL_BEARING_RAD;
+        st->max_dist_err = fmax(st->max_dist_err, ed);
+        if (fabs(true_b) > SIDE_BEARING_RAD) {
+          st->max_side_bearing_err = fmax(st->max_side_bearing_err, eb);
+        } else {
+          st->max_bearing_err = fmax(st->max_bearing_err, eb);
+        }
+        if (ed > TOL_DIST_M || eb > tol_b) {
+          ++st->bad;
+          printf("  out of tolerance: pose (%.3f, %.3f, %.3f) obstacle (%.3f, %.3f, r %.2f) "
+                 "dist %.3f/%.3f bearing %.3f/%.3f\n", p.x_m, p.y_m, p.theta_rad, cx, cy, rad,
+                 f.obstacle[0].distance_m, true_d, f.obstacle[0].bearing_rad, true_b);
+        }
+      }
+    }
+    // Anything reported beyond the one obstacle is a wall mistaken for an obstacle.
+    const int expected = on >= 1 ? 1 : 0;
+    if (f.n_visible > expected) {
+      ++st->false_pos;
+      printf("  false obstacle: pose (%.3f, %.3f, %.3f) reported %u, slot0 %.3f m @ %.3f\n",
+             p.x_m, p.y_m, p.theta_rad, f.n_visible, f.obstacle[0].distance_m,
+             f.obstacle[0].bearing_rad);
+    }
+  }
+}
+
+static void report(const char* name, const sweep_stats_t* st) {
+  printf("[ obstacles ] %-18s n=%d eligible=%d detected=%d false=%d | max err: distance %.4f m, "
+         "bearing %.4f rad (beside the robot %.4f rad), goal %.2e\n",
+         name, st->n, st->eligible, st->detected, st->false_pos, st->max_dist_err,
+         st->max_bearing_err, st->max_side_bearing_err, st->max_goal_err);
+}
+
+static void check(const sweep_stats_t* st) {
+  assert_int_equal(st->nonfinite, 0);
+  assert_true((double)st->detected >= MIN_DETECT_RATE * (double)st->eligible);
+  assert_int_equal(st->bad, 0);
+  assert_true(st->max_dist_err <= TOL_DIST_M);
+  assert_true(st->max_bearing_err <= TOL_BEARING_RAD);
+  assert_true(st->max_side_bearing_err <= TOL_BEARING_SIDE_RAD);
+  assert_true(st->max_goal_err <= 1e-9);
+  assert_int_equal(st->false_pos, 0);
+}
+
+// Clean 1° scans: every well-seen obstacle found, within tolerance; walls never reported.
+static void test_obstacles_random_poses_within_tolerance(void** state) {
+  (void)state;
+  sweep_stats_t st;
+  sweep(11, 500, 1.0, 0.0, 0.0, &st);
+  report("1deg", &st);
+  check(&st);
+}
+
+// 0.5° beams with 10 % dropouts and 2 % error codes.
+static void test_obstacles_dropouts_within_tolerance(void** state) {
+  (void)state;
+  sweep_stats_t st;
+  sweep(12, 500, 0.5, 0.10, 0.02, &st);
+  report("0.5deg dropouts", &st);
+  check(&st);
+}
+
+static features_pose_t pose(double x, double y, double th) {
+  features_pose_t p = {x, y, th};
+  return p;
+}
+
+static void scan_of(features_scan_t* scan, const synth_world_t* w, features_pose_t p) {
+  synth_lidar_config_t lidar;
+  assert_int_equal(synth_lidar_config_lms200(&lidar, 180, 1.0), 0);
+  lidar.noise_sigma_m = 0.0;
+  assert_true(scan_fill(scan, w, &lidar, NULL, p) > 0);
+}
+
+// Two obstacles are reported nearest first; a person in front of a wall is still found.
+static void test_obstacles_two_obstacles_nearest_first(void** state) {
+  (void)state;
+  synth_world_t w;
+  synth_world_init(&w);
+  assert_int_equal(synth_world_add_box(&w, -5.0, -3.5, 2.0, 3.5), 0);
+  assert_int_equal(synth_world_add_circle(&w, 1.0, 0.8, 0.2), 0);    // far, left (0.5 m off the wall)
+  assert_int_equal(synth_world_add_circle(&w, -1.0, -0.6, 0.25), 0); // near, right
+  static features_scan_t scan;
+  const features_pose_t p = pose(-2.5, 0.0, 0.0);
+  scan_of(&scan, &w, p);
+  features_obstacles_config_t cfg;
+  features_obstacles_config_default(&cfg);
+  features_obstacles_t f;
+  assert_int_equal(features_obstacles_compute(&cfg, &scan, &p, 0.0, 0.0, &f), FEATURES_OK);
+  assert_int_equal(f.n_visible, 2);
+  assert_true(f.obstacle[0].visible && f.obstacle[1].visible);
+  assert_true(f.obstacle[0].distance_m < f.obstacle[1].distance_m);
+  assert_true(fabs(f.obstacle[0].distance_m - (hypot(1.5, 0.6) - 0.25)) < TOL_DIST_M);
+  assert_true(f.obstacle[0].bearing_rad < 0.0);  // right of the heading
+  assert_true(fabs(f.obstacle[1].distance_m - (hypot(3.5, 0.8) - 0.2)) < TOL_DIST_M);
+  assert_true(f.obstacle[1].bearing_rad > 0.0);
+  double s[6];
+  assert_int_equal(features_obstacles_state(&f, 2U, s, 6U), 6U);
+  assert_true(s[2] == f.obstacle[0].bearing_rad && s[5] == f.obstacle[1].distance_m);
+}
+
+// Nothing but walls in view: both slots empty with the documented convention (pi, 8 m).
+static void test_obstacles_none_visible_uses_convention(void** state) {
+  (void)state;
+  synth_world_t w;
+  synth_world_init(&w);
+  assert_int_equal(synth_world_add_box(&w, -5.0, -3.5, 2.0, 3.5), 0);
+  static features_scan_t scan;
+  const features_pose_t p = pose(-1.0, 1.0, 0.7);
+  scan_of(&scan, &w, p);
+  features_obstacles_config_t cfg;
+  features_obstacles_config_default(&cfg);
+  features_obstacles_t f;
+  assert_int_equal(features_obstacles_compute(&cfg, &scan, &p, 0.0, 0.0, &f), FEATURES_OK);
+  assert_int_equal(f.n_visible, 0);
+  assert_true(f.n_wall_clusters >= 1U);
+  for (int k = 0; k < FEATURES_MAX_OBSTACLES; ++k) {
+    assert_int_equal(f.obstacle[k].visible, 0);
+    assert_true(f.obstacle[k].bearing_rad == PI);
+    assert_true(f.obstacle[k].distance_m == cfg.no_obstacle_distance_m);
+  }
+  assert_int_equal(f.scan_valid, 1);
+  assert_true(f.nearest_any_m < 3.0);  // the nearest wall
+  double s[4];
+  assert_int_equal(features_obstacles_state(&f, 1U, s, 4U), 4U);
+  assert_true(s[2] == PI && s[3] == cfg.no_obstacle_distance_m);
+  assert_int_equal(features_obstacles_state(&f, 1U, s, 3U), 0U);  // too small: nothing written
+  assert_int_equal(features_obstacles_state(&f, 0U, s, 4U), 0U);
+  assert_int_equal(features_obstacles_state(&f, 3U, s, 8U), 0U);
+}
+
+// Goal bearing and distance from odometry; no pose = invalid goal part, finite values.
+static void test_obstacles_goal_from_odometry(void** state) {
+  (void)state;
+  features_obstacles_config_t cfg;
+  features_obstacles_config_default(&cfg);
+  static features_scan_t scan;
+  memset(&scan, 0, sizeof scan);
+  assert_int_equal(features_scan_set_lms200_geometry(&scan, 180, 0.5), FEATURES_OK);
+  for (int i = 0; i < scan.n_beams; ++i) scan.no_return[i] = 1U;
+  features_obstacles_t f;
+  const features_pose_t p = pose(-3.0, 0.0, 0.0);
+  assert_int_equal(features_obstacles_compute(&cfg, &scan, &p, 0.0, 3.0, &f), FEATURES_OK);
+  assert_int_equal(f.valid, 1);
+  assert_int_equal(f.scan_valid, 0);
+  assert_true(fabs(f.goal_distance_m - hypot(3.0, 3.0)) < 1e-12);
+  assert_true(fabs(f.goal_bearing_rad - PI / 4.0) < 1e-12);
+  const features_pose_t q = pose(0.0, 0.0, 3.0);  // goal behind-left: bearing wraps to (-pi, pi]
+  assert_int_equal(features_obstacles_compute(&cfg, &scan, &q, -1.0, 0.0, &f), FEATURES_OK);
+  assert_true(fabs(f.goal_bearing_rad - (PI - 3.0)) < 1e-12);
+  assert_int_equal(features_obstacles_compute(&cfg, &scan, NULL, 0.0, 0.0, &f), FEATURES_OK);
+  assert_int_equal(f.valid, 0);
+  assert_true(all_finite(&f));
+  assert_int_equal(features_obstacles_compute(&cfg, &scan, &p, NAN, 0.0, &f), FEATURES_OK);
+  assert_int_equal(f.valid, 0);
+  assert_true(all_finite(&f));
+}
+
+// Bad calls are refused with a finite empty output; garbage ranges are ignored.
+static void test_obstacles_invalid_input_rejected(void** state) {
+  (void)state;
+  features_obstacles_config_t cfg;
+  features_obstacles_config_default(&cfg);
+  static features_scan_t scan;
+  synth_world_t w;
+  synth_world_init(&w);
+  assert_int_equal(synth_world_add_box(&w, -5.0, -3.5, 2.0, 3.5), 0);
+  assert_int_equal(synth_world_add_circle(&w, -1.0, 0.0, 0.25), 0);
+  const features_pose_t p = pose(-3.0, 0.0, 0.0);
+  scan_of(&scan, &w, p);
+  features_obstacles_t f;
+  assert_int_equal(features_obstacles_compute(NULL, &scan, &p, 0, 0, &f), FEATURES_ERR_INVALID_ARG);
+  assert_int_equal(features_obstacles_compute(&cfg, NULL, &p, 0, 0, &f), FEATURES_ERR_INVALID_ARG);
+  assert_int_equal(features_obstacles_compute(&cfg, &scan, &p, 0, 0, NULL), FEATURES_ERR_INVALID_ARG);
+  features_obstacles_config_t bad = cfg;
+  bad.cluster_gap_m = -1.0;
+  assert_int_equal(features_obstacles_compute(&bad, &scan, &p, 0, 0, &f), FEATURES_ERR_INVALID_ARG);
+  assert_true(all_finite(&f));
+  scan.n_beams = FEATURES_MAX_BEAMS + 1;
+  assert_int_equal(features_obstacles_compute(&cfg, &scan, &p, 0, 0, &f), FEATURES_ERR_INVALID_ARG);
+  assert_int_equal(f.valid, 0);
+  scan_of(&scan, &w, p);
+  const float junk[4] = {NAN, INFINITY, -2.0f, 1e6f};
+  for (int i = 0; i < scan.n_beams; i += 7) scan.ranges_m[i] = junk[(i / 7) % 4];
+  assert_int_equal(features_obstacles_compute(&cfg, &scan, &p, 0, 0, &f), FEATURES_OK);
+  assert_true(all_finite(&f));
+  assert_int_equal(f.n_visible, 1);
+  assert_true(fabs(f.obstacle[0].distance_m - 1.75) < TOL_DIST_M);
+}
+
+// Same inputs give bit-identical outputs; no allocation over a thousand calls.
+static void test_obstacles_deterministic_and_allocation_free(void** state) {
+  (void)state;
+  features_obstacles_config_t cfg;
+  features_obstacles_config_default(&cfg);
+  synth_world_t w;
+  synth_world_init(&w);
+  assert_int_equal(synth_world_add_box(&w, -5.0, -3.5, 2.0, 3.5), 0);
+  assert_int_equal(synth_world_add_circle(&w, -1.5, 0.1, 0.25), 0);
+  synth_lidar_config_t lidar;
+  assert_int_equal(synth_lidar_config_lms200(&lidar, 180, 0.5), 0);
+  lidar.dropout_prob = 0.05;
+  synth_rng_t rng;
+  synth_rng_seed(&rng, 5);
+  static features_scan_t scan;
+  const features_pose_t p = pose(-3.0, -0.2, 0.1);
+  assert_true(scan_fill(&scan, &w, &lidar, &rng, p) > 0);
+  features_obstacles_t a, b;
+  memset(&a, 0x11, sizeof a);
+  memset(&b, 0x22, sizeof b);
+  assert_int_equal(features_obstacles_compute(&cfg, &scan, &p, 0.0, 0.0, &a), FEATURES_OK);
+  alloc_counter_begin();
+  for (int i = 0; i < 1000; ++i) {
+    assert_int_equal(features_obstacles_compute(&cfg, &scan, &p, 0.0, 0.0, &b), FEATURES_OK);
+  }
+  assert_int_equal(alloc_counter_end(), 0);
+  assert_memory_equal(&a.goal_bearing_rad, &b.goal_bearing_rad, sizeof(double));
+  assert_memory_equal(&a.obstacle[0].distance_m, &b.obstacle[0].distance_m, sizeof(double));
+  assert_memory_equal(&a.obstacle[0].bearing_rad, &b.obstacle[0].bearing_rad, sizeof(double));
+  assert_int_equal(a.n_visible, b.n_visible);
+}
+
+int main(void) {
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_obstacles_random_poses_within_tolerance),
+      cmocka_unit_test(test_obstacles_dropouts_within_tolerance),
+      cmocka_unit_test(test_obstacles_two_obstacles_nearest_first),
+      cmocka_unit_test(test_obstacles_none_visible_uses_convention),
+      cmocka_unit_test(test_obstacles_goal_from_odometry),
+      cmocka_unit_test(test_obstacles_invalid_input_rejected),
+      cmocka_unit_test(test_obstacles_deterministic_and_allocation_free),
+  };
+  return cmocka_run_group_tests_name("features.obstacles", tests, NULL, NULL);
+}
