@@ -3,6 +3,8 @@
 #define _GNU_SOURCE
 #include <drivers/can.h>
 
+#include "fd_wait.h"
+
 #include <errno.h>
 #include <fcntl.h>
 #include <linux/can.h>
@@ -271,16 +273,7 @@ int drv_can_wait_readable(drv_can_t* port, int timeout_ms) {
   if (port == NULL || port->fd < 0) {
     return -EINVAL;
   }
-  struct pollfd pfd = {.fd = port->fd, .events = POLLIN, .revents = 0};
-  for (;;) {
-    const int rc = poll(&pfd, 1, timeout_ms);
-    if (rc >= 0) {
-      return rc > 0 ? 1 : 0;
-    }
-    if (errno != EINTR) {
-      return -errno;
-    }
-  }
+  return drv_fd_wait_readable(port->fd, timeout_ms);
 }
 
 void drv_can_close(drv_can_t* port) {

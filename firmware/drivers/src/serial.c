@@ -3,6 +3,8 @@
 #define _GNU_SOURCE  // B500000 and friends, nanosleep, poll
 #include <drivers/serial.h>
 
+#include "fd_wait.h"
+
 #include <errno.h>
 #include <fcntl.h>
 #include <poll.h>
@@ -277,18 +279,7 @@ int drv_serial_wait_readable(drv_serial_t* port, int timeout_ms) {
   if (port == NULL || port->fd < 0) {
     return -EINVAL;
   }
-  struct pollfd pfd = {.fd = port->fd, .events = POLLIN, .revents = 0};
-  for (;;) {
-    const int rc = poll(&pfd, 1, timeout_ms);
-    if (rc >= 0) {
-      // POLLHUP on a pseudo-terminal whose other side closed: report readable so the next read
-      // returns the error.
-      return rc > 0 ? 1 : 0;
-    }
-    if (errno != EINTR) {
-      return -errno;
-    }
-  }
+  return drv_fd_wait_readable(port->fd, timeout_ms);
 }
 
 int drv_serial_flush_input(drv_serial_t* port) {

@@ -62,30 +62,49 @@ static double jitter_norm(double dx, double dy, double dth, double jx, double jy
   return n;
 }
 
+// Shared training-start sampler of both tasks: picks an evaluation start at random and jitters it
+// within the box (jx, jy, jth) until the pose is both clearly different from the evaluation pose
+// and clear of the world (`is_clear(spec, pose)`). Returns 1 with the pose in *out, or 0 after
+// TASKS_START_ATTEMPTS tries with *out = the last pose tried and *base_out = the chosen evaluation
+// start, so the caller can apply its task's fallback. O(TASKS_START_ATTEMPTS).
+static int jittered_start(const features_pose_t eval_starts[TASKS_N_EVAL_STARTS], double jx, double jy,
+                          double jth, int (*is_clear)(const void* spec, features_pose_t),
+                          const void* spec, tasks_rng_t* rng, features_pose_t* out,
+                          features_pose_t* base_out) {
+  const features_pose_t base = eval_starts[tasks_rng_below(rng, TASKS_N_EVAL_STARTS)];
+  *base_out = base;
+  *out = base;
+  for (int attempt = 0; attempt < TASKS_START_ATTEMPTS; ++attempt) {
+    const double dx = tasks_rng_uniform_range(rng, -jx, jx);
+    const double dy = tasks_rng_uniform_range(rng, -jy, jy);
+    const double dth = tasks_rng_uniform_range(rng, -jth, jth);
+    features_pose_t p = base;
+    p.x_m = base.x_m + dx;
+    p.y_m = base.y_m + dy;
+    p.theta_rad = features_angle_wrap(base.theta_rad + dth);
+    *out = p;
+    if (jitter_norm(dx, dy, dth, jx, jy, jth) >= TASKS_MIN_JITTER_NORM && is_clear(spec, p)) {
+      return 1;
+    }
+  }
+  return 0;
+}
+
 static double clampd(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
-static int corridor_pose_clear(const tasks_corridor_spec_t* spec, features_pose_t p) {
+static int corridor_pose_clear(const void* spec_v, features_pose_t p) {
+  const tasks_corridor_spec_t* spec = (const tasks_corridor_spec_t*)spec_v;
   const double margin = spec->robot_radius_m + 0.1;
   return fabs(p.y_m) <= 0.5 * spec->width_m - margin && p.x_m >= margin &&
          p.x_m <= spec->length_m - spec->goal_distance_m - 0.5;
 }
 
 features_pose_t tasks_corridor_training_start(const tasks_corridor_spec_t* spec, tasks_rng_t* rng) {
-  const features_pose_t base = spec->eval_starts[tasks_rng_below(rng, TASKS_N_EVAL_STARTS)];
-  features_pose_t p = base;
-  for (int attempt = 0; attempt < TASKS_START_ATTEMPTS; ++attempt) {
-    const double dx = tasks_rng_uniform_range(rng, -spec->train_jitter_x_m, spec->train_jitter_x_m);
-    const double dy = tasks_rng_uniform_range(rng, -spec->train_jitter_y_m, spec->train_jitter_y_m);
-    const double dth = tasks_rng_uniform_range(rng, -spec->train_jitter_theta_rad,
-                                               spec->train_jitter_theta_rad);
-    p.x_m = base.x_m + dx;
-    p.y_m = base.y_m + dy;
-    p.theta_rad = features_angle_wrap(base.theta_rad + dth);
-    if (jitter_norm(dx, dy, dth, spec->train_jitter_x_m, spec->train_jitter_y_m,
-                    spec->train_jitter_theta_rad) >= TASKS_MIN_JITTER_NORM &&
-        corridor_pose_clear(spec, p)) {
-      return p;
-    }
+  features_pose_t p;
+  features_pose_t base;
+  if (jittered_start(spec->eval_starts, spec->train_jitter_x_m, spec->train_jitter_y_m,
+                     spec->train_jitter_theta_rad, corridor_pose_clear, spec, rng, &p, &base)) {
+    return p;
   }
   const double margin = spec->robot_radius_m + 0.1;
   const double ylim = fmax(0.0, 0.5 * spec->width_m - margin);
@@ -196,7 +215,8 @@ features_pose_t tasks_obstacles_eval_start(const tasks_obstacles_spec_t* spec, u
   return spec->eval_starts[index % TASKS_N_EVAL_STARTS];
 }
 
-static int obstacles_pose_clear(const tasks_obstacles_spec_t* spec, features_pose_t p) {
+static int obstacles_pose_clear(const void* spec_v, features_pose_t p) {
+  const tasks_obstacles_spec_t* spec = (const tasks_obstacles_spec_t*)spec_v;
   const double margin = spec->robot_radius_m + 0.1;
   if (p.x_m < spec->arena_min_x_m + margin || p.x_m > spec->arena_max_x_m - margin ||
       p.y_m < spec->arena_min_y_m + margin || p.y_m > spec->arena_max_y_m - margin) {
@@ -214,21 +234,11 @@ static int obstacles_pose_clear(const tasks_obstacles_spec_t* spec, features_pos
 
 features_pose_t tasks_obstacles_training_start(const tasks_obstacles_spec_t* spec,
                                                tasks_rng_t* rng) {
-  const features_pose_t base = spec->eval_starts[tasks_rng_below(rng, TASKS_N_EVAL_STARTS)];
-  features_pose_t p = base;
-  for (int attempt = 0; attempt < TASKS_START_ATTEMPTS; ++attempt) {
-    const double dx = tasks_rng_uniform_range(rng, -spec->train_jitter_x_m, spec->train_jitter_x_m);
-    const double dy = tasks_rng_uniform_range(rng, -spec->train_jitter_y_m, spec->train_jitter_y_m);
-    const double dth = tasks_rng_uniform_range(rng, -spec->train_jitter_theta_rad,
-                                               spec->train_jitter_theta_rad);
-    p.x_m = base.x_m + dx;
-    p.y_m = base.y_m + dy;
-    p.theta_rad = features_angle_wrap(base.theta_rad + dth);
-    if (jitter_norm(dx, dy, dth, spec->train_jitter_x_m, spec->train_jitter_y_m,
-                    spec->train_jitter_theta_rad) >= TASKS_MIN_JITTER_NORM &&
-        obstacles_pose_clear(spec, p)) {
-      return p;
-    }
+  features_pose_t p;
+  features_pose_t base;
+  if (jittered_start(spec->eval_starts, spec->train_jitter_x_m, spec->train_jitter_y_m,
+                     spec->train_jitter_theta_rad, obstacles_pose_clear, spec, rng, &p, &base)) {
+    return p;
   }
   // Every attempt failed (only possible with a spec whose jitter box is mostly blocked): keep
   // the evaluation position, which the spec guarantees clear, with a turned heading.
