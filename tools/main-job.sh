@@ -1,13 +1,114 @@
 #!/usr/bin/env bash
 # SPDX-License-Identifier: MIT
-# tools/main-job.sh — the emulated B21r learning the corridor task (README, first command).
+# tools/main-job.sh — the emulated B21r learns the corridor task (README, first command).
+#
+# 1. configures and builds the release preset (only the programs this job needs);
+# 2. evaluates the two reference controllers from the 10 evaluation poses (the "optimal"
+#    hand-tuned one and the example policy at its nominal gain), each against its own emulator;
+# 3. runs the two-phase learning with the paper's settings (30 example runs, 35 learned runs,
+#    an evaluation block of 10 fixed poses every 5 training runs, alpha 0.2, gamma 0.99) against
+#    the ODE emulator in lockstep over pseudo-terminals, printing progress as it goes;
+# 4. writes the learning curve (PNG), a summary (text and JSON), the LCM logs, the checkpoint
+#    and an overhead picture of every run into the output folder it names at the end.
+# Environment: B21R_OUT (output folder, default build/main-job/<time>), B21R_SEED (default 1),
+# B21R_BASE (rflex | canopen, default rflex), B21R_JOBS (build parallelism, default 2).
 set -euo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-if [[ ! -f "$repo/firmware/CMakeLists.txt" || ! -f "$repo/sim/CMakeLists.txt" ]]; then
-  echo "main-job: the onboard controller (firmware/) and the emulator (sim/) are not part of this" >&2
-  echo "main-job: checkout yet, so there is no learning run to start. Run the tests instead:" >&2
-  echo "main-job:   tools/setup.sh && cmake --workflow --preset host-debug" >&2
+cd "$repo"
+say() { printf 'main-job: %s\n' "$*"; }
+start=$(date +%s)
+
+python="$repo/build/venv/bin/python3"
+if [[ ! -x "$python" ]]; then
+  say "error: no Python environment at build/venv; run tools/setup.sh first"
   exit 2
 fi
-echo "main-job: not wired yet" >&2
-exit 2
+preset=host-release
+build="$repo/build/$preset"
+jobs="${B21R_JOBS:-2}"
+seed="${B21R_SEED:-1}"
+base="${B21R_BASE:-rflex}"
+out="${B21R_OUT:-$repo/build/main-job/$(date +%Y%m%d-%H%M%S)}"
+mkdir -p "$out"
+out="$(cd "$out" && pwd)"
+
+say "configuring and building the $preset preset (b21r-controller, b21r-sim, LCM types)"
+if [[ ! -f "$build/build.ninja" ]]; then
+  cmake --preset "$preset" >"$out/build.log" 2>&1 || { tail -30 "$out/build.log"; exit 1; }
+fi
+cmake --build --preset "$preset" -j "$jobs" --target b21r-controller b21r_sim_app b21r_msgs_python \
+  >>"$out/build.log" 2>&1 || { tail -40 "$out/build.log"; say "error: build failed (log: $out/build.log)"; exit 1; }
+controller="$build/bin/b21r-controller"
+sim="$build/bin/b21r-sim"
+world="$repo/sim/worlds/corridor10.world"
+export PYTHONPATH="$build/python:$repo/tools${PYTHONPATH:+:$PYTHONPATH}"
+
+sim_pid=""
+cleanup() {
+  if [[ -n "$sim_pid" ]]; then
+    kill "$sim_pid" 2>/dev/null || true
+    wait "$sim_pid" 2>/dev/null || true
+  fi
+}
+trap cleanup EXIT
+
+# start_sim NAME [b21r-sim args...]: starts an emulator and waits for its endpoints file.
+start_sim() {
+  local name="$1"
+  shift
+  rm -f "$out/$name.endpoints" "$out/$name.control"
+  "$sim" --world "$world" --lockstep --base "$base" --seed "$seed" --control "$out/$name.control" \
+    --endpoints "$out/$name.endpoints" "$@" >"$out/$name.sim.log" 2>&1 &
+  sim_pid=$!
+  for _ in $(seq 100); do
+    [[ -s "$out/$name.endpoints" ]] && return 0
+    kill -0 "$sim_pid" 2>/dev/null || break
+    sleep 0.1
+  done
+  say "error: the emulator did not start (log: $out/$name.sim.log)"
+  cat "$out/$name.sim.log" >&2
+  exit 1
+}
+
+stop_sim() {
+  kill "$sim_pid" 2>/dev/null || true
+  wait "$sim_pid" 2>/dev/null || true
+  sim_pid=""
+}
+
+common=(--set lockstep=true --set lcm_url=none --set "seed=$seed")
+
+for policy in optimal example; do
+  say "reference: evaluating the $policy controller from the 10 evaluation poses"
+  start_sim "$policy"
+  "$controller" --endpoints "$out/$policy.endpoints" "${common[@]}" --set mode=evaluate \
+    --set "evaluate_policy=$policy" --log "$out/$policy.lcmlog" --set progress=true \
+    >"$out/$policy.progress.txt" 2>"$out/$policy.controller.log" ||
+    { cat "$out/$policy.controller.log" >&2; say "error: reference evaluation failed"; exit 1; }
+  grep EVAL "$out/$policy.progress.txt" | sed "s/^/main-job:   /"
+  stop_sim
+done
+
+say "learning: 30 example runs, then 35 runs driven by the learned policy (progress below)"
+start_sim learning --trace-svg "$out/trajectories.svg"
+set +e
+"$controller" --endpoints "$out/learning.endpoints" "${common[@]}" --set progress=true \
+  --checkpoint "$out/hedger.ckpt" --log "$out/learning.lcmlog" --experience-log "$out/experiences.lcmlog" \
+  2>"$out/learning.controller.log" | tee "$out/learning.progress.txt"
+status=${PIPESTATUS[0]}
+set -e
+stop_sim
+if [[ "$status" -ne 0 ]]; then
+  cat "$out/learning.controller.log" >&2
+  say "error: the controller exited with status $status"
+  exit 1
+fi
+
+say "writing the learning curve and the summary"
+"$python" "$repo/tools/b21r_learning_report.py" --log "$out/learning.lcmlog" \
+  --optimal "$out/optimal.lcmlog" --example "$out/example.lcmlog" --out "$out" \
+  --title "Corridor following, emulated B21r ($base base, seed $seed)" >/dev/null
+cat "$out/summary.txt"
+say "finished in $(( $(date +%s) - start )) s"
+say "output folder: $out"
+say "  learning_curve.png  summary.txt  summary.json  trajectories.svg  learning.lcmlog  hedger.ckpt"

@@ -162,11 +162,15 @@ static void test_msgs_status_round_trip_equal(void** state) {
   m.store_capacity = 20000;
   m.hedger_lwr = 123456789012LL;
   m.safety_stops = 1;
+  m.experiences_dropped = 3;
+  m.battery_v = 24.5;
   b21r_status_t out;
   ROUND_TRIP_VARIABLE(b21r_status_t, m, out);
   assert_string_equal(out.stop_detail, detail);
   assert_int_equal(out.tick_p99_us, 812);
   assert_int_equal(out.hedger_lwr, 123456789012LL);
+  assert_int_equal(out.experiences_dropped, 3);
+  assert_true(out.battery_v == 24.5);
   b21r_status_t_decode_cleanup(&out);
 }
 

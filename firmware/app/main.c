@@ -1,0 +1,334 @@
+// SPDX-License-Identifier: MIT
+// b21r-controller: the onboard learning controller of the RWI B21r (command line, wiring, threads).
+#define _GNU_SOURCE 1
+#include "fw/checkpoint.h"
+#include "fw/config.h"
+#include "fw/loop.h"
+#include "fw/publisher.h"
+#include "fw/pubq.h"
+#include "io_posix.h"
+
+#include <b21r/b21r_command_t.h>
+#include <b21r/b21r_teleop_t.h>
+#include <lcm/lcm.h>
+
+#include <errno.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+enum { EXIT_USAGE = 2, EXIT_CHECKPOINT = 3, EXIT_DEVICE = 4 };
+
+static fw_loop_t* volatile g_loop;  // for the signal handler only
+
+static void on_signal(int sig) {
+  fw_loop_t* loop = g_loop;
+  if (loop != NULL) {
+    fw_loop_signal(loop, sig);
+  } else {
+    _exit(128 + sig);  // before the loop exists there is nothing to stop or save
+  }
+}
+
+static void usage(FILE* f) {
+  fprintf(f,
+          "usage: b21r-controller [--config FILE]... [--set KEY=VALUE]... [options]\n"
+          "The onboard learning controller of the RWI B21r: two-phase Q-learning with HEDGER\n"
+          "(Smart & Kaelbling, ICRA 2002) on the real robot or the emulated one (b21r-sim).\n"
+          "\n"
+          "  --config FILE           settings in 'key = value' lines (reference with every key and\n"
+          "                          its documentation: firmware/app/b21r-controller.conf); several\n"
+          "                          files apply in order\n"
+          "  --set KEY=VALUE         override one setting (applied after the files, in order)\n"
+          "  --endpoints FILE|LINE   drive the emulator: b21r-sim's ready line ('laser=... base=...\n"
+          "                          can=... control=...') or a file holding it; sets the device\n"
+          "                          paths, reposition = emulator and base_write_gap_us = 0\n"
+          "  --checkpoint FILE       same as --set checkpoint_file=FILE\n"
+          "  --log FILE              same as --set log_file=FILE (LCM event log, every channel)\n"
+          "  --experience-log FILE   same as --set experience_log_file=FILE\n"
+          "  --print-config          print the effective settings and exit\n"
+          "  --print-reference-config  print every key, its allowed values and its default\n"
+          "  --help                  this text\n"
+          "\n"
+          "LCM channels: publishes B21R_EXPERIENCE, B21R_STATUS, B21R_POSE, B21R_EVAL (B21R_SCAN with\n"
+          "publish_scan = true); listens to B21R_TELEOP (joystick with deadman) and B21R_COMMAND\n"
+          "(START_PHASE_TWO, CONFIRM_START_POSE, PAUSE, RESUME, SHUTDOWN).\n"
+          "Exit status: 0 schedule done or SHUTDOWN; 2 usage or configuration error; 3 checkpoint\n"
+          "refused; 4 a device did not start; 128+N after signal N (the base is stopped and braked\n"
+          "and the learned state saved first).\n");
+}
+
+// Applies b21r-sim's ready line: "laser=/dev/pts/5 base=/dev/pts/6 can=PATH control=PATH".
+static int apply_endpoints(fw_config_t* cfg, const char* arg, char* err, size_t cap) {
+  char line[1024];
+  FILE* f = fopen(arg, "r");
+  if (f != NULL) {
+    const bool ok = fgets(line, sizeof line, f) != NULL;
+    fclose(f);
+    if (!ok) {
+      snprintf(err, cap, "--endpoints %s: empty file", arg);
+      return -1;
+    }
+  } else if (strchr(arg, '=') != NULL && strlen(arg) < sizeof line) {
+    strcpy(line, arg);
+  } else {
+    snprintf(err, cap, "--endpoints %s: neither a readable file nor a 'laser=... base=...' line", arg);
+    return -1;
+  }
+  struct {
+    const char* field;
+    const char* key;
+  } map[] = {{"laser", "laser_device"}, {"base", "base_device"}, {"can", "can_socket"}, {"control", "emulator_control"}};
+  int found = 0;
+  for (char* tok = strtok(line, " \t\r\n"); tok != NULL; tok = strtok(NULL, " \t\r\n")) {
+    char* eq = strchr(tok, '=');
+    if (eq == NULL) {
+      continue;
+    }
+    *eq = '\0';
+    for (size_t i = 0; i < sizeof map / sizeof map[0]; ++i) {
+      if (strcmp(tok, map[i].field) == 0) {
+        if (fw_config_set(cfg, map[i].key, eq + 1, "--endpoints", err, cap) != 0) {
+          return -1;
+        }
+        found++;
+        if (strcmp(tok, "can") == 0) {
+          cfg->base_protocol = FW_BASE_CANOPEN;
+        } else if (strcmp(tok, "base") == 0) {
+          cfg->base_protocol = FW_BASE_RFLEX;
+        } else if (strcmp(tok, "control") == 0) {
+          cfg->reposition = FW_REPOSITION_EMULATOR;
+        }
+      }
+    }
+  }
+  if (found == 0) {
+    snprintf(err, cap, "--endpoints %s: no laser=/base=/can=/control= fields", arg);
+    return -1;
+  }
+  cfg->base_write_gap_us = 0;
+  return 0;
+}
+
+// ---- LCM receive thread --------------------------------------------------------------------
+
+typedef struct receiver {
+  lcm_t* lcm;
+  fw_loop_t* loop;
+  atomic_bool stop;
+  pthread_t thread;
+} receiver_t;
+
+static void on_teleop(const lcm_recv_buf_t* rbuf, const char* channel, const b21r_teleop_t* msg, void* user) {
+  (void)rbuf;
+  (void)channel;
+  fw_loop_post_teleop(((receiver_t*)user)->loop, msg, io_posix_now_us());
+}
+
+static void on_command(const lcm_recv_buf_t* rbuf, const char* channel, const b21r_command_t* msg, void* user) {
+  (void)rbuf;
+  (void)channel;
+  fw_loop_post_command(((receiver_t*)user)->loop, msg, io_posix_now_us());
+}
+
+static void* receiver_main(void* arg) {
+  receiver_t* r = (receiver_t*)arg;
+  while (!atomic_load(&r->stop)) {
+    (void)lcm_handle_timeout(r->lcm, 100);
+  }
+  return NULL;
+}
+
+static void publisher_notify(void* user) { fw_publisher_notify((fw_publisher_t*)user); }
+
+int main(int argc, char** argv) {
+  fw_config_t cfg;
+  fw_config_defaults(&cfg);
+  char err[FW_LOOP_ERR_MAX];
+  bool print_config = false;
+
+  // Pass 1: config files, in order; pass 2: everything else, in order.
+  for (int i = 1; i < argc; ++i) {
+    if (strcmp(argv[i], "--help") == 0 || strcmp(argv[i], "-h") == 0) {
+      usage(stdout);
+      return 0;
+    }
+    if (strcmp(argv[i], "--print-reference-config") == 0) {
+      fw_config_print_reference(stdout);
+      return 0;
+    }
+    if (strcmp(argv[i], "--config") == 0) {
+      if (i + 1 >= argc) {
+        fprintf(stderr, "b21r-controller: --config needs a file\n");
+        return EXIT_USAGE;
+      }
+      if (fw_config_load_file(&cfg, argv[++i], err, sizeof err) != 0) {
+        fprintf(stderr, "b21r-controller: %s\n", err);
+        return EXIT_USAGE;
+      }
+    }
+  }
+  for (int i = 1; i < argc; ++i) {
+    const char* a = argv[i];
+    const char* v = i + 1 < argc ? argv[i + 1] : NULL;
+    int rc = 0;
+    if (strcmp(a, "--config") == 0) {
+      ++i;
+    } else if (strcmp(a, "--print-config") == 0) {
+      print_config = true;
+    } else if (v == NULL && (strcmp(a, "--set") == 0 || strcmp(a, "--endpoints") == 0 ||
+                             strcmp(a, "--checkpoint") == 0 || strcmp(a, "--log") == 0 ||
+                             strcmp(a, "--experience-log") == 0)) {
+      fprintf(stderr, "b21r-controller: %s needs an argument (see --help)\n", a);
+      return EXIT_USAGE;
+    } else if (strcmp(a, "--set") == 0) {
+      rc = fw_config_set_arg(&cfg, v, err, sizeof err);
+      ++i;
+    } else if (strcmp(a, "--endpoints") == 0) {
+      rc = apply_endpoints(&cfg, v, err, sizeof err);
+      ++i;
+    } else if (strcmp(a, "--checkpoint") == 0) {
+      rc = fw_config_set(&cfg, "checkpoint_file", v, a, err, sizeof err);
+      ++i;
+    } else if (strcmp(a, "--log") == 0) {
+      rc = fw_config_set(&cfg, "log_file", v, a, err, sizeof err);
+      ++i;
+    } else if (strcmp(a, "--experience-log") == 0) {
+      rc = fw_config_set(&cfg, "experience_log_file", v, a, err, sizeof err);
+      ++i;
+    } else {
+      fprintf(stderr, "b21r-controller: unknown argument '%s' (see --help)\n", a);
+      return EXIT_USAGE;
+    }
+    if (rc != 0) {
+      fprintf(stderr, "b21r-controller: %s\n", err);
+      return EXIT_USAGE;
+    }
+  }
+  if (fw_config_validate(&cfg, err, sizeof err) != 0) {
+    fprintf(stderr, "b21r-controller: %s\n", err);
+    return EXIT_USAGE;
+  }
+  if (print_config) {
+    fw_config_print(&cfg, stdout);
+    return 0;
+  }
+
+  // Signals: stop the base, brake, checkpoint, exit (handled by the tick).
+  struct sigaction sa;
+  memset(&sa, 0, sizeof sa);
+  sa.sa_handler = on_signal;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGINT, &sa, NULL);
+  sigaction(SIGTERM, &sa, NULL);
+  signal(SIGPIPE, SIG_IGN);
+
+  lcm_t* lcm = NULL;
+  if (strcmp(cfg.lcm_url, "none") != 0) {
+    lcm = lcm_create(cfg.lcm_url[0] != '\0' ? cfg.lcm_url : NULL);
+    if (lcm == NULL) {
+      fprintf(stderr,
+              "b21r-controller: cannot open LCM at '%s' (multicast needs a route: e.g. ip route add 224.0.0.0/4 dev "
+              "lo; or set lcm_url = none)\n",
+              cfg.lcm_url[0] != '\0' ? cfg.lcm_url : "the default URL");
+      return EXIT_DEVICE;
+    }
+  }
+  fw_pubq_t* q = fw_pubq_create((uint32_t)cfg.queue_capacity);
+  const fw_publisher_config_t pc = {.lcm = lcm, .log_file = cfg.log_file, .experience_log_file = cfg.experience_log_file};
+  fw_publisher_t* pub = q != NULL ? fw_publisher_create(q, &pc, err, sizeof err) : NULL;
+  if (pub == NULL) {
+    fprintf(stderr, "b21r-controller: %s\n", q == NULL ? "out of memory" : err);
+    return EXIT_DEVICE;
+  }
+
+  io_posix_t io;
+  if (io_posix_open(&io, &cfg, err, sizeof err) != 0) {
+    fprintf(stderr, "b21r-controller: %s\n", err);
+    fw_publisher_destroy(pub);
+    return EXIT_DEVICE;
+  }
+  const fw_io_t binding = io_posix_binding(&io);
+  const fw_loop_outputs_t out = {.queue = q, .notify = publisher_notify, .notify_user = pub, .checkpoints = NULL};
+  fw_loop_t* loop = fw_loop_create(&cfg, &binding, &out, err, sizeof err);
+  if (loop == NULL) {
+    fprintf(stderr, "b21r-controller: %s\n", err);
+    io_posix_close(&io);
+    fw_publisher_destroy(pub);
+    return EXIT_USAGE;
+  }
+  fw_ckpt_writer_t* ckpt = NULL;
+  int status = 0;
+  if (cfg.checkpoint_file[0] != '\0') {
+    const int r = fw_loop_load_checkpoint(loop, err, sizeof err);
+    if (r < 0) {
+      fprintf(stderr, "b21r-controller: %s\n", err);
+      status = EXIT_CHECKPOINT;
+    } else {
+      fw_loop_stats_t st;
+      fw_loop_get_stats(loop, &st);
+      fprintf(stderr, "b21r-controller: %s %s (phase %d, %d training runs, %d evaluation blocks, %u samples)\n",
+              r == 1 ? "resumed from" : "no checkpoint yet at", cfg.checkpoint_file, st.phase, st.training_runs,
+              st.eval_blocks, st.store_fill);
+      size_t meta_cap = 0;
+      size_t payload_cap = 0;
+      fw_loop_checkpoint_capacity(loop, &meta_cap, &payload_cap);
+      ckpt = fw_ckpt_writer_create(cfg.checkpoint_file, meta_cap, payload_cap, err, sizeof err);
+      if (ckpt == NULL) {
+        fprintf(stderr, "b21r-controller: %s\n", err);
+        status = EXIT_CHECKPOINT;
+      }
+      fw_loop_attach_checkpoints(loop, ckpt);
+    }
+  } else {
+    fprintf(stderr, "b21r-controller: warning: checkpoint_file is not set: learned data is lost at exit\n");
+  }
+
+  receiver_t rx = {.lcm = lcm, .loop = loop};
+  atomic_init(&rx.stop, false);
+  bool rx_running = false;
+  if (status == 0 && lcm != NULL) {
+    b21r_teleop_t_subscribe(lcm, "B21R_TELEOP", on_teleop, &rx);
+    b21r_command_t_subscribe(lcm, "B21R_COMMAND", on_command, &rx);
+    rx_running = pthread_create(&rx.thread, NULL, receiver_main, &rx) == 0;
+  }
+
+  if (status == 0) {
+    g_loop = loop;
+    fprintf(stderr, "b21r-controller: starting devices (laser %s, base %s %s)%s\n", cfg.laser_device,
+            cfg.base_protocol == FW_BASE_RFLEX ? "rflex" : "canopen",
+            cfg.base_protocol == FW_BASE_RFLEX ? cfg.base_device
+                                                : (cfg.can_socket[0] != '\0' ? cfg.can_socket : cfg.can_interface),
+            cfg.lockstep ? ", lockstep" : "");
+    if (fw_loop_start(loop, err, sizeof err) != 0) {
+      fprintf(stderr, "b21r-controller: %s\n", err);
+      status = EXIT_DEVICE;
+      fw_loop_signal(loop, 0);
+    } else {
+      status = fw_loop_run(loop);
+    }
+    if (fw_loop_shutdown(loop) != 0 && status == 0) {
+      fprintf(stderr, "b21r-controller: the final checkpoint could not be written\n");
+      status = EXIT_CHECKPOINT;
+    }
+  }
+
+  if (rx_running) {
+    atomic_store(&rx.stop, true);
+    pthread_join(rx.thread, NULL);
+  }
+  g_loop = NULL;
+  fw_publisher_flush(pub);
+  fw_publisher_destroy(pub);
+  fw_ckpt_writer_destroy(ckpt);
+  fw_loop_destroy(loop);
+  fw_pubq_destroy(q);
+  io_posix_close(&io);
+  if (lcm != NULL) {
+    lcm_destroy(lcm);
+  }
+  return status;
+}

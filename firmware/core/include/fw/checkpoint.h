@@ -1,0 +1,103 @@
+// SPDX-License-Identifier: MIT
+/// fw/checkpoint.h — Crash-safe files for the learned state, and a background writer so that
+/// the control tick never waits for the disk.
+///
+/// File layout (all integers little-endian), format version FW_CHECKPOINT_VERSION:
+/// ```
+///  0  8  magic "B21RCKPT"
+///  8  4  format version
+/// 12  4  header size (48)
+/// 16  8  meta size   M   (controller state: phase, run counters; fw_loop's own encoding)
+/// 24  8  payload size P  (the learner's own versioned, checksummed save format)
+/// 32  4  CRC-32 of meta
+/// 36  4  CRC-32 of payload
+/// 40  4  reserved (0)
+/// 44  4  CRC-32 of bytes 0..43
+/// 48  M  meta
+/// 48+M P payload
+/// ```
+/// Atomicity: fw_checkpoint_write() writes `<path>.tmp`, fsyncs it, renames it over `<path>`
+/// and fsyncs the directory. A process killed at any instant (kill -9) therefore leaves `<path>`
+/// holding either the previous or the new complete file; a stale `<path>.tmp` is harmless and is
+/// overwritten by the next write. CRC-32 is the IEEE 802.3 polynomial (as zlib's crc32()).
+#ifndef FW_CHECKPOINT_H
+#define FW_CHECKPOINT_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define FW_CHECKPOINT_VERSION 1U
+#define FW_CHECKPOINT_HEADER_SIZE 48U
+/// Capacity of the error messages below, including the NUL.
+#define FW_CHECKPOINT_ERR_MAX 512U
+
+/// CRC-32 (IEEE, reflected, init and final XOR 0xFFFFFFFF) of n bytes, continuing from crc
+/// (pass 0 to start). O(n), no allocation.
+uint32_t fw_crc32(uint32_t crc, const void* data, size_t n);
+
+/// Writes a checkpoint atomically (see the file comment). meta/payload may be NULL when their
+/// size is 0. Blocks on the disk (fsync): never call it from the tick; use fw_ckpt_writer_t.
+/// Returns 0, or -1 with a message naming the path and the failing step in err; on failure
+/// `<path>` is untouched.
+int fw_checkpoint_write(const char* path, const void* meta, size_t meta_size, const void* payload,
+                        size_t payload_size, char* err, size_t err_cap);
+
+/// Reads the header and reports the section sizes so the caller can size its buffers.
+/// Returns 1 (file present and the header valid), 0 (no file at path), -1 (unreadable or
+/// corrupt: err says what and how to start fresh).
+int fw_checkpoint_peek(const char* path, size_t* meta_size, size_t* payload_size, char* err, size_t err_cap);
+
+/// Reads and verifies a whole checkpoint into caller buffers. Returns 1 (loaded; *meta_size and
+/// *payload_size set), 0 (no file), -1 (corrupt, truncated, wrong version, too big for the
+/// buffers, or unreadable; err names the problem and says how to start fresh: move the file away).
+int fw_checkpoint_read(const char* path, void* meta, size_t meta_cap, size_t* meta_size, void* payload,
+                       size_t payload_cap, size_t* payload_size, char* err, size_t err_cap);
+
+/// Background checkpoint writer: two buffers of fixed capacity, one thread. The tick fills a
+/// buffer (fw_ckpt_writer_acquire → serialise into it → fw_ckpt_writer_submit); the thread
+/// writes it with fw_checkpoint_write. When the disk is slower than the submissions, a pending,
+/// not yet started checkpoint is replaced by the newer one (the newest state always wins; the
+/// replaced one is counted as superseded).
+typedef struct fw_ckpt_writer fw_ckpt_writer_t;
+
+/// Counters of a writer; monotonic.
+typedef struct fw_ckpt_counters {
+  uint64_t written;      ///< checkpoints on disk
+  uint64_t failed;       ///< write attempts that failed (message on stderr)
+  uint64_t superseded;   ///< submissions replaced by a newer one before being written
+  uint64_t busy;         ///< acquire calls that found no free buffer (checkpoint skipped)
+} fw_ckpt_counters_t;
+
+/// Creates a writer for path with buffers of meta_cap + payload_cap bytes each (allocated here,
+/// once) and starts its thread. Returns NULL with a message on failure.
+fw_ckpt_writer_t* fw_ckpt_writer_create(const char* path, size_t meta_cap, size_t payload_cap, char* err,
+                                        size_t err_cap);
+
+/// Gives the tick a free buffer to serialise into, or returns -1 when both are in use (counted
+/// in `busy`). On success *meta/*payload point into the writer's buffer of the stated capacity
+/// and the returned handle must be passed to fw_ckpt_writer_submit. Bounded time (a mutex held
+/// only for bookkeeping by the thread), no allocation.
+int fw_ckpt_writer_acquire(fw_ckpt_writer_t* w, void** meta, size_t* meta_cap, void** payload,
+                           size_t* payload_cap);
+
+/// Queues the buffer of handle (from acquire) with the used sizes for writing. Bounded time.
+void fw_ckpt_writer_submit(fw_ckpt_writer_t* w, int handle, size_t meta_size, size_t payload_size);
+
+/// Waits until every submitted checkpoint is on disk (or failed). For shutdown and tests.
+void fw_ckpt_writer_flush(fw_ckpt_writer_t* w);
+
+/// Snapshot of the counters (thread-safe).
+fw_ckpt_counters_t fw_ckpt_writer_counters(fw_ckpt_writer_t* w);
+
+/// Flushes, stops the thread and frees the buffers. NULL is ignored.
+void fw_ckpt_writer_destroy(fw_ckpt_writer_t* w);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif  // FW_CHECKPOINT_H

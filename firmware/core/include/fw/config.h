@@ -1,0 +1,193 @@
+// SPDX-License-Identifier: MIT
+/// fw/config.h — The controller's configuration: one struct, its documented defaults, and a
+/// parser for `key = value` files and `--set key=value` overrides.
+///
+/// File format (see firmware/app/b21r-controller.conf, the reference file):
+/// - one `key = value` per line; blanks around `=` and at both ends are ignored;
+/// - `#` starts a comment anywhere outside a double-quoted value; blank lines are ignored;
+/// - string values may be double-quoted (`log_file = "out dir/log"`), which keeps spaces and `#`;
+/// - a key may appear once per file; later sources (more files, then `--set`) override earlier ones.
+/// Every error names the source (`file:line` or `--set`), the key, the bad value and what is
+/// allowed (range, choices), so the operator can fix it without reading code.
+///
+/// Memory: fw_config_t is a plain value (no pointers, strings are fixed arrays); parsing uses the
+/// stack and stdio only. Not used on the tick path. Thread-safety: none needed (start-up only).
+#ifndef FW_CONFIG_H
+#define FW_CONFIG_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/// Capacity of every string setting (paths, URLs), including the terminating NUL.
+#define FW_CONFIG_STR_MAX 256U
+/// Largest number of values of a list key (hedger_input_scale: state dimensions + action).
+#define FW_CONFIG_MAX_SCALES 9
+/// Capacity of an error message produced by the parser, including the NUL.
+#define FW_CONFIG_ERR_MAX 512U
+
+/// Learning task (ARCHITECTURE.md, "The experiments of the paper").
+typedef enum fw_task { FW_TASK_CORRIDOR = 0, FW_TASK_OBSTACLES = 1 } fw_task_t;
+/// Wire protocol of the base.
+typedef enum fw_base_protocol { FW_BASE_RFLEX = 0, FW_BASE_CANOPEN = 1 } fw_base_protocol_t;
+/// Who drives in phase one.
+typedef enum fw_driver {
+  FW_DRIVER_EXAMPLE = 0,   ///< the paper's proportional controller, gain varied per run
+  FW_DRIVER_JOYSTICK = 1,  ///< the operator over B21R_TELEOP (deadman)
+  FW_DRIVER_HUMAN = 2,     ///< a simulated sloppy joystick driver (lib/tasks), for emulator studies
+} fw_driver_t;
+/// When phase two starts.
+typedef enum fw_phase_switch {
+  FW_SWITCH_RUNS = 0,      ///< after phase_one_runs training runs (the paper: 30)
+  FW_SWITCH_OPERATOR = 1,  ///< only on B21R_COMMAND START_PHASE_TWO
+  FW_SWITCH_AUTO = 2,      ///< when an evaluation block shows the learned policy is ready
+} fw_phase_switch_t;
+/// How the robot reaches the next start pose between runs.
+typedef enum fw_reposition {
+  FW_REPOSITION_OPERATOR = 0,  ///< status REPOSITIONING until B21R_COMMAND CONFIRM_START_POSE
+  FW_REPOSITION_EMULATOR = 1,  ///< the emulator's control socket `reset x y theta`
+} fw_reposition_t;
+/// What the process does.
+typedef enum fw_mode {
+  FW_MODE_LEARN = 0,     ///< the two-phase learning schedule
+  FW_MODE_EVALUATE = 1,  ///< one evaluation block of evaluate_policy, learning off, then exit
+} fw_mode_t;
+/// Policy evaluated in FW_MODE_EVALUATE.
+typedef enum fw_eval_policy {
+  FW_EVAL_LEARNED = 0,   ///< HEDGER greedy (from the checkpoint)
+  FW_EVAL_EXAMPLE = 1,   ///< the example policy at its nominal gain
+  FW_EVAL_OPTIMAL = 2,   ///< the hand-tuned reference controller (the paper's "optimal" line)
+} fw_eval_policy_t;
+
+/// Every setting of the controller. Field names carry units. Defaults: fw_config_defaults().
+typedef struct fw_config {
+  // What to do.
+  int32_t task;                    ///< fw_task_t
+  int32_t mode;                    ///< fw_mode_t
+  int32_t evaluate_policy;         ///< fw_eval_policy_t (mode = evaluate only)
+  uint64_t seed;                   ///< root of every random generator
+
+  // Loop timing.
+  double tick_rate_hz;             ///< control rate [1, 100], default 10
+  bool lockstep;                   ///< tick when the emulator's data for t_k has arrived
+  double lockstep_timeout_s;       ///< lockstep: longest wait for any input before "silence"
+  double lockstep_grace_s;         ///< lockstep: wait for the second device once the first answered
+
+  // Devices.
+  char laser_device[FW_CONFIG_STR_MAX];  ///< serial device of the LMS200
+  int32_t laser_baud;              ///< operating rate after switching: 9600|19200|38400|500000
+  int32_t laser_start_baud;        ///< rate the LMS200 powers up with (9600)
+  int32_t laser_fov_deg;           ///< 180 | 100
+  int32_t laser_resolution_cdeg;   ///< 100 | 50 | 25 (0.25 only with fov 100)
+  int32_t base_protocol;           ///< fw_base_protocol_t
+  char base_device[FW_CONFIG_STR_MAX];   ///< rFLEX serial device
+  int32_t base_baud;               ///< rFLEX rate (115200)
+  int32_t base_write_gap_us;       ///< rFLEX: pause after each written packet [µs]
+  char can_interface[FW_CONFIG_STR_MAX]; ///< SocketCAN interface (CANopen), e.g. can0
+  char can_socket[FW_CONFIG_STR_MAX];    ///< seqpacket CAN socket path; overrides can_interface
+  int32_t can_node_translation;    ///< CiA 402 node id of the translation drive [1, 127]
+  int32_t can_node_rotation;       ///< CiA 402 node id of the rotation drive [1, 127]
+  double can_heartbeat_timeout_s;  ///< drive heartbeat silence that counts as a fault
+  double distance_counts_per_m;    ///< base conversion K_d (rFLEX: 103000)
+  double angle_counts_per_rad;     ///< base conversion K_a (rFLEX: 35000)
+  int32_t reposition;              ///< fw_reposition_t
+  char emulator_control[FW_CONFIG_STR_MAX]; ///< emulator control socket (reposition = emulator)
+
+  // Command limits.
+  double max_translation_mps;      ///< |v| limit
+  double max_rotation_radps;       ///< |ω| limit, also the learner's action range
+  double max_translation_accel_mps2;  ///< |Δv|/dt limit
+  double max_rotation_accel_radps2;   ///< |Δω|/dt limit
+
+  // Safety.
+  double laser_timeout_s;          ///< no scan for this long → stop (lockstep: in ticks)
+  double base_timeout_s;           ///< no odometry for this long → stop (lockstep: in ticks)
+  double teleop_timeout_s;         ///< no fresh deadman message for this long → stop
+  bool safety_auto_resume;         ///< resume (with a new run) once the cause has cleared
+  int32_t safety_clear_ticks;      ///< ticks without the cause before resuming
+
+  // Learning.
+  double alpha;                    ///< learning rate (paper: 0.2)
+  double gamma;                    ///< discount; 0 = the task's (paper: corridor 0.99, obstacles 0.9)
+  int32_t hedger_capacity;         ///< stored samples (fixed memory)
+  int32_t hedger_k_min;            ///< fewer neighbours → unknown
+  int32_t hedger_k_max;            ///< neighbourhood size
+  double hedger_bandwidth;         ///< kernel width h in scaled input units
+  double hedger_input_scale[FW_CONFIG_MAX_SCALES]; ///< raw units per scaled unit: state..., action
+  int32_t hedger_input_scale_n;    ///< entries set (0 = the task's defaults)
+  double hedger_merge_radius;      ///< merge a new point into a stored one closer than this (scaled)
+  int32_t hedger_greedy_actions;   ///< evenly spaced actions scanned by the greedy search
+  bool hedger_replay;              ///< replay each finished training run backwards
+  int32_t phase_driver;            ///< fw_driver_t: who drives phase one
+  int32_t phase_switch;            ///< fw_phase_switch_t
+  int32_t phase_one_runs;          ///< training runs in phase one (paper: 30)
+  int32_t phase_two_runs;          ///< training runs in phase two (paper: 35); then done
+  int32_t auto_switch_min_runs;    ///< phase_switch = auto: earliest switch
+  double auto_switch_ratio;        ///< auto: ready when eval mean ≤ ratio × mean example run
+  int32_t eval_every_runs;         ///< an evaluation block every N training runs (paper: 5)
+  int32_t eval_starts;             ///< evaluation start poses per block [1, 16] (paper: 10)
+  bool eval_at_start;              ///< also evaluate before the first training run
+  int32_t max_steps_per_run;       ///< step limit of a run (0 = the task's default)
+  double explore_sigma_radps;      ///< phase two: std-dev of the exploration noise
+  double explore_probability;      ///< phase two: probability of adding noise to a step
+  bool advisor;                    ///< phase two: example policy acts where HEDGER knows nothing
+  double advisor_margin;           ///< phase two: greedy must beat the advisor's Q by this fraction
+
+  // Output.
+  char lcm_url[FW_CONFIG_STR_MAX]; ///< LCM provider URL; "" = LCM's default; "none" = off
+  int32_t status_period_ticks;     ///< publish STATUS every N ticks
+  bool publish_scan;               ///< also publish B21R_SCAN
+  int32_t queue_capacity;          ///< publisher queue slots (power of two)
+  char checkpoint_file[FW_CONFIG_STR_MAX];     ///< "" = no checkpoints (learned data lost!)
+  char log_file[FW_CONFIG_STR_MAX];            ///< LCM event log of every channel ("" = none)
+  char experience_log_file[FW_CONFIG_STR_MAX]; ///< LCM event log of EXPERIENCE only
+  bool progress;                   ///< print one line per run / evaluation block on stdout
+} fw_config_t;
+
+/// Fills cfg with the documented defaults (the values in firmware/app/b21r-controller.conf).
+/// O(number of keys); never fails.
+void fw_config_defaults(fw_config_t* cfg);
+
+/// Sets one key from its textual value. `source` names where it came from ("--set",
+/// "file.conf:12") and is used in the error text only. Returns 0, or -1 with a message in err
+/// (capacity FW_CONFIG_ERR_MAX) naming source, key, value and the allowed range or choices;
+/// cfg is then unchanged. O(number of keys).
+int fw_config_set(fw_config_t* cfg, const char* key, const char* value, const char* source,
+                  char* err, size_t err_cap);
+
+/// Applies a `key=value` command-line override (the argument of `--set`). Same errors as
+/// fw_config_set, plus a missing `=`.
+int fw_config_set_arg(fw_config_t* cfg, const char* key_eq_value, char* err, size_t err_cap);
+
+/// Parses a whole config file over cfg (keys not in the file keep their value). Returns 0, or
+/// -1 with the first error in err ("path:line: ..."), including an unreadable file. cfg may hold
+/// the keys of lines before the error. Lines longer than 1023 characters are an error.
+int fw_config_load_file(fw_config_t* cfg, const char* path, char* err, size_t err_cap);
+
+/// Cross-key checks after all sources were applied (e.g. 0.25° needs the 100° field, k_min ≤
+/// k_max, reposition = emulator needs emulator_control). Returns 0 or -1 with a message.
+int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap);
+
+/// Writes the documentation of every key (default, allowed values, meaning) to out, in the
+/// config file format, so the output is itself a valid config file.
+void fw_config_print_reference(FILE* out);
+
+/// Writes the current value of every key to out in the config file format.
+void fw_config_print(const fw_config_t* cfg, FILE* out);
+
+/// Tick period [µs] derived from tick_rate_hz (rounded to the nearest µs).
+int64_t fw_config_period_us(const fw_config_t* cfg);
+
+/// A timeout in seconds expressed in whole ticks at the configured rate (at least 1).
+int32_t fw_config_ticks(const fw_config_t* cfg, double seconds);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif  // FW_CONFIG_H

@@ -1,0 +1,369 @@
+// SPDX-License-Identifier: MIT
+// Base adapters of the loop core: rFLEX over bytes and CiA 402 drives over CANopen frames.
+// Both feed the same odometry integrator (rflex_odometry_t: heading first, then translation).
+#include "loop_internal.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+// How often the rFLEX is asked for SYS_STATUS (brake, battery), in ticks: about every 2 s at
+// 10 Hz. More often "overwhelms the driver" (protocols.md A.6).
+#define SYS_STATUS_PERIOD_TICKS 20
+
+static bool is_rflex(const fw_loop_t* L) { return L->cfg.base_protocol == FW_BASE_RFLEX; }
+
+// ---- rFLEX ------------------------------------------------------------------------------
+
+static int rflex_send(fw_loop_t* L, const rflex_packet_t* pkt) {
+  uint8_t buf[RFLEX_PACKET_BYTES(RFLEX_MAX_DATA)];
+  const size_t n = rflex_encode(buf, sizeof buf, pkt, RFLEX_HOST_STRICT);
+  if (n == 0) {
+    return -1;
+  }
+  return L->io.vt->base_write(L->io.user, buf, n);
+}
+
+static void rflex_handle(fw_loop_t* L, const rflex_packet_t* pkt) {
+  L->base_packets++;
+  switch (rflex_classify(pkt)) {
+    case RFLEX_MSG_MOTOR_REPORT: {
+      rflex_motor_report_t r;
+      if (rflex_parse_motor_report(pkt, &r) == PROTO_OK && rflex_odom_feed(&L->odo, &r) == PROTO_OK) {
+        L->odo_new[r.axis] = true;
+      }
+      break;
+    }
+    case RFLEX_MSG_SYS_STATUS: {
+      rflex_sys_status_t s;
+      if (pkt->dlen >= 9 && rflex_parse_sys_status(pkt, &s) == PROTO_OK) {
+        L->brake_reported = s.brake != 0 ? 1 : 0;
+        L->battery_v = rflex_battery_volts(s.voltage_raw, L->rflex.power_offset_v);
+      }
+      break;
+    }
+    case RFLEX_MSG_DIO_REPORT: {
+      rflex_dio_report_t d;
+      if (rflex_parse_dio_report(pkt, &d) == PROTO_OK) {
+        const int panel = rflex_dio_bumper_panel(d.address);
+        if (panel >= 0) {
+          if ((d.value & 0x0FU) != 0U) {
+            L->bumper_mask |= 1U << panel;
+          } else {
+            L->bumper_mask &= ~(1U << panel);
+          }
+        }
+      }
+      break;
+    }
+    default:
+      break;  // other reports (sonar, IR, joystick) are not used
+  }
+}
+
+static void rflex_poll(fw_loop_t* L) {
+  // Bounded: at most 16 reads of 1 KB per poll (about 3 s of reports at 115200 Bd).
+  for (int i = 0; i < 16; ++i) {
+    const ssize_t n = L->io.vt->base_read(L->io.user, L->rbuf, sizeof L->rbuf);
+    if (n <= 0) {
+      break;
+    }
+    const uint8_t* p = L->rbuf;
+    size_t left = (size_t)n;
+    while (left > 0) {
+      rflex_packet_t pkt;
+      bool got = false;
+      const size_t k = rflex_decoder_push(&L->rdec, p, left, &pkt, &got);
+      p += k;
+      left -= k;
+      if (got) {
+        rflex_handle(L, &pkt);
+      }
+    }
+  }
+}
+
+// ---- CANopen ----------------------------------------------------------------------------
+
+static const char* drive_name(int i) { return i == 0 ? "translation" : "rotation"; }
+
+static void can_handle(fw_loop_t* L, const canopen_frame_t* f, int64_t now_us) {
+  uint8_t node = 0;
+  const canopen_kind_t kind = canopen_classify(f, &node);
+  int i = -1;
+  for (int k = 0; k < 2; ++k) {
+    if (L->drive[k].node == node) {
+      i = k;
+    }
+  }
+  if (i < 0) {
+    return;
+  }
+  fw_drive_t* d = &L->drive[i];
+  L->base_packets++;
+  switch (kind) {
+    case CANOPEN_KIND_TPDO1: {
+      canopen_tpdo1_t t;
+      if (canopen_decode_tpdo1(f, &t) == PROTO_OK) {
+        d->statusword = t.statusword;
+        d->sw_seen = true;
+        if (cia402_operation_enabled(t.statusword) && !cia402_fault(t.statusword)) {
+          d->emcy_seen = false;  // a good statusword after the EMCY: the drive recovered
+        }
+        d->velocity = t.velocity_actual;
+        d->tpdo1_new = true;
+      }
+      break;
+    }
+    case CANOPEN_KIND_TPDO2: {
+      canopen_tpdo2_t t;
+      if (canopen_decode_tpdo2(f, &t) == PROTO_OK) {
+        d->position = t.position_actual;
+        d->tpdo2_new = true;
+        rflex_motor_report_t r;
+        memset(&r, 0, sizeof r);
+        r.axis = (uint8_t)i;
+        r.position = t.position_actual;
+        r.velocity = d->velocity;
+        if (rflex_odom_feed(&L->odo, &r) == PROTO_OK) {
+          L->odo_new[i] = true;
+        }
+      }
+      break;
+    }
+    case CANOPEN_KIND_EMCY: {
+      canopen_emcy_t e;
+      if (canopen_decode_emcy(f, &e) == PROTO_OK) {
+        d->emcy_code = e.error_code;
+        d->emcy_seen = e.error_code != 0U;
+      }
+      break;
+    }
+    case CANOPEN_KIND_HEARTBEAT:
+      (void)canopen_hb_feed(&d->hb, f, (uint64_t)now_us);
+      break;
+    default:
+      break;
+  }
+}
+
+static void can_poll(fw_loop_t* L, int64_t now_us) {
+  for (int i = 0; i < 256; ++i) {
+    canopen_frame_t f;
+    if (L->io.vt->can_read(L->io.user, &f) != 1) {
+      break;
+    }
+    can_handle(L, &f, now_us);
+  }
+}
+
+static void can_send_cycle(fw_loop_t* L, double v_mps, double w_radps, cia402_request_t req) {
+  const double factor[2] = {L->cfg.distance_counts_per_m, L->cfg.angle_counts_per_rad};
+  const double value[2] = {v_mps, w_radps};
+  for (int i = 0; i < 2; ++i) {
+    fw_drive_t* d = &L->drive[i];
+    const uint16_t cw = cia402_master_controlword(&d->master, d->statusword, req);
+    canopen_frame_t f;
+    if (canopen_encode_rpdo1(&f, d->node, cw, canopen_counts_from_si(value[i], factor[i])) == PROTO_OK) {
+      (void)L->io.vt->can_write(L->io.user, &f);
+    }
+  }
+  canopen_frame_t sync;
+  (void)canopen_encode_sync(&sync);
+  (void)L->io.vt->can_write(L->io.user, &sync);
+}
+
+// ---- common -------------------------------------------------------------------------------
+
+void fw_base_poll(fw_loop_t* L, int64_t now_us) {
+  if (is_rflex(L)) {
+    rflex_poll(L);
+  } else {
+    can_poll(L, now_us);
+  }
+}
+
+bool fw_base_all_reports(const fw_loop_t* L) {
+  if (is_rflex(L)) {
+    return L->odo_new[0] && L->odo_new[1];
+  }
+  return L->drive[0].tpdo1_new && L->drive[0].tpdo2_new && L->drive[1].tpdo1_new && L->drive[1].tpdo2_new;
+}
+
+bool fw_base_any_report(const fw_loop_t* L) {
+  if (is_rflex(L)) {
+    return L->odo_new[0] || L->odo_new[1];
+  }
+  return L->drive[0].tpdo1_new || L->drive[0].tpdo2_new || L->drive[1].tpdo1_new || L->drive[1].tpdo2_new;
+}
+
+void fw_base_clear_flags(fw_loop_t* L) {
+  L->odo_new[0] = false;
+  L->odo_new[1] = false;
+  for (int i = 0; i < 2; ++i) {
+    L->drive[i].tpdo1_new = false;
+    L->drive[i].tpdo2_new = false;
+  }
+}
+
+void fw_base_evaluate_faults(fw_loop_t* L, int64_t now_us) {
+  L->base_fault = false;
+  L->base_fault_detail[0] = '\0';
+  if (is_rflex(L)) {
+    // The rFLEX reports no faults; an engaged brake we did not ask for means its watchdog or an
+    // emergency stop took the motors away.
+    if (L->brake_expected_released && L->brake_reported == 1) {
+      L->base_fault = true;
+      snprintf(L->base_fault_detail, sizeof L->base_fault_detail,
+               "rFLEX reports the brake engaged (watchdog or emergency stop)");
+    }
+    return;
+  }
+  for (int i = 0; i < 2 && !L->base_fault; ++i) {
+    fw_drive_t* d = &L->drive[i];
+    const bool hb_expired = L->cfg.can_heartbeat_timeout_s > 0.0 &&
+                            canopen_hb_expired(&d->hb, (uint64_t)now_us, (uint64_t)L->can_start_us);
+    if (d->emcy_seen || cia402_fault(d->statusword) || !cia402_operation_enabled(d->statusword) || hb_expired) {
+      L->base_fault = true;
+      char emcy[32] = "";
+      if (d->emcy_seen) {
+        snprintf(emcy, sizeof emcy, "EMCY 0x%04x, ", (unsigned)d->emcy_code);
+      }
+      snprintf(L->base_fault_detail, sizeof L->base_fault_detail, "%s drive (node %u): %sstatusword 0x%04x (%s)%s",
+               drive_name(i), (unsigned)d->node, emcy, (unsigned)d->statusword,
+               cia402_state_name(cia402_state_from_statusword(d->statusword)), hb_expired ? ", heartbeat lost" : "");
+    }
+  }
+}
+
+void fw_base_command(fw_loop_t* L, double v_mps, double w_radps, bool stopping) {
+  if (is_rflex(L)) {
+    if (--L->sys_status_countdown <= 0) {
+      // Asked before the velocity pair so that, in lockstep, its answer is not mixed with the
+      // next period's reports (SYS_STATUS is answered at once, without advancing time).
+      rflex_packet_t st;
+      rflex_make_sys_status_request(&st);
+      (void)rflex_send(L, &st);
+      L->sys_status_countdown = SYS_STATUS_PERIOD_TICKS;
+    }
+    rflex_packet_t pair[2];
+    // Stopping decelerates at the configured limit; otherwise the base's own acceleration.
+    const double acc = stopping ? L->cfg.max_translation_accel_mps2 : L->rflex.trans_acc_mps2;
+    if (rflex_make_velocity(pair, &L->rflex, v_mps, w_radps, acc) == PROTO_OK) {
+      (void)rflex_send(L, &pair[0]);
+      (void)rflex_send(L, &pair[1]);
+    }
+    return;
+  }
+  // CANopen: keep asking for "enabled" (a fault reset edge when a drive has recovered from a
+  // fault), with zero velocity while stopped.
+  can_send_cycle(L, v_mps, w_radps, CIA402_REQ_ENABLE);
+}
+
+uint64_t fw_base_bytes_dropped(const fw_loop_t* L) { return is_rflex(L) ? L->rdec.counters.bytes_dropped : 0U; }
+
+uint64_t fw_base_checksum_errors(const fw_loop_t* L) { return is_rflex(L) ? L->rdec.counters.bad_checksum : 0U; }
+
+static int64_t now(const fw_loop_t* L) { return L->io.vt->now_us(L->io.user); }
+
+int fw_base_start(fw_loop_t* L, char* err, size_t err_cap) {
+  if (is_rflex(L)) {
+    if (L->io.vt->base_read == NULL || L->io.vt->base_write == NULL) {
+      snprintf(err, err_cap, "base_protocol = rflex but the I/O binding has no serial base");
+      return -1;
+    }
+    // protocols.md A.7, recommended sequence: odometry on, DIO on, defaults, brake release,
+    // status. Zero velocities follow with every tick. Report period = the tick period [µs],
+    // nudged by 1 µs if a byte would be 0x1B.
+    rflex_packet_t p;
+    uint32_t period = (uint32_t)L->period_us;
+    while (rflex_make_odometry_request(&p, period, 3U) != PROTO_OK) {
+      period++;
+    }
+    int rc = rflex_send(L, &p);
+    uint32_t dio_period = 100000U;
+    while (rflex_make_dio_request(&p, dio_period) != PROTO_OK) {
+      dio_period++;
+    }
+    rc |= rflex_send(L, &p);
+    rflex_make_set_defaults(&p);
+    rc |= rflex_send(L, &p);
+    rflex_make_brake_release(&p);
+    rc |= rflex_send(L, &p);
+    rflex_make_sys_status_request(&p);
+    rc |= rflex_send(L, &p);
+    if (rc != 0) {
+      snprintf(err, err_cap, "rFLEX base: cannot write the start-up packets to %s", L->cfg.base_device);
+      return -1;
+    }
+    L->brake_expected_released = true;
+    L->sys_status_countdown = SYS_STATUS_PERIOD_TICKS;
+    return 0;
+  }
+  if (L->io.vt->can_read == NULL || L->io.vt->can_write == NULL) {
+    snprintf(err, err_cap, "base_protocol = canopen but the I/O binding has no CAN bus");
+    return -1;
+  }
+  L->can_start_us = now(L);
+  for (int i = 0; i < 2; ++i) {
+    canopen_frame_t f;
+    (void)canopen_encode_nmt(&f, CANOPEN_NMT_START, L->drive[i].node);
+    if (L->io.vt->can_write(L->io.user, &f) != 0) {
+      snprintf(err, err_cap, "CANopen: cannot send NMT start to node %u", (unsigned)L->drive[i].node);
+      return -1;
+    }
+  }
+  // Walk both drives to OPERATION ENABLED: one controlword step per SYNC cycle.
+  for (int cycle = 0; cycle < 40; ++cycle) {
+    can_send_cycle(L, 0.0, 0.0, CIA402_REQ_ENABLE);
+    const int64_t deadline = now(L) + 500000;
+    while (now(L) < deadline) {
+      can_poll(L, now(L));
+      if (L->drive[0].tpdo1_new && L->drive[1].tpdo1_new) {
+        break;
+      }
+      (void)L->io.vt->wait(L->io.user, deadline);
+    }
+    const bool ok = cia402_operation_enabled(L->drive[0].statusword) && cia402_operation_enabled(L->drive[1].statusword);
+    fw_base_clear_flags(L);
+    if (ok) {
+      return 0;
+    }
+  }
+  snprintf(err, err_cap,
+           "CANopen: drives not enabled after 40 SYNC cycles (node %u statusword 0x%04x %s, node %u statusword "
+           "0x%04x %s)",
+           (unsigned)L->drive[0].node, (unsigned)L->drive[0].statusword,
+           L->drive[0].sw_seen ? cia402_state_name(cia402_state_from_statusword(L->drive[0].statusword)) : "never seen",
+           (unsigned)L->drive[1].node, (unsigned)L->drive[1].statusword,
+           L->drive[1].sw_seen ? cia402_state_name(cia402_state_from_statusword(L->drive[1].statusword)) : "never seen");
+  return -1;
+}
+
+void fw_base_shutdown(fw_loop_t* L) {
+  if (is_rflex(L)) {
+    // protocols.md A.7 shutdown: zero velocity, brake set, reports off, defaults.
+    fw_base_command(L, 0.0, 0.0, true);
+    rflex_packet_t p;
+    rflex_make_brake_set(&p);
+    (void)rflex_send(L, &p);
+    L->brake_expected_released = false;
+    if (rflex_make_odometry_request(&p, 0U, 0U) == PROTO_OK) {
+      (void)rflex_send(L, &p);
+    }
+    if (rflex_make_dio_request(&p, 0U) == PROTO_OK) {
+      (void)rflex_send(L, &p);
+    }
+    rflex_make_set_defaults(&p);
+    (void)rflex_send(L, &p);
+    return;
+  }
+  // Zero, then disable the drives (no torque) and stop the nodes.
+  can_send_cycle(L, 0.0, 0.0, CIA402_REQ_ENABLE);
+  can_send_cycle(L, 0.0, 0.0, CIA402_REQ_DISABLE);
+  for (int i = 0; i < 2; ++i) {
+    canopen_frame_t f;
+    (void)canopen_encode_nmt(&f, CANOPEN_NMT_STOP, L->drive[i].node);
+    (void)L->io.vt->can_write(L->io.user, &f);
+  }
+}

@@ -1,0 +1,677 @@
+// SPDX-License-Identifier: MIT
+// Table-driven configuration: one row per key carries its type, range, default and help text, so
+// the parser, the error messages, --help and the reference file cannot drift apart.
+#include "fw/config.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef enum key_kind { KIND_BOOL, KIND_INT, KIND_U64, KIND_DOUBLE, KIND_STRING, KIND_ENUM, KIND_DLIST } key_kind_t;
+
+typedef struct choice {
+  const char* name;
+  int32_t value;
+} choice_t;
+
+typedef struct key_desc {
+  const char* section;  // non-NULL starts a new section in the reference output
+  const char* name;
+  key_kind_t kind;
+  size_t offset;
+  double min;           // KIND_INT / KIND_DOUBLE: inclusive unless *_open
+  double max;
+  bool min_open;
+  bool max_open;
+  const choice_t* choices;  // KIND_ENUM: NULL-terminated
+  const char* def;      // default, as text (parsed by the same code as the file)
+  const char* doc;
+} key_desc_t;
+
+#define OFF(field) offsetof(fw_config_t, field)
+// A list key stores its count right after its values.
+_Static_assert(offsetof(fw_config_t, hedger_input_scale_n) ==
+                   offsetof(fw_config_t, hedger_input_scale) + FW_CONFIG_MAX_SCALES * sizeof(double),
+               "list count must follow the list");
+
+static const choice_t k_task[] = {{"corridor", FW_TASK_CORRIDOR}, {"obstacles", FW_TASK_OBSTACLES}, {NULL, 0}};
+static const choice_t k_mode[] = {{"learn", FW_MODE_LEARN}, {"evaluate", FW_MODE_EVALUATE}, {NULL, 0}};
+static const choice_t k_eval_policy[] = {
+    {"learned", FW_EVAL_LEARNED}, {"example", FW_EVAL_EXAMPLE}, {"optimal", FW_EVAL_OPTIMAL}, {NULL, 0}};
+static const choice_t k_baud_laser[] = {
+    {"9600", 9600}, {"19200", 19200}, {"38400", 38400}, {"500000", 500000}, {NULL, 0}};
+static const choice_t k_fov[] = {{"180", 180}, {"100", 100}, {NULL, 0}};
+static const choice_t k_res[] = {{"1", 100}, {"0.5", 50}, {"0.25", 25}, {NULL, 0}};
+static const choice_t k_proto[] = {{"rflex", FW_BASE_RFLEX}, {"canopen", FW_BASE_CANOPEN}, {NULL, 0}};
+static const choice_t k_baud_base[] = {
+    {"9600", 9600}, {"19200", 19200}, {"38400", 38400}, {"57600", 57600}, {"115200", 115200}, {NULL, 0}};
+static const choice_t k_reposition[] = {
+    {"operator", FW_REPOSITION_OPERATOR}, {"emulator", FW_REPOSITION_EMULATOR}, {NULL, 0}};
+static const choice_t k_driver[] = {
+    {"example", FW_DRIVER_EXAMPLE}, {"joystick", FW_DRIVER_JOYSTICK}, {"human", FW_DRIVER_HUMAN}, {NULL, 0}};
+static const choice_t k_switch[] = {
+    {"runs", FW_SWITCH_RUNS}, {"operator", FW_SWITCH_OPERATOR}, {"auto", FW_SWITCH_AUTO}, {NULL, 0}};
+
+// clang-format off
+static const key_desc_t k_keys[] = {
+  {"What to do", "task", KIND_ENUM, OFF(task), 0, 0, false, false, k_task, "corridor",
+   "learning task: corridor following or obstacle avoidance (the paper's two tasks)"},
+  {NULL, "mode", KIND_ENUM, OFF(mode), 0, 0, false, false, k_mode, "learn",
+   "learn: the two-phase schedule; evaluate: one evaluation block of evaluate_policy, then exit"},
+  {NULL, "evaluate_policy", KIND_ENUM, OFF(evaluate_policy), 0, 0, false, false, k_eval_policy, "learned",
+   "policy evaluated when mode = evaluate (optimal = the hand-tuned reference controller)"},
+  {NULL, "seed", KIND_U64, OFF(seed), 0, 9.2e18, false, false, NULL, "1",
+   "root seed of every random generator (example gains, start poses, exploration)"},
+
+  {"Loop timing", "tick_rate_hz", KIND_DOUBLE, OFF(tick_rate_hz), 1, 100, false, false, NULL, "10",
+   "control rate; absolute deadlines on the monotonic clock"},
+  {NULL, "lockstep", KIND_BOOL, OFF(lockstep), 0, 0, false, false, NULL, "false",
+   "tick when the emulator's data for the next period has arrived instead of on the clock"},
+  {NULL, "lockstep_timeout_s", KIND_DOUBLE, OFF(lockstep_timeout_s), 0.01, 60, false, false, NULL, "5",
+   "lockstep: longest wall-clock wait for any input; then the tick runs and counts silence"},
+  {NULL, "lockstep_grace_s", KIND_DOUBLE, OFF(lockstep_grace_s), 0.001, 10, false, false, NULL, "0.25",
+   "lockstep: once one device answered, how long to wait for the other one"},
+
+  {"Devices", "laser_device", KIND_STRING, OFF(laser_device), 0, 0, false, false, NULL, "/dev/ttyUSB0",
+   "serial device of the SICK LMS200"},
+  {NULL, "laser_baud", KIND_ENUM, OFF(laser_baud), 0, 0, false, false, k_baud_laser, "38400",
+   "LMS200 operating rate (the driver switches to it from laser_start_baud)"},
+  {NULL, "laser_start_baud", KIND_ENUM, OFF(laser_start_baud), 0, 0, false, false, k_baud_laser, "9600",
+   "rate the LMS200 listens on after power-up"},
+  {NULL, "laser_fov_deg", KIND_ENUM, OFF(laser_fov_deg), 0, 0, false, false, k_fov, "180",
+   "scan field [deg]"},
+  {NULL, "laser_resolution_deg", KIND_ENUM, OFF(laser_resolution_cdeg), 0, 0, false, false, k_res, "1",
+   "angular resolution [deg]; 0.25 only with laser_fov_deg = 100"},
+  {NULL, "base_protocol", KIND_ENUM, OFF(base_protocol), 0, 0, false, false, k_proto, "rflex",
+   "rflex: the B21r's serial base controller; canopen: CiA 402 drives over CAN"},
+  {NULL, "base_device", KIND_STRING, OFF(base_device), 0, 0, false, false, NULL, "/dev/ttyS0",
+   "rFLEX serial device"},
+  {NULL, "base_baud", KIND_ENUM, OFF(base_baud), 0, 0, false, false, k_baud_base, "115200",
+   "rFLEX serial rate"},
+  {NULL, "base_write_gap_us", KIND_INT, OFF(base_write_gap_us), 0, 100000, false, false, NULL, "1000",
+   "rFLEX: pause after each written packet (the controller's input buffer overflows otherwise; 0 for "
+   "the emulator)"},
+  {NULL, "can_interface", KIND_STRING, OFF(can_interface), 0, 0, false, false, NULL, "can0",
+   "SocketCAN interface of the CANopen drives"},
+  {NULL, "can_socket", KIND_STRING, OFF(can_socket), 0, 0, false, false, NULL, "",
+   "SOCK_SEQPACKET socket of an emulated CAN bus; when set, used instead of can_interface"},
+  {NULL, "can_node_translation", KIND_INT, OFF(can_node_translation), 1, 127, false, false, NULL, "1",
+   "CANopen node id of the translation drive"},
+  {NULL, "can_node_rotation", KIND_INT, OFF(can_node_rotation), 1, 127, false, false, NULL, "2",
+   "CANopen node id of the rotation (steering) drive"},
+  {NULL, "can_heartbeat_timeout_s", KIND_DOUBLE, OFF(can_heartbeat_timeout_s), 0, 10, false, false, NULL, "0",
+   "a drive heartbeat silent this long is a fault (0 = no heartbeat supervision)"},
+  {NULL, "distance_counts_per_m", KIND_DOUBLE, OFF(distance_counts_per_m), 1, 1e7, false, false, NULL, "103000",
+   "base translation conversion K_d (B21r rFLEX: 103000 counts/m)"},
+  {NULL, "angle_counts_per_rad", KIND_DOUBLE, OFF(angle_counts_per_rad), 1, 1e7, false, false, NULL, "35000",
+   "base rotation conversion K_a (B21r rFLEX: 35000 counts/rad)"},
+  {NULL, "reposition", KIND_ENUM, OFF(reposition), 0, 0, false, false, k_reposition, "operator",
+   "between runs: operator places the robot and sends CONFIRM_START_POSE, or the emulator resets it"},
+  {NULL, "emulator_control", KIND_STRING, OFF(emulator_control), 0, 0, false, false, NULL, "",
+   "control socket of the emulator (needed by reposition = emulator)"},
+
+  {"Command limits", "max_translation_mps", KIND_DOUBLE, OFF(max_translation_mps), 0, 2, false, false, NULL, "0.8",
+   "translation speed limit [m/s]"},
+  {NULL, "max_rotation_radps", KIND_DOUBLE, OFF(max_rotation_radps), 0, 4, true, false, NULL, "1",
+   "rotation speed limit [rad/s]; also the learned action range [-limit, limit]"},
+  {NULL, "max_translation_accel_mps2", KIND_DOUBLE, OFF(max_translation_accel_mps2), 0, 5, true, false, NULL, "0.7",
+   "translation acceleration limit of commands [m/s^2]"},
+  {NULL, "max_rotation_accel_radps2", KIND_DOUBLE, OFF(max_rotation_accel_radps2), 0, 20, true, false, NULL, "2.86",
+   "rotation acceleration limit of commands [rad/s^2]"},
+
+  {"Safety", "laser_timeout_s", KIND_DOUBLE, OFF(laser_timeout_s), 0.01, 10, false, false, NULL, "0.35",
+   "no laser scan for this long stops the robot (lockstep: rounded up to whole ticks)"},
+  {NULL, "base_timeout_s", KIND_DOUBLE, OFF(base_timeout_s), 0.01, 10, false, false, NULL, "0.35",
+   "no odometry from the base for this long stops the robot (lockstep: whole ticks)"},
+  {NULL, "teleop_timeout_s", KIND_DOUBLE, OFF(teleop_timeout_s), 0.01, 10, false, false, NULL, "0.3",
+   "joystick driving: no fresh B21R_TELEOP with the deadman held for this long stops the robot"},
+  {NULL, "safety_auto_resume", KIND_BOOL, OFF(safety_auto_resume), 0, 0, false, false, NULL, "true",
+   "after a safety stop whose cause has cleared, start a new run without an operator RESUME"},
+  {NULL, "safety_clear_ticks", KIND_INT, OFF(safety_clear_ticks), 1, 10000, false, false, NULL, "10",
+   "ticks the cause must stay absent before resuming"},
+
+  {"Learning", "alpha", KIND_DOUBLE, OFF(alpha), 0, 1, true, false, NULL, "0.2",
+   "learning rate (the paper: 0.2)"},
+  {NULL, "gamma", KIND_DOUBLE, OFF(gamma), 0, 1, false, true, NULL, "0",
+   "discount factor; 0 = the task's (the paper: corridor 0.99, obstacles 0.9)"},
+  {NULL, "hedger_capacity", KIND_INT, OFF(hedger_capacity), 64, 1000000, false, false, NULL, "20000",
+   "stored samples of the value function (fixed memory)"},
+  {NULL, "hedger_k_min", KIND_INT, OFF(hedger_k_min), 1, 64, false, false, NULL, "6",
+   "fewer neighbours than this and HEDGER answers 'unknown'"},
+  {NULL, "hedger_k_max", KIND_INT, OFF(hedger_k_max), 2, 64, false, false, NULL, "12",
+   "neighbourhood size of a prediction"},
+  {NULL, "hedger_bandwidth", KIND_DOUBLE, OFF(hedger_bandwidth), 0, 100, true, false, NULL, "0.25",
+   "kernel bandwidth h in scaled input units (inputs scaled to about [0, 1])"},
+  {NULL, "hedger_input_scale", KIND_DLIST, OFF(hedger_input_scale), 0, 1000, true, false, NULL, "",
+   "raw units per scaled unit, comma-separated: each state dimension then the action (\"\" = the task's: "
+   "corridor 10,0.5,0.5,0.25 for end distance m, lateral fraction, target angle rad, rotation rad/s)"},
+  {NULL, "hedger_merge_radius", KIND_DOUBLE, OFF(hedger_merge_radius), 0, 10, false, false, NULL, "0.02",
+   "a new sample closer than this (scaled units) to a stored one is merged into it"},
+  {NULL, "hedger_greedy_actions", KIND_INT, OFF(hedger_greedy_actions), 2, 64, false, false, NULL, "9",
+   "evenly spaced actions the greedy search scans before refining"},
+  {NULL, "hedger_replay", KIND_BOOL, OFF(hedger_replay), 0, 0, false, false, NULL, "true",
+   "replay every finished training run backwards (propagates the sparse reward faster)"},
+  {NULL, "phase_one_driver", KIND_ENUM, OFF(phase_driver), 0, 0, false, false, k_driver, "example",
+   "phase one is driven by the example policy (code), the operator's joystick (B21R_TELEOP), or a "
+   "simulated sloppy human driver (code)"},
+  {NULL, "phase_switch", KIND_ENUM, OFF(phase_switch), 0, 0, false, false, k_switch, "runs",
+   "phase two starts after phase_one_runs, only on START_PHASE_TWO, or automatically when ready"},
+  {NULL, "phase_one_runs", KIND_INT, OFF(phase_one_runs), 0, 100000, false, false, NULL, "30",
+   "training runs in phase one (the paper: 30); upper bound for phase_switch = auto"},
+  {NULL, "phase_two_runs", KIND_INT, OFF(phase_two_runs), 0, 100000, false, false, NULL, "35",
+   "training runs in phase two before the schedule ends (the paper: 35)"},
+  {NULL, "auto_switch_min_runs", KIND_INT, OFF(auto_switch_min_runs), 0, 100000, false, false, NULL, "5",
+   "phase_switch = auto: never before this many phase-one runs"},
+  {NULL, "auto_switch_ratio", KIND_DOUBLE, OFF(auto_switch_ratio), 0, 10, true, false, NULL, "1.5",
+   "auto: switch when an evaluation reaches the goal from every start and its mean steps are at most "
+   "ratio x the mean of the phase-one runs"},
+  {NULL, "eval_every_runs", KIND_INT, OFF(eval_every_runs), 1, 100000, false, false, NULL, "5",
+   "an evaluation block (learning off) after every N training runs (the paper: 5)"},
+  {NULL, "eval_starts", KIND_INT, OFF(eval_starts), 1, 16, false, false, NULL, "10",
+   "fixed start poses per evaluation block (the paper: 10)"},
+  {NULL, "eval_at_start", KIND_BOOL, OFF(eval_at_start), 0, 0, false, false, NULL, "false",
+   "also run an evaluation block before the first training run"},
+  {NULL, "max_steps_per_run", KIND_INT, OFF(max_steps_per_run), 0, 1000000, false, false, NULL, "0",
+   "step limit of a run (0 = the task's own limit)"},
+  {NULL, "explore_sigma_radps", KIND_DOUBLE, OFF(explore_sigma_radps), 0, 4, false, false, NULL, "0.1",
+   "phase two: standard deviation of the Gaussian exploration noise [rad/s]"},
+  {NULL, "explore_probability", KIND_DOUBLE, OFF(explore_probability), 0, 1, false, false, NULL, "0.2",
+   "phase two: probability that a step gets exploration noise"},
+  {NULL, "advisor", KIND_BOOL, OFF(advisor), 0, 0, false, false, NULL, "true",
+   "phase two training: the example policy acts where HEDGER knows nothing, or rates its own greedy "
+   "action no better than the example's by advisor_margin"},
+  {NULL, "advisor_margin", KIND_DOUBLE, OFF(advisor_margin), 0, 10, false, false, NULL, "0.02",
+   "phase two: the greedy action is taken only where its Q comes from a local regression and exceeds "
+   "the example action's by this fraction"},
+
+  {"Output", "lcm_url", KIND_STRING, OFF(lcm_url), 0, 0, false, false, NULL, "",
+   "LCM provider (\"\" = LCM's default or $LCM_DEFAULT_URL; \"none\" = no LCM)"},
+  {NULL, "status_period_ticks", KIND_INT, OFF(status_period_ticks), 1, 100000, false, false, NULL, "1",
+   "publish B21R_STATUS every N ticks"},
+  {NULL, "publish_scan", KIND_BOOL, OFF(publish_scan), 0, 0, false, false, NULL, "false",
+   "also publish every decoded scan on B21R_SCAN"},
+  {NULL, "queue_capacity", KIND_INT, OFF(queue_capacity), 16, 65536, false, false, NULL, "1024",
+   "publisher queue slots (a power of two); a full queue drops and counts, never blocks the tick"},
+  {NULL, "checkpoint_file", KIND_STRING, OFF(checkpoint_file), 0, 0, false, false, NULL, "",
+   "learned state, written atomically after every run and at shutdown; loaded at start-up "
+   "(\"\" = no checkpoints: learned data is lost at exit)"},
+  {NULL, "log_file", KIND_STRING, OFF(log_file), 0, 0, false, false, NULL, "",
+   "LCM event log of every published message (\"\" = none)"},
+  {NULL, "experience_log_file", KIND_STRING, OFF(experience_log_file), 0, 0, false, false, NULL, "",
+   "LCM event log of B21R_EXPERIENCE only (\"\" = none); bit-identical for identical runs in lockstep"},
+  {NULL, "progress", KIND_BOOL, OFF(progress), 0, 0, false, false, NULL, "false",
+   "print one line per finished run and evaluation block on stdout"},
+};
+// clang-format on
+
+#define N_KEYS (sizeof k_keys / sizeof k_keys[0])
+
+static void fmt(char* err, size_t cap, const char* format, ...) __attribute__((format(printf, 3, 4)));
+static void fmt(char* err, size_t cap, const char* format, ...) {
+  if (err == NULL || cap == 0) {
+    return;
+  }
+  va_list ap;
+  va_start(ap, format);
+  (void)vsnprintf(err, cap, format, ap);
+  va_end(ap);
+}
+
+static const key_desc_t* find_key(const char* name) {
+  for (size_t i = 0; i < N_KEYS; ++i) {
+    if (strcmp(k_keys[i].name, name) == 0) {
+      return &k_keys[i];
+    }
+  }
+  return NULL;
+}
+
+// Text of the allowed values of a key, for error messages and the reference output.
+static void describe_allowed(const key_desc_t* k, char* out, size_t cap) {
+  switch (k->kind) {
+    case KIND_BOOL:
+      snprintf(out, cap, "true or false");
+      break;
+    case KIND_INT:
+      snprintf(out, cap, "an integer in [%.0f, %.0f]", k->min, k->max);
+      break;
+    case KIND_U64:
+      snprintf(out, cap, "an integer in [0, %.3g]", k->max);
+      break;
+    case KIND_DOUBLE:
+      snprintf(out, cap, "a number in %c%g, %g%c", k->min_open ? '(' : '[', k->min, k->max,
+               k->max_open ? ')' : ']');
+      break;
+    case KIND_STRING:
+      snprintf(out, cap, "text of at most %u characters", FW_CONFIG_STR_MAX - 1U);
+      break;
+    case KIND_DLIST:
+      snprintf(out, cap, "empty, or 1 to %d comma-separated numbers in (%g, %g]", FW_CONFIG_MAX_SCALES, k->min, k->max);
+      break;
+    case KIND_ENUM: {
+      size_t used = (size_t)snprintf(out, cap, "one of");
+      for (const choice_t* c = k->choices; c->name != NULL && used < cap; ++c) {
+        used += (size_t)snprintf(out + used, cap - used, "%s %s", c == k->choices ? "" : ",", c->name);
+      }
+      break;
+    }
+  }
+}
+
+static bool parse_bool(const char* v, bool* out) {
+  static const char* const yes[] = {"true", "yes", "on", "1"};
+  static const char* const no[] = {"false", "no", "off", "0"};
+  for (size_t i = 0; i < 4; ++i) {
+    if (strcmp(v, yes[i]) == 0) {
+      *out = true;
+      return true;
+    }
+    if (strcmp(v, no[i]) == 0) {
+      *out = false;
+      return true;
+    }
+  }
+  return false;
+}
+
+static bool parse_double(const char* v, double* out) {
+  if (*v == '\0') {
+    return false;
+  }
+  char* end = NULL;
+  errno = 0;
+  const double d = strtod(v, &end);
+  if (errno != 0 || end == v || *end != '\0' || !isfinite(d)) {
+    return false;
+  }
+  *out = d;
+  return true;
+}
+
+static bool in_range(const key_desc_t* k, double d) {
+  const bool lo = k->min_open ? d > k->min : d >= k->min;
+  const bool hi = k->max_open ? d < k->max : d <= k->max;
+  return lo && hi;
+}
+
+int fw_config_set(fw_config_t* cfg, const char* key, const char* value, const char* source, char* err,
+                  size_t err_cap) {
+  const key_desc_t* k = find_key(key);
+  if (k == NULL) {
+    fmt(err, err_cap, "%s: unknown key '%s' (b21r-controller --help lists every key)", source, key);
+    return -1;
+  }
+  char allowed[256];
+  describe_allowed(k, allowed, sizeof allowed);
+  char* field = (char*)cfg + k->offset;
+  switch (k->kind) {
+    case KIND_BOOL: {
+      bool b = false;
+      if (!parse_bool(value, &b)) {
+        break;
+      }
+      memcpy(field, &b, sizeof b);
+      return 0;
+    }
+    case KIND_INT: {
+      char* end = NULL;
+      errno = 0;
+      const long long n = strtoll(value, &end, 10);
+      if (*value == '\0' || errno != 0 || *end != '\0' || !in_range(k, (double)n)) {
+        break;
+      }
+      const int32_t i = (int32_t)n;
+      memcpy(field, &i, sizeof i);
+      return 0;
+    }
+    case KIND_U64: {
+      char* end = NULL;
+      errno = 0;
+      if (*value == '\0' || value[0] == '-' || value[0] == '+') {
+        break;
+      }
+      const unsigned long long n = strtoull(value, &end, 10);
+      if (errno != 0 || *end != '\0' || (double)n > k->max) {
+        break;
+      }
+      const uint64_t u = (uint64_t)n;
+      memcpy(field, &u, sizeof u);
+      return 0;
+    }
+    case KIND_DOUBLE: {
+      double d = 0.0;
+      if (!parse_double(value, &d) || !in_range(k, d)) {
+        break;
+      }
+      memcpy(field, &d, sizeof d);
+      return 0;
+    }
+    case KIND_STRING: {
+      const size_t n = strlen(value);
+      if (n >= FW_CONFIG_STR_MAX) {
+        break;
+      }
+      memcpy(field, value, n + 1U);
+      return 0;
+    }
+    case KIND_DLIST: {
+      double vals[FW_CONFIG_MAX_SCALES];
+      int32_t n = 0;
+      bool ok = true;
+      char buf[FW_CONFIG_STR_MAX];
+      if (strlen(value) >= sizeof buf) {
+        break;
+      }
+      strcpy(buf, value);
+      for (char* tok = buf; ok && *tok != '\0';) {
+        char* comma = strchr(tok, ',');
+        if (comma != NULL) {
+          *comma = '\0';
+        }
+        char* t = tok;
+        while (*t == ' ') {
+          ++t;
+        }
+        size_t tl = strlen(t);
+        while (tl > 0 && t[tl - 1] == ' ') {
+          t[--tl] = '\0';
+        }
+        double d = 0.0;
+        if (n >= FW_CONFIG_MAX_SCALES || !parse_double(t, &d) || !in_range(k, d)) {
+          ok = false;
+          break;
+        }
+        vals[n++] = d;
+        if (comma == NULL) {
+          break;
+        }
+        tok = comma + 1;
+        if (*tok == '\0') {
+          ok = false;  // trailing comma
+        }
+      }
+      if (!ok) {
+        break;
+      }
+      double* dst = (double*)(void*)field;
+      memset(dst, 0, FW_CONFIG_MAX_SCALES * sizeof(double));
+      memcpy(dst, vals, (size_t)n * sizeof(double));
+      memcpy(field + FW_CONFIG_MAX_SCALES * sizeof(double), &n, sizeof n);
+      return 0;
+    }
+    case KIND_ENUM:
+      for (const choice_t* c = k->choices; c->name != NULL; ++c) {
+        if (strcmp(c->name, value) == 0) {
+          memcpy(field, &c->value, sizeof c->value);
+          return 0;
+        }
+      }
+      break;
+  }
+  fmt(err, err_cap, "%s: bad value '%s' for key '%s': expected %s (default %s)", source, value, key, allowed,
+      k->def[0] != '\0' ? k->def : "\"\"");
+  return -1;
+}
+
+void fw_config_defaults(fw_config_t* cfg) {
+  memset(cfg, 0, sizeof *cfg);
+  for (size_t i = 0; i < N_KEYS; ++i) {
+    // The defaults are literals checked by the unit tests; a failure here is a programming error.
+    (void)fw_config_set(cfg, k_keys[i].name, k_keys[i].def, "default", NULL, 0);
+  }
+}
+
+static char* trim(char* s) {
+  while (*s == ' ' || *s == '\t') {
+    ++s;
+  }
+  size_t n = strlen(s);
+  while (n > 0 && (s[n - 1] == ' ' || s[n - 1] == '\t' || s[n - 1] == '\r' || s[n - 1] == '\n')) {
+    s[--n] = '\0';
+  }
+  return s;
+}
+
+// Splits "key = value  # comment" in place. Returns 0 (blank/comment: *key = NULL), 1 (pair),
+// -1 with a message on a syntax error.
+static int split_line(char* line, char** key, char** value, char* why, size_t why_cap) {
+  *key = NULL;
+  *value = NULL;
+  // Strip a comment that is not inside double quotes.
+  bool quoted = false;
+  for (char* p = line; *p != '\0'; ++p) {
+    if (*p == '"') {
+      quoted = !quoted;
+    } else if (*p == '#' && !quoted) {
+      *p = '\0';
+      break;
+    }
+  }
+  char* s = trim(line);
+  if (*s == '\0') {
+    return 0;
+  }
+  char* eq = strchr(s, '=');
+  if (eq == NULL) {
+    fmt(why, why_cap, "expected 'key = value', got '%s'", s);
+    return -1;
+  }
+  *eq = '\0';
+  char* k = trim(s);
+  char* v = trim(eq + 1);
+  if (*k == '\0') {
+    fmt(why, why_cap, "missing key before '='");
+    return -1;
+  }
+  const size_t n = strlen(v);
+  if (n > 0 && v[0] == '"') {
+    if (n < 2 || v[n - 1] != '"') {
+      fmt(why, why_cap, "unterminated quoted value for key '%s'", k);
+      return -1;
+    }
+    v[n - 1] = '\0';
+    ++v;
+  }
+  *key = k;
+  *value = v;
+  return 1;
+}
+
+int fw_config_set_arg(fw_config_t* cfg, const char* key_eq_value, char* err, size_t err_cap) {
+  char buf[1024];
+  const size_t n = strlen(key_eq_value);
+  if (n >= sizeof buf) {
+    fmt(err, err_cap, "--set: argument longer than %zu characters", sizeof buf - 1);
+    return -1;
+  }
+  memcpy(buf, key_eq_value, n + 1);
+  char* key = NULL;
+  char* value = NULL;
+  char why[FW_CONFIG_ERR_MAX];
+  const int r = split_line(buf, &key, &value, why, sizeof why);
+  if (r <= 0) {
+    fmt(err, err_cap, "--set '%s': %s", key_eq_value, r == 0 ? "expected key=value" : why);
+    return -1;
+  }
+  return fw_config_set(cfg, key, value, "--set", err, err_cap);
+}
+
+int fw_config_load_file(fw_config_t* cfg, const char* path, char* err, size_t err_cap) {
+  FILE* f = fopen(path, "r");
+  if (f == NULL) {
+    fmt(err, err_cap, "%s: cannot open config file: %s", path, strerror(errno));
+    return -1;
+  }
+  char line[1024];
+  char source[FW_CONFIG_STR_MAX + 32];
+  bool seen[N_KEYS];
+  memset(seen, 0, sizeof seen);
+  int line_no = 0;
+  int rc = 0;
+  while (fgets(line, sizeof line, f) != NULL) {
+    ++line_no;
+    snprintf(source, sizeof source, "%s:%d", path, line_no);
+    const size_t n = strlen(line);
+    if (n == sizeof line - 1 && line[n - 1] != '\n' && !feof(f)) {
+      fmt(err, err_cap, "%s: line longer than %zu characters", source, sizeof line - 2);
+      rc = -1;
+      break;
+    }
+    char* key = NULL;
+    char* value = NULL;
+    char why[FW_CONFIG_ERR_MAX];
+    const int r = split_line(line, &key, &value, why, sizeof why);
+    if (r < 0) {
+      fmt(err, err_cap, "%s: %s", source, why);
+      rc = -1;
+      break;
+    }
+    if (r == 0) {
+      continue;
+    }
+    const key_desc_t* k = find_key(key);
+    if (k != NULL && seen[k - k_keys]) {
+      fmt(err, err_cap, "%s: key '%s' appears twice in this file", source, key);
+      rc = -1;
+      break;
+    }
+    if (fw_config_set(cfg, key, value, source, err, err_cap) != 0) {
+      rc = -1;
+      break;
+    }
+    seen[k - k_keys] = true;
+  }
+  if (rc == 0 && ferror(f)) {
+    fmt(err, err_cap, "%s: read error", path);
+    rc = -1;
+  }
+  fclose(f);
+  return rc;
+}
+
+int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
+  if (cfg->laser_resolution_cdeg == 25 && cfg->laser_fov_deg != 100) {
+    fmt(err, err_cap, "laser_resolution_deg = 0.25 needs laser_fov_deg = 100 (the LMS200 has no 180/0.25 variant)");
+    return -1;
+  }
+  if (cfg->hedger_k_min > cfg->hedger_k_max) {
+    fmt(err, err_cap, "hedger_k_min (%d) must not exceed hedger_k_max (%d)", (int)cfg->hedger_k_min,
+        (int)cfg->hedger_k_max);
+    return -1;
+  }
+  const int32_t dims = (cfg->task == FW_TASK_CORRIDOR ? 3 : 4) + 1;
+  if (cfg->hedger_input_scale_n != 0 && cfg->hedger_input_scale_n != dims) {
+    fmt(err, err_cap, "hedger_input_scale has %d values; task %s needs %d (state dimensions, then the action)",
+        (int)cfg->hedger_input_scale_n, cfg->task == FW_TASK_CORRIDOR ? "corridor" : "obstacles", (int)dims);
+    return -1;
+  }
+  if (cfg->reposition == FW_REPOSITION_EMULATOR && cfg->emulator_control[0] == '\0') {
+    fmt(err, err_cap, "reposition = emulator needs emulator_control = <path of the emulator's control socket>");
+    return -1;
+  }
+  const int32_t q = cfg->queue_capacity;
+  if ((q & (q - 1)) != 0) {
+    fmt(err, err_cap, "queue_capacity = %d: must be a power of two in [16, 65536]", (int)q);
+    return -1;
+  }
+  if (cfg->mode == FW_MODE_LEARN && cfg->phase_one_runs + cfg->phase_two_runs == 0) {
+    fmt(err, err_cap, "phase_one_runs + phase_two_runs is 0: nothing to learn");
+    return -1;
+  }
+  if (cfg->phase_switch == FW_SWITCH_AUTO && cfg->auto_switch_min_runs > cfg->phase_one_runs) {
+    fmt(err, err_cap, "auto_switch_min_runs (%d) exceeds phase_one_runs (%d), the latest switch",
+        (int)cfg->auto_switch_min_runs, (int)cfg->phase_one_runs);
+    return -1;
+  }
+  return 0;
+}
+
+static void print_value(const key_desc_t* k, const fw_config_t* cfg, FILE* out) {
+  const char* field = (const char*)cfg + k->offset;
+  switch (k->kind) {
+    case KIND_BOOL: {
+      bool b = false;
+      memcpy(&b, field, sizeof b);
+      fprintf(out, "%s", b ? "true" : "false");
+      break;
+    }
+    case KIND_INT: {
+      int32_t i = 0;
+      memcpy(&i, field, sizeof i);
+      fprintf(out, "%d", (int)i);
+      break;
+    }
+    case KIND_U64: {
+      uint64_t u = 0;
+      memcpy(&u, field, sizeof u);
+      fprintf(out, "%llu", (unsigned long long)u);
+      break;
+    }
+    case KIND_DOUBLE: {
+      double d = 0.0;
+      memcpy(&d, field, sizeof d);
+      fprintf(out, "%.17g", d);
+      break;
+    }
+    case KIND_STRING:
+      fprintf(out, "\"%s\"", field);
+      break;
+    case KIND_DLIST: {
+      int32_t n = 0;
+      memcpy(&n, field + FW_CONFIG_MAX_SCALES * sizeof(double), sizeof n);
+      fputc('"', out);
+      for (int32_t i = 0; i < n; ++i) {
+        double d = 0.0;
+        memcpy(&d, field + (size_t)i * sizeof(double), sizeof d);
+        fprintf(out, "%s%.17g", i == 0 ? "" : ",", d);
+      }
+      fputc('"', out);
+      break;
+    }
+    case KIND_ENUM: {
+      int32_t v = 0;
+      memcpy(&v, field, sizeof v);
+      for (const choice_t* c = k->choices; c->name != NULL; ++c) {
+        if (c->value == v) {
+          fprintf(out, "%s", c->name);
+          break;
+        }
+      }
+      break;
+    }
+  }
+}
+
+void fw_config_print_reference(FILE* out) {
+  for (size_t i = 0; i < N_KEYS; ++i) {
+    const key_desc_t* k = &k_keys[i];
+    if (k->section != NULL) {
+      fprintf(out, "%s# --- %s ---\n", i == 0 ? "" : "\n", k->section);
+    }
+    char allowed[256];
+    describe_allowed(k, allowed, sizeof allowed);
+    fprintf(out, "# %s\n#   allowed: %s\n", k->doc, allowed);
+    if (k->kind == KIND_STRING || k->kind == KIND_DLIST) {
+      fprintf(out, "%s = \"%s\"\n", k->name, k->def);
+    } else {
+      fprintf(out, "%s = %s\n", k->name, k->def);
+    }
+  }
+}
+
+void fw_config_print(const fw_config_t* cfg, FILE* out) {
+  for (size_t i = 0; i < N_KEYS; ++i) {
+    fprintf(out, "%s = ", k_keys[i].name);
+    print_value(&k_keys[i], cfg, out);
+    fputc('\n', out);
+  }
+}
+
+int64_t fw_config_period_us(const fw_config_t* cfg) { return (int64_t)llround(1e6 / cfg->tick_rate_hz); }
+
+int32_t fw_config_ticks(const fw_config_t* cfg, double seconds) {
+  const double t = ceil(seconds * cfg->tick_rate_hz - 1e-9);
+  return t < 1.0 ? 1 : (int32_t)t;
+}

@@ -1,0 +1,134 @@
+// SPDX-License-Identifier: MIT
+// firmware.bench: compute time of the control tick (features, HEDGER update + greedy action,
+// safety, publishing into the queue) at 1k, 10k and 20k stored samples, p50 / p99 / max.
+// The robot is the in-process fake (lockstep); its simulation time is excluded. The store is
+// pre-filled through a checkpoint of synthetic samples spread over the corridor's state space,
+// then the learned policy drives with learning on (phase two), as on the robot.
+#define _POSIX_C_SOURCE 200809L
+#include "fw/checkpoint.h"
+#include "loop_harness.h"
+
+#include <hedger/hedger.h>
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+static int64_t mono_ns(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+}
+
+static int cmp_i64(const void* a, const void* b) {
+  const int64_t x = *(const int64_t*)a;
+  const int64_t y = *(const int64_t*)b;
+  return (x > y) - (x < y);
+}
+
+// Writes a checkpoint holding n synthetic samples with plausible corridor values.
+static int write_store(const fw_config_t* cfg, uint32_t n, const char* path) {
+  hedger_config_t hc;
+  fw_loop_learner_config(cfg, &hc);
+  hedger_t* h = NULL;
+  if (hedger_create(&h, &hc) != HEDGER_OK) {
+    return -1;
+  }
+  uint64_t s = 12345;
+  while (hedger_size(h) < n) {
+    double u[4];
+    for (int i = 0; i < 4; ++i) {
+      s = s * 6364136223846793005ULL + 1442695040888963407ULL;
+      u[i] = (double)(s >> 11) / 9007199254740992.0;
+    }
+    const double state[3] = {10.0 * u[0], 0.1 + 0.8 * u[1], -1.2 + 2.4 * u[2]};
+    const double a = -1.0 + 2.0 * u[3];
+    const double q = 10.0 * pow(0.99, state[0] / 0.06) * (1.0 - 0.5 * fabs(state[1] - 0.5));
+    if (hedger_insert(h, state, a, q, 0, NULL) != HEDGER_OK) {
+      hedger_destroy(h);
+      return -1;
+    }
+  }
+  // The controller section of a fresh phase-two schedule (the loop's own format, version 1).
+  uint8_t meta[96];
+  memset(meta, 0, sizeof meta);
+  memcpy(meta, "FWMETA01", 8);
+  meta[12] = 3;   // state dimension
+  meta[16] = 2;   // phase two
+  const size_t size = hedger_serialized_size(h);
+  void* buf = malloc(size);
+  size_t written = 0;
+  int rc = -1;
+  char err[FW_CHECKPOINT_ERR_MAX];
+  if (buf != NULL && hedger_save(h, buf, size, &written) == HEDGER_OK &&
+      fw_checkpoint_write(path, meta, sizeof meta, buf, written, err, sizeof err) == 0) {
+    rc = 0;
+  }
+  free(buf);
+  hedger_destroy(h);
+  return rc;
+}
+
+int main(void) {
+  const uint32_t sizes[] = {1000, 10000, 20000};
+  const int ticks = 3000;
+  static int64_t t_us[3000];
+  char dir[] = "/tmp/b21r-bench-XXXXXX";
+  if (mkdtemp(dir) == NULL) {
+    return 1;
+  }
+  printf("firmware.bench: tick compute time (lockstep fake robot, corridor, learning on, phase two)\n");
+  printf("%8s %8s %8s %8s %8s %10s\n", "samples", "p50_us", "p99_us", "max_us", "mean_us", "store_end");
+  int status = 0;
+  for (size_t k = 0; k < sizeof sizes / sizeof sizes[0]; ++k) {
+    fw_config_t c;
+    harness_config(&c);
+    c.phase_one_runs = 0;
+    c.phase_two_runs = 1000;
+    c.eval_every_runs = 1000;
+    c.hedger_capacity = 25000;
+    snprintf(c.checkpoint_file, sizeof c.checkpoint_file, "%s/store-%u.ckpt", dir, (unsigned)sizes[k]);
+    if (write_store(&c, sizes[k], c.checkpoint_file) != 0) {
+      fprintf(stderr, "bench: cannot build a store of %u samples\n", (unsigned)sizes[k]);
+      return 1;
+    }
+    harness_t h;
+    if (harness_open(&h, &c, false, 1) != 0) {
+      return 1;
+    }
+    char err[FW_LOOP_ERR_MAX];
+    if (fw_loop_load_checkpoint(h.loop, err, sizeof err) != 1) {
+      fprintf(stderr, "bench: %s\n", err);
+      return 1;
+    }
+    harness_run(&h, 50);  // warm up: a run under way
+    double sum = 0.0;
+    for (int i = 0; i < ticks; ++i) {
+      const int64_t t = fw_loop_wait(h.loop);
+      const int64_t busy0 = h.fake.busy_ns;
+      const int64_t t0 = mono_ns();
+      (void)fw_loop_tick(h.loop, t);
+      const int64_t dt = mono_ns() - t0 - (h.fake.busy_ns - busy0);
+      t_us[i] = dt / 1000;
+      sum += (double)dt / 1000.0;
+      harness_drain(&h);
+    }
+    fw_loop_stats_t st;
+    fw_loop_get_stats(h.loop, &st);
+    qsort(t_us, (size_t)ticks, sizeof t_us[0], cmp_i64);
+    printf("%8u %8lld %8lld %8lld %8.1f %10u\n", (unsigned)sizes[k], (long long)t_us[ticks / 2],
+           (long long)t_us[(ticks * 99) / 100], (long long)t_us[ticks - 1], sum / ticks, st.store_fill);
+    if (st.store_fill < sizes[k]) {
+      status = 1;
+    }
+    harness_close(&h);
+    unlink(c.checkpoint_file);
+  }
+  rmdir(dir);
+  printf("(one tick = read inputs, features, safety, HEDGER update with the greedy search at s', the\n"
+         " action, clamp, command encoding, experience/pose/status into the queue; 10 Hz budget 100000 us)\n");
+  return status;
+}

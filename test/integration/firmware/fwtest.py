@@ -1,0 +1,106 @@
+# SPDX-License-Identifier: MIT
+"""fwtest: shared helpers of the firmware integration tests (the unmodified b21r-controller
+against the b21r-sim emulator in lockstep): start/stop the emulator, talk to its control socket,
+run the controller, read its LCM event log."""
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+
+from b21r_log import read_log  # noqa: F401  (re-exported for the tests)
+
+
+def fail(msg):
+    print("FAIL: " + msg, flush=True)
+    sys.exit(1)
+
+
+def note(msg):
+    print(msg, flush=True)
+
+
+class Sim:
+    """b21r-sim in lockstep with a control socket; endpoints read from its ready file."""
+
+    def __init__(self, exe, world, workdir, name, base="rflex", seed=1, extra=()):
+        self.ctl = os.path.join(workdir, name + ".ctl")
+        self.endpoints = os.path.join(workdir, name + ".endpoints")
+        self.log = open(os.path.join(workdir, name + ".sim.log"), "w")
+        for p in (self.ctl, self.endpoints):
+            if os.path.exists(p):
+                os.unlink(p)
+        self.proc = subprocess.Popen([exe, "--world", world, "--lockstep", "--base", base, "--seed", str(seed),
+                                      "--control", self.ctl, "--endpoints", self.endpoints, *extra],
+                                     stdout=self.log, stderr=subprocess.STDOUT)
+        deadline = time.time() + 20
+        while not (os.path.exists(self.endpoints) and os.path.getsize(self.endpoints) > 0):
+            if self.proc.poll() is not None or time.time() > deadline:
+                fail("b21r-sim did not start (see %s)" % self.log.name)
+            time.sleep(0.05)
+        self.sock = None
+
+    def control(self, line, timeout=5.0):
+        if self.sock is None:
+            self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+            self.sock.connect(self.ctl)
+        self.sock.settimeout(timeout)
+        self.sock.send(line.encode())
+        reply = self.sock.recv(4096).decode()
+        if not reply.startswith("ok"):
+            fail("emulator refused '%s': %s" % (line, reply))
+        return reply
+
+    def close(self):
+        if self.sock is not None:
+            self.sock.close()
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self.log.close()
+
+
+def controller_cmd(exe, sim, workdir, name, settings):
+    cmd = [exe, "--endpoints", sim.endpoints, "--set", "lockstep=true", "--set", "lcm_url=none",
+           "--set", "progress=true", "--log", os.path.join(workdir, name + ".lcmlog")]
+    for k, v in settings.items():
+        cmd += ["--set", "%s=%s" % (k, v)]
+    return cmd
+
+
+def run_controller(exe, sim, workdir, name, settings, timeout):
+    """Runs the controller to completion; returns (exit status, stderr text, log path)."""
+    out = open(os.path.join(workdir, name + ".progress.txt"), "w")
+    err_path = os.path.join(workdir, name + ".controller.log")
+    with open(err_path, "w") as err:
+        p = subprocess.Popen(controller_cmd(exe, sim, workdir, name, settings), stdout=out, stderr=err)
+        try:
+            rc = p.wait(timeout)
+        except subprocess.TimeoutExpired:
+            p.send_signal(signal.SIGTERM)
+            p.wait(10)
+            fail("controller did not finish within %d s (progress: %s)" % (timeout, out.name))
+    out.close()
+    with open(err_path) as f:
+        text = f.read()
+    return rc, text, os.path.join(workdir, name + ".lcmlog")
+
+
+def workdir(name):
+    base = os.environ.get("B21R_TEST_TMP", tempfile.gettempdir())
+    d = tempfile.mkdtemp(prefix="b21r-%s-" % name, dir=base)
+    return d
+
+
+def cleanup(d, ok):
+    if ok and os.environ.get("B21R_KEEP") is None:
+        shutil.rmtree(d, ignore_errors=True)
+    else:
+        note("files kept in %s" % d)

@@ -1,0 +1,113 @@
+#!/usr/bin/env python3
+# SPDX-License-Identifier: MIT
+"""firmware.safety_<base>: every safety stop, triggered by the emulator's fault injection while
+the unmodified controller learns in lockstep, is observed in the log (stderr) and on B21R_STATUS
+with its reason and detail, and the controller recovers from the transient ones:
+- rflex: laser silence, base silence, bumper, operator deadman (joystick phase one without
+  B21R_TELEOP), SIGTERM (zero, brake, checkpoint, exit 128+15; the checkpoint then loads);
+- canopen: laser silence, drive fault (EMCY + statusword), SIGTERM.
+usage: test_safety.py CONTROLLER SIM WORLD rflex|canopen"""
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import fwtest
+from b21r_log import read_log
+
+STOP_NAMES = {1: "laser silent", 2: "base silent", 3: "base fault", 4: "bumper", 6: "deadman released", 7: "signal"}
+
+
+def wait_for(path, text, start, timeout, proc=None):
+    """Waits until `text` appears in the file after offset `start`; returns the new offset."""
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        with open(path) as f:
+            f.seek(start)
+            data = f.read()
+        i = data.find(text)
+        if i >= 0:
+            return start + i + len(text)
+        if proc is not None and proc.poll() is not None:
+            fwtest.fail("controller exited (%d) while waiting for '%s'" % (proc.returncode, text))
+        time.sleep(0.05)
+    fwtest.fail("'%s' did not appear in %s within %d s" % (text, path, timeout))
+    return start
+
+
+def main():
+    controller, sim_exe, world, base = sys.argv[1:5]
+    d = fwtest.workdir("safety-" + base)
+    ok = False
+    sim = fwtest.Sim(sim_exe, world, d, "sim", base=base, seed=2)
+    try:
+        ckpt = os.path.join(d, "hedger.ckpt")
+        settings = {"phase_one_runs": 1000, "eval_every_runs": 1000, "checkpoint_file": ckpt,
+                    "lockstep_grace_s": 0.1, "lockstep_timeout_s": 1, "safety_clear_ticks": 5, "hedger_replay": "false"}
+        err_path = os.path.join(d, "run.controller.log")
+        with open(err_path, "w") as err, open(os.path.join(d, "run.progress.txt"), "w") as out:
+            proc = subprocess.Popen(fwtest.controller_cmd(controller, sim, d, "run", settings), stdout=out, stderr=err)
+        off = wait_for(err_path, "starting devices", 0, 30, proc)
+        time.sleep(1.0)  # the first run is under way
+        faults = [("fault laser_drop 1500", "SAFETY STOP (laser silent)", None)]
+        if base == "rflex":
+            # A silent base ignores the cycle's SET_DIR too, so lockstep time stands still until
+            # the fault is cleared (the emulator's duration is in simulated time).
+            faults += [("fault base_silent 1500", "SAFETY STOP (base silent)", "fault clear"),
+                       ("fault bumper 3", "SAFETY STOP (bumper)", "fault clear")]
+        else:
+            faults += [("fault drive_fault 2", "SAFETY STOP (base fault)", "fault clear")]
+        for inject, expect, clear in faults:
+            t0 = time.time()
+            sim.control(inject)
+            off = wait_for(err_path, expect, off, 60, proc)
+            fwtest.note("%-24s -> '%s' after %.2f s" % (inject, expect, time.time() - t0))
+            if clear is not None:
+                time.sleep(0.3)
+                sim.control(clear)
+            off = wait_for(err_path, "safety stop cleared", off, 60, proc)
+            time.sleep(0.5)  # let a run start again
+        proc.send_signal(signal.SIGTERM)
+        rc = proc.wait(60)
+        if rc != 128 + signal.SIGTERM:
+            fwtest.fail("SIGTERM: exit status %d, expected %d" % (rc, 128 + signal.SIGTERM))
+        wait_for(err_path, "SAFETY STOP (signal)", off, 5)
+        wait_for(err_path, "brake set", off, 5)
+        fwtest.note("SIGTERM -> stopped, braked, checkpointed, exit status %d" % rc)
+        # Every stop is on B21R_STATUS with its reason and a detail.
+        seen = {}
+        for _, _, s in read_log(os.path.join(d, "run.lcmlog"), {"B21R_STATUS"}):
+            if s.stop_reason != 0 and s.stop_reason not in seen:
+                seen[s.stop_reason] = s.stop_detail
+        want = [1, 7] + ([2, 4] if base == "rflex" else [3])
+        for r in want:
+            if r not in seen or not seen[r]:
+                fwtest.fail("B21R_STATUS never reported stop reason %d (%s); seen %s" % (r, STOP_NAMES[r], seen))
+            fwtest.note("STATUS stop_reason %d (%s): %s" % (r, STOP_NAMES[r], seen[r]))
+        if not os.path.exists(ckpt):
+            fwtest.fail("no checkpoint after SIGTERM")
+        if base == "rflex":
+            # Joystick phase one without a deadman message: the robot must not move.
+            with open(os.path.join(d, "joy.controller.log"), "w") as err, \
+                    open(os.path.join(d, "joy.progress.txt"), "w") as out:
+                joy = subprocess.Popen(fwtest.controller_cmd(controller, sim, d, "joy",
+                                                             {"phase_one_driver": "joystick", "checkpoint_file": ckpt,
+                                                              "phase_one_runs": 1000}), stdout=out, stderr=err)
+            wait_for(os.path.join(d, "joy.controller.log"), "resumed from", 0, 30, joy)
+            wait_for(os.path.join(d, "joy.controller.log"), "SAFETY STOP (deadman released)", 0, 60, joy)
+            fwtest.note("joystick phase one without B21R_TELEOP -> 'SAFETY STOP (deadman released)'")
+            joy.send_signal(signal.SIGINT)
+            rc = joy.wait(60)
+            if rc != 128 + signal.SIGINT:
+                fwtest.fail("SIGINT: exit status %d" % rc)
+        ok = True
+    finally:
+        sim.close()
+        fwtest.cleanup(d, ok)
+    print("PASS")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

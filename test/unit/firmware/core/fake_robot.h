@@ -1,0 +1,90 @@
+// SPDX-License-Identifier: MIT
+/// fake_robot.h — A deterministic in-process B21r for loop-core tests and the firmware
+/// benchmark: the analytic corridor world and kinematic synchro drive of b21r_test/synthetic_world.h
+/// behind the loop's I/O vtable, speaking the real byte protocols (LMS200 0xB0 telegrams decoded
+/// with lib/proto, rFLEX packets stuffed as the base sends them, CiA 402 frames).
+///
+/// Lockstep like the emulator's contract: time advances one control period when the rotation
+/// SET_DIR (rFLEX) or SYNC (CANopen) arrives; then the scan and the odometry of the new period
+/// are queued. The clock is simulated: `wait` jumps it to the deadline when nothing is pending.
+/// Fault injection mirrors the emulator's control socket (laser drop, base silence, drive fault,
+/// bumper, corrupt bytes). No allocation after fake_robot_init. Not thread-safe.
+#ifndef B21R_TEST_FAKE_ROBOT_H
+#define B21R_TEST_FAKE_ROBOT_H
+
+#include "fw/io.h"
+
+#include <b21r_test/synthetic_world.h>
+#include <proto/canopen.h>
+#include <proto/lms200.h>
+#include <proto/rflex.h>
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define FAKE_BYTES 16384
+#define FAKE_FRAMES 64
+
+typedef struct fake_robot {
+  // World and body.
+  synth_world_t world;
+  synth_lidar_config_t lidar;
+  synth_rng_t rng;
+  synth_robot_t robot;
+  synth_drive_limits_t limits;
+  double dt_s;
+  double k_d;   // counts per metre
+  double k_a;   // counts per radian
+  double trans_pos_m;   // wheel odometry accumulators
+  double rot_pos_rad;
+  bool collided;
+  int64_t clock_us;
+  int64_t ticks;        // periods simulated
+  bool streaming;
+  bool canopen;
+  // Commands.
+  double v_cmd;
+  double w_cmd;
+  bool brake;
+  // Laser link: the host side decodes real telegrams.
+  uint8_t laser_bytes[FAKE_BYTES];
+  uint32_t laser_fill;
+  lms_decoder_t lms_dec;
+  // Base link.
+  uint8_t base_bytes[FAKE_BYTES];   // device -> host
+  uint32_t base_fill;
+  rflex_decoder_t host_dec;         // host -> device packets
+  uint8_t dev_id;
+  canopen_frame_t frames[FAKE_FRAMES];
+  uint32_t n_frames;
+  cia402_drive_t drive[2];
+  int32_t drive_target[2];
+  // Faults.
+  int32_t laser_drop_ticks;
+  int32_t base_silent_ticks;
+  int32_t bumper_ticks;
+  double corrupt_fraction;
+  bool nan_odometry;
+  // Counters.
+  int64_t start_pose_requests;
+  int64_t commands;
+  int64_t laser_telegrams;
+  int64_t busy_ns;      ///< wall time spent simulating (advance), to subtract in benchmarks
+} fake_robot_t;
+
+/// Builds the paper's 10 m × 2 m corridor with the LMS200 180°/1° laser (noise 1 cm, seeded),
+/// the robot at rest at (1, 0, 0). canopen selects the bus (else rFLEX). dt_s: control period.
+void fake_robot_init(fake_robot_t* f, bool canopen, double dt_s, uint64_t seed);
+
+/// The binding for the loop: vtable + this fake as user.
+fw_io_t fake_robot_io(fake_robot_t* f);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif  // B21R_TEST_FAKE_ROBOT_H

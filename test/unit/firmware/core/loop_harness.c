@@ -1,0 +1,119 @@
+// SPDX-License-Identifier: MIT
+// Single-threaded driver of the loop core over the fake robot (see loop_harness.h).
+#include "loop_harness.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+void harness_config(fw_config_t* cfg) {
+  fw_config_defaults(cfg);
+  cfg->lockstep = true;
+  cfg->lockstep_timeout_s = 1.0;
+  cfg->lockstep_grace_s = 0.05;
+  cfg->reposition = FW_REPOSITION_EMULATOR;
+  strcpy(cfg->emulator_control, "fake");
+  strcpy(cfg->lcm_url, "none");
+  cfg->queue_capacity = 4096;
+  cfg->status_period_ticks = 10;
+}
+
+int harness_open(harness_t* h, const fw_config_t* cfg, bool canopen, uint64_t fake_seed) {
+  memset(h, 0, sizeof *h);
+  h->cfg = *cfg;
+  if (canopen) {
+    h->cfg.base_protocol = FW_BASE_CANOPEN;
+  }
+  fake_robot_init(&h->fake, canopen, 1.0 / h->cfg.tick_rate_hz, fake_seed);
+  h->q = fw_pubq_create((uint32_t)h->cfg.queue_capacity);
+  if (h->q == NULL) {
+    return -1;
+  }
+  const fw_io_t io = fake_robot_io(&h->fake);
+  const fw_loop_outputs_t out = {.queue = h->q, .notify = NULL, .notify_user = NULL, .checkpoints = NULL};
+  char err[FW_LOOP_ERR_MAX];
+  h->loop = fw_loop_create(&h->cfg, &io, &out, err, sizeof err);
+  if (h->loop == NULL) {
+    fprintf(stderr, "harness: %s\n", err);
+    return -1;
+  }
+  if (fw_loop_start(h->loop, err, sizeof err) != 0) {
+    fprintf(stderr, "harness: %s\n", err);
+    return -1;
+  }
+  h->max_stop_reason_seen = 0;
+  return 0;
+}
+
+static uint64_t fnv1a(uint64_t h, const uint8_t* p, int n) {
+  for (int i = 0; i < n; ++i) {
+    h ^= p[i];
+    h *= 1099511628211ULL;
+  }
+  return h;
+}
+
+void harness_drain(harness_t* h) {
+  const fw_msg_t* m;
+  while ((m = fw_pubq_peek(h->q)) != NULL) {
+    switch (m->kind) {
+      case FW_MSG_EXPERIENCE: {
+        uint8_t buf[1024];
+        const int n = b21r_experience_t_encode(buf, 0, (int)sizeof buf, &m->u.experience);
+        if (h->exp_count == 0) {
+          h->exp_hash = 14695981039346656037ULL;
+        }
+        h->exp_hash = fnv1a(h->exp_hash, buf, n);
+        if (m->u.experience.seq != h->exp_next_seq) {
+          h->exp_gaps++;
+        }
+        h->exp_next_seq = m->u.experience.seq + 1;
+        h->exp_count++;
+        if (m->u.experience.terminal && m->u.experience.reward > 0.0) {
+          h->goals++;
+        }
+        break;
+      }
+      case FW_MSG_EVAL:
+        h->last_eval = m->u.eval;
+        h->evals++;
+        break;
+      case FW_MSG_STATUS:
+        h->last_status = m->u.status.msg;
+        memcpy(h->last_status_detail, m->u.status.detail, sizeof h->last_status_detail);
+        if (m->u.status.msg.stop_reason > 0 && m->u.status.msg.stop_reason < 32) {
+          h->stop_reasons_seen |= 1U << m->u.status.msg.stop_reason;
+        }
+        break;
+      case FW_MSG_TEXT:
+        if (h->print_text) {
+          printf("%s\n", m->u.text.line);
+        }
+        break;
+      default:
+        break;
+    }
+    fw_pubq_pop(h->q);
+  }
+}
+
+int64_t harness_run(harness_t* h, int64_t max_ticks) {
+  int64_t n = 0;
+  while (n < max_ticks) {
+    const int64_t t = fw_loop_wait(h->loop);
+    const bool more = fw_loop_tick(h->loop, t);
+    n++;
+    harness_drain(h);
+    if (!more) {
+      break;
+    }
+  }
+  return n;
+}
+
+void harness_close(harness_t* h) {
+  fw_loop_destroy(h->loop);
+  fw_pubq_destroy(h->q);
+  h->loop = NULL;
+  h->q = NULL;
+}

@@ -1,0 +1,56 @@
+// SPDX-License-Identifier: MIT
+/// loop_harness.h — Runs the loop core against the fake robot in one thread: no publisher
+/// thread, the test drains the queue itself (hashing experiences, collecting text and status).
+#ifndef B21R_TEST_LOOP_HARNESS_H
+#define B21R_TEST_LOOP_HARNESS_H
+
+#include "fake_robot.h"
+#include "fw/config.h"
+#include "fw/loop.h"
+#include "fw/pubq.h"
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct harness {
+  fw_config_t cfg;
+  fake_robot_t fake;
+  fw_pubq_t* q;
+  fw_loop_t* loop;
+  uint64_t exp_hash;        // FNV-1a over the encoded experiences, in order
+  int64_t exp_count;
+  int64_t exp_next_seq;     // gap detection
+  int64_t exp_gaps;
+  int64_t goals;
+  b21r_eval_t last_eval;
+  int evals;
+  b21r_status_t last_status;
+  char last_status_detail[160];
+  int8_t max_stop_reason_seen;
+  uint32_t stop_reasons_seen;  // bit per STOP_* seen on STATUS
+  bool print_text;
+} harness_t;
+
+/// Test defaults: lockstep, short corridor schedule, no LCM, fake robot (rFLEX unless canopen).
+void harness_config(fw_config_t* cfg);
+
+/// Creates fake + queue + loop and runs fw_loop_start. Returns 0 or fails the test.
+int harness_open(harness_t* h, const fw_config_t* cfg, bool canopen, uint64_t fake_seed);
+
+/// Drains the queue (hash experiences, track EVAL and STATUS).
+void harness_drain(harness_t* h);
+
+/// Runs up to max_ticks ticks (draining as it goes); returns the ticks run.
+int64_t harness_run(harness_t* h, int64_t max_ticks);
+
+void harness_close(harness_t* h);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif  // B21R_TEST_LOOP_HARNESS_H

@@ -1,0 +1,289 @@
+// SPDX-License-Identifier: MIT
+// Config parsing: defaults, every error names source, key and allowed values; overrides; the
+// reference file in firmware/app is exactly the generated documentation of the defaults.
+#define _POSIX_C_SOURCE 200809L
+#include "fw/config.h"
+
+#include <b21r_test/alloc_counter.h>
+
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include <cmocka.h>
+
+static const char* g_reference_path;
+static char g_dir[256];
+
+static const char* write_tmp(const char* name, const char* text) {
+  static char path[512];
+  snprintf(path, sizeof path, "%s/%s", g_dir, name);
+  FILE* f = fopen(path, "w");
+  assert_non_null(f);
+  fputs(text, f);
+  fclose(f);
+  return path;
+}
+
+static int setup(void** state) {
+  (void)state;
+  snprintf(g_dir, sizeof g_dir, "/tmp/b21r-config-XXXXXX");
+  return mkdtemp(g_dir) == NULL ? -1 : 0;
+}
+
+static int teardown(void** state) {
+  (void)state;
+  char cmd[300];
+  snprintf(cmd, sizeof cmd, "rm -rf '%s'", g_dir);
+  return system(cmd) == 0 ? 0 : -1;
+}
+
+// The defaults are the paper's settings and pass the cross-key checks.
+static void test_config_defaults_are_paper_settings_and_valid(void** state) {
+  (void)state;
+  fw_config_t c;
+  fw_config_defaults(&c);
+  char err[FW_CONFIG_ERR_MAX];
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
+  assert_true(c.tick_rate_hz == 10.0);
+  assert_true(c.alpha == 0.2);
+  assert_true(c.gamma == 0.0);  // the task's own: 0.99 for the corridor
+  assert_int_equal(c.eval_every_runs, 5);
+  assert_int_equal(c.eval_starts, 10);
+  assert_int_equal(c.phase_one_runs, 30);
+  assert_int_equal(c.phase_two_runs, 35);
+  assert_int_equal(c.base_protocol, FW_BASE_RFLEX);
+  assert_int_equal(c.laser_resolution_cdeg, 100);
+  assert_int_equal(fw_config_period_us(&c), 100000);
+  assert_int_equal(fw_config_ticks(&c, 0.35), 4);
+  assert_int_equal(fw_config_ticks(&c, 0.3), 3);
+  assert_int_equal(fw_config_ticks(&c, 0.0), 1);
+}
+
+// An unknown key is an error naming the file, the line and the key.
+static void test_config_unknown_key_names_file_line_and_key(void** state) {
+  (void)state;
+  const char* p = write_tmp("unknown.conf", "# comment\n\ntick_rat_hz = 10\n");
+  fw_config_t c;
+  fw_config_defaults(&c);
+  char err[FW_CONFIG_ERR_MAX];
+  assert_int_equal(fw_config_load_file(&c, p, err, sizeof err), -1);
+  assert_non_null(strstr(err, "unknown.conf:3"));
+  assert_non_null(strstr(err, "unknown key 'tick_rat_hz'"));
+}
+
+// A value out of range names the key, the line and the allowed range.
+static void test_config_out_of_range_names_allowed_range(void** state) {
+  (void)state;
+  const char* p = write_tmp("range.conf", "alpha = 0.2\ntick_rate_hz = 500\n");
+  fw_config_t c;
+  fw_config_defaults(&c);
+  char err[FW_CONFIG_ERR_MAX];
+  assert_int_equal(fw_config_load_file(&c, p, err, sizeof err), -1);
+  assert_non_null(strstr(err, "range.conf:2"));
+  assert_non_null(strstr(err, "'tick_rate_hz'"));
+  assert_non_null(strstr(err, "[1, 100]"));
+  assert_true(c.tick_rate_hz == 10.0);  // unchanged
+}
+
+// Bad enum, bool, number, NaN and infinity are refused with the allowed values in the message.
+static void test_config_bad_values_refused_with_choices(void** state) {
+  (void)state;
+  fw_config_t c;
+  fw_config_defaults(&c);
+  char err[FW_CONFIG_ERR_MAX];
+  assert_int_equal(fw_config_set(&c, "base_protocol", "usb", "x.conf:4", err, sizeof err), -1);
+  assert_non_null(strstr(err, "one of rflex, canopen"));
+  assert_non_null(strstr(err, "x.conf:4"));
+  assert_int_equal(fw_config_set(&c, "lockstep", "maybe", "s", err, sizeof err), -1);
+  assert_non_null(strstr(err, "true or false"));
+  assert_int_equal(fw_config_set(&c, "alpha", "abc", "s", err, sizeof err), -1);
+  assert_int_equal(fw_config_set(&c, "alpha", "nan", "s", err, sizeof err), -1);
+  assert_int_equal(fw_config_set(&c, "alpha", "inf", "s", err, sizeof err), -1);
+  assert_int_equal(fw_config_set(&c, "alpha", "", "s", err, sizeof err), -1);
+  assert_int_equal(fw_config_set(&c, "alpha", "0", "s", err, sizeof err), -1);  // open lower bound
+  assert_non_null(strstr(err, "(0, 1]"));
+  assert_int_equal(fw_config_set(&c, "gamma", "1", "s", err, sizeof err), -1);  // open upper bound
+  assert_non_null(strstr(err, "[0, 1)"));
+  assert_int_equal(fw_config_set(&c, "eval_starts", "10.5", "s", err, sizeof err), -1);
+  assert_int_equal(fw_config_set(&c, "eval_starts", "17", "s", err, sizeof err), -1);
+  assert_int_equal(fw_config_set(&c, "seed", "-1", "s", err, sizeof err), -1);
+  assert_int_equal(fw_config_set(&c, "seed", "18446744073709551615", "s", err, sizeof err), -1);
+  assert_int_equal(fw_config_set(&c, "laser_baud", "57600", "s", err, sizeof err), -1);
+  assert_non_null(strstr(err, "9600, 19200, 38400, 500000"));
+  assert_true(c.alpha == 0.2);
+  assert_int_equal(fw_config_set(&c, "lockstep", "on", "s", err, sizeof err), 0);
+  assert_true(c.lockstep);
+  assert_int_equal(fw_config_set(&c, "seed", "123456789012", "s", err, sizeof err), 0);
+  assert_true(c.seed == 123456789012ULL);
+}
+
+// Syntax errors (no '=', missing key, unterminated quote, duplicate key) name the line.
+static void test_config_syntax_errors_name_line(void** state) {
+  (void)state;
+  fw_config_t c;
+  char err[FW_CONFIG_ERR_MAX];
+  fw_config_defaults(&c);
+  assert_int_equal(fw_config_load_file(&c, write_tmp("a.conf", "seed 3\n"), err, sizeof err), -1);
+  assert_non_null(strstr(err, "a.conf:1: expected 'key = value'"));
+  fw_config_defaults(&c);
+  assert_int_equal(fw_config_load_file(&c, write_tmp("b.conf", "\n = 3\n"), err, sizeof err), -1);
+  assert_non_null(strstr(err, "b.conf:2: missing key"));
+  fw_config_defaults(&c);
+  assert_int_equal(fw_config_load_file(&c, write_tmp("c.conf", "log_file = \"abc\n"), err, sizeof err), -1);
+  assert_non_null(strstr(err, "unterminated"));
+  fw_config_defaults(&c);
+  assert_int_equal(fw_config_load_file(&c, write_tmp("d.conf", "seed = 3\nseed = 4\n"), err, sizeof err), -1);
+  assert_non_null(strstr(err, "d.conf:2: key 'seed' appears twice"));
+  fw_config_defaults(&c);
+  assert_int_equal(fw_config_load_file(&c, "/nonexistent/b21r.conf", err, sizeof err), -1);
+  assert_non_null(strstr(err, "/nonexistent/b21r.conf: cannot open"));
+}
+
+// Comments, blanks, quoted values with spaces and '#', CRLF line ends are handled.
+static void test_config_comments_quotes_and_crlf_parse(void** state) {
+  (void)state;
+  const char* p = write_tmp("ok.conf",
+                            "# header\n"
+                            "   \n"
+                            "log_file = \"out dir/a # b.log\"   # trailing comment\r\n"
+                            "  tick_rate_hz=20  \r\n"
+                            "task = obstacles # the other task\n"
+                            "checkpoint_file = plain/path.ckpt\n");
+  fw_config_t c;
+  fw_config_defaults(&c);
+  char err[FW_CONFIG_ERR_MAX];
+  assert_int_equal(fw_config_load_file(&c, p, err, sizeof err), 0);
+  assert_string_equal(c.log_file, "out dir/a # b.log");
+  assert_true(c.tick_rate_hz == 20.0);
+  assert_int_equal(c.task, FW_TASK_OBSTACLES);
+  assert_string_equal(c.checkpoint_file, "plain/path.ckpt");
+  assert_int_equal(fw_config_period_us(&c), 50000);
+}
+
+// --set overrides and its errors name "--set".
+static void test_config_set_arg_overrides_and_errors(void** state) {
+  (void)state;
+  fw_config_t c;
+  fw_config_defaults(&c);
+  char err[FW_CONFIG_ERR_MAX];
+  assert_int_equal(fw_config_set_arg(&c, "alpha=0.5", err, sizeof err), 0);
+  assert_true(c.alpha == 0.5);
+  assert_int_equal(fw_config_set_arg(&c, "lcm_url = memq://", err, sizeof err), 0);
+  assert_string_equal(c.lcm_url, "memq://");
+  assert_int_equal(fw_config_set_arg(&c, "alpha", err, sizeof err), -1);
+  assert_non_null(strstr(err, "--set 'alpha'"));
+  assert_int_equal(fw_config_set_arg(&c, "alpha=2", err, sizeof err), -1);
+  assert_non_null(strstr(err, "--set: bad value '2' for key 'alpha'"));
+  assert_int_equal(fw_config_set_arg(&c, "nope=1", err, sizeof err), -1);
+  assert_non_null(strstr(err, "--set: unknown key 'nope'"));
+}
+
+// Cross-key rules are enforced with a message that names both keys.
+static void test_config_validate_cross_key_rules(void** state) {
+  (void)state;
+  fw_config_t c;
+  char err[FW_CONFIG_ERR_MAX];
+  fw_config_defaults(&c);
+  c.laser_resolution_cdeg = 25;
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), -1);
+  assert_non_null(strstr(err, "laser_fov_deg = 100"));
+  c.laser_fov_deg = 100;
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
+  fw_config_defaults(&c);
+  c.hedger_k_min = 20;
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), -1);
+  assert_non_null(strstr(err, "hedger_k_min"));
+  fw_config_defaults(&c);
+  c.reposition = FW_REPOSITION_EMULATOR;
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), -1);
+  assert_non_null(strstr(err, "emulator_control"));
+  fw_config_defaults(&c);
+  c.queue_capacity = 1000;
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), -1);
+  assert_non_null(strstr(err, "power of two"));
+}
+
+// The generated reference parses back to exactly the defaults, and the checked-in reference
+// file is byte for byte that generated text (so documentation and code cannot drift apart).
+static void test_config_reference_file_matches_defaults(void** state) {
+  (void)state;
+  char gen_path[512];
+  snprintf(gen_path, sizeof gen_path, "%s/generated.conf", g_dir);
+  FILE* f = fopen(gen_path, "w");
+  assert_non_null(f);
+  fw_config_print_reference(f);
+  fclose(f);
+  fw_config_t a;
+  fw_config_t d;
+  fw_config_defaults(&d);
+  memset(&a, 0x5A, sizeof a);
+  fw_config_defaults(&a);
+  a.alpha = 0.9;
+  a.lockstep = true;
+  char err[FW_CONFIG_ERR_MAX];
+  assert_int_equal(fw_config_load_file(&a, gen_path, err, sizeof err), 0);
+  assert_memory_equal(&a, &d, sizeof a);
+
+  // The printed current values parse back to the same struct too.
+  char cur_path[512];
+  snprintf(cur_path, sizeof cur_path, "%s/current.conf", g_dir);
+  fw_config_t b;
+  fw_config_defaults(&b);
+  b.alpha = 0.125;
+  strcpy(b.log_file, "x y");
+  f = fopen(cur_path, "w");
+  assert_non_null(f);
+  fw_config_print(&b, f);
+  fclose(f);
+  fw_config_t b2;
+  fw_config_defaults(&b2);
+  assert_int_equal(fw_config_load_file(&b2, cur_path, err, sizeof err), 0);
+  assert_memory_equal(&b, &b2, sizeof b);
+
+  if (g_reference_path != NULL) {
+    char cmd[1200];
+    snprintf(cmd, sizeof cmd, "cmp -s '%s' '%s'", gen_path, g_reference_path);
+    if (system(cmd) != 0) {
+      fail_msg("%s differs from the generated reference: regenerate it with "
+               "`b21r-controller --print-reference-config > %s`",
+               g_reference_path, g_reference_path);
+    }
+  }
+}
+
+// Parsing and validation allocate only what stdio needs (no hidden growth per key).
+static void test_config_set_allocates_nothing(void** state) {
+  (void)state;
+  fw_config_t c;
+  fw_config_defaults(&c);
+  char err[FW_CONFIG_ERR_MAX];
+  alloc_counter_begin();
+  for (int i = 0; i < 1000; ++i) {
+    (void)fw_config_set(&c, "alpha", "0.3", "s", err, sizeof err);
+    (void)fw_config_set(&c, "alpha", "bad", "s", err, sizeof err);
+  }
+  assert_int_equal(alloc_counter_end(), 0);
+}
+
+int main(int argc, char** argv) {
+  g_reference_path = argc > 1 ? argv[1] : NULL;
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_config_defaults_are_paper_settings_and_valid),
+      cmocka_unit_test(test_config_unknown_key_names_file_line_and_key),
+      cmocka_unit_test(test_config_out_of_range_names_allowed_range),
+      cmocka_unit_test(test_config_bad_values_refused_with_choices),
+      cmocka_unit_test(test_config_syntax_errors_name_line),
+      cmocka_unit_test(test_config_comments_quotes_and_crlf_parse),
+      cmocka_unit_test(test_config_set_arg_overrides_and_errors),
+      cmocka_unit_test(test_config_validate_cross_key_rules),
+      cmocka_unit_test(test_config_reference_file_matches_defaults),
+      cmocka_unit_test(test_config_set_allocates_nothing),
+  };
+  return cmocka_run_group_tests_name("firmware.config", tests, setup, teardown);
+}

@@ -1,0 +1,192 @@
+// SPDX-License-Identifier: MIT
+// Loop core over the fake lockstep robot: learns the corridor from examples, is deterministic,
+// allocates nothing per tick, and reacts to every safety cause within one tick.
+#define _POSIX_C_SOURCE 200809L
+#include "loop_harness.h"
+
+#include "fw/safety.h"
+
+#include <b21r_test/alloc_counter.h>
+
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <cmocka.h>
+
+static harness_t g_h;
+
+// The paper's 30 example runs, then 5 learned runs; one block after each phase (a block every
+// 5 runs costs too much time in the sanitizer build; the main job runs the paper's cadence).
+static void short_schedule(fw_config_t* c) {
+  harness_config(c);
+  c->phase_one_runs = 30;
+  c->phase_two_runs = 5;
+  c->eval_every_runs = 30;
+  c->hedger_replay = false;
+  c->progress = true;
+}
+
+// The controller learns the corridor from example runs and, in phase two, reaches the goal
+// from all 10 evaluation poses; the experience stream has no gaps.
+static void test_loop_learns_corridor_reaches_goal_from_all_poses(void** state) {
+  (void)state;
+  fw_config_t c;
+  short_schedule(&c);
+  assert_int_equal(harness_open(&g_h, &c, false, 7), 0);
+  g_h.print_text = getenv("B21R_TEST_VERBOSE") != NULL;
+  harness_run(&g_h, 200000);
+  fw_loop_stats_t st;
+  fw_loop_get_stats(g_h.loop, &st);
+  print_message("ticks %lld, steps %lld, runs %d, blocks %d, last block %d/%d mean %.1f +- %.1f, best example %d\n",
+                (long long)st.ticks, (long long)st.steps, st.runs_finished, st.eval_blocks, st.last_block.successes,
+                st.last_block.n_starts, st.last_block.mean_steps, st.last_block.ci95_halfwidth, st.best_example_steps);
+  assert_true(st.done);
+  assert_int_equal(st.training_runs, 35);
+  assert_int_equal(st.eval_blocks, 2);
+  assert_int_equal(g_h.evals, 2);
+  assert_int_equal(g_h.last_eval.phase, 2);
+  assert_int_equal(g_h.last_eval.successes, 10);
+  assert_int_equal(g_h.exp_gaps, 0);
+  assert_int_equal(st.experiences_dropped, 0);
+  harness_close(&g_h);
+}
+
+// The same configuration and seeds give bit-identical experience streams; another seed differs.
+static void test_loop_same_seed_bit_identical_experiences(void** state) {
+  (void)state;
+  fw_config_t c;
+  harness_config(&c);
+  c.phase_one_runs = 3;
+  c.phase_two_runs = 2;
+  c.eval_every_runs = 5;
+  c.eval_starts = 2;
+  uint64_t hashes[3];
+  int64_t counts[3];
+  for (int i = 0; i < 3; ++i) {
+    c.seed = i < 2 ? 11 : 12;
+    assert_int_equal(harness_open(&g_h, &c, false, 5), 0);
+    harness_run(&g_h, 100000);
+    hashes[i] = g_h.exp_hash;
+    counts[i] = g_h.exp_count;
+    harness_close(&g_h);
+  }
+  print_message("experiences %lld, hash %016llx / %016llx / %016llx\n", (long long)counts[0],
+                (unsigned long long)hashes[0], (unsigned long long)hashes[1], (unsigned long long)hashes[2]);
+  assert_true(counts[0] > 100);
+  assert_int_equal(counts[0], counts[1]);
+  assert_true(hashes[0] == hashes[1]);
+  assert_true(hashes[0] != hashes[2]);
+}
+
+// After start-up, thousands of ticks (runs, run ends, evaluation blocks, phase switch) perform
+// no heap allocation.
+static void test_loop_tick_allocates_nothing(void** state) {
+  (void)state;
+  fw_config_t c;
+  harness_config(&c);
+  c.phase_one_runs = 3;
+  c.phase_two_runs = 3;
+  c.eval_every_runs = 3;
+  c.eval_starts = 4;
+  c.progress = true;
+  assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
+  harness_run(&g_h, 5);
+  alloc_counter_begin();
+  int64_t ticks = 0;
+  for (; ticks < 3000; ++ticks) {
+    const int64_t t = fw_loop_wait(g_h.loop);
+    const bool more = fw_loop_tick(g_h.loop, t);
+    harness_drain(&g_h);
+    if (!more) {
+      break;
+    }
+  }
+  const uint64_t allocs = alloc_counter_end();
+  fw_loop_stats_t st;
+  fw_loop_get_stats(g_h.loop, &st);
+  print_message("%lld ticks, %d runs, %d blocks: %llu allocations\n", (long long)ticks, st.runs_finished,
+                st.eval_blocks, (unsigned long long)allocs);
+  assert_true(ticks > 1500);
+  assert_true(st.eval_blocks >= 1);
+  assert_int_equal(allocs, 0);
+  harness_close(&g_h);
+}
+
+// The learned state and the schedule's progress survive a restart: a new loop loading the
+// checkpoint written at the end of each training run continues with the same counts, phase and
+// samples; a corrupt checkpoint is refused with the "start fresh" hint and changes nothing.
+static void test_loop_checkpoint_restart_resumes(void** state) {
+  (void)state;
+  char dir[] = "/tmp/b21r-loopckpt-XXXXXX";
+  assert_non_null(mkdtemp(dir));
+  fw_config_t c;
+  harness_config(&c);
+  c.phase_one_runs = 4;
+  c.phase_two_runs = 2;
+  c.eval_every_runs = 10;
+  c.eval_starts = 1;
+  snprintf(c.checkpoint_file, sizeof c.checkpoint_file, "%s/hedger.ckpt", dir);
+  assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
+  size_t meta_cap = 0;
+  size_t payload_cap = 0;
+  fw_loop_checkpoint_capacity(g_h.loop, &meta_cap, &payload_cap);
+  char err[FW_LOOP_ERR_MAX];
+  fw_ckpt_writer_t* w = fw_ckpt_writer_create(c.checkpoint_file, meta_cap, payload_cap, err, sizeof err);
+  assert_non_null(w);
+  fw_loop_attach_checkpoints(g_h.loop, w);
+  // Run until three training runs are done (phase one), then stop as after a power cut.
+  fw_loop_stats_t st;
+  do {
+    harness_run(&g_h, 1);
+    fw_loop_get_stats(g_h.loop, &st);
+  } while (st.training_runs < 3);
+  fw_ckpt_writer_flush(w);
+  const uint32_t fill = st.store_fill;
+  harness_close(&g_h);
+  fw_ckpt_writer_destroy(w);
+
+  assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
+  assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), 1);
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.training_runs, 3);
+  assert_int_equal(st.phase, 1);
+  assert_int_equal(st.store_fill, fill);
+  assert_true(st.best_example_steps > 0);
+  harness_run(&g_h, 100000);
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_true(st.done);
+  assert_int_equal(st.training_runs, 6);
+  assert_int_equal(st.phase, 2);
+  harness_close(&g_h);
+
+  // Damage the file: refused, with the way out in the message.
+  FILE* f = fopen(c.checkpoint_file, "r+b");
+  assert_non_null(f);
+  assert_int_equal(fseek(f, 200, SEEK_SET), 0);
+  fputc(0xAB, f);
+  fclose(f);
+  assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
+  assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), -1);
+  assert_non_null(strstr(err, "to start fresh"));
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.training_runs, 0);
+  harness_close(&g_h);
+  char cmd[128];
+  snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+  assert_int_equal(system(cmd), 0);
+}
+
+int main(void) {
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_loop_learns_corridor_reaches_goal_from_all_poses),
+      cmocka_unit_test(test_loop_same_seed_bit_identical_experiences),
+      cmocka_unit_test(test_loop_tick_allocates_nothing),
+      cmocka_unit_test(test_loop_checkpoint_restart_resumes),
+  };
+  return cmocka_run_group_tests_name("firmware.loop", tests, NULL, NULL);
+}

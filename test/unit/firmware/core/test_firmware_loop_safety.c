@@ -1,0 +1,289 @@
+// SPDX-License-Identifier: MIT
+// The loop's safety reactions over the fake robot: every cause commands zero in the very tick the
+// stop begins and reports its reason on STATUS; bad teleop and command messages are rejected and
+// counted; operator commands act.
+#define _POSIX_C_SOURCE 200809L
+#include "loop_harness.h"
+
+#include "fw/safety.h"
+
+#include <math.h>
+#include <setjmp.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+
+#include <cmocka.h>
+
+static harness_t g_h;
+
+static void open_running(bool canopen, void (*tweak)(fw_config_t*)) {
+  fw_config_t c;
+  harness_config(&c);
+  c.phase_one_runs = 50;
+  c.eval_every_runs = 50;
+  c.safety_clear_ticks = 3;
+  if (tweak != NULL) {
+    tweak(&c);
+  }
+  assert_int_equal(harness_open(&g_h, &c, canopen, 9), 0);
+  harness_run(&g_h, 40);  // a run is under way, the robot moves
+}
+
+static double fake_v(void) {
+  if (!g_h.fake.canopen) {
+    return g_h.fake.v_cmd;
+  }
+  return (double)g_h.fake.drive_target[0] / g_h.fake.k_d;
+}
+
+// Runs tick by tick until the stop reason appears; asserts the robot was commanded to move the
+// tick before and to stand still in the tick the stop began. Returns the ticks it took.
+static int expect_stop_within(int reason, int max_ticks) {
+  fw_loop_stats_t st;
+  for (int i = 1; i <= max_ticks; ++i) {
+    const double v_before = fake_v();
+    harness_run(&g_h, 1);
+    fw_loop_get_stats(g_h.loop, &st);
+    if (st.stop_reason == reason) {
+      assert_true(fabs(v_before) > 0.05);
+      assert_true(fabs(fake_v()) < 1e-9);
+      assert_true(fabs(g_h.fake.canopen ? (double)g_h.fake.drive_target[1] : g_h.fake.w_cmd) < 1e-9);
+      assert_true((g_h.stop_reasons_seen & (1U << reason)) != 0);  // on STATUS in that tick
+      assert_true(g_h.last_status_detail[0] != '\0');
+      return i;
+    }
+  }
+  fail_msg("stop reason %d (%s) not seen within %d ticks", reason, fw_stop_reason_name(reason), max_ticks);
+  return -1;
+}
+
+static void expect_resume(int max_ticks) {
+  fw_loop_stats_t st;
+  for (int i = 0; i < max_ticks; ++i) {
+    harness_run(&g_h, 1);
+    fw_loop_get_stats(g_h.loop, &st);
+    if (st.stop_reason == FW_STOP_NONE && st.mode == B21R_STATUS_T_MODE_RUNNING) {
+      return;
+    }
+  }
+  fail_msg("the loop did not resume within %d ticks", max_ticks);
+}
+
+// Laser silence for the limit (4 ticks at 0.35 s) stops the robot in that tick (the 5th tick
+// after the fault: the scan of the period under way was already sent); it resumes with a new run
+// once scans are back.
+static void test_loop_laser_silence_stops_within_one_tick(void** state) {
+  (void)state;
+  open_running(false, NULL);
+  g_h.fake.laser_drop_ticks = 8;
+  const int ticks = expect_stop_within(FW_STOP_LASER_SILENT, 20);
+  assert_int_equal(ticks, 5);
+  assert_non_null(strstr(g_h.last_status_detail, "laser silent for 4 ticks"));
+  expect_resume(60);
+  fw_loop_stats_t st;
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.runs_aborted, 1);
+  harness_close(&g_h);
+}
+
+// Base silence stops the robot.
+static void test_loop_base_silence_stops_within_one_tick(void** state) {
+  (void)state;
+  open_running(false, NULL);
+  g_h.fake.base_silent_ticks = 8;
+  expect_stop_within(FW_STOP_BASE_SILENT, 20);
+  expect_resume(60);
+  harness_close(&g_h);
+}
+
+// A bumper hit ends the run as a collision (the last transition is learned, not aborted) and
+// stops the robot; the emulator binding repositions it, the bumper clears, the loop resumes.
+static void test_loop_bumper_stops_and_ends_run_as_collision(void** state) {
+  (void)state;
+  open_running(false, NULL);
+  g_h.fake.bumper_ticks = 3;
+  expect_stop_within(FW_STOP_BUMPER, 5);
+  fw_loop_stats_t st;
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.runs_aborted, 0);
+  assert_int_equal(st.runs_finished, 1);
+  assert_false(st.last_run_goal);
+  expect_resume(60);
+  harness_close(&g_h);
+}
+
+// A CiA 402 drive fault (EMCY + statusword) stops the robot; after the fault condition clears,
+// the loop's fault-reset edge recovers the drive and the loop resumes.
+static void test_loop_drive_fault_stops_and_recovers(void** state) {
+  (void)state;
+  open_running(true, NULL);
+  cia402_drive_set_fault(&g_h.fake.drive[1], 0x2310);
+  canopen_frame_t emcy;
+  (void)canopen_encode_emcy(&emcy, 2, 0x2310, 0x01, NULL);
+  g_h.fake.frames[g_h.fake.n_frames++] = emcy;
+  expect_stop_within(FW_STOP_BASE_FAULT, 3);
+  assert_non_null(strstr(g_h.last_status_detail, "EMCY 0x2310"));
+  harness_run(&g_h, 5);
+  fw_loop_stats_t st;
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.stop_reason, FW_STOP_BASE_FAULT);  // still faulted: no recovery by itself
+  cia402_drive_set_fault(&g_h.fake.drive[1], 0);            // the cause is gone
+  expect_resume(80);
+  harness_close(&g_h);
+}
+
+// SIGTERM: zero command in the same tick, the loop ends with 128 + 15.
+static void test_loop_signal_stops_and_ends(void** state) {
+  (void)state;
+  open_running(false, NULL);
+  fw_loop_signal(g_h.loop, SIGTERM);
+  expect_stop_within(FW_STOP_SIGNAL, 1);
+  fw_loop_stats_t st;
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_true(st.done);
+  assert_int_equal(fw_loop_shutdown(g_h.loop), 0);
+  assert_true(g_h.fake.brake);
+  assert_false(g_h.fake.streaming);  // odometry reports switched off
+  harness_close(&g_h);
+}
+
+static void joystick(fw_config_t* c) {
+  c->phase_driver = FW_DRIVER_JOYSTICK;
+  c->teleop_timeout_s = 0.3;
+}
+
+static b21r_teleop_t teleop(int64_t seq, double rot) {
+  b21r_teleop_t t;
+  memset(&t, 0, sizeof t);
+  t.seq = seq;
+  t.deadman = 1;
+  t.rotation_radps = rot;
+  return t;
+}
+
+// Joystick driving: the robot moves only while fresh, valid deadman messages arrive; NaN, out of
+// range, repeated and stale messages are rejected and counted; losing the deadman stops it.
+static void test_loop_teleop_deadman_and_validation(void** state) {
+  (void)state;
+  fw_config_t c;
+  harness_config(&c);
+  joystick(&c);
+  c.phase_one_runs = 50;
+  c.eval_every_runs = 50;
+  assert_int_equal(harness_open(&g_h, &c, false, 4), 0);
+  // No teleop at all: the first run does not start, the robot never moves, the stop says why.
+  fw_loop_stats_t st;
+  for (int i = 0; i < 5; ++i) {
+    harness_run(&g_h, 1);
+    assert_true(fabs(g_h.fake.v_cmd) < 1e-9);
+  }
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.stop_reason, FW_STOP_DEADMAN);
+  // Valid, fresh messages: the stop clears and the operator's rotation is executed.
+  int64_t seq = 1;
+  int running = 0;
+  for (int i = 0; i < 60 && running < 3; ++i) {
+    fw_loop_post_teleop(g_h.loop, &(b21r_teleop_t){.seq = seq++, .deadman = 1, .rotation_radps = 0.25},
+                        g_h.fake.clock_us);
+    harness_run(&g_h, 1);
+    fw_loop_get_stats(g_h.loop, &st);
+    running = st.mode == B21R_STATUS_T_MODE_RUNNING ? running + 1 : 0;
+  }
+  assert_int_equal(running, 3);
+  assert_int_equal(st.stop_reason, FW_STOP_NONE);
+  assert_true(g_h.fake.v_cmd > 0.05);
+  assert_true(fabs(g_h.fake.w_cmd - 0.25) < 1e-6);  // 8750 counts: no 0x1B byte to nudge
+  const int64_t accepted = st.teleop_accepted;
+  // Bad messages: NaN, out of range, a repeated seq, a stale one.
+  b21r_teleop_t bad = teleop(seq++, NAN);
+  fw_loop_post_teleop(g_h.loop, &bad, g_h.fake.clock_us);
+  bad = teleop(seq++, 5.0);
+  fw_loop_post_teleop(g_h.loop, &bad, g_h.fake.clock_us);
+  bad = teleop(seq - 5, 0.1);
+  fw_loop_post_teleop(g_h.loop, &bad, g_h.fake.clock_us);
+  bad = teleop(seq++, 0.1);
+  fw_loop_post_teleop(g_h.loop, &bad, g_h.fake.clock_us - 2000000);
+  harness_run(&g_h, 1);
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.teleop_rejected, 4);
+  assert_int_equal(st.teleop_accepted, accepted);
+  // Deadman released (messages stop): stop within the timeout, zero in that tick.
+  expect_stop_within(FW_STOP_DEADMAN, 6);
+  harness_close(&g_h);
+}
+
+// Operator commands: PAUSE stops (reported as paused) until RESUME; repeated or unknown commands
+// are rejected; START_PHASE_TWO switches after the current run; SHUTDOWN ends the loop.
+static void test_loop_operator_commands(void** state) {
+  (void)state;
+  open_running(false, NULL);
+  b21r_command_t cmd;
+  memset(&cmd, 0, sizeof cmd);
+  cmd.seq = 1;
+  cmd.command = B21R_COMMAND_T_PAUSE;
+  fw_loop_post_command(g_h.loop, &cmd, 0);
+  expect_stop_within(FW_STOP_OPERATOR, 2);
+  fw_loop_stats_t st;
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.mode, B21R_STATUS_T_MODE_PAUSED);
+  harness_run(&g_h, 20);
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.stop_reason, FW_STOP_OPERATOR);
+  fw_loop_post_command(g_h.loop, &cmd, 0);  // repeated seq: rejected
+  cmd.seq = 2;
+  cmd.command = 42;  // unknown
+  fw_loop_post_command(g_h.loop, &cmd, 0);
+  cmd.seq = 3;
+  cmd.command = B21R_COMMAND_T_RESUME;
+  fw_loop_post_command(g_h.loop, &cmd, 0);
+  expect_resume(20);
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.commands_rejected, 2);
+  cmd.seq = 4;
+  cmd.command = B21R_COMMAND_T_START_PHASE_TWO;
+  fw_loop_post_command(g_h.loop, &cmd, 0);
+  for (int i = 0; i < 3000 && st.phase == 1; ++i) {
+    harness_run(&g_h, 1);
+    fw_loop_get_stats(g_h.loop, &st);
+  }
+  assert_int_equal(st.phase, 2);
+  cmd.seq = 5;
+  cmd.command = B21R_COMMAND_T_SHUTDOWN;
+  fw_loop_post_command(g_h.loop, &cmd, 0);
+  harness_run(&g_h, 2);
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_true(st.done);
+  harness_close(&g_h);
+}
+
+// Corrupted laser bytes are dropped by the CRC and counted, never crash the loop.
+static void test_loop_corrupt_bytes_counted(void** state) {
+  (void)state;
+  open_running(false, NULL);
+  g_h.fake.corrupt_fraction = 0.0005;
+  harness_run(&g_h, 200);
+  g_h.fake.corrupt_fraction = 0.0;
+  harness_run(&g_h, 20);
+  harness_drain(&g_h);
+  assert_true(g_h.last_status.laser_crc_errors > 0);
+  assert_true(g_h.last_status.laser_scans > 100);
+  harness_close(&g_h);
+}
+
+int main(void) {
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_loop_laser_silence_stops_within_one_tick),
+      cmocka_unit_test(test_loop_base_silence_stops_within_one_tick),
+      cmocka_unit_test(test_loop_bumper_stops_and_ends_run_as_collision),
+      cmocka_unit_test(test_loop_drive_fault_stops_and_recovers),
+      cmocka_unit_test(test_loop_signal_stops_and_ends),
+      cmocka_unit_test(test_loop_teleop_deadman_and_validation),
+      cmocka_unit_test(test_loop_operator_commands),
+      cmocka_unit_test(test_loop_corrupt_bytes_counted),
+  };
+  return cmocka_run_group_tests_name("firmware.loop_safety", tests, NULL, NULL);
+}
