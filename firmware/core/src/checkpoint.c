@@ -2,6 +2,7 @@
 // Checkpoint files (write temp, fsync, rename, fsync directory) and the background writer.
 #define _POSIX_C_SOURCE 200809L
 #include "fw/checkpoint.h"
+#include "le_bytes.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -42,33 +43,9 @@ uint32_t fw_crc32(uint32_t crc, const void* data, size_t n) {
   return ~crc;
 }
 
-static void put_u32(uint8_t* p, uint32_t v) {
-  for (int i = 0; i < 4; ++i) {
-    p[i] = (uint8_t)(v >> (8 * i));
-  }
-}
 
-static void put_u64(uint8_t* p, uint64_t v) {
-  for (int i = 0; i < 8; ++i) {
-    p[i] = (uint8_t)(v >> (8 * i));
-  }
-}
 
-static uint32_t get_u32(const uint8_t* p) {
-  uint32_t v = 0;
-  for (int i = 3; i >= 0; --i) {
-    v = (v << 8) | p[i];
-  }
-  return v;
-}
 
-static uint64_t get_u64(const uint8_t* p) {
-  uint64_t v = 0;
-  for (int i = 7; i >= 0; --i) {
-    v = (v << 8) | p[i];
-  }
-  return v;
-}
 
 static int write_all(int fd, const void* data, size_t n) {
   const uint8_t* p = (const uint8_t*)data;
@@ -121,13 +98,13 @@ int fw_checkpoint_write(const char* path, const void* meta, size_t meta_size, co
   uint8_t header[FW_CHECKPOINT_HEADER_SIZE];
   memset(header, 0, sizeof header);
   memcpy(header, k_magic, sizeof k_magic);
-  put_u32(header + 8, FW_CHECKPOINT_VERSION);
-  put_u32(header + 12, FW_CHECKPOINT_HEADER_SIZE);
-  put_u64(header + 16, (uint64_t)meta_size);
-  put_u64(header + 24, (uint64_t)payload_size);
-  put_u32(header + 32, fw_crc32(0, meta, meta_size));
-  put_u32(header + 36, fw_crc32(0, payload, payload_size));
-  put_u32(header + 44, fw_crc32(0, header, 44));
+  fw_put_u32(header + 8, FW_CHECKPOINT_VERSION);
+  fw_put_u32(header + 12, FW_CHECKPOINT_HEADER_SIZE);
+  fw_put_u64(header + 16, (uint64_t)meta_size);
+  fw_put_u64(header + 24, (uint64_t)payload_size);
+  fw_put_u32(header + 32, fw_crc32(0, meta, meta_size));
+  fw_put_u32(header + 36, fw_crc32(0, payload, payload_size));
+  fw_put_u32(header + 44, fw_crc32(0, header, 44));
 
   const int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) {
@@ -179,21 +156,21 @@ static int read_header(FILE* f, const char* path, uint64_t* meta_size, uint64_t*
     fmt(err, err_cap, "%s is not a B21r checkpoint (bad magic); " FRESH_HINT, path, path, path);
     return -1;
   }
-  if (get_u32(h + 44) != fw_crc32(0, h, 44)) {
+  if (fw_get_u32(h + 44) != fw_crc32(0, h, 44)) {
     fmt(err, err_cap, "checkpoint %s is corrupt (header checksum mismatch); " FRESH_HINT, path, path, path);
     return -1;
   }
-  const uint32_t version = get_u32(h + 8);
-  if (version != FW_CHECKPOINT_VERSION || get_u32(h + 12) != FW_CHECKPOINT_HEADER_SIZE) {
+  const uint32_t version = fw_get_u32(h + 8);
+  if (version != FW_CHECKPOINT_VERSION || fw_get_u32(h + 12) != FW_CHECKPOINT_HEADER_SIZE) {
     fmt(err, err_cap,
         "checkpoint %s has format version %u; this controller reads version %u only; " FRESH_HINT, path,
         (unsigned)version, FW_CHECKPOINT_VERSION, path, path);
     return -1;
   }
-  *meta_size = get_u64(h + 16);
-  *payload_size = get_u64(h + 24);
-  *meta_crc = get_u32(h + 32);
-  *payload_crc = get_u32(h + 36);
+  *meta_size = fw_get_u64(h + 16);
+  *payload_size = fw_get_u64(h + 24);
+  *meta_crc = fw_get_u32(h + 32);
+  *payload_crc = fw_get_u32(h + 36);
   return 0;
 }
 

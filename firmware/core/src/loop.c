@@ -2,6 +2,7 @@
 // The control loop: tick, run lifecycle, learning, safety reactions, publishing, checkpoints.
 #define _POSIX_C_SOURCE 200809L
 #include "loop_internal.h"
+#include "le_bytes.h"
 
 #include <errno.h>
 #include <math.h>
@@ -58,33 +59,9 @@ void fw_loop_log(fw_loop_t* L, int stream, const char* format, ...) {
   notify(L);
 }
 
-static void put_u32(uint8_t* p, uint32_t v) {
-  for (int i = 0; i < 4; ++i) {
-    p[i] = (uint8_t)(v >> (8 * i));
-  }
-}
 
-static uint32_t get_u32(const uint8_t* p) {
-  uint32_t v = 0;
-  for (int i = 3; i >= 0; --i) {
-    v = (v << 8) | p[i];
-  }
-  return v;
-}
 
-static void put_f64(uint8_t* p, double d) {
-  uint64_t u = 0;
-  memcpy(&u, &d, sizeof u);
-  put_u32(p, (uint32_t)u);
-  put_u32(p + 4, (uint32_t)(u >> 32));
-}
 
-static double get_f64(const uint8_t* p) {
-  const uint64_t u = (uint64_t)get_u32(p) | ((uint64_t)get_u32(p + 4) << 32);
-  double d = 0.0;
-  memcpy(&d, &u, sizeof d);
-  return d;
-}
 
 static bool all_finite(const double* v, uint32_t n) {
   for (uint32_t i = 0; i < n; ++i) {
@@ -340,17 +317,17 @@ static size_t encode_meta(const fw_loop_t* L, uint8_t* p) {
   memset(p, 0, META_BYTES);
   memcpy(p, META_MAGIC, 8);
   const fw_schedule_progress_t* g = &L->sched.p;
-  put_u32(p + 8, (uint32_t)L->cfg.task);
-  put_u32(p + 12, L->state_dim);
-  put_u32(p + 16, (uint32_t)g->phase);
-  put_u32(p + 20, (uint32_t)g->training_runs);
-  put_u32(p + 24, (uint32_t)g->phase_one_runs);
-  put_u32(p + 28, (uint32_t)g->phase_two_runs);
-  put_u32(p + 32, (uint32_t)g->eval_blocks);
-  put_u32(p + 36, (uint32_t)g->example_runs);
-  put_f64(p + 40, g->example_steps_sum);
-  put_u32(p + 48, (uint32_t)g->best_example_steps);
-  put_u32(p + 52, (uint32_t)(L->run_id + 1));
+  fw_put_u32(p + 8, (uint32_t)L->cfg.task);
+  fw_put_u32(p + 12, L->state_dim);
+  fw_put_u32(p + 16, (uint32_t)g->phase);
+  fw_put_u32(p + 20, (uint32_t)g->training_runs);
+  fw_put_u32(p + 24, (uint32_t)g->phase_one_runs);
+  fw_put_u32(p + 28, (uint32_t)g->phase_two_runs);
+  fw_put_u32(p + 32, (uint32_t)g->eval_blocks);
+  fw_put_u32(p + 36, (uint32_t)g->example_runs);
+  fw_put_f64(p + 40, g->example_steps_sum);
+  fw_put_u32(p + 48, (uint32_t)g->best_example_steps);
+  fw_put_u32(p + 52, (uint32_t)(L->run_id + 1));
   return META_BYTES;
 }
 
@@ -590,11 +567,11 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
         path);
     return -1;
   }
-  if (get_u32(meta + 8) != (uint32_t)L->cfg.task || get_u32(meta + 12) != L->state_dim) {
+  if (fw_get_u32(meta + 8) != (uint32_t)L->cfg.task || fw_get_u32(meta + 12) != L->state_dim) {
     free(payload);
     fmt(err, err_cap,
         "checkpoint %s was learned for another task (%s); to start fresh, move the file away (e.g. mv '%s' '%s.other')",
-        path, get_u32(meta + 8) == 0 ? "corridor" : "obstacles", path, path);
+        path, fw_get_u32(meta + 8) == 0 ? "corridor" : "obstacles", path, path);
     return -1;
   }
   const hedger_status_t hs = hedger_load(L->hedger, payload, payload_size);
@@ -608,17 +585,17 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
   }
   fw_schedule_progress_t p;
   memset(&p, 0, sizeof p);
-  p.phase = (int32_t)get_u32(meta + 16);
-  p.training_runs = (int32_t)get_u32(meta + 20);
-  p.phase_one_runs = (int32_t)get_u32(meta + 24);
-  p.phase_two_runs = (int32_t)get_u32(meta + 28);
-  p.eval_blocks = (int32_t)get_u32(meta + 32);
-  p.example_runs = (int32_t)get_u32(meta + 36);
-  p.example_steps_sum = get_f64(meta + 40);
-  p.best_example_steps = (int32_t)get_u32(meta + 48);
+  p.phase = (int32_t)fw_get_u32(meta + 16);
+  p.training_runs = (int32_t)fw_get_u32(meta + 20);
+  p.phase_one_runs = (int32_t)fw_get_u32(meta + 24);
+  p.phase_two_runs = (int32_t)fw_get_u32(meta + 28);
+  p.eval_blocks = (int32_t)fw_get_u32(meta + 32);
+  p.example_runs = (int32_t)fw_get_u32(meta + 36);
+  p.example_steps_sum = fw_get_f64(meta + 40);
+  p.best_example_steps = (int32_t)fw_get_u32(meta + 48);
   const fw_schedule_config_t sc = L->sched.cfg;  // a copy: init clears the schedule first
   fw_schedule_init(&L->sched, &sc, &p);
-  L->run_id = (int32_t)get_u32(meta + 52) - 1;
+  L->run_id = (int32_t)fw_get_u32(meta + 52) - 1;
   return 1;
 }
 
