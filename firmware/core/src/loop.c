@@ -291,7 +291,13 @@ static void publish_status(fw_loop_t* L) {
   s->teleop_accepted = L->teleop_accepted;
   s->teleop_rejected = L->teleop_rejected;
   s->lcm_queue_drops = (int64_t)fw_pubq_drops(L->out.queue, -1);
-  s->checkpoints_written = L->out.checkpoints != NULL ? (int64_t)fw_ckpt_writer_counters(L->out.checkpoints).written : 0;
+  // One snapshot of the writer's counters (each read takes the writer's lock).
+  fw_ckpt_counters_t ckpt;
+  memset(&ckpt, 0, sizeof ckpt);
+  if (L->out.checkpoints != NULL) {
+    ckpt = fw_ckpt_writer_counters(L->out.checkpoints);
+  }
+  s->checkpoints_written = (int64_t)ckpt.written;
   s->safety_stops = L->safety.stops;
   s->held_ticks = L->held_ticks;
   s->teleop_rejected_nan = L->teleop_rejected_nan;
@@ -300,8 +306,7 @@ static void publish_status(fw_loop_t* L) {
   s->teleop_rejected_stale = L->teleop_rejected_stale;
   s->commands_accepted = L->commands_accepted;
   s->commands_rejected = L->commands_rejected;
-  s->checkpoint_failures =
-      L->out.checkpoints != NULL ? (int64_t)fw_ckpt_writer_counters(L->out.checkpoints).failed : 0;
+  s->checkpoint_failures = (int64_t)ckpt.failed;
   s->laser_restarts = (int64_t)ls.restarts;
   s->odometry_rejected = (int64_t)(L->odo.rejected_trans + L->odo.rejected_rot);
   s->experiences = L->exp_seq;
