@@ -14,6 +14,10 @@ example), and writes into OUTDIR:
 Usage:
   b21r_learning_report.py --log LEARN.lcmlog [--optimal OPT.lcmlog] [--example EX.lcmlog] --out OUTDIR
 """
+import b21r_bootstrap  # noqa: E402 (first: runs the tool in the project's venv)
+
+b21r_bootstrap.ensure()
+
 import argparse
 import json
 import math

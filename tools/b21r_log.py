@@ -8,9 +8,13 @@ Library use:
     events = read_log("run.lcmlog")            # [(timestamp_us, channel, decoded message), ...]
 Command line:
     b21r_log.py FILE [--channel B21R_EVAL] [--gaps] [--runs]
-The generated Python types must be importable: PYTHONPATH=<build>/python (tools/main-job.sh and
-the CTest helpers set it).
+Runs from a plain shell after tools/setup.sh and a build (b21r_bootstrap finds the venv and the
+generated types).
 """
+import b21r_bootstrap  # noqa: E402 (first: runs the tool in the project's venv)
+
+b21r_bootstrap.ensure()
+
 import argparse
 import sys
 
@@ -19,7 +23,7 @@ import lcm
 try:
     from b21r import command_t, eval_t, experience_t, pose_t, scan_t, status_t, teleop_t
 except ImportError as exc:  # pragma: no cover - a usage error, explained
-    sys.exit("b21r_log: the generated LCM types are not importable (%s); set PYTHONPATH=<build>/python" % exc)
+    sys.exit("b21r_log: the generated LCM types are not importable (%s); build them: %s" % (exc, b21r_bootstrap.BUILD_HINT))
 
 TYPES = {
     "B21R_EXPERIENCE": experience_t,

@@ -14,8 +14,13 @@ Interactive (curses):
     robot (teleop_timeout_s) and reports "deadman released".
 One command and exit:
     b21r_teleop.py --command START_PHASE_TWO|CONFIRM_START_POSE|PAUSE|RESUME|SHUTDOWN
-The generated types must be importable: PYTHONPATH=<build>/python.
+Runs from a plain shell after tools/setup.sh and a build (b21r_bootstrap finds the venv and the
+generated types).
 """
+import b21r_bootstrap  # noqa: E402 (first: runs the tool in the project's venv)
+
+b21r_bootstrap.ensure()
+
 import argparse
 import sys
 import time
