@@ -207,6 +207,11 @@ static const key_desc_t k_keys[] = {
 // clang-format on
 
 #define N_KEYS (sizeof k_keys / sizeof k_keys[0])
+_Static_assert(N_KEYS <= FW_CONFIG_MAX_KEYS, "raise FW_CONFIG_MAX_KEYS");
+_Static_assert(FW_CONFIG_MAX_SOURCES <= 255U, "source indices are uint8_t");
+
+// The program that reads these settings, for the hints in error messages.
+#define REFERENCE_HINT "b21r-controller --print-reference-config lists every key with its documentation"
 
 static void fmt(char* err, size_t cap, const char* format, ...) __attribute__((format(printf, 3, 4)));
 static void fmt(char* err, size_t cap, const char* format, ...) {
@@ -228,11 +233,146 @@ static const key_desc_t* find_key(const char* name) {
   return NULL;
 }
 
+// Edit distance with adjacent transpositions (optimal string alignment), so that one typo, a
+// dropped or extra letter, or two swapped letters each count 1. Three rolling rows; names are
+// compared on their first KEY_CMP_MAX characters (every key is shorter).
+#define KEY_CMP_MAX 48U
+static size_t bounded_len(const char* s) {
+  size_t n = 0;
+  while (n < KEY_CMP_MAX && s[n] != '\0') {
+    ++n;
+  }
+  return n;
+}
+
+static size_t edit_distance(const char* a, const char* b) {
+  const size_t na = bounded_len(a);
+  const size_t nb = bounded_len(b);
+  size_t rows[3][KEY_CMP_MAX + 1U];
+  size_t* prev2 = rows[0];
+  size_t* prev = rows[1];
+  size_t* cur = rows[2];
+  for (size_t j = 0; j <= nb; ++j) {
+    prev[j] = j;
+  }
+  for (size_t i = 1; i <= na; ++i) {
+    cur[0] = i;
+    for (size_t j = 1; j <= nb; ++j) {
+      const size_t cost = a[i - 1] == b[j - 1] ? 0U : 1U;
+      size_t best = prev[j] + 1U;
+      if (cur[j - 1] + 1U < best) {
+        best = cur[j - 1] + 1U;
+      }
+      if (prev[j - 1] + cost < best) {
+        best = prev[j - 1] + cost;
+      }
+      if (i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] && prev2[j - 2] + 1U < best) {
+        best = prev2[j - 2] + 1U;
+      }
+      cur[j] = best;
+    }
+    size_t* t = prev2;
+    prev2 = prev;
+    prev = cur;
+    cur = t;
+  }
+  return prev[nb];
+}
+
+// The known key an unknown name most likely meant, or NULL when none is close: within a third
+// of the name's length in edits (at least 2), or a key that starts with the name (a unit suffix
+// left out: "max_rotation" → "max_rotation_radps"). Ties go to the earlier key in the table.
+static const key_desc_t* nearest_key(const char* name) {
+  const size_t n = strlen(name);
+  const size_t limit = n / 3U > 2U ? n / 3U : 2U;
+  const key_desc_t* best = NULL;
+  size_t best_d = SIZE_MAX;
+  for (size_t i = 0; i < N_KEYS; ++i) {
+    size_t d = edit_distance(name, k_keys[i].name);
+    if (d > limit && n >= 4U && strncmp(k_keys[i].name, name, n) == 0) {
+      d = limit;  // a prefix of a key counts as close, after any real near-miss
+    }
+    if (d <= limit && d < best_d) {
+      best = &k_keys[i];
+      best_d = d;
+    }
+  }
+  return best;
+}
+
+// Splits "path:123" into the source name and the line (0 when the source is not "name:digits").
+static uint32_t split_source(const char* source, size_t* name_len) {
+  const char* colon = strrchr(source, ':');
+  *name_len = strlen(source);
+  if (colon == NULL || colon[1] == '\0') {
+    return 0;
+  }
+  uint32_t line = 0;
+  for (const char* p = colon + 1; *p != '\0'; ++p) {
+    if (*p < '0' || *p > '9' || line > 100000000U) {
+      return 0;
+    }
+    line = line * 10U + (uint32_t)(*p - '0');
+  }
+  *name_len = (size_t)(colon - source);
+  return line;
+}
+
+// Remembers that key k was set from source ("default" = the table's default).
+static void note_origin(fw_config_t* cfg, const key_desc_t* k, const char* source) {
+  fw_config_origins_t* o = &cfg->origins;
+  const size_t ki = (size_t)(k - k_keys);
+  size_t len = 0;
+  const uint32_t line = split_source(source, &len);
+  uint8_t index = 0;
+  if (strcmp(source, "default") != 0) {
+    index = FW_CONFIG_MAX_SOURCES;  // none yet
+    for (uint8_t i = 1; i < FW_CONFIG_MAX_SOURCES; ++i) {
+      if (o->source[i][0] == '\0' && len < FW_CONFIG_STR_MAX) {
+        memcpy(o->source[i], source, len);
+        o->source[i][len] = '\0';
+        index = i;
+        break;
+      }
+      if (strlen(o->source[i]) == len && strncmp(o->source[i], source, len) == 0) {
+        index = i;
+        break;
+      }
+    }
+  }
+  o->key_source[ki] = index;
+  o->key_line[ki] = line;
+}
+
+static void origin_text(const fw_config_t* cfg, const key_desc_t* k, char* out, size_t cap) {
+  const fw_config_origins_t* o = &cfg->origins;
+  const size_t ki = (size_t)(k - k_keys);
+  const uint8_t index = o->key_source[ki];
+  if (index == 0) {
+    snprintf(out, cap, "default");
+  } else if (index >= FW_CONFIG_MAX_SOURCES) {
+    snprintf(out, cap, "an earlier setting");
+  } else if (o->key_line[ki] > 0) {
+    snprintf(out, cap, "%s:%u", o->source[index], (unsigned)o->key_line[ki]);
+  } else {
+    snprintf(out, cap, "%s", o->source[index]);
+  }
+}
+
+void fw_config_origin(const fw_config_t* cfg, const char* key, char* out, size_t out_cap) {
+  const key_desc_t* k = find_key(key);
+  if (k == NULL) {
+    snprintf(out, out_cap, "unknown key");
+    return;
+  }
+  origin_text(cfg, k, out, out_cap);
+}
+
 // Text of the allowed values of a key, for error messages and the reference output.
 static void describe_allowed(const key_desc_t* k, char* out, size_t cap) {
   switch (k->kind) {
     case KIND_BOOL:
-      snprintf(out, cap, "true or false");
+      snprintf(out, cap, "true or false");  // exactly what parse_bool accepts
       break;
     case KIND_INT:
       snprintf(out, cap, "an integer in [%.0f, %.0f]", k->min, k->max);
@@ -260,18 +400,11 @@ static void describe_allowed(const key_desc_t* k, char* out, size_t cap) {
   }
 }
 
+// One spelling per value, the one fw_config_print() writes and the error text names.
 static bool parse_bool(const char* v, bool* out) {
-  static const char* const yes[] = {"true", "yes", "on", "1"};
-  static const char* const no[] = {"false", "no", "off", "0"};
-  for (size_t i = 0; i < 4; ++i) {
-    if (strcmp(v, yes[i]) == 0) {
-      *out = true;
-      return true;
-    }
-    if (strcmp(v, no[i]) == 0) {
-      *out = false;
-      return true;
-    }
+  if (strcmp(v, "true") == 0 || strcmp(v, "false") == 0) {
+    *out = v[0] == 't';
+    return true;
   }
   return false;
 }
@@ -296,15 +429,8 @@ static bool in_range(const key_desc_t* k, double d) {
   return lo && hi;
 }
 
-int fw_config_set(fw_config_t* cfg, const char* key, const char* value, const char* source, char* err,
-                  size_t err_cap) {
-  const key_desc_t* k = find_key(key);
-  if (k == NULL) {
-    fmt(err, err_cap, "%s: unknown key '%s' (b21r-controller --help lists every key)", source, key);
-    return -1;
-  }
-  char allowed[256];
-  describe_allowed(k, allowed, sizeof allowed);
+// Parses value into k's field. Returns 0, or -1 (the field is then unchanged).
+static int set_value(fw_config_t* cfg, const key_desc_t* k, const char* value) {
   char* field = (char*)cfg + k->offset;
   switch (k->kind) {
     case KIND_BOOL: {
@@ -410,6 +536,27 @@ int fw_config_set(fw_config_t* cfg, const char* key, const char* value, const ch
       }
       break;
   }
+  return -1;
+}
+
+int fw_config_set(fw_config_t* cfg, const char* key, const char* value, const char* source, char* err,
+                  size_t err_cap) {
+  const key_desc_t* k = find_key(key);
+  if (k == NULL) {
+    const key_desc_t* near = nearest_key(key);
+    if (near != NULL) {
+      fmt(err, err_cap, "%s: unknown key '%s'; did you mean '%s'? (%s)", source, key, near->name, REFERENCE_HINT);
+    } else {
+      fmt(err, err_cap, "%s: unknown key '%s' (%s)", source, key, REFERENCE_HINT);
+    }
+    return -1;
+  }
+  if (set_value(cfg, k, value) == 0) {
+    note_origin(cfg, k, source);
+    return 0;
+  }
+  char allowed[256];
+  describe_allowed(k, allowed, sizeof allowed);
   fmt(err, err_cap, "%s: bad value '%s' for key '%s': expected %s (default %s)", source, value, key, allowed,
       k->def[0] != '\0' ? k->def : "\"\"");
   return -1;
@@ -533,7 +680,8 @@ int fw_config_load_file(fw_config_t* cfg, const char* path, char* err, size_t er
     }
     const key_desc_t* k = find_key(key);
     if (k != NULL && seen[k - k_keys]) {
-      fmt(err, err_cap, "%s: key '%s' appears twice in this file", source, key);
+      fmt(err, err_cap, "%s: key '%s' appears twice in this file (first on line %u)", source, key,
+          (unsigned)cfg->origins.key_line[k - k_keys]);
       rc = -1;
       break;
     }
@@ -551,38 +699,58 @@ int fw_config_load_file(fw_config_t* cfg, const char* path, char* err, size_t er
   return rc;
 }
 
+// "origin: " of key name, for the start of a cross-key message.
+typedef struct origin_buf {
+  char text[FW_CONFIG_STR_MAX + 16];
+} origin_buf_t;
+
+static origin_buf_t origin_of(const fw_config_t* cfg, const char* key) {
+  origin_buf_t o;
+  fw_config_origin(cfg, key, o.text, sizeof o.text);
+  return o;
+}
+
 int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
   if (cfg->laser_resolution_cdeg == 25 && cfg->laser_fov_deg != 100) {
-    fmt(err, err_cap, "laser_resolution_deg = 0.25 needs laser_fov_deg = 100 (the LMS200 has no 180/0.25 variant)");
+    fmt(err, err_cap,
+        "%s: laser_resolution_deg = 0.25 needs laser_fov_deg = 100 (set at %s; the LMS200 has no 180/0.25 variant)",
+        origin_of(cfg, "laser_resolution_deg").text, origin_of(cfg, "laser_fov_deg").text);
     return -1;
   }
   if (cfg->hedger_k_min > cfg->hedger_k_max) {
-    fmt(err, err_cap, "hedger_k_min (%d) must not exceed hedger_k_max (%d)", (int)cfg->hedger_k_min,
-        (int)cfg->hedger_k_max);
+    fmt(err, err_cap, "%s: hedger_k_min (%d) must not exceed hedger_k_max (%d, set at %s)",
+        origin_of(cfg, "hedger_k_min").text, (int)cfg->hedger_k_min, (int)cfg->hedger_k_max,
+        origin_of(cfg, "hedger_k_max").text);
     return -1;
   }
   const int32_t dims = (cfg->task == FW_TASK_CORRIDOR ? 3 : 4) + 1;
   if (cfg->hedger_input_scale_n != 0 && cfg->hedger_input_scale_n != dims) {
-    fmt(err, err_cap, "hedger_input_scale has %d values; task %s needs %d (state dimensions, then the action)",
-        (int)cfg->hedger_input_scale_n, cfg->task == FW_TASK_CORRIDOR ? "corridor" : "obstacles", (int)dims);
+    fmt(err, err_cap,
+        "%s: hedger_input_scale has %d values; task %s (set at %s) needs %d (state dimensions, then the action)",
+        origin_of(cfg, "hedger_input_scale").text, (int)cfg->hedger_input_scale_n,
+        cfg->task == FW_TASK_CORRIDOR ? "corridor" : "obstacles", origin_of(cfg, "task").text, (int)dims);
     return -1;
   }
   if (cfg->reposition == FW_REPOSITION_EMULATOR && cfg->emulator_control[0] == '\0') {
-    fmt(err, err_cap, "reposition = emulator needs emulator_control = <path of the emulator's control socket>");
+    fmt(err, err_cap, "%s: reposition = emulator needs emulator_control = <path of the emulator's control socket>",
+        origin_of(cfg, "reposition").text);
     return -1;
   }
   const int32_t q = cfg->queue_capacity;
   if ((q & (q - 1)) != 0) {
-    fmt(err, err_cap, "queue_capacity = %d: must be a power of two in [16, 65536]", (int)q);
+    fmt(err, err_cap, "%s: queue_capacity = %d: must be a power of two in [16, 65536]",
+        origin_of(cfg, "queue_capacity").text, (int)q);
     return -1;
   }
   if (cfg->mode == FW_MODE_LEARN && cfg->phase_one_runs + cfg->phase_two_runs == 0) {
-    fmt(err, err_cap, "phase_one_runs + phase_two_runs is 0: nothing to learn");
+    fmt(err, err_cap, "%s: phase_one_runs + phase_two_runs is 0 (phase_two_runs set at %s): nothing to learn",
+        origin_of(cfg, "phase_one_runs").text, origin_of(cfg, "phase_two_runs").text);
     return -1;
   }
   if (cfg->phase_switch == FW_SWITCH_AUTO && cfg->auto_switch_min_runs > cfg->phase_one_runs) {
-    fmt(err, err_cap, "auto_switch_min_runs (%d) exceeds phase_one_runs (%d), the latest switch",
-        (int)cfg->auto_switch_min_runs, (int)cfg->phase_one_runs);
+    fmt(err, err_cap, "%s: auto_switch_min_runs (%d) exceeds phase_one_runs (%d, set at %s), the latest switch",
+        origin_of(cfg, "auto_switch_min_runs").text, (int)cfg->auto_switch_min_runs, (int)cfg->phase_one_runs,
+        origin_of(cfg, "phase_one_runs").text);
     return -1;
   }
   return 0;

@@ -8,7 +8,10 @@
 /// - string values may be double-quoted (`log_file = "out dir/log"`), which keeps spaces and `#`;
 /// - a key may appear once per file; later sources (more files, then `--set`) override earlier ones.
 /// Every error names the source (`file:line` or `--set`), the key, the bad value and what is
-/// allowed (range, choices), so the operator can fix it without reading code.
+/// allowed (range, choices), so the operator can fix it without reading code. An unknown key
+/// suggests the nearest known one and points to `b21r-controller --print-reference-config`.
+/// fw_config_t remembers where each key was last set (fw_config_origins_t), so that the
+/// cross-key checks of fw_config_validate() can name the file and line of the keys involved.
 ///
 /// Memory: fw_config_t is a plain value (no pointers, strings are fixed arrays); parsing uses the
 /// stack and stdio only. Not used on the tick path. Thread-safety: none needed (start-up only).
@@ -30,6 +33,11 @@ extern "C" {
 #define FW_CONFIG_MAX_SCALES 9
 /// Capacity of an error message produced by the parser, including the NUL.
 #define FW_CONFIG_ERR_MAX 512U
+/// Ceiling of the number of keys (the table in config.c has fewer; checked at compile time).
+#define FW_CONFIG_MAX_KEYS 128U
+/// Distinct sources (config files, "--set", ...) whose names errors can cite; a key set from a
+/// further source is cited as "an earlier setting".
+#define FW_CONFIG_MAX_SOURCES 8U
 
 /// Learning task (ARCHITECTURE.md, "The experiments of the paper").
 typedef enum fw_task { FW_TASK_CORRIDOR = 0, FW_TASK_OBSTACLES = 1 } fw_task_t;
@@ -63,6 +71,16 @@ typedef enum fw_eval_policy {
   FW_EVAL_EXAMPLE = 1,   ///< the example policy at its nominal gain
   FW_EVAL_OPTIMAL = 2,   ///< the hand-tuned reference controller (the paper's "optimal" line)
 } fw_eval_policy_t;
+
+/// Where each key was last set, for error messages: not a setting (fw_config_print() ignores it,
+/// and two configs with equal settings may differ here). Filled by fw_config_set() and its
+/// callers; a field assigned directly keeps the origin of its last fw_config_set().
+typedef struct fw_config_origins {
+  /// Source names without the line ("robot.conf", "--set"); entry 0 is unused (= default value).
+  char source[FW_CONFIG_MAX_SOURCES][FW_CONFIG_STR_MAX];
+  uint8_t key_source[FW_CONFIG_MAX_KEYS]; ///< per key (table order): index into source[]; 0 = default
+  uint32_t key_line[FW_CONFIG_MAX_KEYS];  ///< per key: line in that source, 0 = not a file line
+} fw_config_origins_t;
 
 /// Every setting of the controller. Field names carry units. Defaults: fw_config_defaults().
 typedef struct fw_config {
@@ -147,6 +165,9 @@ typedef struct fw_config {
   char log_file[FW_CONFIG_STR_MAX];            ///< LCM event log of every channel ("" = none)
   char experience_log_file[FW_CONFIG_STR_MAX]; ///< LCM event log of EXPERIENCE only
   bool progress;                   ///< print one line per run / evaluation block on stdout
+
+  /// Where each key came from (last member: settings end at offsetof(fw_config_t, origins)).
+  fw_config_origins_t origins;
 } fw_config_t;
 
 /// Fills cfg with the documented defaults (the values in firmware/app/b21r-controller.conf).
@@ -154,9 +175,10 @@ typedef struct fw_config {
 void fw_config_defaults(fw_config_t* cfg);
 
 /// Sets one key from its textual value. `source` names where it came from ("--set",
-/// "file.conf:12") and is used in the error text only. Returns 0, or -1 with a message in err
-/// (capacity FW_CONFIG_ERR_MAX) naming source, key, value and the allowed range or choices;
-/// cfg is then unchanged. O(number of keys).
+/// "file.conf:12"): it is used in the error text and remembered as the key's origin. Returns 0,
+/// or -1 with a message in err (capacity FW_CONFIG_ERR_MAX) naming source, key, value and the
+/// allowed range or choices (an unknown key: the nearest known key, if one is close); cfg is
+/// then unchanged. Booleans are exactly `true` or `false`. O(number of keys × key length).
 int fw_config_set(fw_config_t* cfg, const char* key, const char* value, const char* source,
                   char* err, size_t err_cap);
 
@@ -170,8 +192,14 @@ int fw_config_set_arg(fw_config_t* cfg, const char* key_eq_value, char* err, siz
 int fw_config_load_file(fw_config_t* cfg, const char* path, char* err, size_t err_cap);
 
 /// Cross-key checks after all sources were applied (e.g. 0.25° needs the 100° field, k_min ≤
-/// k_max, reposition = emulator needs emulator_control). Returns 0 or -1 with a message.
+/// k_max, reposition = emulator needs emulator_control). Returns 0 or -1 with a message that
+/// starts with the origin of the offending key ("robot.conf:12: ", "--set: ", "default: ") and
+/// names the origin of every other key involved.
 int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap);
+
+/// Writes where key was last set into out: "file:line", "--set", "default", ... (cap bytes,
+/// NUL-terminated; "unknown key" for a name that is not a key). O(number of keys).
+void fw_config_origin(const fw_config_t* cfg, const char* key, char* out, size_t out_cap);
 
 /// Writes the documentation of every key (default, allowed values, meaning) to out, in the
 /// config file format, so the output is itself a valid config file.

@@ -65,7 +65,8 @@ static void test_config_defaults_are_paper_settings_and_valid(void** state) {
   assert_int_equal(fw_config_ticks(&c, 0.0), 1);
 }
 
-// An unknown key is an error naming the file, the line and the key.
+// An unknown key is an error naming the file, the line and the key, the nearest known key and
+// the option that lists every key.
 static void test_config_unknown_key_names_file_line_and_key(void** state) {
   (void)state;
   const char* p = write_tmp("unknown.conf", "# comment\n\ntick_rat_hz = 10\n");
@@ -75,6 +76,46 @@ static void test_config_unknown_key_names_file_line_and_key(void** state) {
   assert_int_equal(fw_config_load_file(&c, p, err, sizeof err), -1);
   assert_non_null(strstr(err, "unknown.conf:3"));
   assert_non_null(strstr(err, "unknown key 'tick_rat_hz'"));
+  assert_non_null(strstr(err, "did you mean 'tick_rate_hz'?"));
+  assert_non_null(strstr(err, "--print-reference-config"));
+}
+
+// The suggestion is the nearest key: typos, swapped letters, a left-out unit suffix; nothing
+// is suggested for a name that resembles no key.
+static void test_config_unknown_key_suggests_nearest(void** state) {
+  (void)state;
+  static const struct {
+    const char* typed;
+    const char* meant;  // NULL: no suggestion
+  } cases[] = {
+      {"aplha", "alpha"},                          // swapped letters
+      {"max_rotation", "max_rotation_radps"},      // unit suffix left out
+      {"max_rotation_rads", "max_rotation_radps"}, // one letter dropped
+      {"teleop_timeout", "teleop_timeout_s"},
+      {"lockstepp", "lockstep"},
+      {"hedger_k_mx", "hedger_k_max"},
+      {"lcm-url", "lcm_url"},
+      {"xyzzy", NULL},
+      {"colour_scheme", NULL},
+  };
+  fw_config_t c;
+  fw_config_defaults(&c);
+  char err[FW_CONFIG_ERR_MAX];
+  for (size_t i = 0; i < sizeof cases / sizeof cases[0]; ++i) {
+    assert_int_equal(fw_config_set(&c, cases[i].typed, "1", "--set", err, sizeof err), -1);
+    assert_non_null(strstr(err, "--print-reference-config"));
+    if (cases[i].meant == NULL) {
+      if (strstr(err, "did you mean") != NULL) {
+        fail_msg("'%s': unexpected suggestion: %s", cases[i].typed, err);
+      }
+    } else {
+      char want[128];
+      snprintf(want, sizeof want, "did you mean '%s'?", cases[i].meant);
+      if (strstr(err, want) == NULL) {
+        fail_msg("'%s': expected \"%s\" in: %s", cases[i].typed, want, err);
+      }
+    }
+  }
 }
 
 // A value out of range names the key, the line and the allowed range.
@@ -117,8 +158,26 @@ static void test_config_bad_values_refused_with_choices(void** state) {
   assert_int_equal(fw_config_set(&c, "laser_baud", "57600", "s", err, sizeof err), -1);
   assert_non_null(strstr(err, "9600, 19200, 38400, 500000"));
   assert_true(c.alpha == 0.2);
-  assert_int_equal(fw_config_set(&c, "lockstep", "on", "s", err, sizeof err), 0);
+  assert_int_equal(fw_config_set(&c, "seed", "123456789012", "s", err, sizeof err), 0);
+  assert_true(c.seed == 123456789012ULL);
+}
+
+// A boolean is exactly what its error message says: true or false, nothing else.
+static void test_config_bool_accepts_exactly_true_or_false(void** state) {
+  (void)state;
+  fw_config_t c;
+  fw_config_defaults(&c);
+  char err[FW_CONFIG_ERR_MAX];
+  static const char* const refused[] = {"on", "off", "yes", "no", "1", "0", "True", "FALSE", "t", ""};
+  for (size_t i = 0; i < sizeof refused / sizeof refused[0]; ++i) {
+    assert_int_equal(fw_config_set(&c, "lockstep", refused[i], "s", err, sizeof err), -1);
+    assert_non_null(strstr(err, "expected true or false"));
+    assert_false(c.lockstep);
+  }
+  assert_int_equal(fw_config_set(&c, "lockstep", "true", "s", err, sizeof err), 0);
   assert_true(c.lockstep);
+  assert_int_equal(fw_config_set(&c, "lockstep", "false", "s", err, sizeof err), 0);
+  assert_false(c.lockstep);
   assert_int_equal(fw_config_set(&c, "seed", "123456789012", "s", err, sizeof err), 0);
   assert_true(c.seed == 123456789012ULL);
 }
@@ -139,7 +198,7 @@ static void test_config_syntax_errors_name_line(void** state) {
   assert_non_null(strstr(err, "unterminated"));
   fw_config_defaults(&c);
   assert_int_equal(fw_config_load_file(&c, write_tmp("d.conf", "seed = 3\nseed = 4\n"), err, sizeof err), -1);
-  assert_non_null(strstr(err, "d.conf:2: key 'seed' appears twice"));
+  assert_non_null(strstr(err, "d.conf:2: key 'seed' appears twice in this file (first on line 1)"));
   fw_config_defaults(&c);
   assert_int_equal(fw_config_load_file(&c, "/nonexistent/b21r.conf", err, sizeof err), -1);
   assert_non_null(strstr(err, "/nonexistent/b21r.conf: cannot open"));
@@ -209,6 +268,57 @@ static void test_config_validate_cross_key_rules(void** state) {
   assert_non_null(strstr(err, "power of two"));
 }
 
+// Every cross-key error starts with the file and line (or option) of the offending key and
+// names where the other key involved was set, whichever source set it.
+static void test_config_validate_errors_carry_file_and_line(void** state) {
+  (void)state;
+  static const struct {
+    const char* file_text;  // written to robot.conf
+    const char* set_arg;    // then applied with --set (NULL: none)
+    const char* want[2];    // substrings of the error
+  } cases[] = {
+      {"# robot\nalpha = 0.3\nhedger_k_min = 20\n", NULL, {"robot.conf:3: hedger_k_min (20)", "(12, set at default)"}},
+      {"hedger_k_max = 4\n", "hedger_k_min=5", {"--set: hedger_k_min (5)", "robot.conf:1)"}},
+      {"\nlaser_resolution_deg = 0.25\n", NULL, {"robot.conf:2: laser_resolution_deg = 0.25", "(set at default;"}},
+      {"task = obstacles\n", "hedger_input_scale=1,2,3,4", {"--set: hedger_input_scale has 4 values", "robot.conf:1) needs 5"}},
+      {"seed = 2\nreposition = emulator\n", NULL, {"robot.conf:2: reposition = emulator needs emulator_control", NULL}},
+      {"queue_capacity = 1000\n", NULL, {"robot.conf:1: queue_capacity = 1000", NULL}},
+      {"phase_one_runs = 0\nphase_two_runs = 0\n", NULL, {"robot.conf:1: phase_one_runs", "robot.conf:2): nothing to learn"}},
+      {"phase_switch = auto\nphase_one_runs = 3\n", NULL, {"default: auto_switch_min_runs (5)", "robot.conf:2), the latest switch"}},
+  };
+  for (size_t i = 0; i < sizeof cases / sizeof cases[0]; ++i) {
+    fw_config_t c;
+    fw_config_defaults(&c);
+    char err[FW_CONFIG_ERR_MAX];
+    const char* p = write_tmp("robot.conf", cases[i].file_text);
+    assert_int_equal(fw_config_load_file(&c, p, err, sizeof err), 0);
+    if (cases[i].set_arg != NULL) {
+      assert_int_equal(fw_config_set_arg(&c, cases[i].set_arg, err, sizeof err), 0);
+    }
+    assert_int_equal(fw_config_validate(&c, err, sizeof err), -1);
+    for (int j = 0; j < 2; ++j) {
+      if (cases[i].want[j] != NULL && strstr(err, cases[i].want[j]) == NULL) {
+        fail_msg("case %zu: expected \"%s\" in: %s", i, cases[i].want[j], err);
+      }
+    }
+  }
+  // The second file's keys are named by that file; the first file's keys keep theirs.
+  fw_config_t c;
+  fw_config_defaults(&c);
+  char err[FW_CONFIG_ERR_MAX];
+  char where[FW_CONFIG_STR_MAX + 16];
+  assert_int_equal(fw_config_load_file(&c, write_tmp("a.conf", "alpha = 0.3\nseed = 4\n"), err, sizeof err), 0);
+  assert_int_equal(fw_config_load_file(&c, write_tmp("b.conf", "\n\nseed = 5\n"), err, sizeof err), 0);
+  fw_config_origin(&c, "alpha", where, sizeof where);
+  assert_non_null(strstr(where, "a.conf:1"));
+  fw_config_origin(&c, "seed", where, sizeof where);
+  assert_non_null(strstr(where, "b.conf:3"));
+  fw_config_origin(&c, "gamma", where, sizeof where);
+  assert_string_equal(where, "default");
+  fw_config_origin(&c, "no_such_key", where, sizeof where);
+  assert_string_equal(where, "unknown key");
+}
+
 // The generated reference parses back to exactly the defaults, and the checked-in reference
 // file is byte for byte that generated text (so documentation and code cannot drift apart).
 static void test_config_reference_file_matches_defaults(void** state) {
@@ -228,7 +338,7 @@ static void test_config_reference_file_matches_defaults(void** state) {
   a.lockstep = true;
   char err[FW_CONFIG_ERR_MAX];
   assert_int_equal(fw_config_load_file(&a, gen_path, err, sizeof err), 0);
-  assert_memory_equal(&a, &d, sizeof a);
+  assert_memory_equal(&a, &d, offsetof(fw_config_t, origins));  // settings only, not their origins
 
   // The printed current values parse back to the same struct too.
   char cur_path[512];
@@ -244,7 +354,7 @@ static void test_config_reference_file_matches_defaults(void** state) {
   fw_config_t b2;
   fw_config_defaults(&b2);
   assert_int_equal(fw_config_load_file(&b2, cur_path, err, sizeof err), 0);
-  assert_memory_equal(&b, &b2, sizeof b);
+  assert_memory_equal(&b, &b2, offsetof(fw_config_t, origins));
 
   if (g_reference_path != NULL) {
     char cmd[1200];
@@ -276,12 +386,15 @@ int main(int argc, char** argv) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_config_defaults_are_paper_settings_and_valid),
       cmocka_unit_test(test_config_unknown_key_names_file_line_and_key),
+      cmocka_unit_test(test_config_unknown_key_suggests_nearest),
       cmocka_unit_test(test_config_out_of_range_names_allowed_range),
       cmocka_unit_test(test_config_bad_values_refused_with_choices),
+      cmocka_unit_test(test_config_bool_accepts_exactly_true_or_false),
       cmocka_unit_test(test_config_syntax_errors_name_line),
       cmocka_unit_test(test_config_comments_quotes_and_crlf_parse),
       cmocka_unit_test(test_config_set_arg_overrides_and_errors),
       cmocka_unit_test(test_config_validate_cross_key_rules),
+      cmocka_unit_test(test_config_validate_errors_carry_file_and_line),
       cmocka_unit_test(test_config_reference_file_matches_defaults),
       cmocka_unit_test(test_config_set_allocates_nothing),
   };
