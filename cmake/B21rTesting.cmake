@@ -49,7 +49,7 @@ function(b21r_add_python_test name)
   get_filename_component(script "${ARG_SCRIPT}" ABSOLUTE)
   add_test(NAME ${name} COMMAND ${Python3_EXECUTABLE} "${script}" ${ARG_ARGS})
   set_tests_properties(${name} PROPERTIES LABELS "unit;python;${ARG_LABELS}" TIMEOUT ${ARG_TIMEOUT}
-    ENVIRONMENT "PYTHONPATH=${CMAKE_BINARY_DIR}/python:${PROJECT_SOURCE_DIR}/tools;PYTHONDONTWRITEBYTECODE=1")
+    ENVIRONMENT "PYTHONPATH=${CMAKE_BINARY_DIR}/python:${PROJECT_SOURCE_DIR}/tools;PYTHONDONTWRITEBYTECODE=1;B21R_BUILD_DIR=${CMAKE_BINARY_DIR}")
 endfunction()
 
 # b21r_add_benchmark(<module>.<area> TARGET <exe> [ARGS ...])

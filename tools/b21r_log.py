@@ -8,6 +8,12 @@ Library use:
     events = read_log("run.lcmlog")            # [(timestamp_us, channel, decoded message), ...]
 Command line:
     b21r_log.py FILE [--channel B21R_EVAL] [--gaps] [--runs]
+      --gaps   count the experiences and list the sequence gaps (exit status 1 when any)
+      --runs   one line per run from B21R_EXPERIENCE; when experiences are missing a warning
+               comes first and the runs it touches are marked (their numbers are lower bounds)
+Messages are decoded by their LCM type fingerprint, so every type of the project is read
+whatever the channel is called. A controller restart inside one recording (seq starting again
+at 0) begins a new segment and is not counted as a gap.
 Runs from a plain shell after tools/setup.sh and a build (b21r_bootstrap finds the venv and the
 generated types).
 """
@@ -16,35 +22,39 @@ import b21r_bootstrap  # noqa: E402 (first: runs the tool in the project's venv)
 b21r_bootstrap.ensure()
 
 import argparse
+import signal
 import sys
 
 import lcm
 
 try:
-    from b21r import command_t, eval_t, experience_t, pose_t, scan_t, status_t, teleop_t
+    import b21r
 except ImportError as exc:  # pragma: no cover - a usage error, explained
     sys.exit("b21r_log: the generated LCM types are not importable (%s); build them: %s" % (exc, b21r_bootstrap.BUILD_HINT))
 
-TYPES = {
-    "B21R_EXPERIENCE": experience_t,
-    "B21R_STATUS": status_t,
-    "B21R_POSE": pose_t,
-    "B21R_EVAL": eval_t,
-    "B21R_SCAN": scan_t,
-    "B21R_TELEOP": teleop_t,
-    "B21R_COMMAND": command_t,
-}
+
+def _types_by_fingerprint():
+    types = {}
+    for name in dir(b21r):
+        t = getattr(b21r, name)
+        if isinstance(t, type) and hasattr(t, "_get_packed_fingerprint"):
+            types[t._get_packed_fingerprint()] = t
+    return types
+
+
+FINGERPRINTS = _types_by_fingerprint()
 
 
 def read_log(path, channels=None):
-    """All events of the log (optionally only the given channels), decoded, in file order."""
+    """All events of the log with a B21R type (optionally only the given channels), decoded, in
+    file order: [(timestamp_us, channel, message)]. Events of unknown types are skipped."""
     out = []
     log = lcm.EventLog(path, "r")
     try:
         for ev in log:
             if channels is not None and ev.channel not in channels:
                 continue
-            t = TYPES.get(ev.channel)
+            t = FINGERPRINTS.get(bytes(ev.data[:8]))
             if t is None:
                 continue
             out.append((ev.timestamp, ev.channel, t.decode(ev.data)))
@@ -54,58 +64,110 @@ def read_log(path, channels=None):
 
 
 def experience_gaps(experiences):
-    """Sequence gaps in a stream of experience_t (the controller numbers them 0, 1, 2, ...).
+    """Sequence gaps in a stream of experience_t (the controller numbers them 0, 1, 2, ... per
+    process). A seq of 0 after a higher one is a restart of the controller, not a gap.
     Returns a list of (expected_seq, got_seq)."""
     gaps = []
     expect = None
     for e in experiences:
-        if expect is not None and e.seq != expect:
+        if expect is not None and e.seq != expect and not (e.seq == 0 and expect > 0):
             gaps.append((expect, e.seq))
         expect = e.seq + 1
     return gaps
 
 
+def missing_count(gaps):
+    """Experiences lost in the given gaps (reordered or repeated ones count 0)."""
+    return sum(max(0, got - want) for want, got in gaps)
+
+
 def runs_from_experiences(experiences):
-    """One dict per run: run_id, phase, evaluating, steps, reached goal, sources used."""
-    runs = {}
-    order = []
+    """One dict per run, in order of first appearance: run_id, phase, evaluating, steps (actions
+    taken: the last step_id seen + 1), received (experiences present), goal, terminal, return,
+    sources (experiences per source), and complete: False when experiences of the run are
+    missing (a hole in its step_ids, or a sequence gap right after it while it had not ended,
+    so that its last steps may be lost); the numbers of an incomplete run are lower bounds."""
+    runs = []
+    by_id = {}
+    prev = None
     for e in experiences:
-        r = runs.get(e.run_id)
+        if prev is not None and e.seq == 0 and prev.seq > 0:
+            by_id = {}  # a controller restart: run ids may repeat
+        r = by_id.get(e.run_id)
         if r is None:
-            r = {"run_id": e.run_id, "phase": e.phase, "evaluating": bool(e.evaluating), "steps": 0,
-                 "goal": False, "terminal": False, "return": 0.0, "sources": {}}
-            runs[e.run_id] = r
-            order.append(e.run_id)
+            r = {"run_id": e.run_id, "phase": e.phase, "evaluating": bool(e.evaluating), "steps": 0, "received": 0,
+                 "goal": False, "terminal": False, "return": 0.0, "sources": {}, "complete": True}
+            by_id[e.run_id] = r
+            if runs and prev is not None and e.seq != prev.seq + 1 and not runs[-1]["terminal"]:
+                runs[-1]["complete"] = False  # the lost experiences may have been its end
+            runs.append(r)
         r["steps"] = max(r["steps"], e.step_id + 1)
+        r["received"] += 1
         r["return"] += e.reward
         r["sources"][e.source] = r["sources"].get(e.source, 0) + 1
         if e.terminal:
             r["terminal"] = True
             r["goal"] = e.reward > 0.0
-    return [runs[i] for i in order]
+        prev = e
+    for r in runs:
+        if r["received"] != r["steps"]:
+            r["complete"] = False
+    return runs
+
+
+def missing_runs(experiences):
+    """Run ids of which no experience at all is present (run ids count every run, training and
+    evaluation, from 0 per controller process or from the checkpoint's count)."""
+    missing = []
+    prev = None
+    for e in experiences:
+        if prev is not None and not (e.seq == 0 and prev.seq > 0) and e.run_id > prev.run_id + 1:
+            missing.extend(range(prev.run_id + 1, e.run_id))
+        prev = e
+    return missing
 
 
 def main():
+    signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # `b21r_log.py FILE | head` ends quietly
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("log")
     ap.add_argument("--channel", action="append", help="only this channel (repeatable)")
     ap.add_argument("--gaps", action="store_true", help="check B21R_EXPERIENCE for sequence gaps")
     ap.add_argument("--runs", action="store_true", help="one line per run from B21R_EXPERIENCE")
     args = ap.parse_args()
-    if args.gaps or args.runs:
-        exps = [m for _, _, m in read_log(args.log, {"B21R_EXPERIENCE"})]
-        if args.gaps:
-            gaps = experience_gaps(exps)
-            print("%d experiences, %d gaps%s" % (len(exps), len(gaps), (": %s" % gaps[:10]) if gaps else ""))
-        if args.runs:
-            for r in runs_from_experiences(exps):
-                print("run %4d phase %d %-5s %4d steps %s" % (r["run_id"], r["phase"],
-                      "eval" if r["evaluating"] else "train", r["steps"], "goal" if r["goal"] else "-"))
-        return 1 if args.gaps and experience_gaps(exps) else 0
-    for t, ch, m in read_log(args.log, set(args.channel) if args.channel else None):
-        fields = {k: getattr(m, k) for k in m.__slots__}
-        print(t, ch, fields)
-    return 0
+    try:
+        if args.gaps or args.runs:
+            exps = [m for _, _, m in read_log(args.log, {"B21R_EXPERIENCE"})]
+        else:
+            events = read_log(args.log, set(args.channel) if args.channel else None)
+    except IOError as exc:
+        sys.exit("b21r_log: cannot read %s: %s" % (args.log, exc))
+    if not (args.gaps or args.runs):
+        for t, ch, m in events:
+            fields = {k: getattr(m, k) for k in m.__slots__}
+            print(t, ch, fields)
+        return 0
+    gaps = experience_gaps(exps)
+    if args.gaps:
+        print("%d experiences, %d gaps, %d missing%s" % (len(exps), len(gaps), missing_count(gaps),
+                                                        (": %s" % gaps[:10]) if gaps else ""))
+    if args.runs:
+        runs = runs_from_experiences(exps)
+        incomplete = [r for r in runs if not r["complete"]]
+        lost_runs = missing_runs(exps)
+        if gaps or incomplete:
+            print("warning: this log is missing %d experiences in %d gaps%s; the numbers of the %d run(s) marked * "
+                  "are lower bounds (the controller's own --log loses nothing)" %
+                  (missing_count(gaps), len(gaps),
+                   ", among them every experience of run(s) %s" % lost_runs[:20] if lost_runs else "",
+                   len(incomplete)), file=sys.stderr)
+            sys.stderr.flush()
+        for r in runs:
+            end = "goal" if r["goal"] else ("end" if r["terminal"] else "-")
+            print("run %4d phase %d %-5s %4d steps %s%s" % (r["run_id"], r["phase"],
+                  "eval" if r["evaluating"] else "train", r["steps"], end,
+                  "" if r["complete"] else "  * incomplete (%d experiences received)" % r["received"]))
+    return 1 if gaps else 0
 
 
 if __name__ == "__main__":
