@@ -1,0 +1,132 @@
+#!/usr/bin/env python3
+# SPDX-License-Identifier: MIT
+"""tools.offline_train: b21r-train trains HEDGER from a logged phase-one session and the
+controller resumes phase two from its checkpoint (emulator, lockstep).
+Claims checked:
+1. Offline training from the session's experience log reproduces the learned state the
+   controller itself ended phase one with, bit for bit (same HEDGER calls, same settings).
+2. The controller, started with the offline checkpoint and the session's configuration, resumes
+   in phase two (not one phase-one example run: phase two's policy drives, the greedy action or
+   the advisor), and the evaluation block after its phase-two runs, where the learned policy
+   drives alone, reaches the goal from all 10 evaluation poses, as the online-trained
+   controller does in firmware.learn_rflex.
+3. Errors name the file and the fix: another task, an existing output, a file that is not a log.
+usage: test_offline_train.py CONTROLLER SIM WORLD TRAIN"""
+import os
+import struct
+import subprocess
+import sys
+
+from b21r import experience_t
+
+import fwtest
+from b21r_log import read_log
+
+SESSION = {"phase_one_runs": 30, "eval_every_runs": 1000, "eval_starts": 1}
+
+
+def sections(path):
+    """(meta, payload) of a controller checkpoint (fw/checkpoint.h layout)."""
+    with open(path, "rb") as f:
+        data = f.read()
+    if data[:8] != b"B21RCKPT":
+        fwtest.fail("%s is not a checkpoint" % path)
+    meta_n, payload_n = struct.unpack_from("<QQ", data, 16)
+    return data[48:48 + meta_n], data[48 + meta_n:48 + meta_n + payload_n]
+
+
+def train(exe, args, expect_rc=0):
+    p = subprocess.run([exe, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, timeout=300)
+    if p.returncode != expect_rc:
+        fwtest.fail("b21r-train %s: exit %d, expected %d\n%s%s" % (" ".join(args), p.returncode, expect_rc, p.stdout,
+                                                                 p.stderr))
+    return p.stdout, p.stderr
+
+
+def main():
+    controller, sim_exe, world, trainer = sys.argv[1:5]
+    d = fwtest.workdir("offline-train")
+    ok = False
+    sim = fwtest.Sim(sim_exe, world, d, "phase1", seed=4)
+    try:
+        online = os.path.join(d, "online.ckpt")
+        explog = os.path.join(d, "phase1-experiences.lcmlog")
+        settings = dict(SESSION, phase_two_runs=0, checkpoint_file=online, experience_log_file=explog)
+        rc, err, _ = fwtest.run_controller(controller, sim, d, "phase1", settings, timeout=600)
+        if rc != 0:
+            fwtest.fail("phase-one session: exit %d\n%s" % (rc, err))
+        sim.close()
+        exps = [m for _, _, m in read_log(explog, {"B21R_EXPERIENCE"})]
+        training = [e for e in exps if not e.evaluating]
+        if not training or any(e.source != experience_t.SOURCE_EXAMPLE or e.phase != 1 for e in training):
+            fwtest.fail("the session's training steps must all be phase-one example steps")
+        fwtest.note("phase one: %d experiences logged, %d of training runs" % (len(exps), len(training)))
+
+        offline = os.path.join(d, "offline.ckpt")
+        args = ["--set", "phase_one_runs=30", "--set", "eval_every_runs=1000", "--out", offline, explog]
+        out, _ = train(trainer, args)
+        fwtest.note(out.strip())
+        if "%d experiences learned" % len(training) not in out:
+            fwtest.fail("b21r-train did not learn every training experience (%d)" % len(training))
+        if sections(offline)[1] != sections(online)[1]:
+            fwtest.fail("the offline learned state differs from the controller's own after phase one")
+        fwtest.note("claim 1: the offline learned state equals the controller's after phase one, bit for bit")
+
+        # Claim 2: phase two from the offline checkpoint.
+        sim = fwtest.Sim(sim_exe, world, d, "phase2", seed=4)
+        rc, err, log = fwtest.run_controller(controller, sim, d, "phase2",
+                                             dict(SESSION, phase_two_runs=5, eval_every_runs=5, eval_starts=10,
+                                                  checkpoint_file=offline), timeout=600)
+        if rc != 0 or "resumed from %s (phase 2, 0 training runs" % offline not in err:
+            fwtest.fail("the controller did not resume phase two from the offline checkpoint (exit %d):\n%s" % (rc, err))
+        exps2 = [m for _, _, m in read_log(log, {"B21R_EXPERIENCE"})]
+        trained2 = [e for e in exps2 if not e.evaluating]
+        by_source = {}
+        for e in trained2:
+            by_source[e.source] = by_source.get(e.source, 0) + 1
+        if any(e.phase != 2 for e in exps2) or experience_t.SOURCE_EXAMPLE in by_source:
+            fwtest.fail("phase two expected throughout, phase two's policy driving (sources %s)" % by_source)
+        evals = [m for _, _, m in read_log(log, {"B21R_EVAL"})]
+        if len(evals) != 1 or evals[0].phase != 2 or evals[0].n_starts != 10:
+            fwtest.fail("expected one phase-two evaluation block of 10 poses, got %d" % len(evals))
+        e = evals[0]
+        fwtest.note("claim 2: phase two from the offline checkpoint: %d training steps (by source %s); evaluation "
+                    "after 5 phase-two runs: %d/%d reached the goal, mean %.1f +- %.1f steps" %
+                    (len(trained2), by_source, e.successes, e.n_starts, e.mean_steps, e.ci95_halfwidth))
+        if e.successes != e.n_starts:
+            fwtest.fail("phase two from the offline checkpoint reached the goal from %d of %d poses" %
+                        (e.successes, e.n_starts))
+        sim.close()
+
+        # Several logs, in order: the second pass learns the same data again (twice the updates).
+        twice = os.path.join(d, "twice.ckpt")
+        out, _ = train(trainer, ["--out", twice, "--quiet", explog, explog])
+        if "%d experiences learned from 2 log(s)" % (2 * len(training)) not in out:
+            fwtest.fail("two logs: %s" % out)
+        if sections(twice)[1] == sections(offline)[1]:
+            fwtest.fail("learning the data twice left the state unchanged")
+
+        # Claim 3: errors name the file and the fix.
+        _, err = train(trainer, ["--set", "task=obstacles", "--out", os.path.join(d, "x.ckpt"), explog], expect_rc=1)
+        if explog not in err or "task = " not in err:
+            fwtest.fail("another task: %s" % err)
+        _, err = train(trainer, ["--out", offline, explog], expect_rc=1)
+        if "--force" not in err:
+            fwtest.fail("an existing output: %s" % err)
+        _, err = train(trainer, ["--out", os.path.join(d, "y.ckpt"), online], expect_rc=1)
+        if "not an LCM event log" not in err:
+            fwtest.fail("a checkpoint given as a log: %s" % err)
+        _, err = train(trainer, ["--set", "hedger_k_mn=3", "--out", os.path.join(d, "z.ckpt"), explog], expect_rc=2)
+        if "did you mean 'hedger_k_min'" not in err:
+            fwtest.fail("a misspelt key: %s" % err)
+        fwtest.note("claim 3: errors name the file and the fix")
+        ok = True
+    finally:
+        sim.close()
+        fwtest.cleanup(d, ok)
+    print("PASS")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
