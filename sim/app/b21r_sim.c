@@ -51,6 +51,8 @@ typedef struct options {
   const char* can;
   const char* endpoints;
   const char* trace_svg;
+  const char* can_log;
+  const char* can_log_iface;
   sim_emu_config_t cfg;
   int start_index;
   int have_start;
@@ -73,6 +75,8 @@ typedef struct app {
   char can_path[256];
   pend_t laser_out, base_out;
   frame_pend_t can_out;
+  FILE* can_log;            // candump -L trace of the bus (--can-log), or NULL
+  uint64_t can_log_flush_ns;
   uint64_t t0_ns;
   int quit;
   uint8_t io[65536];
@@ -96,6 +100,9 @@ static void usage(FILE* f) {
           "  --control PATH        control socket (SOCK_SEQPACKET; reset, pose, fault, status,\n"
           "                        svg, quit)\n"
           "  --can PATH            CAN bus socket (canopen; default PATH of --control + \".can\")\n"
+          "  --can-log FILE        write every frame on the CAN bus to FILE in candump -L format\n"
+          "                        ('(seconds) vcan0 181#2702...'), for cantools decode, canplayer\n"
+          "  --can-log-iface NAME  interface name written in the trace (default vcan0)\n"
           "  --endpoints FILE      also write the ready line to FILE (atomically)\n"
           "  --seed N              seed of every random stream (default 1)\n"
           "  --period S            control period in seconds (default 0.1)\n"
@@ -131,7 +138,7 @@ static int parse_args(int argc, char** argv, options_t* o) {
   enum {
     OPT_WORLD = 1000, OPT_LOCKSTEP, OPT_REALTIME, OPT_BASE, OPT_CONTROL, OPT_CAN, OPT_ENDPOINTS,
     OPT_SEED, OPT_PERIOD, OPT_DT, OPT_START, OPT_START_INDEX, OPT_BAUD, OPT_VARIANT, OPT_UNIT,
-    OPT_NOISE, OPT_LASER_X, OPT_WATCHDOG, OPT_BRAKE, OPT_SVG, OPT_HELP,
+    OPT_NOISE, OPT_LASER_X, OPT_WATCHDOG, OPT_BRAKE, OPT_SVG, OPT_CAN_LOG, OPT_CAN_LOG_IFACE, OPT_HELP,
   };
   static const struct option longopts[] = {
       {"world", required_argument, NULL, OPT_WORLD},
@@ -154,6 +161,8 @@ static int parse_args(int argc, char** argv, options_t* o) {
       {"watchdog", required_argument, NULL, OPT_WATCHDOG},
       {"brake-released", no_argument, NULL, OPT_BRAKE},
       {"trace-svg", required_argument, NULL, OPT_SVG},
+      {"can-log", required_argument, NULL, OPT_CAN_LOG},
+      {"can-log-iface", required_argument, NULL, OPT_CAN_LOG_IFACE},
       {"help", no_argument, NULL, OPT_HELP},
       {NULL, 0, NULL, 0},
   };
@@ -183,6 +192,21 @@ static int parse_args(int argc, char** argv, options_t* o) {
       case OPT_CAN: o->can = a; break;
       case OPT_ENDPOINTS: o->endpoints = a; break;
       case OPT_SVG: o->trace_svg = a; break;
+      case OPT_CAN_LOG: o->can_log = a; break;
+      case OPT_CAN_LOG_IFACE: {
+        // candump's names: letters and digits (what its log readers accept), at most IFNAMSIZ-1.
+        size_t len = strlen(a);
+        int ok = len > 0 && len < 16;
+        for (size_t i = 0; ok && i < len; ++i) {
+          ok = (a[i] >= 'a' && a[i] <= 'z') || (a[i] >= 'A' && a[i] <= 'Z') || (a[i] >= '0' && a[i] <= '9');
+        }
+        if (!ok) {
+          fprintf(stderr, "b21r-sim: --can-log-iface needs 1 to 15 letters or digits, not '%s'\n", a);
+          return -1;
+        }
+        o->can_log_iface = a;
+        break;
+      }
       case OPT_SEED: {
         char* end = NULL;
         errno = 0;
@@ -253,6 +277,13 @@ static int parse_args(int argc, char** argv, options_t* o) {
     fprintf(stderr, "b21r-sim: --world FILE is required (try --help)\n");
     return -1;
   }
+  if (o->can_log != NULL && o->cfg.base != SIM_BASE_CANOPEN) {
+    fprintf(stderr, "b21r-sim: --can-log needs --base canopen (the rFLEX base has no CAN bus)\n");
+    return -1;
+  }
+  if (o->can_log_iface == NULL) {
+    o->can_log_iface = "vcan0";
+  }
   return 0;
 }
 
@@ -298,6 +329,32 @@ static uint64_t pend_next_ns(const pend_t* p) {
   return p->ch_len > 0 ? p->ch[p->ch_head].ready_ns : UINT64_MAX;
 }
 
+// One line of the bus trace, as `candump -L` writes it: "(seconds.micros) iface ID#DATA", the
+// time of day on the wall clock (so traces of sessions line up with other logs), the 11-bit ID
+// in 3 hex digits. The file is flushed at most every 200 ms and at exit: cheap in lockstep,
+// yet a `tail -f` follows it.
+static void can_log_frame(app_t* a, const struct can_frame* f, uint64_t now_ns) {
+  if (a->can_log == NULL) {
+    return;
+  }
+  struct timespec ts;
+  clock_gettime(CLOCK_REALTIME, &ts);
+  char data[2 * CAN_MAX_DLEN + 1];
+  const unsigned dlc = f->can_dlc <= CAN_MAX_DLEN ? f->can_dlc : CAN_MAX_DLEN;
+  for (unsigned i = 0; i < dlc; ++i) {
+    static const char hex[] = "0123456789ABCDEF";
+    data[2 * i] = hex[f->data[i] >> 4];
+    data[2 * i + 1] = hex[f->data[i] & 0x0F];
+  }
+  data[2 * dlc] = '\0';
+  fprintf(a->can_log, "(%lld.%06ld) %s %03X#%s\n", (long long)ts.tv_sec, ts.tv_nsec / 1000L, a->opt.can_log_iface,
+          (unsigned)(f->can_id & CAN_SFF_MASK), data);
+  if (now_ns >= a->can_log_flush_ns) {
+    fflush(a->can_log);
+    a->can_log_flush_ns = now_ns + 200000000ULL;
+  }
+}
+
 static void can_broadcast(app_t* a, const struct can_frame* f, int except_fd) {
   for (int i = 0; i < APP_MAX_CLIENTS; ++i) {
     const int fd = a->can_clients[i];
@@ -335,6 +392,7 @@ static void pump(app_t* a, uint64_t now_ns) {
     pend_flush(&a->base_out, a->base_master, now_ns);
   }
   while (a->can_out.len > 0 && a->can_out.fr[a->can_out.head].ready_ns <= now_ns) {
+    can_log_frame(a, &a->can_out.fr[a->can_out.head].f, now_ns);
     can_broadcast(a, &a->can_out.fr[a->can_out.head].f, -1);
     a->can_out.head = (a->can_out.head + 1U) % APP_PEND_FRAMES;
     --a->can_out.len;
@@ -387,6 +445,10 @@ static int setup(app_t* a) {
     a->can_listen = sim_seqpacket_listen(a->can_path);
     if (a->can_listen < 0) {
       fprintf(stderr, "b21r-sim: cannot listen on %s: %s\n", a->can_path, strerror(errno));
+      return -1;
+    }
+    if (a->opt.can_log != NULL && (a->can_log = fopen(a->opt.can_log, "w")) == NULL) {
+      fprintf(stderr, "b21r-sim: cannot write %s: %s\n", a->opt.can_log, strerror(errno));
       return -1;
     }
   }
@@ -480,6 +542,7 @@ static void serve_can(app_t* a, int slot) {
     }
     canopen_frame_t cf;
     sim_can_from_linux(&f, &cf);
+    can_log_frame(a, &f, mono_ns());
     can_broadcast(a, &f, a->can_clients[slot]);  // the other nodes on the bus see it too
     sim_emu_can_write(a->emu, &cf);
     pump(a, mono_ns());  // keep the drives' answers in bus order
@@ -607,6 +670,9 @@ static void teardown(app_t* a) {
   }
   if (a->can_listen >= 0) unlink(a->can_path);
   if (a->ctl_listen >= 0) unlink(a->opt.control);
+  if (a->can_log != NULL && fclose(a->can_log) != 0) {
+    fprintf(stderr, "b21r-sim: cannot write %s: %s\n", a->opt.can_log, strerror(errno));
+  }
   sim_emu_destroy(a->emu);
 }
 

@@ -318,10 +318,16 @@ static void test_canopen_golden_frames_written(void** state) {
       const int32_t v = velocities[i];
       (void)canopen_encode_rpdo1(&f, node, w, v);
       snprintf(name, sizeof name, "RPDO1_%s", axis[node]);
-      EMIT(name, "Controlword=%u TargetVelocity=%d", (unsigned)w, (int)v);
+      // The DBC splits the controlword and the statusword into their CiA 402 bit fields.
+      EMIT(name, "Command=%u OpModeSpecific=%u FaultReset=%u Halt=%u ControlwordHigh=%u TargetVelocity=%d",
+           w & 0xFU, (w >> 4) & 0x7U, (w >> 7) & 1U, (w >> 8) & 1U, (unsigned)(w >> 9), (int)v);
       (void)canopen_encode_tpdo1(&f, node, w, v);
       snprintf(name, sizeof name, "TPDO1_%s", axis[node]);
-      EMIT(name, "Statusword=%u VelocityActual=%d", (unsigned)w, (int)v);
+      EMIT(name,
+           "DriveState=%u Warning=%u ManufacturerBit8=%u Remote=%u TargetReached=%u InternalLimitActive=%u "
+           "OpModeSpecific=%u ManufacturerBits14=%u VelocityActual=%d",
+           w & 0x7FU, (w >> 7) & 1U, (w >> 8) & 1U, (w >> 9) & 1U, (w >> 10) & 1U, (w >> 11) & 1U, (w >> 12) & 3U,
+           (unsigned)(w >> 14), (int)v);
       (void)canopen_encode_tpdo2(&f, node, v);
       snprintf(name, sizeof name, "TPDO2_%s", axis[node]);
       EMIT(name, "PositionActual=%d", (int)v);
@@ -335,10 +341,15 @@ static void test_canopen_golden_frames_written(void** state) {
     const uint8_t vendor[5] = {0x11, 0x22, 0x33, 0x44, 0x55};
     (void)canopen_encode_emcy(&f, node, 0x2310, 0x03, vendor);
     snprintf(name, sizeof name, "EMCY_%s", axis[node]);
-    EMIT(name, "ErrorCode=%u ErrorRegister=%u VendorData=%llu", 0x2310U, 3U,
-         0x5544332211ULL);
-    (void)canopen_encode_emcy(&f, node, 0, 0, NULL);
-    EMIT(name, "ErrorCode=0 ErrorRegister=0 VendorData=0");
+    // Error register 0x03 = generic + current, as bit fields.
+    EMIT(name,
+         "ErrorCode=%u ErrGeneric=1 ErrCurrent=1 ErrVoltage=0 ErrTemperature=0 ErrCommunication=0 "
+         "ErrDeviceProfile=0 ErrReserved=0 ErrManufacturer=0 VendorData=%llu",
+         0x2310U, 0x5544332211ULL);
+    (void)canopen_encode_emcy(&f, node, 0, 0x84, NULL);
+    EMIT(name,
+         "ErrorCode=0 ErrGeneric=0 ErrCurrent=0 ErrVoltage=1 ErrTemperature=0 ErrCommunication=0 "
+         "ErrDeviceProfile=0 ErrReserved=0 ErrManufacturer=1 VendorData=0");
   }
   static const uint8_t cmds[] = {0x01, 0x02, 0x80, 0x81, 0x82};
   for (size_t i = 0; i < sizeof cmds; ++i) {

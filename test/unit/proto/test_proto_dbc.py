@@ -1,7 +1,9 @@
 # SPDX-License-Identifier: MIT
 """The DBC file and the C CANopen encoder agree: every frame the C code encodes decodes with
-cantools to the signal values the C code put in, cantools re-encodes the same bytes, and every
-message of the DBC is exercised.
+cantools to the signal values the C code put in (raw, the controlword and statusword as their
+CiA 402 bit fields), cantools re-encodes the same bytes, and every message of the DBC is
+exercised; velocities and positions carry SI units with the drives' scales, and the value tables
+name the CiA 402 states, the device control commands and the EMCY codes the drives send.
 
 Usage: test_proto_dbc.py <b21r_canopen.dbc> <dir with canopen_frames.txt from proto.canopen>
 """
@@ -50,14 +52,48 @@ class DbcAgreesWithEncoder(unittest.TestCase):
                 msg = self.db.get_message_by_frame_id(frame_id)
                 self.assertEqual(msg.name, name)
                 self.assertEqual(msg.length, len(data), "DLC differs from the DBC")
-                decoded = self.db.decode_message(frame_id, data, decode_choices=False)
+                decoded = self.db.decode_message(frame_id, data, decode_choices=False, scaling=False)
                 self.assertEqual({k: int(v) for k, v in decoded.items()}, signals)
 
     def test_each_frame_reencodes_identically(self):
         # cantools encodes the same signal values to the same bytes (layout agrees both ways).
         for name, frame_id, data, signals in self.frames:
             with self.subTest(frame=name, id=hex(frame_id)):
-                self.assertEqual(self.db.encode_message(frame_id, signals), data)
+                self.assertEqual(self.db.encode_message(frame_id, signals, scaling=False), data)
+
+    def test_units_and_scales_are_the_drives(self):
+        # SI units with the emulator's and the controller's default drive scales.
+        for axis, unit, counts in (("Trans", "m", 103000.0), ("Rot", "rad", 35000.0)):
+            for msg, sig, u in ((f"TPDO1_{axis}", "VelocityActual", unit + "/s"),
+                                (f"RPDO1_{axis}", "TargetVelocity", unit + "/s"),
+                                (f"TPDO2_{axis}", "PositionActual", unit)):
+                s = self.db.get_message_by_name(msg).get_signal_by_name(sig)
+                self.assertEqual(s.unit, u)
+                self.assertAlmostEqual(s.scale * counts, 1.0, places=12)
+        # 1 m/s forward = 103000 counts/s
+        frame = self.db.encode_message("RPDO1_Trans", {"Command": 15, "OpModeSpecific": 0, "FaultReset": 0,
+                                                       "Halt": 0, "ControlwordHigh": 0, "TargetVelocity": 1.0})
+        self.assertEqual(frame, bytes.fromhex("0f00") + (103000).to_bytes(4, "little", signed=True))
+
+    def test_value_tables_name_cia402_states_commands_and_emcy_codes(self):
+        def name(msg, sig, raw):
+            return self.db.get_message_by_name(msg).get_signal_by_name(sig).choices[raw]
+        # Statusword 0x0237 (operation enabled, voltage on, remote) and 0x0218 (fault).
+        d = self.db.decode_message(0x181, bytes.fromhex("3702") + bytes(4))
+        self.assertEqual((str(d["DriveState"]), str(d["Remote"])), ("operation_enabled", "remote"))
+        d = self.db.decode_message(0x182, bytes.fromhex("1802") + bytes(4))
+        self.assertEqual(str(d["DriveState"]), "fault")
+        for raw, state in ((0x00, "not_ready_to_switch_on"), (0x40, "switch_on_disabled"), (0x21, "ready_to_switch_on"),
+                           (0x23, "switched_on"), (0x27, "operation_enabled"), (0x07, "quick_stop_active"),
+                           (0x0F, "fault_reaction_active"), (0x08, "fault"), (0x31, "ready_to_switch_on")):
+            self.assertEqual(name("TPDO1_Trans", "DriveState", raw), state)
+        for raw, cmd in ((0x06, "shutdown"), (0x07, "switch_on_or_disable_operation"), (0x0F, "enable_operation"),
+                         (0x02, "quick_stop"), (0x00, "disable_voltage")):
+            self.assertEqual(name("RPDO1_Rot", "Command", raw), cmd)
+        self.assertEqual(name("RPDO1_Rot", "FaultReset", 1), "fault_reset")
+        # The codes the emulated drives send.
+        self.assertEqual(name("EMCY_Trans", "ErrorCode", 0x2310), "continuous_over_current")
+        self.assertEqual(name("EMCY_Rot", "ErrorCode", 0x0000), "no_error_or_reset")
 
     def test_every_dbc_message_exercised(self):
         # No DBC message lacks a C encoder counterpart, and no C frame lacks a DBC message.
