@@ -4,9 +4,12 @@
 ///
 /// The picture shows the world's walls (their solid rectangles), cylinders, the goal disc and
 /// the start poses (small arrows), then each run's trajectory as a polyline (a new run starts
-/// at every point with `run` different from the previous point's), the robot's outline at each
-/// run's last pose, and a red cross where a run first touched an obstacle. 1 m = 60 px by
-/// default, y up (the SVG is flipped so that the world's CCW angles look CCW).
+/// at every point with `run` different from the previous point's) coloured in run order on the
+/// viridis scale (as tools/b21r_trajectories.py), a dot at each run's start, the robot's outline
+/// at each run's last pose, and a red cross where a run first touched an obstacle; a legend to
+/// the right names the runs (a colour bar from the first to the last when there are more than
+/// 12) and the symbols. 1 m = 60 px by default, y up (the SVG is flipped so that the world's CCW
+/// angles look CCW).
 ///
 /// Memory: no allocation (streams to the file). Not thread-safe per file.
 #ifndef B21R_SIM_SVG_H

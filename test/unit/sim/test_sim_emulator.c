@@ -176,7 +176,9 @@ static void test_emu_fault_drive_fault_on_canopen(void** state) {
   sim_emu_destroy(e);
 }
 
-// The trace picture: an SVG with the world, one polyline per run, written atomically.
+// The trace picture: an SVG with the world, one polyline per run coloured in run order on the
+// viridis scale of tools/b21r_trajectories.py, a legend naming the runs and the symbols, written
+// atomically.
 static void test_emu_svg_shows_runs(void** state) {
   (void)state;
   sim_emu_t* e = make("obstacle1.world", SIM_BASE_RFLEX, SIM_MODE_LOCKSTEP);
@@ -212,6 +214,13 @@ static void test_emu_svg_shows_runs(void** state) {
     ++polylines;
   }
   assert_int_equal(polylines, 2);
+  assert_non_null(strstr(text, "<polyline fill=\"none\" stroke=\"#440154\""));  // the first run
+  assert_non_null(strstr(text, "<polyline fill=\"none\" stroke=\"#bddf26\""));  // the last run
+  assert_non_null(strstr(text, ">run 0</text>"));
+  assert_non_null(strstr(text, ">run 1</text>"));
+  assert_non_null(strstr(text, ">start of a run</text>"));
+  assert_non_null(strstr(text, ">collision</text>"));
+  assert_non_null(strstr(text, ">goal</text>"));
   assert_int_equal(ctl(e, "svg /nonexistent-dir/x.svg"), SIM_EMU_CTRL_ERROR);
   sim_emu_destroy(e);
 }
