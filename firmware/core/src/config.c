@@ -280,11 +280,11 @@ static size_t edit_distance(const char* a, const char* b) {
 }
 
 // The known key an unknown name most likely meant, or NULL when none is close: within a third
-// of the name's length in edits (at least 2), or a key that starts with the name (a unit suffix
-// left out: "max_rotation" → "max_rotation_radps"). Ties go to the earlier key in the table.
+// of the name's length in edits (at least 2, at most 6), or a key that starts with the name (a
+// unit suffix left out: "max_rotation" → "max_rotation_radps"). Ties go to the earlier key.
 static const key_desc_t* nearest_key(const char* name) {
   const size_t n = strlen(name);
-  const size_t limit = n / 3U > 2U ? n / 3U : 2U;
+  const size_t limit = n / 3U < 2U ? 2U : (n / 3U > 6U ? 6U : n / 3U);
   const key_desc_t* best = NULL;
   size_t best_d = SIZE_MAX;
   for (size_t i = 0; i < N_KEYS; ++i) {

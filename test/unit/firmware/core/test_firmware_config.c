@@ -97,6 +97,7 @@ static void test_config_unknown_key_suggests_nearest(void** state) {
       {"lcm-url", "lcm_url"},
       {"xyzzy", NULL},
       {"colour_scheme", NULL},
+      {"a_very_long_name_that_resembles_no_key_of_the_controller_at_all", NULL},
   };
   fw_config_t c;
   fw_config_defaults(&c);
