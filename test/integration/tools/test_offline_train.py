@@ -11,6 +11,7 @@ Claims checked:
    drives alone, reaches the goal from all 10 evaluation poses, as the online-trained
    controller does in firmware.learn_rflex.
 3. Errors name the file and the fix: another task, an existing output, a file that is not a log.
+Also: two logs, --passes 2 and --init from the first pass's checkpoint give the same state.
 usage: test_offline_train.py CONTROLLER SIM WORLD TRAIN"""
 import os
 import struct
@@ -105,6 +106,16 @@ def main():
             fwtest.fail("two logs: %s" % out)
         if sections(twice)[1] == sections(offline)[1]:
             fwtest.fail("learning the data twice left the state unchanged")
+        # Continuing from a checkpoint (--init) is the same as learning everything in one go, and
+        # --passes 2 is the same as giving the log twice.
+        first = os.path.join(d, "first.ckpt")  # offline.ckpt has learned phase two meanwhile
+        train(trainer, ["--out", first, "--quiet", explog])
+        for name, extra in (("init", ["--init", first, explog]), ("passes", ["--passes", "2", explog])):
+            path = os.path.join(d, name + ".ckpt")
+            train(trainer, ["--out", path, "--quiet", *extra])
+            if sections(path)[1] != sections(twice)[1]:
+                fwtest.fail("%s: the learned state differs from learning the log twice in one go" % " ".join(extra))
+        fwtest.note("several logs, --passes and --init (continuing from a checkpoint) agree bit for bit")
 
         # Claim 3: errors name the file and the fix.
         _, err = train(trainer, ["--set", "task=obstacles", "--out", os.path.join(d, "x.ckpt"), explog], expect_rc=1)
