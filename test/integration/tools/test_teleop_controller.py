@@ -28,7 +28,7 @@ import b21r_teleop as tt
 URL = "udpm://239.255.76.67:7667?ttl=0"
 TIMEOUT_S = 0.3
 TICK_S = 0.1
-SLACK_S = 0.25  # scheduling on a shared 2-core machine, the emulator's odometry period
+SLACK_S = 1.0  # this process's view of a shared 2-core machine: only for the robot standing still
 LIMIT = 1.0
 
 
@@ -93,16 +93,21 @@ def still(p):
 
 
 def check_stop(bus, t_event, what):
-    """The deadman stop is reported, and the robot stands still, within the timeout + a tick."""
-    limit = TIMEOUT_S + TICK_S + SLACK_S
-    t_stop, _ = bus.wait("status", deadman_stop, t_event, 5.0, "no deadman stop after " + what)
+    """The controller stops within teleop_timeout_s + a tick of the last deadman message it took,
+    measured on its own clock (STATUS utime: the tick times, late ticks included), so that the
+    load of a shared machine on this test's process does not count; the robot then stands still."""
+    t_stop, stop = bus.wait("status", deadman_stop, t_event, 5.0, "no deadman stop after " + what)
+    accepted = [m for _, m in bus.since("status", t_event - 2.0) if m.teleop_accepted == stop.teleop_accepted]
+    t_last_taken = accepted[0].utime  # the first tick that had taken the last message
+    dt = (stop.utime - t_last_taken) * 1e-6
     t_still, _ = bus.wait("pose", still, t_event, 5.0, "the robot kept turning after " + what)
-    fwtest.note("%s: deadman stop reported after %.3f s, robot still after %.3f s (limit %.2f s + the deceleration)"
-                % (what, t_stop - t_event, t_still - t_event, limit))
-    if t_stop - t_event > limit:
-        fwtest.fail("%s: the stop came %.3f s later (limit %.2f s)" % (what, t_stop - t_event, limit))
+    fwtest.note("%s: deadman stop %.3f s (controller clock) after the last message taken; seen here %.3f s after "
+                "the event, the robot still %.3f s after it" % (what, dt, t_stop - t_event, t_still - t_event))
+    if dt > TIMEOUT_S + 2 * TICK_S + 1e-3:
+        fwtest.fail("%s: the stop came %.3f s after the last message (limit teleop_timeout_s %.1f s + a tick)" %
+                    (what, dt, TIMEOUT_S))
     decel = LIMIT / 2.86  # the rotation acceleration limit brings |w| <= 1 rad/s to 0 in 0.35 s
-    if t_still - t_event > limit + decel:
+    if t_still - t_event > TIMEOUT_S + TICK_S + decel + SLACK_S:
         fwtest.fail("%s: the robot turned for %.3f s more" % (what, t_still - t_event))
 
 
@@ -166,6 +171,7 @@ def keyboard(bus, teleop_tool, d):
             os.write(master, b"\x1bOD")
             time.sleep(1.0 / 30)
         t_last = time.monotonic()
+        t_last_wall = time.time()
         t_turn, _ = bus.wait("pose", turning_at(0.5), t_first, 0.1, "keyboard: the robot did not turn at +0.5 rad/s")
         if t_turn > t_last:
             fwtest.fail("keyboard: the robot turned only after the keys stopped")
@@ -174,15 +180,16 @@ def keyboard(bus, teleop_tool, d):
         held = [(t, m) for t, m in msgs if m.deadman]
         if not held or any(abs(m.rotation_radps - 0.5) > 1e-12 for _, m in held):
             fwtest.fail("keyboard: expected TELEOP at +0.5 rad/s while the key repeats, got %d messages" % len(held))
-        if held[-1][0] > t_last + 0.5 + 0.1 + SLACK_S:
-            fwtest.fail("keyboard: TELEOP went on %.3f s after the last key" % (held[-1][0] - t_last))
+        after_last_key = held[-1][1].utime * 1e-6 - t_last_wall  # the tool's own send time
+        if after_last_key > 0.5 + 0.05 + 0.25:
+            fwtest.fail("keyboard: TELEOP went on %.3f s after the last key (hold 0.5 s)" % after_last_key)
         if msgs[-1][1].deadman:
             fwtest.fail("keyboard: no release message after the keys stopped")
         n_expected = (t_last - t_first) * 20
         if len(held) < 0.8 * n_expected:
             fwtest.fail("keyboard: %d messages while the key repeated for %.1f s" % (len(held), t_last - t_first))
-        fwtest.note("keyboard: %d TELEOP at +0.5 rad/s while the key repeated, the last %.3f s after the last key, "
-                    "then the release" % (len(held), held[-1][0] - t_last))
+        fwtest.note("keyboard: %d TELEOP at +0.5 rad/s while the key repeated, the last sent %.3f s after the last "
+                    "key, then the release" % (len(held), after_last_key))
         check_stop(bus, t_last + 0.5, "the keyboard's deadman timeout")
         os.write(master, b"q")
         tool.wait(10)
