@@ -699,7 +699,7 @@ NB_MODULE(_core, m) {
       .def("predict", &Hedger::predict, "state"_a, "action"_a)
       .def("predict_ex", &Hedger::predict_ex, "state"_a, "action"_a, "slots"_a = nb::none(), "weights"_a = nb::none())
       .def("greedy", &Hedger::greedy, "state"_a)
-      .def("update", &Hedger::update, "state"_a, "action"_a, "reward"_a, "state_next"_a, "terminal"_a = false)
+      .def("update", &Hedger::update, "state"_a, "action"_a, "reward"_a, "state_next"_a.none(), "terminal"_a = false)
       .def("end_run", &Hedger::end_run)
       .def("insert", &Hedger::insert, "state"_a, "action"_a, "value"_a, "flags"_a = 0)
       .def("observe_reward", &Hedger::observe_reward, "reward"_a)
