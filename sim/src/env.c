@@ -51,7 +51,6 @@ struct sim_env {
   uint32_t substeps;
   double substep_s;
   bool kin_collided;
-  sim_plant_t* ray_plant;      // built on the first sim_env_laser_view of the kinematic model
 };
 
 static void fmt_err(char* err, size_t cap, const char* msg) {
@@ -251,7 +250,6 @@ void sim_env_destroy(sim_env_t* env) {
     return;
   }
   sim_emu_destroy(env->emu);
-  sim_plant_destroy(env->ray_plant);
   free(env);
 }
 
@@ -420,23 +418,21 @@ size_t sim_env_laser_view(sim_env_t* env, double* angle_min_rad, double* increme
     }
     return n;
   }
-  if (env->ray_plant == NULL) {
-    sim_plant_config_t pc;
-    sim_plant_config_default(&pc);
-    env->ray_plant = sim_plant_create(&env->world, &pc);
-    if (env->ray_plant == NULL) {
-      return 0U;
-    }
-  }
-  sim_plant_reset(env->ray_plant, env->kin.x_m, env->kin.y_m, env->kin.theta_rad);
+  // Kinematic: an ideal scan (no noise, every beam to the first solid) from the true pose.
+  const tasks_episode_t* ep = &env->ep;
+  const features_laser_mount_t* m =
+      ep->task == TASKS_TASK_CORRIDOR ? &ep->corridor_features.scan.mount : &ep->obstacles_features.scan.mount;
+  const double c = cos(env->kin.theta_rad), s = sin(env->kin.theta_rad);
+  const double lx = env->kin.x_m + c * m->x_m - s * m->y_m;
+  const double ly = env->kin.y_m + s * m->x_m + c * m->y_m;
   const size_t n = cap < 181U ? cap : 181U;
   *angle_min_rad = -0.5 * ENV_PI;
   *increment_rad = ENV_PI / 180.0;
-  sim_plant_scan(env->ray_plant, *angle_min_rad, *increment_rad, n, FEATURES_LMS200_MAX_VALID_RANGE_M, ranges_m);
   for (size_t i = 0U; i < n; ++i) {
-    if (!isfinite(ranges_m[i])) {
-      ranges_m[i] = NAN;
-    }
+    const double r = sim_world_raycast(&env->world, lx, ly,
+                                       env->kin.theta_rad + m->yaw_rad + *angle_min_rad + (double)i * *increment_rad,
+                                       FEATURES_LMS200_MAX_VALID_RANGE_M);
+    ranges_m[i] = isfinite(r) ? r : (double)NAN;
   }
   return n;
 }

@@ -148,8 +148,8 @@ void sim_env_get_truth(const sim_env_t* env, sim_env_truth_t* out);
 
 /// The laser's view for drawing: n ranges [m] of beams at bearings angle_min + i * increment
 /// (laser frame, mount at the task's features configuration), NaN where a beam has no return.
-/// ODE: the newest decoded scan; kinematic: a noise-free ray cast from the true pose (the first
-/// call builds an ODE plant of the world for it). Returns the number written (<= cap).
+/// ODE: the newest decoded scan; kinematic: a noise-free ray cast from the true pose
+/// (sim_world_raycast, 181 beams over 180°). Returns the number written (<= cap). O(n * world).
 size_t sim_env_laser_view(sim_env_t* env, double* angle_min_rad, double* increment_rad, double* ranges_m,
                           size_t cap);
 

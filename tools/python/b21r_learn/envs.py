@@ -68,6 +68,11 @@ class B21rEnv(gymnasium.Env):
         """The task's settings in use (spec fields, command limits, laser noise)."""
         return self.core.spec()
 
+    def driver_action(self, driver):
+        """The action of an example driver (b21r_learn.Driver) for the newest observation: the
+        controller's phase-one teacher, computed from the same features (advances the driver)."""
+        return driver.act(self.core)
+
     # ---- Gymnasium API ---------------------------------------------------------------------
 
     def reset(self, *, seed=None, options=None):
