@@ -17,8 +17,9 @@ and then:
    build command when none does. The packages are tools/ (the tools' modules), tools/python
    (b21r_learn) and the build's python/ folder (the generated types, b21r_learn's compiled part);
 3. when that build's compiled Python extension carries AddressSanitizer (host-debug), it
-   re-executes once more with the sanitizer runtime preloaded (LD_PRELOAD, leak detection off:
-   the interpreter itself keeps memory until exit), which such an extension needs to load.
+   re-executes once more with the sanitizer runtime (and libstdc++, for ASan's exception
+   interceptor) preloaded, leak detection off (the interpreter keeps memory until exit): such an
+   extension does not load otherwise.
 
 Only the standard library is used here, so the module works under any Python 3.
 """
@@ -100,14 +101,14 @@ def _preload_sanitizer(build):
     marker = build / _PRELOAD_MARKER
     if not marker.is_file():
         return
-    runtime = marker.read_text().strip()
-    preloaded = os.environ.get("LD_PRELOAD", "").split(":")
-    if not runtime or runtime in preloaded:
+    runtime = [p for p in marker.read_text().strip().split(":") if p]
+    preloaded = [p for p in os.environ.get("LD_PRELOAD", "").split(":") if p]
+    if not runtime or preloaded[: len(runtime)] == runtime:
         return
     if os.environ.get(_PRELOAD_GUARD) == "1":
         sys.exit("%s: cannot preload the sanitizer runtime %s (named in %s)" % (_tool_name(), runtime, marker))
     os.environ[_PRELOAD_GUARD] = "1"
-    os.environ["LD_PRELOAD"] = ":".join([runtime] + [p for p in preloaded if p])
+    os.environ["LD_PRELOAD"] = ":".join(runtime + [p for p in preloaded if p not in runtime])
     os.environ.setdefault("ASAN_OPTIONS", "detect_leaks=0")
     script = os.path.abspath(sys.argv[0])
     os.execv(sys.executable, [sys.executable, script] + sys.argv[1:])
