@@ -118,8 +118,8 @@ static double max_d(double a, double b) { return a > b ? a : b; }
 // Extent [lo, hi] of the values recorded in the non-empty bins among b-1, b, b+1.
 static void span3(const uint16_t* h, const double* lo_v, const double* hi_v, int nb, int b,
                   double* lo, double* hi) {
-  *lo = INFINITY;
-  *hi = -INFINITY;
+  *lo = (double)INFINITY;
+  *hi = -(double)INFINITY;
   for (int j = b - 1; j <= b + 1; ++j) {
     if (j >= 0 && j < nb && h[j] > 0U) {
       *lo = min_d(*lo, lo_v[j]);
@@ -201,12 +201,12 @@ static int hough_walls(const features_corridor_config_t* cfg, const features_poi
     memset(hist_s, 0, sizeof hist_s);
     // Extents start empty (+inf, -inf): the first point of a bin sets both, without a branch.
     for (int e = 0; e < MAX_END_BINS; ++e) {
-      r_lo[e] = INFINITY;
-      r_hi[e] = -INFINITY;
+      r_lo[e] = (double)INFINITY;
+      r_hi[e] = -(double)INFINITY;
     }
     for (int b = 0; b < nb; ++b) {
-      s_lo[b] = INFINITY;
-      s_hi[b] = -INFINITY;
+      s_lo[b] = (double)INFINITY;
+      s_hi[b] = -(double)INFINITY;
     }
     int e_first = MAX_END_BINS;  // range of the along-axis bins that received points
     int e_last = -1;
@@ -385,8 +385,8 @@ static void refit_walls(const features_corridor_config_t* cfg, const features_po
   uint32_t cnt[3] = {0U, 0U, 0U};
   const int use[3] = {w->left_ok, w->right_ok, w->has_end};
   uint8_t group[FEATURES_MAX_BEAMS];
-  double lo[3] = {INFINITY, INFINITY, INFINITY};  // extent along each line
-  double hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  double lo[3] = {(double)INFINITY, (double)INFINITY, (double)INFINITY};  // extent along each line
+  double hi[3] = {-(double)INFINITY, -(double)INFINITY, -(double)INFINITY};
   for (uint16_t i = 0U; i < n_beams; ++i) {
     group[i] = 3U;  // none
     if (pts[i].valid == 0U) continue;
@@ -489,8 +489,8 @@ static uint16_t find_end_wall(const features_corridor_config_t* cfg, const featu
   const double s_max = (double)MAX_END_BINS * BIN_M;
   for (int b = 0; b < MAX_END_BINS; ++b) {
     hist[b] = 0U;
-    lat_lo[b] = INFINITY;
-    lat_hi[b] = -INFINITY;
+    lat_lo[b] = (double)INFINITY;
+    lat_hi[b] = -(double)INFINITY;
   }
   const double cs = cos(w->phi_rad);
   const double sn = sin(w->phi_rad);

@@ -423,7 +423,7 @@ static void test_obstacles_from_pose_agrees_with_scan(void** state) {
   const features_disc_t bad = {1.0, 0.0, -0.1};
   assert_int_equal(features_obstacles_from_pose(&cfg, pose(0, 0, 0), 0, 0, &bad, 1U, PI, &f), FEATURES_ERR_INVALID_ARG);
   assert_int_equal(f.valid, 0);
-  assert_int_equal(features_obstacles_from_pose(&cfg, pose(NAN, 0, 0), 0, 0, two, 2U, PI, &f), FEATURES_ERR_INVALID_ARG);
+  assert_int_equal(features_obstacles_from_pose(&cfg, pose((double)NAN, 0, 0), 0, 0, two, 2U, PI, &f), FEATURES_ERR_INVALID_ARG);
   assert_int_equal(features_obstacles_from_pose(&cfg, pose(0, 0, 0), 0, 0, NULL, 1U, PI, &f), FEATURES_ERR_INVALID_ARG);
   assert_int_equal(features_obstacles_from_pose(&cfg, pose(0, 0, 0), 0, 0, two, 2U, 0.0, &f), FEATURES_ERR_INVALID_ARG);
   assert_int_equal(features_obstacles_from_pose(NULL, pose(0, 0, 0), 0, 0, two, 2U, PI, &f), FEATURES_ERR_INVALID_ARG);

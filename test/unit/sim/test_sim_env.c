@@ -101,12 +101,12 @@ static void test_env_errors(void** state) {
   assert_int_equal(sim_env_step(env, 0.0, &t), SIM_ENV_ERR_STATE);
   const features_pose_t in_wall = {0.1, 0.0, 0.0};
   assert_int_equal(sim_env_reset(env, SIM_ENV_START_POSE, 0, in_wall, s), SIM_ENV_ERR_INVALID_ARG);
-  const features_pose_t nan_pose = {NAN, 0.0, 0.0};
+  const features_pose_t nan_pose = {(double)NAN, 0.0, 0.0};
   assert_int_equal(sim_env_reset(env, SIM_ENV_START_POSE, 0, nan_pose, s), SIM_ENV_ERR_INVALID_ARG);
   assert_int_equal(sim_env_reset(env, (sim_env_start_t)9, 0, k_no_pose, s), SIM_ENV_ERR_INVALID_ARG);
   const features_pose_t p = {9.05, 0.0, 0.0};  // one step from the goal
   assert_int_equal(sim_env_reset(env, SIM_ENV_START_POSE, 0, p, s), SIM_ENV_OK);
-  assert_int_equal(sim_env_step(env, NAN, &t), SIM_ENV_ERR_INVALID_ARG);
+  assert_int_equal(sim_env_step(env, (double)NAN, &t), SIM_ENV_ERR_INVALID_ARG);
   assert_int_equal(sim_env_step(env, 0.0, &t), SIM_ENV_OK);
   assert_true(t.terminated && t.reason == TASKS_END_GOAL && t.reward == 10.0);
   assert_int_equal(sim_env_step(env, 0.0, &t), SIM_ENV_ERR_STATE);

@@ -49,13 +49,13 @@ static void test_episode_command_clamp_limits_and_non_finite(void** state) {
   w = 0.05;
   assert_int_equal(tasks_command_clamp(&l, 0.1, 0.3, 0.0, &v, &w), 1);
   assert_true(v == 0.3 && w == 0.05);  // within the limits: unchanged, bit for bit
-  v = NAN;
+  v = (double)NAN;
   w = 0.1;
   assert_int_equal(tasks_command_clamp(&l, 0.1, 0.3, 0.0, &v, &w), 0);
   assert_true(v == 0.0 && w == 0.0);
   v = 0.1;
   w = 0.1;
-  assert_int_equal(tasks_command_clamp(&l, 0.1, INFINITY, 0.0, &v, &w), 0);
+  assert_int_equal(tasks_command_clamp(&l, 0.1, (double)INFINITY, 0.0, &v, &w), 0);
   assert_true(v == 0.0 && w == 0.0);
 }
 
@@ -120,7 +120,7 @@ static void test_episode_corridor_observe_outcome_speed(void** state) {
   assert_true(o.terminal == 1U && o.reason == TASKS_END_COLLISION && o.reward == 0.0);
   // An unusable state leaves the vector as it was.
   double keep[3] = {7.0, 7.0, 7.0};
-  assert_int_equal(tasks_episode_observe_pose(&ep, pose(NAN, 0.0, 0.0), keep), 0);
+  assert_int_equal(tasks_episode_observe_pose(&ep, pose((double)NAN, 0.0, 0.0), keep), 0);
   assert_true(keep[0] == 7.0 && keep[2] == 7.0);
 }
 
