@@ -38,9 +38,11 @@ function(b21r_add_integration_test name)
   endif()
 endfunction()
 
-# b21r_add_python_test(<module>.<area> SCRIPT <file.py> [ARGS ...] [LABELS ...])
-#   Runs a Python test script with the tools' virtual environment and the generated LCM types
-#   on PYTHONPATH.
+# b21r_add_python_test(<module>.<area> SCRIPT <file.py> [ARGS ...] [LABELS ...] [TIMEOUT <s>])
+#   Runs a Python test script with the tools' virtual environment, the generated LCM types and
+#   the project's Python packages on PYTHONPATH; in a sanitized build also with the sanitizer
+#   runtime preloaded that the compiled b21r_learn module needs (B21R_PYTHON_TEST_ENV, set by
+#   tools/python/CMakeLists.txt).
 function(b21r_add_python_test name)
   cmake_parse_arguments(ARG "" "SCRIPT;TIMEOUT" "ARGS;LABELS" ${ARGN})
   if(NOT ARG_TIMEOUT)
@@ -48,8 +50,12 @@ function(b21r_add_python_test name)
   endif()
   get_filename_component(script "${ARG_SCRIPT}" ABSOLUTE)
   add_test(NAME ${name} COMMAND ${Python3_EXECUTABLE} "${script}" ${ARG_ARGS})
+  get_property(py_env GLOBAL PROPERTY B21R_PYTHON_TEST_ENV)
+  if(NOT py_env)
+    set(py_env "PYTHONPATH=${CMAKE_BINARY_DIR}/python:${PROJECT_SOURCE_DIR}/tools" "PYTHONDONTWRITEBYTECODE=1" "B21R_BUILD_DIR=${CMAKE_BINARY_DIR}")
+  endif()
   set_tests_properties(${name} PROPERTIES LABELS "unit;python;${ARG_LABELS}" TIMEOUT ${ARG_TIMEOUT}
-    ENVIRONMENT "PYTHONPATH=${CMAKE_BINARY_DIR}/python:${PROJECT_SOURCE_DIR}/tools;PYTHONDONTWRITEBYTECODE=1;B21R_BUILD_DIR=${CMAKE_BINARY_DIR}")
+    ENVIRONMENT "${py_env}")
 endfunction()
 
 # b21r_add_benchmark(<module>.<area> TARGET <exe> [ARGS ...])

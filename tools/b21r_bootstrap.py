@@ -14,7 +14,12 @@ and then:
 2. it puts the generated LCM types (`import b21r`) and the project's own Python packages on
    sys.path: the build named by B21R_BUILD_DIR, else the first of build/host-release,
    build/host-debug that holds them; with `need_types=True` (the default) it stops with the
-   build command when none does.
+   build command when none does. The packages are tools/ (the tools' modules), tools/python
+   (b21r_learn) and the build's python/ folder (the generated types, b21r_learn's compiled part);
+3. when that build's compiled Python extension carries AddressSanitizer (host-debug), it
+   re-executes once more with the sanitizer runtime (and libstdc++, for ASan's exception
+   interceptor) preloaded, leak detection off (the interpreter keeps memory until exit): such an
+   extension does not load otherwise.
 
 Only the standard library is used here, so the module works under any Python 3.
 """
@@ -30,6 +35,9 @@ PRESETS = ("host-release", "host-debug", "host-coverage")
 BUILD_HINT = "cmake --preset host-release && cmake --build --preset host-release"
 
 _GUARD = "B21R_BOOTSTRAPPED"
+_PRELOAD_GUARD = "B21R_SANITIZER_PRELOADED"
+# Written by tools/python/CMakeLists.txt into a sanitized build: the runtime to preload.
+_PRELOAD_MARKER = "python/b21r_learn/sanitizer-preload.txt"
 
 
 def _tool_name():
@@ -81,10 +89,29 @@ def ensure(need_types=True):
                 % (_tool_name(), ", ".join(str(d / "python") for d in build_dirs()), BUILD_HINT)
             )
         return None
-    for p in (str(build / "python"), str(REPO / "tools")):
+    _preload_sanitizer(build)
+    for p in (str(build / "python"), str(REPO / "tools" / "python"), str(REPO / "tools")):
         if p not in sys.path:
             sys.path.insert(0, p)
     return build
+
+
+def _preload_sanitizer(build):
+    """Re-executes with the sanitizer runtime preloaded when the build's extension needs it."""
+    marker = build / _PRELOAD_MARKER
+    if not marker.is_file():
+        return
+    runtime = [p for p in marker.read_text().strip().split(":") if p]
+    preloaded = [p for p in os.environ.get("LD_PRELOAD", "").split(":") if p]
+    if not runtime or preloaded[: len(runtime)] == runtime:
+        return
+    if os.environ.get(_PRELOAD_GUARD) == "1":
+        sys.exit("%s: cannot preload the sanitizer runtime %s (named in %s)" % (_tool_name(), runtime, marker))
+    os.environ[_PRELOAD_GUARD] = "1"
+    os.environ["LD_PRELOAD"] = ":".join(runtime + [p for p in preloaded if p not in runtime])
+    os.environ.setdefault("ASAN_OPTIONS", "detect_leaks=0")
+    script = os.path.abspath(sys.argv[0])
+    os.execv(sys.executable, [sys.executable, script] + sys.argv[1:])
 
 
 def find_program(name):

@@ -4,7 +4,8 @@
 #   1. the Debian packages in tools/debian-packages.txt that are not installed yet
 #      (apt-get update first; nothing at all when every package is present);
 #   2. a Python virtual environment at build/venv with tools/requirements.txt (pinned), redone
-#      only when the requirements file changes.
+#      only when the requirements file changes, with the project's own packages on its path
+#      (tools/python, and build/host-release/python once built).
 # Needs root (or sudo) only when a Debian package is missing. Safe to run any number of times.
 set -euo pipefail
 
@@ -56,4 +57,8 @@ if [[ ! -x "$venv/bin/python3" || ! -f "$stamp" || "$(cat "$stamp")" != "$want" 
 else
   say "Python environment up to date ($venv)"
 fi
+# The project's own Python packages in that environment: b21r_learn (tools/python, its compiled
+# part in the host-release build) and the generated LCM types, importable once built.
+site="$("$venv/bin/python3" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
+printf '%s\n' "$repo/tools/python" "$repo/build/host-release/python" >"$site/b21r-project.pth"
 say "done"

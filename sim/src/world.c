@@ -445,6 +445,57 @@ int sim_world_disc_collides(const sim_world_t* w, double x_m, double y_m, double
   return 0;
 }
 
+// Clips the ray's parameter interval [*s_in, *s_out] to the slab lo <= o + s d <= hi of one
+// axis; returns 0 when nothing of it is left.
+static int clip_slab(double o, double d, double lo, double hi, double* s_in, double* s_out) {
+  if (fabs(d) < 1e-15 * (fabs(lo) + fabs(hi) + 1.0)) {  // parallel to the slab: inside it or never
+    return o >= lo && o <= hi;
+  }
+  const double a = (lo - o) / d;
+  const double b = (hi - o) / d;
+  const double near = a < b ? a : b;
+  const double far = a < b ? b : a;
+  *s_in = near > *s_in ? near : *s_in;
+  *s_out = far < *s_out ? far : *s_out;
+  return *s_in <= *s_out;
+}
+
+double sim_world_raycast(const sim_world_t* w, double x_m, double y_m, double dir_rad, double max_range_m) {
+  const double dx = cos(dir_rad);
+  const double dy = sin(dir_rad);
+  double best = INFINITY;
+  for (size_t i = 0; i < w->n_walls; ++i) {
+    // The wall's rectangle in its own (unnormalised) frame: along the face f = p1 - p0 the
+    // coordinate p.f runs over [0, |f|^2]; across it, p.(fy, -fx) (into the solid, to the
+    // right of p0 -> p1) over [0, thickness |f|].
+    const sim_wall_t* wl = &w->walls[i];
+    const double fx = wl->x1_m - wl->x0_m;
+    const double fy = wl->y1_m - wl->y0_m;
+    const double len2 = fx * fx + fy * fy;
+    const double px = x_m - wl->x0_m, py = y_m - wl->y0_m;
+    double s_in = 0.0, s_out = best;
+    if (clip_slab(px * fx + py * fy, dx * fx + dy * fy, 0.0, len2, &s_in, &s_out) &&
+        clip_slab(px * fy - py * fx, dx * fy - dy * fx, 0.0, wl->thickness_m * sqrt(len2), &s_in, &s_out)) {
+      best = s_in;
+    }
+  }
+  for (size_t i = 0; i < w->n_cylinders; ++i) {
+    const sim_cylinder_t* c = &w->cylinders[i];
+    const double ox = x_m - c->x_m, oy = y_m - c->y_m;
+    const double b = ox * dx + oy * dy;
+    const double cc = ox * ox + oy * oy - c->radius_m * c->radius_m;
+    if (cc <= 0.0) {
+      return 0.0;  // inside the cylinder
+    }
+    const double disc = b * b - cc;
+    if (b < 0.0 && disc >= 0.0) {
+      const double s = -b - sqrt(disc);
+      best = s < best ? s : best;
+    }
+  }
+  return best <= max_range_m ? best : (double)INFINITY;
+}
+
 int sim_world_in_goal(const sim_world_t* w, double x_m, double y_m) {
   if (!w->has_goal) {
     return 0;

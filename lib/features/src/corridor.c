@@ -118,8 +118,8 @@ static double max_d(double a, double b) { return a > b ? a : b; }
 // Extent [lo, hi] of the values recorded in the non-empty bins among b-1, b, b+1.
 static void span3(const uint16_t* h, const double* lo_v, const double* hi_v, int nb, int b,
                   double* lo, double* hi) {
-  *lo = INFINITY;
-  *hi = -INFINITY;
+  *lo = (double)INFINITY;
+  *hi = -(double)INFINITY;
   for (int j = b - 1; j <= b + 1; ++j) {
     if (j >= 0 && j < nb && h[j] > 0U) {
       *lo = min_d(*lo, lo_v[j]);
@@ -129,6 +129,13 @@ static void span3(const uint16_t* h, const double* lo_v, const double* hi_v, int
 }
 
 static double normal_offset(double phi, double x, double y) { return -sin(phi) * x + cos(phi) * y; }
+
+// floor(x) as an int for |x| well inside the int range: the same value as (int)floor(x), without
+// the library call (hot: once per point and candidate direction).
+static int floor_int(double x) {
+  const int t = (int)x;
+  return (double)t > x ? t - 1 : t;
+}
 
 // Sum of three neighbouring bins: the support of a wall within about +-1.5 bins.
 static uint32_t h3(const uint16_t* h, int nb, int b) {
@@ -169,6 +176,21 @@ static int hough_walls(const features_corridor_config_t* cfg, const features_poi
   uint16_t hist_s[MAX_END_BINS];
   double r_lo[MAX_END_BINS];
   double r_hi[MAX_END_BINS];
+  // The valid points once, packed; per direction their lateral and along-axis offsets once.
+  double px[FEATURES_MAX_BEAMS];
+  double py[FEATURES_MAX_BEAMS];
+  double rho_of[FEATURES_MAX_BEAMS];
+  double along_of[FEATURES_MAX_BEAMS];
+  double e_of[FEATURES_MAX_BEAMS];  // along-axis bin coordinate (before truncation)
+  double b_of[FEATURES_MAX_BEAMS];  // lateral bin coordinate (before floor)
+  int n_valid = 0;
+  for (uint16_t i = 0U; i < n_beams; ++i) {
+    if (pts[i].valid != 0U) {
+      px[n_valid] = pts[i].x_m;
+      py[n_valid] = pts[i].y_m;
+      ++n_valid;
+    }
+  }
   for (int k = 0; k < n_dirs; ++k) {
     const double phi = phi0 + step * (double)k;
     const double sn = sin(phi);
@@ -177,28 +199,44 @@ static int hough_walls(const features_corridor_config_t* cfg, const features_poi
     uint32_t over_pos = 0U;
     uint32_t over_neg = 0U;
     memset(hist_s, 0, sizeof hist_s);
+    // Extents start empty (+inf, -inf): the first point of a bin sets both, without a branch.
+    for (int e = 0; e < MAX_END_BINS; ++e) {
+      r_lo[e] = (double)INFINITY;
+      r_hi[e] = -(double)INFINITY;
+    }
+    for (int b = 0; b < nb; ++b) {
+      s_lo[b] = (double)INFINITY;
+      s_hi[b] = -(double)INFINITY;
+    }
+    int e_first = MAX_END_BINS;  // range of the along-axis bins that received points
+    int e_last = -1;
     // Pass 1: cross walls (along-axis histogram). Pass 2: side walls (lateral histogram) without
     // the points of the cross wall, whose corners would otherwise join up with clutter.
-    for (uint16_t i = 0U; i < n_beams; ++i) {
-      if (pts[i].valid == 0U) continue;
-      const double rho = -sn * pts[i].x_m + cs * pts[i].y_m;
-      const double along = cs * pts[i].x_m + sn * pts[i].y_m;
+    // The offsets first, in a loop the compiler vectorises (element-wise: same results).
+    for (int i = 0; i < n_valid; ++i) {
+      rho_of[i] = -sn * px[i] + cs * py[i];
+      along_of[i] = cs * px[i] + sn * py[i];
+      e_of[i] = along_of[i] / BIN_M;
+      b_of[i] = (rho_of[i] + lat_max) / bin;
+    }
+    for (int i = 0; i < n_valid; ++i) {
+      const double rho = rho_of[i];
+      const double along = along_of[i];
       if (along > 0.0 && along < s_max && fabs(rho) < lat_max) {
-        const int e = (int)(along / BIN_M);
-        // Ranges start at the first point of a bin (empty bins are never read).
-        if (hist_s[e] == 0U) {
-          r_lo[e] = rho;
-          r_hi[e] = rho;
-        } else {
-          r_lo[e] = min_d(r_lo[e], rho);
-          r_hi[e] = max_d(r_hi[e], rho);
-        }
+        const int e = (int)e_of[i];
+        e_first = e < e_first ? e : e_first;
+        e_last = e > e_last ? e : e_last;
+        r_lo[e] = min_d(r_lo[e], rho);
+        r_hi[e] = max_d(r_hi[e], rho);
         if (hist_s[e] < UINT16_MAX) ++hist_s[e];
       }
     }
     uint32_t end_sup = 0U;
     double end_s = 0.0;
-    for (int e = 0; e < MAX_END_BINS; ++e) {
+    // Only bins next to a filled one can reach min_end_points (empty ones are skipped anyway).
+    const int e_lo = e_first > 0 ? e_first - 1 : 0;
+    const int e_hi = e_last + 1 < MAX_END_BINS ? e_last + 1 : MAX_END_BINS - 1;
+    for (int e = e_lo; e <= e_hi; ++e) {
       const uint32_t n3 = h3(hist_s, MAX_END_BINS, e);
       if (n3 < cfg->min_end_points || n3 <= end_sup) continue;
       double lo, hi;
@@ -209,24 +247,21 @@ static int hough_walls(const features_corridor_config_t* cfg, const features_poi
       }
     }
     const double end_excl = 2.0 * BIN_M + cfg->inlier_tolerance_m;
-    for (uint16_t i = 0U; i < n_beams; ++i) {
-      if (pts[i].valid == 0U) continue;
-      const double rho = -sn * pts[i].x_m + cs * pts[i].y_m;
-      const double along = cs * pts[i].x_m + sn * pts[i].y_m;
+    int b_first = nb;  // range of the lateral bins that received points
+    int b_last = -1;
+    for (int i = 0; i < n_valid; ++i) {
+      const double along = along_of[i];
       if (end_sup > 0U && fabs(along - end_s) <= end_excl) continue;
-      const int b = (int)floor((rho + lat_max) / bin);
+      const int b = floor_int(b_of[i]);
       if (b < 0) {
         ++over_neg;
       } else if (b >= nb) {
         ++over_pos;
       } else {
-        if (hist[b] == 0U) {
-          s_lo[b] = along;
-          s_hi[b] = along;
-        } else {
-          s_lo[b] = min_d(s_lo[b], along);
-          s_hi[b] = max_d(s_hi[b], along);
-        }
+        b_first = b < b_first ? b : b_first;
+        b_last = b > b_last ? b : b_last;
+        s_lo[b] = min_d(s_lo[b], along);
+        s_hi[b] = max_d(s_hi[b], along);
         if (hist[b] < UINT16_MAX) ++hist[b];
       }
     }
@@ -234,20 +269,24 @@ static int hough_walls(const features_corridor_config_t* cfg, const features_poi
     // fills one lateral bin, but over a short length. And a wall bounds the corridor: points
     // beyond it (laterally outside) count against it, which keeps a person standing near a
     // wall, plus whatever lines up with them, from posing as the wall.
+    // Only bins next to a filled one can have support: the others stay 0 and are not visited
+    // below (every loop over them would skip them anyway).
+    const int b_lo = b_first > 0 ? b_first - 1 : 0;
+    const int b_hi = b_last + 1 < nb ? b_last + 1 : nb - 1;
     uint32_t outside = over_neg;  // points laterally beyond bin b on the right side
-    for (int b = 0; b < nb; ++b) {
+    for (int b = b_lo; b <= b_hi; ++b) {
       if (b >= 3) outside += hist[b - 3];
       beyond[b] = outside;
     }
     outside = over_pos;
-    for (int b = nb - 1; b >= 0; --b) {
+    for (int b = b_hi; b >= b_lo; --b) {
       if (b + 3 < nb) outside += hist[b + 3];
       if (b >= nb / 2) beyond[b] = outside;
     }
-    for (int b = 0; b < nb; ++b) {
+    memset(sup, 0, sizeof sup[0] * (size_t)nb);
+    for (int b = b_lo; b <= b_hi; ++b) {
       const uint32_t n3 = h3(hist, nb, b);
       const uint32_t net = n3 > beyond[b] ? n3 - beyond[b] : 0U;
-      sup[b] = 0U;
       if (net >= min_pts) {
         double lo, hi;
         span3(hist, s_lo, s_hi, nb, b, &lo, &hi);
@@ -259,7 +298,7 @@ static int hough_walls(const features_corridor_config_t* cfg, const features_poi
     uint32_t single_here = 0U;
     wall_pair_t pair_cand = {0};
     wall_pair_t single_cand = {0};
-    for (int bl = mid; bl < nb; ++bl) {
+    for (int bl = mid > b_lo ? mid : b_lo; bl <= b_hi; ++bl) {
       const uint32_t sl = sup[bl];
       if (sl == 0U) continue;
       if (sl > single_here) {
@@ -281,7 +320,7 @@ static int hough_walls(const features_corridor_config_t* cfg, const features_poi
         }
       }
     }
-    for (int br = 0; br < mid; ++br) {
+    for (int br = b_lo; br < mid && br <= b_hi; ++br) {
       const uint32_t sr = sup[br];
       if (sr > single_here) {
         single_here = sr;
@@ -346,8 +385,8 @@ static void refit_walls(const features_corridor_config_t* cfg, const features_po
   uint32_t cnt[3] = {0U, 0U, 0U};
   const int use[3] = {w->left_ok, w->right_ok, w->has_end};
   uint8_t group[FEATURES_MAX_BEAMS];
-  double lo[3] = {INFINITY, INFINITY, INFINITY};  // extent along each line
-  double hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  double lo[3] = {(double)INFINITY, (double)INFINITY, (double)INFINITY};  // extent along each line
+  double hi[3] = {-(double)INFINITY, -(double)INFINITY, -(double)INFINITY};
   for (uint16_t i = 0U; i < n_beams; ++i) {
     group[i] = 3U;  // none
     if (pts[i].valid == 0U) continue;
@@ -450,8 +489,8 @@ static uint16_t find_end_wall(const features_corridor_config_t* cfg, const featu
   const double s_max = (double)MAX_END_BINS * BIN_M;
   for (int b = 0; b < MAX_END_BINS; ++b) {
     hist[b] = 0U;
-    lat_lo[b] = INFINITY;
-    lat_hi[b] = -INFINITY;
+    lat_lo[b] = (double)INFINITY;
+    lat_hi[b] = -(double)INFINITY;
   }
   const double cs = cos(w->phi_rad);
   const double sn = sin(w->phi_rad);

@@ -75,7 +75,7 @@ static void judge_cluster(const features_obstacles_config_t* cfg, const features
                           int first, int last, int prev, int next, features_obstacles_t* out) {
   uint16_t n = 0U;
   double sx = 0.0, sy = 0.0;
-  double best_d = INFINITY;
+  double best_d = (double)INFINITY;
   for (int i = first; i <= last; ++i) {
     if (pts[i].valid == 0U) continue;
     ++n;
@@ -119,6 +119,19 @@ static void judge_cluster(const features_obstacles_config_t* cfg, const features
   keep_nearest(out, &o);
 }
 
+// The goal part of the state: from the pose, when it and the goal are finite.
+static void set_goal(const features_pose_t* pose, double goal_x_m, double goal_y_m,
+                     features_obstacles_t* out) {
+  if (pose != NULL && isfinite(pose->x_m) && isfinite(pose->y_m) && isfinite(pose->theta_rad) &&
+      isfinite(goal_x_m) && isfinite(goal_y_m)) {
+    const double dx = goal_x_m - pose->x_m;
+    const double dy = goal_y_m - pose->y_m;
+    out->goal_distance_m = hypot(dx, dy);
+    out->goal_bearing_rad = features_angle_wrap(atan2(dy, dx) - pose->theta_rad);
+    out->valid = 1U;
+  }
+}
+
 features_status_t features_obstacles_compute(const features_obstacles_config_t* cfg,
                                              const features_scan_t* scan,
                                              const features_pose_t* pose, double goal_x_m,
@@ -130,14 +143,7 @@ features_status_t features_obstacles_compute(const features_obstacles_config_t* 
   if (cfg == NULL || scan == NULL || !config_ok(cfg) || !features_scan_ok(scan)) {
     return FEATURES_ERR_INVALID_ARG;
   }
-  if (pose != NULL && isfinite(pose->x_m) && isfinite(pose->y_m) && isfinite(pose->theta_rad) &&
-      isfinite(goal_x_m) && isfinite(goal_y_m)) {
-    const double dx = goal_x_m - pose->x_m;
-    const double dy = goal_y_m - pose->y_m;
-    out->goal_distance_m = hypot(dx, dy);
-    out->goal_bearing_rad = features_angle_wrap(atan2(dy, dx) - pose->theta_rad);
-    out->valid = 1U;
-  }
+  set_goal(pose, goal_x_m, goal_y_m, out);
 
   features_point_t pts[FEATURES_MAX_BEAMS];
   out->n_points = features_scan_points(&cfg->scan, scan, pts);
@@ -174,6 +180,71 @@ features_status_t features_obstacles_compute(const features_obstacles_config_t* 
     last = i;
   }
   judge_cluster(cfg, pts, first, last, before, -1, out);
+  return FEATURES_OK;
+}
+
+features_status_t features_obstacles_from_pose(const features_obstacles_config_t* cfg,
+                                               features_pose_t pose, double goal_x_m,
+                                               double goal_y_m, const features_disc_t* obstacles,
+                                               uint32_t n_obstacles, double field_of_view_rad,
+                                               features_obstacles_t* out) {
+  if (out == NULL) {
+    return FEATURES_ERR_INVALID_ARG;
+  }
+  set_empty(cfg, out);
+  if (cfg == NULL || !config_ok(cfg) || (obstacles == NULL && n_obstacles > 0U) ||
+      !isfinite(pose.x_m) || !isfinite(pose.y_m) || !isfinite(pose.theta_rad) ||
+      !isfinite(goal_x_m) || !isfinite(goal_y_m) || !(field_of_view_rad > 0.0) ||
+      field_of_view_rad > 2.0 * FEAT_PI) {
+    return FEATURES_ERR_INVALID_ARG;
+  }
+  for (uint32_t k = 0U; k < n_obstacles; ++k) {
+    const features_disc_t* d = &obstacles[k];
+    if (!isfinite(d->x_m) || !isfinite(d->y_m) || !isfinite(d->radius_m) || !(d->radius_m > 0.0)) {
+      return FEATURES_ERR_INVALID_ARG;
+    }
+  }
+  set_goal(&pose, goal_x_m, goal_y_m, out);
+  out->scan_valid = 1U;
+  const double c = cos(pose.theta_rad);
+  const double s = sin(pose.theta_rad);
+  // The laser's origin and heading in the task frame.
+  const features_laser_mount_t* m = &cfg->scan.mount;
+  const double lx = pose.x_m + c * m->x_m - s * m->y_m;
+  const double ly = pose.y_m + s * m->x_m + c * m->y_m;
+  const double l_theta = pose.theta_rad + m->yaw_rad;
+  for (uint32_t k = 0U; k < n_obstacles; ++k) {
+    const features_disc_t* d = &obstacles[k];
+    const double dx = d->x_m - pose.x_m;
+    const double dy = d->y_m - pose.y_m;
+    const double centre_dist = hypot(dx, dy);
+    const double surface = centre_dist > d->radius_m ? centre_dist - d->radius_m : 0.0;
+    // The surface point nearest to the robot centre, and how the laser sees it.
+    const double ux = centre_dist > 0.0 ? dx / centre_dist : 1.0;
+    const double uy = centre_dist > 0.0 ? dy / centre_dist : 0.0;
+    const double px = pose.x_m + surface * ux - lx;
+    const double py = pose.y_m + surface * uy - ly;
+    const double range = hypot(px, py);
+    const double laser_bearing = features_angle_wrap(atan2(py, px) - l_theta);
+    if (fabs(laser_bearing) > 0.5 * field_of_view_rad || range < cfg->scan.min_range_m ||
+        range > cfg->scan.max_range_m) {
+      continue;
+    }
+    features_obstacle_t o;
+    o.bearing_rad = features_angle_wrap(atan2(uy, ux) - pose.theta_rad);
+    o.distance_m = surface;
+    o.width_m = 2.0 * d->radius_m;
+    o.centre_x_m = c * dx + s * dy;
+    o.centre_y_m = -s * dx + c * dy;
+    o.n_points = 0U;
+    o.visible = 1U;
+    if (out->n_visible < UINT8_MAX) ++out->n_visible;
+    if (surface < out->nearest_any_m) {
+      out->nearest_any_m = surface;
+      out->nearest_any_bearing_rad = o.bearing_rad;
+    }
+    keep_nearest(out, &o);
+  }
   return FEATURES_OK;
 }
 

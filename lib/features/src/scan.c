@@ -46,6 +46,23 @@ features_status_t features_scan_set_lms200_geometry(features_scan_t* scan, int f
   return FEATURES_OK;
 }
 
+features_status_t features_scan_fill(features_scan_t* scan, double angle_min_rad,
+                                     double angle_increment_rad, uint16_t n_beams,
+                                     const float* ranges_m, const uint8_t* no_return) {
+  if (scan == NULL || (n_beams > 0U && (ranges_m == NULL || no_return == NULL)) ||
+      n_beams > FEATURES_MAX_BEAMS) {
+    return FEATURES_ERR_INVALID_ARG;
+  }
+  scan->angle_min_rad = angle_min_rad;
+  scan->angle_increment_rad = angle_increment_rad;
+  scan->n_beams = n_beams;
+  for (uint16_t i = 0U; i < n_beams; ++i) {
+    scan->ranges_m[i] = ranges_m[i];
+    scan->no_return[i] = no_return[i];
+  }
+  return FEATURES_OK;
+}
+
 double features_angle_wrap(double angle_rad) {
   if (!isfinite(angle_rad)) {
     return 0.0;

@@ -835,3 +835,72 @@ void rflex_odom_set_pose(rflex_odometry_t* odo, double x_m, double y_m, double t
   odo->y_m = y_m;
   odo->theta_rad = isfinite(theta_rad) ? wrap_pi(theta_rad) : 0.0;
 }
+
+// ---------------------------------------------------------------------------------------------
+// Host view of the base
+
+proto_status_t rflex_host_init(rflex_host_t* host, const rflex_b21r_params_t* params) {
+  if (host == NULL) {
+    return PROTO_ERR_INVALID_ARG;
+  }
+  memset(host, 0, sizeof *host);
+  rflex_decoder_init(&host->decoder);
+  host->brake = -1;
+  return rflex_odom_init(&host->odometry, params);
+}
+
+rflex_msg_kind_t rflex_host_handle(rflex_host_t* host, const rflex_packet_t* pkt) {
+  host->packets++;
+  const rflex_msg_kind_t kind = rflex_classify(pkt);
+  switch (kind) {
+    case RFLEX_MSG_MOTOR_REPORT: {
+      rflex_motor_report_t r;
+      if (rflex_parse_motor_report(pkt, &r) == PROTO_OK && rflex_odom_feed(&host->odometry, &r) == PROTO_OK) {
+        host->report_new[r.axis] = true;
+      }
+      break;
+    }
+    case RFLEX_MSG_SYS_STATUS: {
+      rflex_sys_status_t st;
+      // DLEN 0 is the host's own request echoed by nobody; only replies carry the fields.
+      if (pkt->dlen >= 9U && rflex_parse_sys_status(pkt, &st) == PROTO_OK) {
+        host->brake = st.brake != 0U ? 1 : 0;
+        host->battery_v = rflex_battery_volts(st.voltage_raw, host->odometry.params.power_offset_v);
+      }
+      break;
+    }
+    case RFLEX_MSG_DIO_REPORT: {
+      rflex_dio_report_t d;
+      if (rflex_parse_dio_report(pkt, &d) == PROTO_OK) {
+        const int panel = rflex_dio_bumper_panel(d.address);
+        if (panel >= 0) {
+          if ((d.value & 0x0FU) != 0U) {
+            host->bumper_mask |= 1U << (unsigned)panel;
+          } else {
+            host->bumper_mask &= ~(1U << (unsigned)panel);
+          }
+        }
+      }
+      break;
+    }
+    default:
+      break;  // sonar, IR, joystick and unknown reports are not used
+  }
+  return kind;
+}
+
+size_t rflex_host_feed(rflex_host_t* host, const uint8_t* bytes, size_t n) {
+  size_t handled = 0U;
+  while (n > 0U) {
+    rflex_packet_t pkt;
+    bool got = false;
+    const size_t k = rflex_decoder_push(&host->decoder, bytes, n, &pkt, &got);
+    bytes += k;
+    n -= k;
+    if (got) {
+      (void)rflex_host_handle(host, &pkt);
+      ++handled;
+    }
+  }
+  return handled;
+}

@@ -123,6 +123,13 @@ void sim_world_compute_bounds(sim_world_t* w);
 /// O(walls + cylinders).
 int sim_world_disc_collides(const sim_world_t* w, double x_m, double y_m, double radius_m);
 
+/// Distance along the ray from (x, y) in direction dir_rad (floor plane) to the first wall solid
+/// or cylinder, or INFINITY when nothing lies within max_range_m. Walls count as their full thick
+/// rectangle (as in the ODE plant, whose boxes they are); a ray starting inside a solid returns 0.
+/// Exact closed-form intersections (no stepping). The LMS200 emulation's ray cast. O(walls +
+/// cylinders), pure.
+double sim_world_raycast(const sim_world_t* w, double x_m, double y_m, double dir_rad, double max_range_m);
+
 /// Is (x, y) inside the goal disc? 0 when the world has no goal. O(1).
 int sim_world_in_goal(const sim_world_t* w, double x_m, double y_m);
 

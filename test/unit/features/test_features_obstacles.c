@@ -358,6 +358,77 @@ static void test_obstacles_deterministic_and_allocation_free(void** state) {
   assert_int_equal(a.n_visible, b.n_visible);
 }
 
+// The exact state of a known pose (the kinematic model's observation) agrees with what the
+// features measure in a noise-free scan of the same scene: the goal part bit for bit, a visible
+// obstacle within the features' stated tolerances; invalid calls are refused.
+static void test_obstacles_from_pose_agrees_with_scan(void** state) {
+  (void)state;
+  features_obstacles_config_t cfg;
+  features_obstacles_config_default(&cfg);
+  static features_scan_t scan;
+  synth_rng_t rng;
+  synth_rng_seed(&rng, 77);
+  int compared = 0;
+  int agree_visible = 0;
+  for (int k = 0; k < 300; ++k) {
+    const features_pose_t p = pose(urange(&rng, -4.0, 1.0), urange(&rng, -2.5, 2.5), urange(&rng, -PI, PI));
+    const double rad = urange(&rng, 0.15, 0.35);
+    const double dist = urange(&rng, 0.5, 3.0);
+    const double brg = urange(&rng, -1.4, 1.4);
+    const features_disc_t d = {p.x_m + (dist + rad) * cos(p.theta_rad + brg),
+                               p.y_m + (dist + rad) * sin(p.theta_rad + brg), rad};
+    if (d.x_m - rad < ARENA_MIN_X + 0.6 || d.x_m + rad > ARENA_MAX_X - 0.6 || d.y_m - rad < ARENA_MIN_Y + 0.6 ||
+        d.y_m + rad > ARENA_MAX_Y - 0.6) {
+      continue;
+    }
+    synth_world_t w;
+    synth_world_init(&w);
+    assert_int_equal(synth_world_add_box(&w, ARENA_MIN_X, ARENA_MIN_Y, ARENA_MAX_X, ARENA_MAX_Y), 0);
+    assert_int_equal(synth_world_add_circle(&w, d.x_m, d.y_m, d.radius_m), 0);
+    scan_of(&scan, &w, p);
+    features_obstacles_t measured, exact;
+    assert_int_equal(features_obstacles_compute(&cfg, &scan, &p, 0.5, -0.5, &measured), FEATURES_OK);
+    assert_int_equal(features_obstacles_from_pose(&cfg, p, 0.5, -0.5, &d, 1U, PI, &exact), FEATURES_OK);
+    assert_true(all_finite(&exact));
+    assert_memory_equal(&measured.goal_bearing_rad, &exact.goal_bearing_rad, sizeof(double));
+    assert_memory_equal(&measured.goal_distance_m, &exact.goal_distance_m, sizeof(double));
+    assert_int_equal(exact.valid, 1);
+    ++compared;
+    if (measured.obstacle[0].visible != exact.obstacle[0].visible) {
+      continue;
+    }
+    ++agree_visible;
+    if (exact.obstacle[0].visible) {
+      const double tol_b = fabs(exact.obstacle[0].bearing_rad) > SIDE_BEARING_RAD ? TOL_BEARING_SIDE_RAD : TOL_BEARING_RAD;
+      assert_true(fabs(measured.obstacle[0].distance_m - exact.obstacle[0].distance_m) < TOL_DIST_M);
+      assert_true(fabs(features_angle_wrap(measured.obstacle[0].bearing_rad - exact.obstacle[0].bearing_rad)) < tol_b);
+      assert_true(fabs(exact.obstacle[0].width_m - 2.0 * rad) < 1e-12);
+    } else {
+      assert_true(exact.obstacle[0].bearing_rad == PI && exact.obstacle[0].distance_m == cfg.no_obstacle_distance_m);
+    }
+  }
+  print_message("from_pose vs scan: %d scenes, visibility agrees in %d\n", compared, agree_visible);
+  assert_true(compared > 100);
+  assert_true(agree_visible >= compared * 95 / 100);
+  // Behind the robot: not visible. Two discs: nearest first. Bad calls: refused, empty output.
+  const features_disc_t two[2] = {{3.0, 0.0, 0.2}, {1.5, 0.2, 0.3}};
+  features_obstacles_t f;
+  assert_int_equal(features_obstacles_from_pose(&cfg, pose(0.0, 0.0, PI), 0, 0, two, 2U, PI, &f), FEATURES_OK);
+  assert_int_equal(f.n_visible, 0);
+  assert_int_equal(features_obstacles_from_pose(&cfg, pose(0.0, 0.0, 0.0), 0, 0, two, 2U, PI, &f), FEATURES_OK);
+  assert_int_equal(f.n_visible, 2);
+  assert_true(fabs(f.obstacle[0].distance_m - (hypot(1.5, 0.2) - 0.3)) < 1e-12);
+  assert_true(fabs(f.obstacle[1].distance_m - 2.8) < 1e-12);
+  assert_true(fabs(f.obstacle[0].bearing_rad - atan2(0.2, 1.5)) < 1e-12);
+  const features_disc_t bad = {1.0, 0.0, -0.1};
+  assert_int_equal(features_obstacles_from_pose(&cfg, pose(0, 0, 0), 0, 0, &bad, 1U, PI, &f), FEATURES_ERR_INVALID_ARG);
+  assert_int_equal(f.valid, 0);
+  assert_int_equal(features_obstacles_from_pose(&cfg, pose((double)NAN, 0, 0), 0, 0, two, 2U, PI, &f), FEATURES_ERR_INVALID_ARG);
+  assert_int_equal(features_obstacles_from_pose(&cfg, pose(0, 0, 0), 0, 0, NULL, 1U, PI, &f), FEATURES_ERR_INVALID_ARG);
+  assert_int_equal(features_obstacles_from_pose(&cfg, pose(0, 0, 0), 0, 0, two, 2U, 0.0, &f), FEATURES_ERR_INVALID_ARG);
+  assert_int_equal(features_obstacles_from_pose(NULL, pose(0, 0, 0), 0, 0, two, 2U, PI, &f), FEATURES_ERR_INVALID_ARG);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_obstacles_random_poses_within_tolerance),
@@ -367,6 +438,7 @@ int main(void) {
       cmocka_unit_test(test_obstacles_goal_from_odometry),
       cmocka_unit_test(test_obstacles_invalid_input_rejected),
       cmocka_unit_test(test_obstacles_deterministic_and_allocation_free),
+      cmocka_unit_test(test_obstacles_from_pose_agrees_with_scan),
   };
   return cmocka_run_group_tests_name("features.obstacles", tests, NULL, NULL);
 }

@@ -91,11 +91,31 @@ static void test_scan_pose_algebra_consistent(void** state) {
   assert_int_equal(alloc_counter_end(), 0);
 }
 
+// A decoded scan's arrays fill a features scan as given; bad calls leave it unchanged.
+static void test_scan_fill_copies_and_refuses_bad_calls(void** state) {
+  (void)state;
+  static features_scan_t scan;
+  float ranges[3] = {1.5f, 8.191f, 0.25f};
+  uint8_t reasons[3] = {0U, 1U, 0U};
+  assert_int_equal(features_scan_fill(&scan, -1.5, 0.0174, 3U, ranges, reasons), FEATURES_OK);
+  assert_true(scan.angle_min_rad == -1.5 && scan.angle_increment_rad == 0.0174 && scan.n_beams == 3U);
+  assert_memory_equal(scan.ranges_m, ranges, sizeof ranges);
+  assert_memory_equal(scan.no_return, reasons, sizeof reasons);
+  assert_int_equal(features_scan_fill(&scan, 0.0, 0.1, FEATURES_MAX_BEAMS + 1, ranges, reasons),
+                   FEATURES_ERR_INVALID_ARG);
+  assert_int_equal(features_scan_fill(&scan, 0.0, 0.1, 3U, NULL, reasons), FEATURES_ERR_INVALID_ARG);
+  assert_int_equal(features_scan_fill(NULL, 0.0, 0.1, 3U, ranges, reasons), FEATURES_ERR_INVALID_ARG);
+  assert_true(scan.n_beams == 3U && scan.angle_min_rad == -1.5);
+  assert_int_equal(features_scan_fill(&scan, 0.0, 0.1, 0U, NULL, NULL), FEATURES_OK);
+  assert_int_equal(scan.n_beams, 0);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_scan_lms200_geometry_variants),
       cmocka_unit_test(test_scan_angle_wrap_range),
       cmocka_unit_test(test_scan_pose_algebra_consistent),
+      cmocka_unit_test(test_scan_fill_copies_and_refuses_bad_calls),
   };
   return cmocka_run_group_tests_name("features.scan", tests, NULL, NULL);
 }

@@ -649,6 +649,60 @@ static void test_rflex_decoder_no_allocation(void** state) {
   assert_int_equal(g_dec.counters.packets_ok, 800);
 }
 
+// Encodes pkt as the base sends it (stuffed) into buf; returns the byte count.
+static size_t device_bytes(uint8_t* buf, size_t cap, const rflex_packet_t* pkt) {
+  const size_t n = rflex_encode(buf, cap, pkt, RFLEX_DEVICE_STUFFED);
+  assert_true(n > 0U);
+  return n;
+}
+
+// The host view takes the base's byte stream: odometry from both axes' reports, bump panels
+// pressed and released over DIO, brake and battery from SYS_STATUS; garbage is only counted.
+static void test_rflex_host_view_follows_reports(void** state) {
+  (void)state;
+  rflex_b21r_params_t params;
+  rflex_b21r_params_default(&params);
+  rflex_host_t host;
+  assert_int_equal(rflex_host_init(&host, &params), PROTO_OK);
+  assert_int_equal(host.brake, -1);
+  static uint8_t buf[4096];
+  size_t n = 0;
+  rflex_packet_t pk;
+  const rflex_motor_report_t trans = {.axis = 0, .position = 103000, .velocity = 0x1B1B};
+  const rflex_motor_report_t rot = {.axis = 1, .position = 0};
+  assert_int_equal(rflex_make_motor_report(&pk, 0x1B, &trans), PROTO_OK);  // stuffed id and data
+  n += device_bytes(buf + n, sizeof buf - n, &pk);
+  assert_int_equal(rflex_make_motor_report(&pk, 1, &rot), PROTO_OK);
+  n += device_bytes(buf + n, sizeof buf - n, &pk);
+  buf[n++] = 0x55;  // line noise between packets
+  const rflex_dio_report_t press = {.address = 0x46, .value = 0x0003};
+  assert_int_equal(rflex_make_dio_report(&pk, 2, &press), PROTO_OK);
+  n += device_bytes(buf + n, sizeof buf - n, &pk);
+  const rflex_sys_status_t st = {.voltage_raw = 2480, .brake = 0};
+  assert_int_equal(rflex_make_sys_status(&pk, 3, &st), PROTO_OK);
+  n += device_bytes(buf + n, sizeof buf - n, &pk);
+  assert_int_equal(rflex_host_feed(&host, buf, n), 4U);
+  assert_true(host.report_new[0] && host.report_new[1]);
+  assert_int_equal(host.bumper_mask, 1U << 6);
+  assert_int_equal(host.brake, 0);
+  ASSERT_NEAR(host.battery_v, 26.0, 1e-12);
+  assert_int_equal(host.packets, 4U);
+  assert_int_equal(host.decoder.counters.bytes_garbage, 1U);
+  // The first update sets the baseline; the next report pair moves the pose 1 m ahead.
+  assert_true(rflex_odom_update(&host.odometry));
+  const rflex_motor_report_t trans2 = {.axis = 0, .position = 2 * 103000};
+  assert_int_equal(rflex_make_motor_report(&pk, 4, &trans2), PROTO_OK);
+  n = device_bytes(buf, sizeof buf, &pk);
+  const rflex_dio_report_t release = {.address = 0x46, .value = 0};
+  assert_int_equal(rflex_make_dio_report(&pk, 5, &release), PROTO_OK);
+  n += device_bytes(buf + n, sizeof buf - n, &pk);
+  assert_int_equal(rflex_host_feed(&host, buf, n), 2U);
+  assert_true(rflex_odom_update(&host.odometry));
+  ASSERT_NEAR(host.odometry.x_m, 1.0, 1e-12);
+  assert_int_equal(host.bumper_mask, 0U);
+  assert_int_equal(rflex_host_init(&host, NULL), PROTO_ERR_INVALID_ARG);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_rflex_worked_examples_match),
@@ -663,6 +717,7 @@ int main(void) {
       cmocka_unit_test(test_rflex_every_message_round_trips),
       cmocka_unit_test(test_rflex_odometry_heading_first_wrap_and_rejects),
       cmocka_unit_test(test_rflex_decoder_no_allocation),
+      cmocka_unit_test(test_rflex_host_view_follows_reports),
   };
   return cmocka_run_group_tests_name("proto.rflex", tests, NULL, NULL);
 }

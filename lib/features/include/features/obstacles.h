@@ -107,6 +107,36 @@ features_status_t features_obstacles_compute(const features_obstacles_config_t* 
                                              const features_pose_t* pose, double goal_x_m,
                                              double goal_y_m, features_obstacles_t* out);
 
+/// An obstacle whose geometry is known exactly: a vertical cylinder, in the frame of the pose
+/// given to features_obstacles_from_pose (the task frame).
+typedef struct features_disc {
+  double x_m;       ///< centre [m]
+  double y_m;       ///< [m]
+  double radius_m;  ///< [m], > 0
+} features_disc_t;
+
+/// The obstacle-task state of a robot at a known pose among known obstacles: what an ideal laser
+/// (no noise, unlimited angular resolution, no occlusion) at cfg->scan.mount would give. This is
+/// the observation of the idealised kinematic model (sim/env.h), as features_corridor_from_pose
+/// is for the corridor.
+/// - Goal fields exactly as features_obstacles_compute computes them from the same pose.
+/// - Obstacle k is visible when the point of its surface nearest to the robot centre lies in the
+///   laser's field of view (|bearing from the mount| <= field_of_view_rad / 2, range from the
+///   mount within [min_range_m, max_range_m]); then distance_m = robot centre to that point (0
+///   when the centre is inside the disc), bearing_rad = its bearing from the robot centre (the
+///   direction of the disc's centre), width_m = 2 radius, centre_x/y_m = the disc centre in the
+///   robot frame, n_points = 0 (no beams). Nearest first, empty slots as documented above.
+/// - nearest_any_m / _bearing_rad: the nearest visible obstacle (walls are not known here);
+///   n_points, n_clusters, n_wall_clusters = 0; scan_valid = 1.
+/// Returns FEATURES_ERR_INVALID_ARG (out = the empty state) for NULL cfg/out, obstacles == NULL
+/// with n_obstacles > 0, a non-finite pose, goal or disc, a radius <= 0, a field of view outside
+/// (0, 2 pi] or a bad configuration. O(n_obstacles), no allocation, pure.
+features_status_t features_obstacles_from_pose(const features_obstacles_config_t* cfg,
+                                               features_pose_t pose, double goal_x_m,
+                                               double goal_y_m, const features_disc_t* obstacles,
+                                               uint32_t n_obstacles, double field_of_view_rad,
+                                               features_obstacles_t* out);
+
 /// Writes the learner's state vector: goal_bearing, goal_distance, then (bearing, distance) of
 /// the first n_obstacles slots (1 = the paper's task, 4 values; 2 gives 6). Returns the number
 /// of values written, or 0 if n_obstacles is 0 or > FEATURES_MAX_OBSTACLES or capacity is too

@@ -95,6 +95,16 @@ void features_scan_config_default(features_scan_config_t* cfg);
 features_status_t features_scan_set_lms200_geometry(features_scan_t* scan, int field_deg,
                                                     double resolution_deg);
 
+/// Fills a scan from a decoded laser scan: beam geometry (angle_min_rad, angle_increment_rad),
+/// n_beams ranges [m] and per-beam no-return reasons (0 = valid return), copied as given. This
+/// is how a decoded LMS200 telegram (proto/lms200.h: start_angle_rad, step_rad, range_m,
+/// beam_status) becomes the features' input, in the controller and in the Python environment
+/// alike. Returns FEATURES_ERR_INVALID_ARG (scan unchanged) for NULL pointers or n_beams >
+/// FEATURES_MAX_BEAMS. O(n_beams), no allocation.
+features_status_t features_scan_fill(features_scan_t* scan, double angle_min_rad,
+                                     double angle_increment_rad, uint16_t n_beams,
+                                     const float* ranges_m, const uint8_t* no_return);
+
 /// Wraps an angle to (-pi, pi]. Non-finite input returns 0 (never NaN). O(1).
 double features_angle_wrap(double angle_rad);
 

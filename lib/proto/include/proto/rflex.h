@@ -363,6 +363,35 @@ bool rflex_odom_update(rflex_odometry_t* odo);
 /// Sets the pose (e.g. heading from the index pulse); keeps the baseline. O(1).
 void rflex_odom_set_pose(rflex_odometry_t* odo, double x_m, double y_m, double theta_rad);
 
+// ---------------------------------------------------------------------------------------------
+// Host view of the base: what a controller learns from the base's reports
+
+/// Everything a host keeps from the base's byte stream: framing, odometry, bump panels, brake,
+/// battery. The controller and the Python environment (sim/env.h) read the base through it.
+typedef struct rflex_host {
+  rflex_decoder_t decoder;    ///< framing of the base's bytes (its counters: dropped bytes, ...)
+  rflex_odometry_t odometry;  ///< fed by every MOT_SYSTEM_REPORT; the caller runs rflex_odom_update()
+  bool report_new[2];         ///< per axis: a MOT_SYSTEM_REPORT arrived since the caller cleared it
+  uint32_t bumper_mask;       ///< bit p set while bump panel p (DIO 0x40 + p) reads pressed
+  int8_t brake;               ///< from SYS_STATUS: -1 unknown, 0 released, 1 engaged
+  double battery_v;           ///< from SYS_STATUS [V]; 0 before the first one
+  uint64_t packets;           ///< valid packets handled
+} rflex_host_t;
+
+/// Initialises the host view (odometry at the origin with params). O(1).
+/// @return PROTO_OK, or PROTO_ERR_INVALID_ARG (NULL, bad params; *host unusable).
+proto_status_t rflex_host_init(rflex_host_t* host, const rflex_b21r_params_t* params);
+
+/// Takes one packet from the base: a MOT_SYSTEM_REPORT feeds the odometry and sets
+/// report_new[axis]; a DIO_REPORT of a bump panel sets or clears its bit (pressed = any of the
+/// low 4 value bits); a SYS_STATUS reply (DLEN >= 9) sets brake and battery_v. Other packets
+/// only count. @return the packet's kind. O(1).
+rflex_msg_kind_t rflex_host_handle(rflex_host_t* host, const rflex_packet_t* pkt);
+
+/// Frames n bytes from the base with the host's decoder and handles every complete packet.
+/// @return packets handled. O(n).
+size_t rflex_host_feed(rflex_host_t* host, const uint8_t* bytes, size_t n);
+
 #ifdef __cplusplus
 }
 #endif

@@ -1,0 +1,128 @@
+// SPDX-License-Identifier: MIT
+/// tasks/episode.h — One of the paper's tasks as a robot runs it, step by step: the state from a
+/// laser scan and odometry in the run's frame, reward and termination, the translation speed,
+/// the example drivers' action, and the clamp of every command to the base's limits.
+///
+/// The controller's tick (firmware/core) and the Python environments (sim/env.h) both compute
+/// their numbers with these functions, so that a result in one means the same in the other.
+///
+/// A run in the task frame: at its start the robot stands at start_in_task (a start pose of the
+/// task spec, or one given) while the odometry reads odom_at_start; every later odometry pose
+/// maps into the task frame by features_odom_to_task. The state vector is
+/// - corridor (3): end distance [m], lateral fraction [0, 1], target angle [rad];
+/// - obstacles (4): goal bearing [rad], goal distance [m], nearest obstacle's bearing [rad] and
+///   distance [m] (pi and no_obstacle_distance_m when none is visible).
+///
+/// Memory: tasks_episode_t is a plain caller-owned struct (about 1.8 KiB), no allocation.
+/// Thread-safety: none per instance; distinct instances are independent. Every function is
+/// bounded: observe is linear in the beams (see features/corridor.h for its cost), the others
+/// O(1).
+#ifndef B21R_TASKS_EPISODE_H
+#define B21R_TASKS_EPISODE_H
+
+#include <stdint.h>
+
+#include "features/features.h"
+#include "tasks/tasks.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/// Largest state dimension of the tasks' state vectors.
+#define TASKS_MAX_STATE_DIM 4
+
+/// Limits applied to every command sent to the base. Defaults (tasks_command_limits_default) in
+/// brackets: the controller's defaults (firmware/app/b21r-controller.conf).
+typedef struct tasks_command_limits {
+  double max_translation_mps;         ///< |v| limit [0.8]
+  double max_rotation_radps;          ///< |omega| limit, also the learner's action range [1.0]
+  double max_translation_accel_mps2;  ///< |dv| per period / period [0.7]
+  double max_rotation_accel_radps2;   ///< |domega| per period / period [2.86]
+} tasks_command_limits_t;
+
+/// Fills lim with the defaults documented on each field. O(1).
+void tasks_command_limits_default(tasks_command_limits_t* lim);
+
+/// The command actually sent for a requested (v, omega): first clamped to the velocity limits,
+/// then to within (acceleration limit x dt_s) of the previous command (prev_v_mps,
+/// prev_omega_radps). A non-finite request, previous command or limit makes both zero (the base
+/// is never sent a non-finite number). Returns 1 when the result came from the clamp, 0 when a
+/// non-finite value forced the zero command. O(1).
+int tasks_command_clamp(const tasks_command_limits_t* lim, double dt_s, double prev_v_mps,
+                        double prev_omega_radps, double* v_mps, double* omega_radps);
+
+/// One task with the state of the current run. Fields are readable; change a spec's step_limit,
+/// speeds or rewards at any time, but call tasks_episode_init again after changing its geometry
+/// (the feature configurations are derived from it there).
+typedef struct tasks_episode {
+  tasks_task_t task;
+  uint32_t state_dim;                            ///< 3 (corridor) or 4 (obstacles)
+  tasks_corridor_spec_t corridor;                ///< the corridor task (used when task is CORRIDOR)
+  features_corridor_config_t corridor_features;  ///< derived from corridor at init
+  tasks_obstacles_spec_t obstacles;              ///< the obstacle task (used when task is OBSTACLES)
+  features_obstacles_config_t obstacles_features;  ///< derived from obstacles at init
+  features_pose_t start_in_task;                 ///< start pose of the current run, task frame
+  features_pose_t odom_at_start;                 ///< odometry pose at the start of the run
+  features_corridor_t corridor_state;            ///< newest corridor features (corridor task)
+  features_obstacles_t obstacles_state;          ///< newest obstacle features (obstacle task)
+} tasks_episode_t;
+
+/// Sets up task with the given specs (NULL: the defaults of tasks_*_spec_default); both specs
+/// are kept, only the one of `task` is used. An unknown task falls back to the corridor. Clears
+/// the run (start pose and odometry at the origin, neutral features). O(1).
+void tasks_episode_init(tasks_episode_t* ep, tasks_task_t task, const tasks_corridor_spec_t* corridor,
+                        const tasks_obstacles_spec_t* obstacles);
+
+/// Starts a run: the robot stands at start_in_task while odometry reads odom_at_start. O(1).
+void tasks_episode_begin(tasks_episode_t* ep, features_pose_t start_in_task, features_pose_t odom_at_start);
+
+/// The odometry pose odom_now in the task frame of the current run. O(1).
+features_pose_t tasks_episode_pose_in_task(const tasks_episode_t* ep, features_pose_t odom_now);
+
+/// The state from a scan and the odometry pose (what the controller computes each tick): the
+/// task's features of scan at the odometry pose mapped into the task frame, kept in the episode;
+/// when they are valid, the state vector is written to state[0..state_dim) (otherwise state is
+/// left as it was). Returns 1 when the state is usable (valid features, every value finite), 0
+/// otherwise: do not learn from it. Cost: features_corridor_compute or
+/// features_obstacles_compute.
+int tasks_episode_observe(tasks_episode_t* ep, const features_scan_t* scan, features_pose_t odom_now,
+                          double* state);
+
+/// The exact state of a robot at a known pose in the task frame (the idealised kinematic model):
+/// features_corridor_from_pose, or features_obstacles_from_pose with the spec's obstacles and the
+/// LMS200's 180° field of view. Same contract as tasks_episode_observe. O(obstacles).
+int tasks_episode_observe_pose(tasks_episode_t* ep, features_pose_t pose_in_task, double* state);
+
+/// Reward and termination of the transition into the newest observed state (tasks_*_outcome with
+/// the spec's step limit). contact: the bumper (or the model's collision test) fired on it;
+/// steps_taken: actions executed in this run, including the last one. O(1).
+tasks_outcome_t tasks_episode_outcome(const tasks_episode_t* ep, uint8_t contact, uint32_t steps_taken);
+
+/// Translation speed for the newest observed state (the task's speed policy) [m/s]. O(1).
+double tasks_episode_speed_mps(const tasks_episode_t* ep);
+
+/// The driver's rotation command for the newest observed state (tasks_driver_corridor or
+/// tasks_driver_obstacles; advances the driver's state) [rad/s]. O(1).
+double tasks_episode_driver_action(const tasks_episode_t* ep, tasks_driver_t* driver);
+
+/// Evaluation start pose `index` (modulo TASKS_N_EVAL_STARTS), task frame. O(1).
+features_pose_t tasks_episode_eval_start(const tasks_episode_t* ep, uint32_t index);
+
+/// A training start pose drawn from rng (tasks_*_training_start). Bounded draws.
+features_pose_t tasks_episode_training_start(const tasks_episode_t* ep, tasks_rng_t* rng);
+
+/// The run's step limit (the spec's; 0 = none). O(1).
+uint32_t tasks_episode_step_limit(const tasks_episode_t* ep);
+
+/// The task's action bound omega_max [rad/s], discount gamma and the robot's collision radius
+/// [m] (from the spec). O(1).
+double tasks_episode_omega_max(const tasks_episode_t* ep);
+double tasks_episode_gamma(const tasks_episode_t* ep);
+double tasks_episode_robot_radius(const tasks_episode_t* ep);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif  // B21R_TASKS_EPISODE_H

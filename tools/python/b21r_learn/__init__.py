@@ -1,0 +1,54 @@
+# SPDX-License-Identifier: MIT
+"""b21r_learn: the RWI B21r tasks of Smart & Kaelbling (ICRA 2002) as Gymnasium environments, and
+HEDGER as a Python learner, both computed by the C code the robot runs.
+
+Importing the package registers two environments:
+
+- ``B21rCorridor-v0``: corridor following (state: end distance, lateral fraction, target angle);
+- ``B21rObstacles-v0``: obstacle avoidance (state: goal bearing and distance, nearest obstacle's
+  bearing and distance).
+
+Both take ``backend="ode"`` (the emulated B21r: ODE plant, ray-cast LMS200 with noise, rFLEX
+protocol; what the controller sees) or ``backend="kinematic"`` (the idealised model, exact state,
+fast). See :class:`b21r_learn.envs.B21rEnv`.
+
+HEDGER: :class:`Hedger` (settings as keyword arguments, defaults from the C API), the example
+drivers :class:`Driver`, and the controller's files: :func:`read_checkpoint`,
+:func:`controller_learner_config`.
+"""
+from pkgutil import extend_path
+
+# The compiled part (_core) lives in the build tree (<build>/python/b21r_learn), the Python part
+# here; extend_path joins every b21r_learn folder on sys.path into this one package. In an
+# installed wheel both are in one folder and this changes nothing.
+__path__ = extend_path(__path__, __name__)
+
+from ._core import (  # noqa: E402  (after the package path is complete)
+    POINT_PROTECTED,
+    Driver,
+    Hedger,
+    HedgerError,
+    Prediction,
+    controller_learner_config,
+    mean_ci95,
+    read_checkpoint,
+)
+from .envs import B21rEnv, register_envs  # noqa: E402
+
+KIND_NAMES = ("unknown", "lwa", "lwr")  # Prediction.kind / greedy kind -> name
+
+__all__ = [
+    "B21rEnv",
+    "Driver",
+    "Hedger",
+    "HedgerError",
+    "KIND_NAMES",
+    "POINT_PROTECTED",
+    "Prediction",
+    "controller_learner_config",
+    "mean_ci95",
+    "read_checkpoint",
+    "register_envs",
+]
+
+register_envs()

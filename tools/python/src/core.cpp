@@ -1,0 +1,720 @@
+// SPDX-License-Identifier: MIT
+// b21r_learn._core: the C environments of sim/env.h, the example drivers of lib/tasks and HEDGER
+// (lib/hedger/include/hedger/hedger.h) for Python, through nanobind. Thin on purpose: every
+// number is computed by the C libraries the robot runs; this file converts types and errors.
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/optional.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/tuple.h>
+#include <nanobind/stl/vector.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include <fw/checkpoint.h>
+#include <fw/config.h>
+#include <fw/loop.h>
+#include <fw/schedule.h>
+#include <hedger/hedger.h>
+#include <sim/env.h>
+#include <tasks/episode.h>
+#include <tasks/tasks.h>
+
+namespace nb = nanobind;
+using namespace nb::literals;
+
+namespace {
+
+// ---- arrays -------------------------------------------------------------------------------
+
+// A read-only view of caller memory: float64, 1-D, contiguous (no copy).
+using InVec = nb::ndarray<const double, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+// A caller buffer written in place.
+using OutF64 = nb::ndarray<double, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+using OutU32 = nb::ndarray<uint32_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+using NpF64 = nb::ndarray<nb::numpy, double, nb::ndim<1>>;
+using NpF64x2 = nb::ndarray<nb::numpy, double, nb::ndim<2>>;
+using NpU32 = nb::ndarray<nb::numpy, uint32_t, nb::ndim<1>>;
+
+// A new NumPy array owning a copy of n values (every returned state is a fresh array, so a
+// replay buffer that keeps it is never overwritten by the next step).
+template <typename T>
+nb::ndarray<nb::numpy, T, nb::ndim<1>> new_array(const T* values, size_t n) {
+  T* data = new T[n > 0 ? n : 1];
+  if (n > 0) std::memcpy(data, values, n * sizeof(T));
+  nb::capsule owner(data, [](void* p) noexcept { delete[] static_cast<T*>(p); });
+  return nb::ndarray<nb::numpy, T, nb::ndim<1>>(data, {n}, owner);
+}
+
+// ---- errors -------------------------------------------------------------------------------
+
+struct HedgerError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+void check_hedger(hedger_status_t st, const char* what) {
+  if (st == HEDGER_OK || st == HEDGER_NO_KNOWN_ACTION) return;
+  throw HedgerError(std::string(what) + ": " + hedger_status_str(st));
+}
+
+void check_env(sim_env_status_t st, const char* what) {
+  if (st == SIM_ENV_OK) return;
+  const std::string msg = std::string(what) + ": " + sim_env_status_str(st);
+  if (st == SIM_ENV_ERR_INVALID_ARG) throw nb::value_error(msg.c_str());
+  throw std::runtime_error(msg);
+}
+
+tasks_task_t parse_task(const std::string& s) {
+  if (s == "corridor") return TASKS_TASK_CORRIDOR;
+  if (s == "obstacles") return TASKS_TASK_OBSTACLES;
+  throw nb::value_error(("unknown task '" + s + "' (corridor, obstacles)").c_str());
+}
+
+// ---- configuration structs as keyword arguments --------------------------------------------
+
+// One settable field of a C struct: its name and how to read and write it from Python. A new
+// field of the C API is one more line in the tables below.
+template <typename S>
+struct Field {
+  const char* name;
+  nb::object (*get)(const S&);
+  void (*set)(S&, nb::handle);
+};
+
+#define B21R_F64(S, f) \
+  Field<S> { #f, [](const S& s) -> nb::object { return nb::float_(s.f); }, [](S& s, nb::handle v) { s.f = nb::cast<double>(v); } }
+#define B21R_U32(S, f) \
+  Field<S> { #f, [](const S& s) -> nb::object { return nb::int_(s.f); }, [](S& s, nb::handle v) { s.f = nb::cast<uint32_t>(v); } }
+#define B21R_U64(S, f) \
+  Field<S> { #f, [](const S& s) -> nb::object { return nb::int_(s.f); }, [](S& s, nb::handle v) { s.f = nb::cast<uint64_t>(v); } }
+
+template <typename S, size_t N>
+void apply_fields(S& s, const Field<S> (&table)[N], const nb::dict& kwargs, const char* what) {
+  for (auto [key, value] : kwargs) {
+    const std::string k = nb::cast<std::string>(key);
+    bool found = false;
+    for (const Field<S>& f : table) {
+      if (k == f.name) {
+        f.set(s, value);
+        found = true;
+        break;
+      }
+    }
+    if (!found) {
+      std::string names;
+      for (const Field<S>& f : table) names += std::string(names.empty() ? "" : ", ") + f.name;
+      throw nb::type_error((std::string(what) + ": unknown setting '" + k + "' (known: " + names + ")").c_str());
+    }
+  }
+}
+
+template <typename S, size_t N>
+nb::dict fields_dict(const S& s, const Field<S> (&table)[N]) {
+  nb::dict d;
+  for (const Field<S>& f : table) d[f.name] = f.get(s);
+  return d;
+}
+
+nb::object input_scale_get(const hedger_config_t& c) {
+  nb::list l;
+  for (uint32_t i = 0; i <= c.state_dim && i < HEDGER_MAX_INPUT_DIM; ++i) l.append(c.input_scale[i]);
+  return l;
+}
+
+void input_scale_set(hedger_config_t& c, nb::handle v) {
+  const std::vector<double> x = nb::cast<std::vector<double>>(v);
+  if (x.size() > HEDGER_MAX_INPUT_DIM) throw nb::value_error("input_scale: at most state_dim + 1 values");
+  for (size_t i = 0; i < x.size(); ++i) c.input_scale[i] = x[i];
+}
+
+const Field<hedger_config_t> kHedgerFields[] = {
+    B21R_U32(hedger_config_t, state_dim),
+    B21R_F64(hedger_config_t, action_min),
+    B21R_F64(hedger_config_t, action_max),
+    B21R_U32(hedger_config_t, capacity),
+    B21R_U32(hedger_config_t, k_min),
+    B21R_U32(hedger_config_t, k_max),
+    B21R_F64(hedger_config_t, bandwidth),
+    B21R_F64(hedger_config_t, weight_epsilon),
+    B21R_F64(hedger_config_t, ridge),
+    B21R_F64(hedger_config_t, alpha),
+    B21R_F64(hedger_config_t, gamma),
+    Field<hedger_config_t>{"input_scale", input_scale_get, input_scale_set},
+    B21R_F64(hedger_config_t, default_value),
+    B21R_U64(hedger_config_t, seed),
+    B21R_U32(hedger_config_t, greedy_coarse_actions),
+    B21R_U32(hedger_config_t, greedy_refine_iters),
+    B21R_U32(hedger_config_t, ivh_mode),
+    B21R_F64(hedger_config_t, merge_radius),
+    B21R_U32(hedger_config_t, evict_candidates),
+    B21R_U32(hedger_config_t, fresh_capacity),
+    B21R_U32(hedger_config_t, rebuild_work_per_update),
+    B21R_U32(hedger_config_t, run_capacity),
+    B21R_U32(hedger_config_t, replay),
+};
+
+nb::object pose_get(const features_pose_t& p) { return nb::make_tuple(p.x_m, p.y_m, p.theta_rad); }
+
+features_pose_t pose_from(nb::handle v) {
+  const auto t = nb::cast<std::tuple<double, double, double>>(v);
+  return features_pose_t{std::get<0>(t), std::get<1>(t), std::get<2>(t)};
+}
+
+template <typename S>
+nb::object eval_starts_get(const S& s) {
+  nb::list l;
+  for (const features_pose_t& p : s.eval_starts) l.append(pose_get(p));
+  return l;
+}
+
+template <typename S>
+void eval_starts_set(S& s, nb::handle v) {
+  const nb::list l = nb::cast<nb::list>(v);
+  if (l.size() != TASKS_N_EVAL_STARTS) throw nb::value_error("eval_starts: exactly 10 poses (x, y, theta)");
+  for (size_t i = 0; i < TASKS_N_EVAL_STARTS; ++i) s.eval_starts[i] = pose_from(l[i]);
+}
+
+nb::object obstacles_get(const tasks_obstacles_spec_t& s) {
+  nb::list l;
+  for (uint32_t k = 0; k < s.n_obstacles && k < TASKS_MAX_OBSTACLES; ++k)
+    l.append(nb::make_tuple(s.obstacles[k].x_m, s.obstacles[k].y_m, s.obstacles[k].radius_m));
+  return l;
+}
+
+void obstacles_set(tasks_obstacles_spec_t& s, nb::handle v) {
+  const nb::list l = nb::cast<nb::list>(v);
+  if (l.size() > TASKS_MAX_OBSTACLES) throw nb::value_error("obstacles: at most 4 (x, y, radius)");
+  s.n_obstacles = static_cast<uint32_t>(l.size());
+  for (size_t k = 0; k < l.size(); ++k) {
+    const auto t = nb::cast<std::tuple<double, double, double>>(l[k]);
+    s.obstacles[k] = tasks_circle_t{std::get<0>(t), std::get<1>(t), std::get<2>(t)};
+  }
+}
+
+using CSpec = tasks_corridor_spec_t;
+const Field<CSpec> kCorridorFields[] = {
+    B21R_F64(CSpec, length_m),        B21R_F64(CSpec, width_m),         B21R_F64(CSpec, goal_distance_m),
+    B21R_F64(CSpec, robot_radius_m),  B21R_F64(CSpec, v_centre_mps),    B21R_F64(CSpec, v_wall_mps),
+    B21R_F64(CSpec, dt_s),            B21R_U32(CSpec, step_limit),      B21R_F64(CSpec, goal_reward),
+    B21R_F64(CSpec, gamma),           B21R_F64(CSpec, lookahead_m),     B21R_F64(CSpec, train_jitter_x_m),
+    B21R_F64(CSpec, train_jitter_y_m), B21R_F64(CSpec, train_jitter_theta_rad),
+    Field<CSpec>{"eval_starts", eval_starts_get<CSpec>, eval_starts_set<CSpec>},
+};
+
+using OSpec = tasks_obstacles_spec_t;
+const Field<OSpec> kObstaclesFields[] = {
+    B21R_F64(OSpec, goal_x_m),         B21R_F64(OSpec, goal_y_m),       B21R_F64(OSpec, goal_radius_m),
+    B21R_F64(OSpec, arena_min_x_m),    B21R_F64(OSpec, arena_max_x_m),  B21R_F64(OSpec, arena_min_y_m),
+    B21R_F64(OSpec, arena_max_y_m),    B21R_F64(OSpec, robot_radius_m), B21R_F64(OSpec, v_mps),
+    B21R_F64(OSpec, dt_s),             B21R_U32(OSpec, step_limit),     B21R_F64(OSpec, goal_reward),
+    B21R_F64(OSpec, collision_reward), B21R_F64(OSpec, gamma),          B21R_F64(OSpec, train_jitter_x_m),
+    B21R_F64(OSpec, train_jitter_y_m), B21R_F64(OSpec, train_jitter_theta_rad),
+    Field<OSpec>{"obstacles", obstacles_get, obstacles_set},
+    Field<OSpec>{"eval_starts", eval_starts_get<OSpec>, eval_starts_set<OSpec>},
+};
+
+using Lim = tasks_command_limits_t;
+const Field<Lim> kLimitFields[] = {
+    B21R_F64(Lim, max_translation_mps),
+    B21R_F64(Lim, max_rotation_radps),
+    B21R_F64(Lim, max_translation_accel_mps2),
+    B21R_F64(Lim, max_rotation_accel_radps2),
+};
+
+// ---- environment --------------------------------------------------------------------------
+
+class Env {
+ public:
+  Env(const std::string& task, const std::string& backend, const nb::dict& spec, const nb::dict& limits,
+      nb::object laser_noise_sigma_m, nb::object laser_error_code_prob) {
+    sim_env_backend_t b;
+    if (backend == "ode") {
+      b = SIM_ENV_ODE;
+    } else if (backend == "kinematic") {
+      b = SIM_ENV_KINEMATIC;
+    } else {
+      throw nb::value_error(("unknown backend '" + backend + "' (ode, kinematic)").c_str());
+    }
+    sim_env_config_t cfg;
+    sim_env_config_default(&cfg, parse_task(task), b);
+    if (cfg.task == TASKS_TASK_CORRIDOR) {
+      apply_fields(cfg.corridor, kCorridorFields, spec, "corridor spec");
+    } else {
+      apply_fields(cfg.obstacles, kObstaclesFields, spec, "obstacles spec");
+    }
+    apply_fields(cfg.limits, kLimitFields, limits, "command limits");
+    if (!laser_noise_sigma_m.is_none()) cfg.laser_noise_sigma_m = nb::cast<double>(laser_noise_sigma_m);
+    if (!laser_error_code_prob.is_none()) cfg.laser_error_code_prob = nb::cast<double>(laser_error_code_prob);
+    char err[256] = "";
+    env_ = sim_env_create(&cfg, err, sizeof err);
+    if (env_ == nullptr) throw nb::value_error(err);
+    dim_ = sim_env_episode(env_)->state_dim;
+  }
+  ~Env() { sim_env_destroy(env_); }
+  Env(const Env&) = delete;
+  Env& operator=(const Env&) = delete;
+
+  void seed(uint64_t s) { check_env(sim_env_seed(env_, s), "seed"); }
+
+  NpF64 reset(int start, uint32_t eval_index, nb::object pose) {
+    const features_pose_t p = pose.is_none() ? features_pose_t{0.0, 0.0, 0.0} : pose_from(pose);
+    double state[TASKS_MAX_STATE_DIM];
+    check_env(sim_env_reset(env_, static_cast<sim_env_start_t>(start), eval_index, p, state), "reset");
+    return new_array(state, dim_);
+  }
+
+  // (state, reward, terminated, truncated, reason, executed action, translation, steps)
+  nb::tuple step(double action) {
+    sim_env_transition_t t;
+    check_env(sim_env_step(env_, action, &t), "step");
+    return nb::make_tuple(new_array(t.state, dim_), t.reward, t.terminated != 0, t.truncated != 0,
+                          static_cast<int>(t.reason), t.action_radps, t.translation_mps, t.steps);
+  }
+
+  uint32_t state_dim() const { return dim_; }
+
+  nb::tuple state_bounds() const {
+    double lo[TASKS_MAX_STATE_DIM], hi[TASKS_MAX_STATE_DIM];
+    sim_env_state_bounds(env_, lo, hi);
+    return nb::make_tuple(new_array(lo, dim_), new_array(hi, dim_));
+  }
+
+  double action_bound() const { return sim_env_get_config(env_)->limits.max_rotation_radps; }
+
+  nb::dict truth() const {
+    sim_env_truth_t t;
+    sim_env_get_truth(env_, &t);
+    nb::dict d;
+    d["pose"] = pose_get(t.pose);
+    d["start_pose"] = pose_get(sim_env_episode(env_)->start_in_task);
+    d["odometry_pose"] = pose_get(t.odom_pose);
+    d["v_mps"] = t.v_mps;
+    d["omega_radps"] = t.omega_radps;
+    d["collided"] = t.collided != 0;
+    d["time_s"] = t.time_s;
+    return d;
+  }
+
+  nb::tuple laser_view() {
+    double ranges[FEATURES_MAX_BEAMS];
+    double a0 = 0.0, inc = 0.0;
+    const size_t n = sim_env_laser_view(env_, &a0, &inc, ranges, FEATURES_MAX_BEAMS);
+    return nb::make_tuple(a0, inc, new_array(ranges, n));
+  }
+
+  nb::dict world() const {
+    const sim_world_t* w = sim_env_world(env_);
+    nb::list walls, cylinders;
+    for (size_t i = 0; i < w->n_walls; ++i) {
+      const sim_wall_t& wl = w->walls[i];
+      walls.append(nb::make_tuple(wl.x0_m, wl.y0_m, wl.x1_m, wl.y1_m, wl.thickness_m));
+    }
+    for (size_t i = 0; i < w->n_cylinders; ++i)
+      cylinders.append(nb::make_tuple(w->cylinders[i].x_m, w->cylinders[i].y_m, w->cylinders[i].radius_m));
+    nb::dict d;
+    d["name"] = std::string(w->name);
+    d["walls"] = walls;
+    d["cylinders"] = cylinders;
+    d["goal"] = w->has_goal ? nb::object(nb::make_tuple(w->goal.x_m, w->goal.y_m, w->goal.radius_m)) : nb::none();
+    d["bounds"] = nb::make_tuple(w->bounds_min_x_m, w->bounds_min_y_m, w->bounds_max_x_m, w->bounds_max_y_m);
+    const tasks_episode_t* ep = sim_env_episode(env_);
+    d["robot_radius_m"] = tasks_episode_robot_radius(ep);
+    const features_laser_mount_t& m = ep->task == TASKS_TASK_CORRIDOR ? ep->corridor_features.scan.mount
+                                                                       : ep->obstacles_features.scan.mount;
+    d["laser_mount"] = nb::make_tuple(m.x_m, m.y_m, m.yaw_rad);
+    return d;
+  }
+
+  // The task's settings in use (the spec, the limits), for reports and plots.
+  nb::dict spec() const {
+    const sim_env_config_t* c = sim_env_get_config(env_);
+    nb::dict d = c->task == TASKS_TASK_CORRIDOR ? fields_dict(c->corridor, kCorridorFields)
+                                                : fields_dict(c->obstacles, kObstaclesFields);
+    const tasks_episode_t* ep = sim_env_episode(env_);
+    d["omega_max_radps"] = tasks_episode_omega_max(ep);
+    d["limits"] = fields_dict(c->limits, kLimitFields);
+    d["laser_noise_sigma_m"] = c->laser_noise_sigma_m;
+    d["laser_error_code_prob"] = c->laser_error_code_prob;
+    return d;
+  }
+
+  // Feature details of the newest state (where each value came from).
+  nb::dict features() const {
+    const tasks_episode_t* ep = sim_env_episode(env_);
+    nb::dict d;
+    if (ep->task == TASKS_TASK_CORRIDOR) {
+      const features_corridor_t& f = ep->corridor_state;
+      d["offset_m"] = f.offset_m;
+      d["heading_rad"] = f.heading_rad;
+      d["width_m"] = f.width_m;
+      d["walls_seen"] = static_cast<int>(f.walls_seen);
+      d["end_wall_seen"] = f.end_wall_seen != 0;
+      d["lateral_source"] = static_cast<int>(f.lateral_source);
+      d["end_source"] = static_cast<int>(f.end_source);
+    } else {
+      const features_obstacles_t& f = ep->obstacles_state;
+      d["n_visible"] = static_cast<int>(f.n_visible);
+      d["nearest_any_m"] = f.nearest_any_m;
+      d["obstacle_visible"] = f.obstacle[0].visible != 0;
+    }
+    return d;
+  }
+
+  const sim_env_t* raw() const { return env_; }
+
+ private:
+  sim_env_t* env_ = nullptr;
+  uint32_t dim_ = 0;
+};
+
+// ---- example drivers ------------------------------------------------------------------------
+
+class Driver {
+ public:
+  Driver(const std::string& kind, const std::string& task, double omega_max_radps)
+      : task_(parse_task(task)), omega_max_(omega_max_radps) {
+    if (kind == "proportional") {
+      kind_ = TASKS_DRIVER_PROPORTIONAL;
+    } else if (kind == "human") {
+      kind_ = TASKS_DRIVER_HUMAN;
+    } else if (kind == "optimal") {
+      kind_ = TASKS_DRIVER_OPTIMAL;
+    } else {
+      throw nb::value_error(("unknown driver '" + kind + "' (proportional, human, optimal)").c_str());
+    }
+    begin_run(0);
+  }
+  void begin_run(uint64_t seed) { tasks_driver_begin_run(&d_, kind_, task_, omega_max_, seed); }
+  double act(const Env& env) {
+    if (sim_env_episode(env.raw())->task != task_) throw nb::value_error("the driver is for another task");
+    return sim_env_driver_action(env.raw(), &d_);
+  }
+  double gain() const { return d_.gain; }
+  void set_gain(double g) { d_.gain = g; }
+
+ private:
+  tasks_driver_t d_{};
+  tasks_driver_kind_t kind_ = TASKS_DRIVER_PROPORTIONAL;
+  tasks_task_t task_;
+  double omega_max_;
+};
+
+// ---- HEDGER -------------------------------------------------------------------------------
+
+struct Prediction {
+  double value;
+  int kind;
+  int fallback;
+  uint32_t n_neighbours;
+};
+
+Prediction to_py(const hedger_prediction_t& p) {
+  return Prediction{p.value, static_cast<int>(p.kind), static_cast<int>(p.fallback), p.n_neighbours};
+}
+
+class Hedger {
+ public:
+  explicit Hedger(const nb::kwargs& kwargs) {
+    hedger_config_t cfg = hedger_config_default();
+    apply_fields(cfg, kHedgerFields, kwargs, "Hedger");
+    check_hedger(hedger_config_validate(&cfg), "Hedger config");
+    check_hedger(hedger_create(&h_, &cfg), "hedger_create");
+  }
+  ~Hedger() { hedger_destroy(h_); }
+  Hedger(const Hedger&) = delete;
+  Hedger& operator=(const Hedger&) = delete;
+
+  static nb::dict default_config() {
+    const hedger_config_t c = hedger_config_default();
+    return fields_dict(c, kHedgerFields);
+  }
+  nb::dict config() const { return fields_dict(*hedger_get_config(h_), kHedgerFields); }
+  uint32_t state_dim() const { return hedger_get_config(h_)->state_dim; }
+
+  const double* state_ptr(const InVec& s, const char* what) const {
+    if (s.shape(0) != state_dim())
+      throw nb::value_error((std::string(what) + ": the state must have state_dim = " + std::to_string(state_dim()) +
+                             " values, got " + std::to_string(s.shape(0)))
+                                .c_str());
+    return s.data();
+  }
+
+  Prediction predict(const InVec& s, double a) {
+    hedger_prediction_t p;
+    check_hedger(hedger_predict(h_, state_ptr(s, "predict"), a, &p), "hedger_predict");
+    return to_py(p);
+  }
+
+  // Neighbours into the caller's arrays when given (no copy), else into new arrays.
+  nb::tuple predict_ex(const InVec& s, double a, std::optional<OutU32> slots, std::optional<OutF64> weights) {
+    const uint32_t kmax = hedger_get_config(h_)->k_max;
+    hedger_prediction_t p;
+    if (slots || weights) {
+      const size_t cap_s = slots ? slots->shape(0) : SIZE_MAX;
+      const size_t cap_w = weights ? weights->shape(0) : SIZE_MAX;
+      const uint32_t cap = static_cast<uint32_t>(std::min<size_t>({cap_s, cap_w, kmax}));
+      check_hedger(hedger_predict_ex(h_, state_ptr(s, "predict_ex"), a, &p, slots ? slots->data() : nullptr,
+                                     weights ? weights->data() : nullptr, cap),
+                   "hedger_predict_ex");
+      return nb::make_tuple(to_py(p), slots ? nb::cast(*slots) : nb::none(), weights ? nb::cast(*weights) : nb::none());
+    }
+    uint32_t sl[HEDGER_MAX_K];
+    double w[HEDGER_MAX_K];
+    check_hedger(hedger_predict_ex(h_, state_ptr(s, "predict_ex"), a, &p, sl, w, kmax), "hedger_predict_ex");
+    const size_t n = std::min<uint32_t>(p.n_neighbours, kmax);
+    return nb::make_tuple(to_py(p), new_array(sl, n), new_array(w, n));
+  }
+
+  // (action, value, kind, known): known = False when every candidate action is unknown.
+  nb::tuple greedy(const InVec& s) {
+    double a = 0.0, v = 0.0;
+    hedger_kind_t k = HEDGER_KIND_UNKNOWN;
+    const hedger_status_t st = hedger_greedy(h_, state_ptr(s, "greedy"), &a, &v, &k);
+    check_hedger(st, "hedger_greedy");
+    return nb::make_tuple(a, v, static_cast<int>(k), st == HEDGER_OK);
+  }
+
+  nb::dict update(const InVec& s, double a, double r, nb::object s_next, bool terminal) {
+    const double* sn = nullptr;
+    InVec next;
+    if (!s_next.is_none()) {
+      next = nb::cast<InVec>(s_next);
+      sn = state_ptr(next, "update (s_next)");
+    } else if (!terminal) {
+      throw nb::value_error("update: s_next is required unless terminal");
+    }
+    hedger_update_info_t info;
+    check_hedger(hedger_update(h_, state_ptr(s, "update"), a, r, sn, terminal ? 1 : 0, &info), "hedger_update");
+    nb::dict d;
+    d["next_known"] = info.next_status == HEDGER_OK;
+    d["next_action"] = info.next_action;
+    d["next_value"] = info.next_value;
+    d["next_kind"] = static_cast<int>(info.next_kind);
+    d["q_next"] = info.q_next;
+    d["q_old"] = info.q_old;
+    d["kind"] = static_cast<int>(info.kind);
+    d["target"] = info.target;
+    d["q_new"] = info.q_new;
+    d["n_pulled"] = info.n_pulled;
+    d["store_op"] = static_cast<int>(info.store_op);
+    return d;
+  }
+
+  uint32_t end_run() {
+    uint32_t replayed = 0;
+    check_hedger(hedger_end_run(h_, &replayed), "hedger_end_run");
+    return replayed;
+  }
+
+  int insert(const InVec& s, double a, double q, uint32_t flags) {
+    hedger_store_op_t op = HEDGER_STORE_NONE;
+    check_hedger(hedger_insert(h_, state_ptr(s, "insert"), a, q, flags, &op), "hedger_insert");
+    return static_cast<int>(op);
+  }
+
+  void observe_reward(double r) { check_hedger(hedger_observe_reward(h_, r), "hedger_observe_reward"); }
+
+  uint32_t size() const { return hedger_size(h_); }
+
+  nb::dict get_point(uint32_t slot) const {
+    hedger_point_t p;
+    check_hedger(hedger_get_point(h_, slot, &p), "hedger_get_point");
+    nb::dict d;
+    d["state"] = new_array(p.state, state_dim());
+    d["action"] = p.action;
+    d["value"] = p.value;
+    d["flags"] = p.flags;
+    return d;
+  }
+
+  // Every stored point: (states [n x state_dim], actions [n], values [n], flags [n]).
+  nb::tuple points() const {
+    const uint32_t n = hedger_size(h_);
+    const uint32_t d = state_dim();
+    double* st = new double[static_cast<size_t>(n) * d + 1];
+    std::vector<double> act(n), val(n);
+    std::vector<uint32_t> fl(n);
+    for (uint32_t i = 0; i < n; ++i) {
+      hedger_point_t p;
+      check_hedger(hedger_get_point(h_, i, &p), "hedger_get_point");
+      std::memcpy(st + static_cast<size_t>(i) * d, p.state, d * sizeof(double));
+      act[i] = p.action;
+      val[i] = p.value;
+      fl[i] = p.flags;
+    }
+    nb::capsule owner(st, [](void* q) noexcept { delete[] static_cast<double*>(q); });
+    NpF64x2 states(st, {n, d}, owner);
+    return nb::make_tuple(states, new_array(act.data(), n), new_array(val.data(), n), new_array(fl.data(), n));
+  }
+
+  nb::dict counters() const {
+    const hedger_counters_t* c = hedger_counters(h_);
+    nb::dict d;
+#define B21R_C(f) d[#f] = c->f
+    B21R_C(predictions_lwr);
+    B21R_C(predictions_lwa);
+    B21R_C(predictions_unknown);
+    B21R_C(fallback_hull);
+    B21R_C(fallback_implausible);
+    B21R_C(fallback_singular);
+    B21R_C(greedy_calls);
+    B21R_C(greedy_all_unknown);
+    B21R_C(updates);
+    B21R_C(replayed_updates);
+    B21R_C(run_overflows);
+    B21R_C(inserts);
+    B21R_C(merges);
+    B21R_C(evictions);
+    B21R_C(protected_evictions);
+    B21R_C(rebuilds);
+    B21R_C(forced_rebuild_work);
+    B21R_C(rejected_non_finite);
+    B21R_C(loads);
+    B21R_C(max_rebuild_work);
+    B21R_C(store_fill);
+    B21R_C(store_protected);
+    B21R_C(fresh_fill);
+    B21R_C(run_fill);
+    B21R_C(reward_min);
+    B21R_C(reward_max);
+#undef B21R_C
+    return d;
+  }
+
+  nb::bytes save() const {
+    const size_t n = hedger_serialized_size(h_);
+    std::vector<uint8_t> buf(n);
+    size_t written = 0;
+    check_hedger(hedger_save(h_, buf.data(), buf.size(), &written), "hedger_save");
+    return nb::bytes(reinterpret_cast<const char*>(buf.data()), written);
+  }
+
+  void load(const nb::bytes& data) { check_hedger(hedger_load(h_, data.c_str(), data.size()), "hedger_load"); }
+
+  size_t serialized_size() const { return hedger_serialized_size(h_); }
+  size_t serialized_max_size() const { return hedger_serialized_max_size(hedger_get_config(h_)); }
+
+ private:
+  hedger_t* h_ = nullptr;
+};
+
+// ---- the controller's files and settings ----------------------------------------------------
+
+// (meta, payload) of a controller checkpoint file (fw/checkpoint.h), verified by its CRCs.
+nb::tuple read_checkpoint(const std::string& path) {
+  char err[FW_CHECKPOINT_ERR_MAX] = "";
+  size_t meta_size = 0, payload_size = 0;
+  int r = fw_checkpoint_peek(path.c_str(), &meta_size, &payload_size, err, sizeof err);
+  if (r == 0) throw nb::value_error(("no checkpoint file at " + path).c_str());
+  if (r < 0) throw nb::value_error(err);
+  std::vector<uint8_t> meta(meta_size + 1), payload(payload_size + 1);
+  r = fw_checkpoint_read(path.c_str(), meta.data(), meta.size(), &meta_size, payload.data(), payload.size(),
+                         &payload_size, err, sizeof err);
+  if (r <= 0) throw nb::value_error(r == 0 ? ("no checkpoint file at " + path).c_str() : err);
+  return nb::make_tuple(nb::bytes(reinterpret_cast<const char*>(meta.data()), meta_size),
+                        nb::bytes(reinterpret_cast<const char*>(payload.data()), payload_size));
+}
+
+// The learner configuration the controller derives for a task from its default settings, with
+// `settings` applied as controller config keys (the ones of b21r-controller.conf).
+nb::dict controller_learner_config(const std::string& task, const nb::dict& settings) {
+  fw_config_t cfg;
+  fw_config_defaults(&cfg);
+  char err[FW_CONFIG_ERR_MAX] = "";
+  if (fw_config_set(&cfg, "task", task.c_str(), "controller_learner_config", err, sizeof err) != 0)
+    throw nb::value_error(err);
+  for (auto [key, value] : settings) {
+    const std::string k = nb::cast<std::string>(key);
+    const std::string v = nb::cast<std::string>(nb::str(value));
+    if (fw_config_set(&cfg, k.c_str(), v.c_str(), "controller_learner_config", err, sizeof err) != 0)
+      throw nb::value_error(err);
+  }
+  hedger_config_t hc;
+  fw_loop_learner_config(&cfg, &hc);
+  return fields_dict(hc, kHedgerFields);
+}
+
+// Mean and 95 % half-width (Student t) of a sample, as the controller's evaluation blocks report.
+nb::tuple mean_ci95(const std::vector<double>& values) {
+  double mean = 0.0, half = 0.0;
+  fw_mean_ci95(values.data(), static_cast<int32_t>(values.size()), &mean, &half);
+  return nb::make_tuple(mean, half);
+}
+
+}  // namespace
+
+NB_MODULE(_core, m) {
+  m.doc() = "C core of b21r_learn: the B21r task environments, example drivers and HEDGER.";
+  nb::exception<HedgerError>(m, "HedgerError", PyExc_ValueError);
+
+  nb::class_<Env>(m, "Env", "One task on one back-end (sim/env.h).")
+      .def(nb::init<const std::string&, const std::string&, const nb::dict&, const nb::dict&, nb::object, nb::object>(),
+           "task"_a, "backend"_a, "spec"_a = nb::dict(), "limits"_a = nb::dict(), "laser_noise_sigma_m"_a = nb::none(),
+           "laser_error_code_prob"_a = nb::none())
+      .def("seed", &Env::seed, "seed"_a)
+      .def("reset", &Env::reset, "start"_a, "eval_index"_a = 0, "pose"_a = nb::none())
+      .def("step", &Env::step, "action"_a)
+      .def_prop_ro("state_dim", &Env::state_dim)
+      .def_prop_ro("action_bound", &Env::action_bound)
+      .def("state_bounds", &Env::state_bounds)
+      .def("truth", &Env::truth)
+      .def("laser_view", &Env::laser_view)
+      .def("world", &Env::world)
+      .def("spec", &Env::spec)
+      .def("features", &Env::features);
+  m.attr("START_TRAINING") = static_cast<int>(SIM_ENV_START_TRAINING);
+  m.attr("START_EVAL") = static_cast<int>(SIM_ENV_START_EVAL);
+  m.attr("START_POSE") = static_cast<int>(SIM_ENV_START_POSE);
+  m.attr("N_EVAL_STARTS") = TASKS_N_EVAL_STARTS;
+
+  nb::class_<Driver>(m, "Driver", "An example driver of lib/tasks (phase one's teacher).")
+      .def(nb::init<const std::string&, const std::string&, double>(), "kind"_a, "task"_a, "omega_max_radps"_a = 1.0)
+      .def("begin_run", &Driver::begin_run, "seed"_a)
+      .def("act", &Driver::act, "env"_a)
+      .def_prop_rw("gain", &Driver::gain, &Driver::set_gain);
+
+  nb::class_<Prediction>(m, "Prediction", "A HEDGER prediction: value, kind (0 unknown, 1 LWA, 2 LWR), ...")
+      .def_ro("value", &Prediction::value)
+      .def_ro("kind", &Prediction::kind)
+      .def_ro("fallback", &Prediction::fallback)
+      .def_ro("n_neighbours", &Prediction::n_neighbours)
+      .def("__repr__", [](const Prediction& p) {
+        return "Prediction(value=" + std::to_string(p.value) + ", kind=" + hedger_kind_str(static_cast<hedger_kind_t>(p.kind)) +
+               ", n_neighbours=" + std::to_string(p.n_neighbours) + ")";
+      });
+
+  nb::class_<Hedger>(m, "Hedger", "HEDGER over its C API (hedger.h); settings as keyword arguments.")
+      .def(nb::init<const nb::kwargs&>())
+      .def_static("default_config", &Hedger::default_config)
+      .def_prop_ro("config", &Hedger::config)
+      .def_prop_ro("state_dim", &Hedger::state_dim)
+      .def("predict", &Hedger::predict, "state"_a, "action"_a)
+      .def("predict_ex", &Hedger::predict_ex, "state"_a, "action"_a, "slots"_a = nb::none(), "weights"_a = nb::none())
+      .def("greedy", &Hedger::greedy, "state"_a)
+      .def("update", &Hedger::update, "state"_a, "action"_a, "reward"_a, "state_next"_a.none(), "terminal"_a = false)
+      .def("end_run", &Hedger::end_run)
+      .def("insert", &Hedger::insert, "state"_a, "action"_a, "value"_a, "flags"_a = 0)
+      .def("observe_reward", &Hedger::observe_reward, "reward"_a)
+      .def("__len__", &Hedger::size)
+      .def("get_point", &Hedger::get_point, "slot"_a)
+      .def("points", &Hedger::points)
+      .def_prop_ro("counters", &Hedger::counters)
+      .def("save", &Hedger::save)
+      .def("load", &Hedger::load, "data"_a)
+      .def_prop_ro("serialized_size", &Hedger::serialized_size)
+      .def_prop_ro("serialized_max_size", &Hedger::serialized_max_size);
+  m.attr("POINT_PROTECTED") = HEDGER_POINT_PROTECTED;
+
+  m.def("read_checkpoint", &read_checkpoint, "path"_a);
+  m.def("mean_ci95", &mean_ci95, "values"_a,
+        "(mean, 95 % half-width) with Student's t, as the controller's evaluation blocks report them.");
+  m.def("controller_learner_config", &controller_learner_config, "task"_a, "settings"_a = nb::dict());
+}
