@@ -53,6 +53,9 @@ typedef struct exp_settings {
   char vary_key[64];
   char vary_values[EXP_MAX_VARIANTS][64];
   int32_t n_vary;
+  /// Controller keys the experiment needs (experiment.requires) that this controller lacks: the
+  /// experiment cannot run with this build ("" = none missing).
+  char missing[EXP_STR_MAX];
   // Exploration studies (kinds explore_*).
   int32_t explore_runs;            ///< runs per seed
   double explore_time_limit_s;     ///< simulated time limit of one run (one week: 604800)

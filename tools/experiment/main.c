@@ -29,7 +29,8 @@ static void usage(FILE* f) {
           "  --trace-svg FILE       overhead picture of the learning session's runs (kind learn)\n"
           "  --verbose              the controller's progress lines on stderr\n"
           "  --plan                 print the sweep plan as JSON: name, kind, seeds, variants\n"
-          "Exit status: 0 done; 1 the experiment failed (message on stderr); 2 usage or configuration error.\n");
+          "Exit status: 0 done; 1 the experiment failed (message on stderr); 2 usage or configuration error;\n"
+          "3 the experiment needs controller keys this build does not have (experiment.requires).\n");
 }
 
 static int print_plan(const exp_settings_t* s) {
@@ -40,6 +41,11 @@ static int print_plan(const exp_settings_t* s) {
   json_str(&w, "name", s->name);
   json_str(&w, "kind", kinds[s->kind]);
   json_str(&w, "title", s->title);
+  if (s->missing[0] != '\0') {
+    char why[EXP_STR_MAX + 96];
+    snprintf(why, sizeof why, "needs the controller key(s) %s, which this build does not have", s->missing);
+    json_str(&w, "unavailable", why);
+  }
   json_array(&w, "seeds");
   for (int32_t i = 0; i < s->seeds; ++i) {
     json_int(&w, NULL, s->first_seed + i);
@@ -146,12 +152,17 @@ int main(int argc, char** argv) {
     }
     ++i;
   }
-  if (exp_validate(&s, &cfg, err, sizeof err) != 0) {
+  if (s.missing[0] == '\0' && exp_validate(&s, &cfg, err, sizeof err) != 0) {
     fprintf(stderr, "b21r-experiment: %s: %s\n", config, err);
     return 2;
   }
   if (plan) {
     return print_plan(&s);
+  }
+  if (s.missing[0] != '\0') {
+    fprintf(stderr, "b21r-experiment: %s: needs the controller key(s) %s, which this build does not have\n", config,
+            s.missing);
+    return 3;
   }
   if (seed < 0 || out == NULL) {
     fprintf(stderr, "b21r-experiment: --seed N and --out FILE are required (see --help)\n");

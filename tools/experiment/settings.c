@@ -24,7 +24,7 @@ static void fmt(char* err, size_t cap, const char* format, ...) {
   va_end(ap);
 }
 
-typedef enum xkind { X_STRING, X_KIND, X_INT, X_DOUBLE, X_BOOL, X_REFS, X_VARY } xkind_t;
+typedef enum xkind { X_STRING, X_KIND, X_INT, X_DOUBLE, X_BOOL, X_REFS, X_VARY, X_REQUIRES } xkind_t;
 
 typedef struct xkey {
   const char* name;
@@ -61,6 +61,10 @@ static const xkey_t k_xkeys[] = {
   {"experiment.vary", X_VARY, 0, 0, 0, "",
    "one sweep axis, KEY=V1|V2|...: each value of a controller or experiment key is a variant with its "
    "own result files (\"\" = no variants)"},
+  {"experiment.requires", X_REQUIRES, 0, 0, 0, "",
+   "comma-separated controller keys the experiment needs (e.g. a learner variant of a newer "
+   "controller); when one is missing the runner refuses the experiment and the sweep skips it, saying "
+   "why. Put it before the lines that use those keys"},
   {"experiment.explore_runs", X_INT, XOFF(explore_runs), 1, 100000, "20",
    "explore_*: independent runs per seed"},
   {"experiment.explore_time_limit_s", X_DOUBLE, XOFF(explore_time_limit_s), 1, 1e8, "604800",
@@ -147,6 +151,24 @@ static int set_refs(exp_settings_t* s, const char* value, char* why, size_t cap)
   return 0;
 }
 
+static int set_requires(exp_settings_t* s, const char* value, char* why, size_t cap) {
+  s->missing[0] = '\0';
+  for (const char* p = value; p != NULL && *value != '\0';) {
+    char tok[64];
+    bool too_long = false;
+    p = next_token(p, ',', tok, sizeof tok, &too_long);
+    if (too_long || tok[0] == '\0') {
+      fmt(why, cap, "comma-separated key names of at most 63 characters");
+      return -1;
+    }
+    if (!fw_config_has_key(tok)) {
+      const size_t n = strlen(s->missing);
+      snprintf(s->missing + n, sizeof s->missing - n, "%s%s", n > 0 ? ", " : "", tok);
+    }
+  }
+  return 0;
+}
+
 static int set_vary(exp_settings_t* s, fw_config_t* cfg, const char* value, char* why, size_t cap) {
   exp_settings_t t = *s;
   t.n_vary = 0;
@@ -170,12 +192,15 @@ static int set_vary(exp_settings_t* s, fw_config_t* cfg, const char* value, char
       fmt(why, cap, "KEY=V1|V2|... with 1 to %d non-empty values of at most 63 characters", EXP_MAX_VARIANTS);
       return -1;
     }
-    // Every value must be valid for its key now, not only when its task runs.
+    // Every value must be valid for its key now, not only when its task runs (unless the key
+    // belongs to a controller this build does not have: the experiment is refused anyway).
     exp_settings_t probe_s = t;
     fw_config_t probe_c = *cfg;
     char inner[EXP_ERR_MAX];
-    if (strcmp(t.vary_key, "experiment.vary") == 0 ||
-        exp_set(&probe_s, &probe_c, t.vary_key, tok, "experiment.vary", inner, sizeof inner) != 0) {
+    const bool missing_key = strncmp(t.vary_key, "experiment.", 11) != 0 && !fw_config_has_key(t.vary_key) &&
+                             s->missing[0] != '\0';
+    if (!missing_key && (strcmp(t.vary_key, "experiment.vary") == 0 ||
+                         exp_set(&probe_s, &probe_c, t.vary_key, tok, "experiment.vary", inner, sizeof inner) != 0)) {
       fmt(why, cap, "value '%s' is not valid for '%s' (%s)", tok, t.vary_key, inner);
       return -1;
     }
@@ -207,6 +232,9 @@ static void describe(const xkey_t* k, char* out, size_t cap) {
       break;
     case X_VARY:
       snprintf(out, cap, "KEY=V1|V2|... or empty");
+      break;
+    case X_REQUIRES:
+      snprintf(out, cap, "comma-separated controller keys, or empty");
       break;
   }
 }
@@ -261,6 +289,9 @@ static int set_xkey(exp_settings_t* s, fw_config_t* cfg, const xkey_t* k, const 
       break;
     case X_VARY:
       ok = set_vary(s, cfg, value, why, sizeof why) == 0;
+      break;
+    case X_REQUIRES:
+      ok = set_requires(s, value, why, sizeof why) == 0;
       break;
   }
   if (ok) {
@@ -465,6 +496,16 @@ void exp_write_header(json_writer_t* w, const exp_settings_t* s, const fw_config
   json_str(w, "title", s->title);
   json_str(w, "kind", k_kind_names[s->kind]);
   json_str(w, "variant", task->variant);
+  // Position of the variant in experiment.vary (the first is the baseline of comparisons).
+  int32_t index = 0;
+  for (int32_t i = 0; i < s->n_vary; ++i) {
+    char label[160];
+    snprintf(label, sizeof label, "%s=%s", s->vary_key, s->vary_values[i]);
+    if (strcmp(label, task->variant) == 0) {
+      index = i;
+    }
+  }
+  json_int(w, "variant_index", index);
   json_int(w, "seed", (int64_t)task->seed);
   json_str(w, "command", task->command_line);
   // Every controller setting as the controller prints it, so a result names exactly what ran.

@@ -418,6 +418,8 @@ int fw_config_set(fw_config_t* cfg, const char* key, const char* value, const ch
   return -1;
 }
 
+bool fw_config_has_key(const char* key) { return find_key(key) != NULL; }
+
 void fw_config_defaults(fw_config_t* cfg) {
   memset(cfg, 0, sizeof *cfg);
   for (size_t i = 0; i < N_KEYS; ++i) {

@@ -161,6 +161,10 @@ void fw_config_defaults(fw_config_t* cfg);
 int fw_config_set(fw_config_t* cfg, const char* key, const char* value, const char* source,
                   char* err, size_t err_cap);
 
+/// True when `key` is a key of the controller (tools use it to tell an unknown key from a key of a
+/// newer controller). O(number of keys).
+bool fw_config_has_key(const char* key);
+
 /// Applies a `key=value` command-line override (the argument of `--set`). Same errors as
 /// fw_config_set, plus a missing `=`.
 int fw_config_set_arg(fw_config_t* cfg, const char* key_eq_value, char* err, size_t err_cap);
