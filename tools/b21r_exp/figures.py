@@ -10,7 +10,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from b21r_exp import analysis, results  # noqa: E402
+from b21r_exp import analysis, results, stats  # noqa: E402
 
 LEARN_FIGS = {
     "fig4_corridor_examples": "fig4_corridor_examples.png",
@@ -95,8 +95,8 @@ def obstacle_figures(S, title, fig_dir, command):
     s = [c["successes"][0] for c in curve]
     se = [0 if math.isnan(c["successes"][1]) else c["successes"][1] for c in curve]
     ax.errorbar(x, s, yerr=se, marker="s", color="black", capsize=3, label="learned policy")
-    _hline(ax, (S["seeds"][0]["refs"]["optimal"]["successes"], math.nan, 1) if "optimal" in S["seeds"][0]["refs"]
-           else (math.nan, math.nan, 0), "optimal (seed %d)" % S["seeds"][0]["seed"], "--", "#2ca02c")
+    _hline(ax, stats.mean_ci([s["refs"]["optimal"]["successes"] for s in S["seeds"] if "optimal" in s["refs"]]),
+           "optimal controller (same poses)", "--", "#2ca02c")
     sm, _, sn = S["switch_after"]
     if sn > 0:
         ax.axvline(sm, color="red", linewidth=0.8, linestyle="--")

@@ -5,7 +5,9 @@
 - --plan lists seeds x variants; an experiment needing controller keys this build lacks says so
   in its plan and is refused (exit 3) when run;
 - an exploration study writes a complete result (no temporary file left) and is a function of
-  its seed (same seed: same runs; another seed: other runs).
+  its seed (same seed: same runs; another seed: other runs);
+- corridor_length_m reaches the task and the emulator's world: the optimal controller needs
+  about (15 - 10) m / 0.6 m/s = 83 more steps in the 15 m corridor than in the 10 m one.
 usage: test_runner.py B21R_EXPERIMENT CONFIG_DIR"""
 import json
 import os
@@ -77,6 +79,23 @@ def main():
             fail("the same seed gave different runs")
         if outs[0] == outs[2]:
             fail("another seed gave the same runs")
+        steps = {}
+        for length in (10, 15):
+            out = os.path.join(d, "len%d.json" % length)
+            p = run(exe, "--config", os.path.join(configs, "fig4_corridor_examples.conf"), "--seed", "1", "--out", out,
+                    "--set", "corridor_length_m=%d" % length, "--set", "experiment.references=optimal",
+                    "--set", "phase_one_runs=1", "--set", "phase_two_runs=0", "--set", "eval_starts=1")
+            if p.returncode != 0:
+                fail("corridor %d m: %s" % (length, p.stderr))
+            with open(out) as f:
+                r = json.load(f)
+            ref = r["references"]["optimal"]
+            if ref["successes"] != 1 or r["world"] != "corridor%d" % length:
+                fail("corridor %d m: optimal did not reach the goal in world %s" % (length, r["world"]))
+            steps[length] = ref["steps"][0]
+        print("optimal controller: %d steps in 10 m, %d steps in 15 m" % (steps[10], steps[15]))
+        if not 70 <= steps[15] - steps[10] <= 100:
+            fail("the 15 m corridor should take about 83 more steps than the 10 m one")
     print("PASS")
     return 0
 

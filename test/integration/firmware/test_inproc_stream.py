@@ -6,9 +6,11 @@ b21r-controller over pseudo-terminals / the seqpacket CAN bus) for the same seed
 B21R_EXPERIENCE event logs are byte-identical. A different seed must give a different stream.
 Registered for rFLEX. On CANopen the streams are not identical today: the same poses and
 actions, but the laser noise differs from the first experience on (0.3 mm in the lateral
-state), because the pty start-up (CiA 402 enable over SYNC cycles in wall time, LMS200
-negotiation) lets the emulator emit a different number of scans before the first run than the
-in-process start-up does; `test_inproc_stream.py ... canopen` shows it.
+state). The emulator's scan counter shows why: for one training and one evaluation run the pty
+emulator emitted 3 scans more than the in-process session had ticks on CANopen, 2 on rFLEX, so
+the pty start-up (CiA 402 enable over SYNC cycles in wall time) lets one more period pass before
+the first run and the noise stream is shifted by one scan. `test_inproc_stream.py ... canopen`
+shows it.
 usage: test_inproc_stream.py CONTROLLER SIM EXPERIMENT WORLD rflex|canopen"""
 import hashlib
 import os
