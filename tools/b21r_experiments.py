@@ -126,11 +126,11 @@ def main():
                 say("  %s: %s" % (task.label(), err.splitlines()[-1] if err else "?"))
             status = 1
     if "merge" in commands:
-        for p in sweep.merge(args.out):
+        for p in sweep.merge(args.out, str(CONFIGS)):
             say("merged: %s" % p)
     fig_dir = os.path.join(os.path.dirname(os.path.abspath(args.report)), "figures")
     if "figures" in commands:
-        for p in figures.make_all(args.out, fig_dir):
+        for p in figures.make_all(args.out, fig_dir, str(CONFIGS)):
             say("figure: %s" % p)
     if "report" in commands:
         report.write(args.out, fig_dir, args.report, CONFIGS)

@@ -175,11 +175,11 @@ def command_for(name):
     return "tools/b21r_experiments.py run figures %s" % name
 
 
-def make_all(out, fig_dir, captions=None):
+def make_all(out, fig_dir, configs_dir, captions=None):
     """Writes every figure the results allow; returns their paths. captions (dict) gets
     {file name: caption}."""
     os.makedirs(fig_dir, exist_ok=True)
-    data = results.load(out)
+    data = results.load(out, configs_dir)
     made = []
     caps = captions if captions is not None else {}
     for name, variants in data.items():

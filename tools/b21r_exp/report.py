@@ -82,14 +82,14 @@ def curve_table(doc, S):
 
 
 def write(out, fig_dir, path, configs_dir):
-    data = results.load(out)
+    data = results.load(out, configs_dir)
     old = {}
     if os.path.exists(path):
         with open(path) as f:
             old = {m.group(1): m.group(2) for m in PROSE_RE.finditer(f.read())}
     doc = Doc(old)
     caps = {}
-    figures.make_all(out, fig_dir, caps)
+    figures.make_all(out, fig_dir, configs_dir, caps)
     rel = os.path.relpath(fig_dir, os.path.dirname(os.path.abspath(path)))
     repo = os.path.dirname(os.path.dirname(os.path.abspath(configs_dir)))
     doc.add("# Results: the paper's experiments in the emulated B21r", "",
@@ -250,7 +250,7 @@ def write(out, fig_dir, path, configs_dir):
             f, h = c["final"], c["hours"]
             doc.add("| %s vs %s | %s, %s%s | %s, %s%s |" % (
                 c["variant"], c["baseline"], fmt_ci(f["mean_diff"], f["ci"]), fmt_p(f["p"]),
-                " (significant)" if f["significant"] else "", fmt_ci(h["mean_diff"], h["ci"], 2), fmt_p(h["p"]),
+                " (significant)" if f["significant"] else "", fmt_ci(h["mean_diff"], h["ci"], 3), fmt_p(h["p"]),
                 " (significant)" if h["significant"] else ""))
         doc.add("")
         hours.append(hours_row(name + " (" + next(iter(variants)) + ")", summ[next(iter(variants))]))

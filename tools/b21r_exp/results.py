@@ -7,6 +7,7 @@ goal counts at the step limit in `mean_all`, beside `mean_succ`, the mean over s
 import json
 import math
 import os
+import re
 
 FORMAT = "b21r-experiment-result/1"
 SOURCES = ("example", "joystick", "advisor", "greedy", "exploration")
@@ -30,8 +31,24 @@ def read_result(path):
     return d if d.get("format") == FORMAT else None
 
 
-def load(out):
-    """{experiment: {variant: [result, ...] sorted by seed}} of every result under out."""
+def vary_order(configs_dir, experiment):
+    """The variants of experiment.vary in the order its file lists them (the first is the baseline
+    of comparisons), or [] when the file or the key is missing."""
+    try:
+        with open(os.path.join(configs_dir, experiment + ".conf")) as f:
+            for line in f:
+                m = re.match(r"\s*experiment\.vary\s*=\s*([^#]*)", line)
+                if m and "=" in m.group(1):
+                    key, values = m.group(1).strip().strip('"').split("=", 1)
+                    return ["%s=%s" % (key.strip(), v.strip()) for v in values.split("|")]
+    except OSError:
+        pass
+    return []
+
+
+def load(out, configs_dir=None):
+    """{experiment: {variant: [result, ...] sorted by seed}} of every result under out. Variants
+    follow the order of experiment.vary in configs_dir (else the order they were run with)."""
     root = os.path.join(out, "results")
     found = {}
     if not os.path.isdir(root):
@@ -45,8 +62,12 @@ def load(out):
             rs = sorted((r for r in rs if r is not None), key=lambda r: r["seed"])
             if rs:
                 found.setdefault(exp, {})[rs[0]["variant"]] = rs
-    # Variants in the order of experiment.vary (the first is the baseline of comparisons).
-    return {e: dict(sorted(v.items(), key=lambda kv: kv[1][0].get("variant_index", 0))) for e, v in found.items()}
+    ordered = {}
+    for e, v in found.items():
+        order = vary_order(configs_dir, e) if configs_dir else []
+        key = (lambda kv: order.index(kv[0]) if kv[0] in order else len(order) + kv[1][0].get("variant_index", 0))
+        ordered[e] = dict(sorted(v.items(), key=key))
+    return ordered
 
 
 def nan_mean(v):

@@ -139,9 +139,9 @@ def run(exe, plans, out, address=None, num_cpus=None, rerun=False, log=print):
     return failed
 
 
-def merge(out):
+def merge(out, configs_dir=None):
     """One file per experiment with every result (<out>/merged/<experiment>.json)."""
-    data = results.load(out)
+    data = results.load(out, configs_dir)
     paths = []
     for exp, variants in data.items():
         path = os.path.join(out, "merged", exp + ".json")

@@ -48,7 +48,7 @@ def main():
         p = run(exe, "--config", os.path.join(configs, "ablation_capacity.conf"), "--plan")
         plan = json.loads(p.stdout)
         if plan["seeds"] != list(range(1, 11)) or plan["variants"] != [
-                "hedger_capacity=500", "hedger_capacity=2000", "hedger_capacity=20000"]:
+                "hedger_capacity=20000", "hedger_capacity=2000", "hedger_capacity=500"]:
             fail("unexpected plan: %s" % plan)
         learner = os.path.join(configs, "ablation_learner.conf")
         plan = json.loads(run(exe, "--config", learner, "--plan").stdout)
