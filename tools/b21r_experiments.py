@@ -31,6 +31,7 @@ import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 REPO = b21r_bootstrap.REPO
 CONFIGS = REPO / "tools" / "experiments"
@@ -71,15 +72,15 @@ def ensure_runner(jobs):
     return str(build / "bin" / "b21r-experiment")
 
 
-def config_paths(names):
+def config_paths(configs, names):
     if not names:
-        return sorted(glob.glob(str(CONFIGS / "*.conf")))
+        return sorted(glob.glob(str(configs / "*.conf")))
     paths = []
     for n in names:
-        p = CONFIGS / (n if n.endswith(".conf") else n + ".conf")
+        p = configs / (n if n.endswith(".conf") else n + ".conf")
         if not p.exists():
-            known = ", ".join(sorted(os.path.basename(x)[:-5] for x in glob.glob(str(CONFIGS / "*.conf"))))
-            sys.exit("experiments: no experiment '%s' (tools/experiments/ has: %s)" % (n, known))
+            known = ", ".join(sorted(os.path.basename(x)[:-5] for x in glob.glob(str(configs / "*.conf"))))
+            sys.exit("experiments: no experiment '%s' (%s has: %s)" % (n, configs, known))
         paths.append(str(p))
     return paths
 
@@ -95,6 +96,8 @@ def main():
     ap.add_argument("--num-cpus", type=int, help="local Ray: CPUs to use (default: all)")
     ap.add_argument("--jobs", type=int, default=2, help="build parallelism (default 2)")
     ap.add_argument("--rerun", action="store_true", help="run finished tasks again")
+    ap.add_argument("--configs", default=str(CONFIGS), help="folder of the experiment files (default tools/experiments)")
+    ap.add_argument("--runner", help="use this b21r-experiment instead of building the host-release one")
     args = ap.parse_args()
     commands = [w for w in args.words if w in ("run", "figures", "report", "merge", "all")]
     names = [w for w in args.words if w not in commands]
@@ -106,10 +109,11 @@ def main():
     from b21r_exp import figures, report, sweep  # after the packages exist
 
     status = 0
+    configs = Path(args.configs).resolve()
     if "run" in commands:
-        exe = ensure_runner(args.jobs)
+        exe = os.path.abspath(args.runner) if args.runner else ensure_runner(args.jobs)
         plans = []
-        for c in config_paths(names):
+        for c in config_paths(configs, names):
             p = sweep.plan(exe, c, args.seeds)
             if "unavailable" in p:
                 say("skipping %s: %s" % (p["name"], p["unavailable"]))
@@ -126,14 +130,14 @@ def main():
                 say("  %s: %s" % (task.label(), err.splitlines()[-1] if err else "?"))
             status = 1
     if "merge" in commands:
-        for p in sweep.merge(args.out, str(CONFIGS)):
+        for p in sweep.merge(args.out, str(configs)):
             say("merged: %s" % p)
     fig_dir = os.path.join(os.path.dirname(os.path.abspath(args.report)), "figures")
     if "figures" in commands:
-        for p in figures.make_all(args.out, fig_dir, str(CONFIGS)):
+        for p in figures.make_all(args.out, fig_dir, str(configs)):
             say("figure: %s" % p)
     if "report" in commands:
-        report.write(args.out, fig_dir, args.report, CONFIGS)
+        report.write(args.out, fig_dir, args.report, str(configs))
         say("report: %s" % args.report)
     return status
 

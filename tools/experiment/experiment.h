@@ -102,6 +102,7 @@ void json_end_array(json_writer_t* w);
 void json_int(json_writer_t* w, const char* key, int64_t v);
 void json_num(json_writer_t* w, const char* key, double v);  ///< non-finite → null
 void json_bool(json_writer_t* w, const char* key, bool v);
+void json_null(json_writer_t* w, const char* key);
 void json_str(json_writer_t* w, const char* key, const char* v);
 
 /// What the runner was asked to do for one task.

@@ -12,7 +12,6 @@
 #include <tasks/tasks.h>
 
 #include <math.h>
-#include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>

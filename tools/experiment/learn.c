@@ -12,7 +12,6 @@
 #include <sim/task_worlds.h>
 #include <tasks/tasks.h>
 
-#include <math.h>
 #include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
@@ -389,7 +388,7 @@ static void write_learning(json_writer_t* w, const session_t* S, double dt_s) {
   if (switch_after >= 0) {
     json_int(w, "phase_switch_after_training_runs", switch_after);
   } else {
-    json_num(w, "phase_switch_after_training_runs", NAN);  // written as null: no switch
+    json_null(w, "phase_switch_after_training_runs");  // no switch
   }
   json_object(w, "totals");
   json_int(w, "training_runs", S->final.training_runs);

@@ -137,7 +137,7 @@ static int set_refs(exp_settings_t* s, const char* value, char* why, size_t cap)
     char tok[16];
     bool too_long = false;
     p = next_token(p, ',', tok, sizeof tok, &too_long);
-    if (too_long || (strcmp(tok, "optimal") != 0 && strcmp(tok, "example") != 0 && strcmp(tok, "learned") != 0)) {
+    if (too_long || (strcmp(tok, "optimal") != 0 && strcmp(tok, "example") != 0)) {
       fmt(why, cap, "a comma-separated list of optimal, example (values of evaluate_policy)");
       return -1;
     }
@@ -481,6 +481,11 @@ void json_num(json_writer_t* w, const char* key, double v) {
 void json_bool(json_writer_t* w, const char* key, bool v) {
   json_key(w, key);
   fputs(v ? "true" : "false", w->f);
+}
+
+void json_null(json_writer_t* w, const char* key) {
+  json_key(w, key);
+  fputs("null", w->f);
 }
 
 void json_str(json_writer_t* w, const char* key, const char* v) {
