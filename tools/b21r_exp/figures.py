@@ -155,7 +155,7 @@ def ablation_figure(name, variants, title, path, command):
         e = [0 if math.isnan(c["mean_all"][1]) else c["mean_all"][1] for c in S["curve"]]
         ax.errorbar([xi + 0.25 * i for xi in x], m, yerr=e, marker="o", capsize=2, label=v or "default")
     first = next(iter(summ.values()))
-    _hline(ax, first["refs"].get("optimal", (math.nan, math.nan, 0)), "optimal (same poses)", "--", "#2ca02c")
+    _hline(ax, first["refs"].get("optimal", (math.nan, math.nan, 0)), "optimal (same poses)", "--", "black")
     ax.set_xlabel("training runs")
     ax.set_ylabel("steps to the goal")
     ax.set_ylim(bottom=0)
