@@ -64,6 +64,9 @@ static const key_desc_t k_keys[] = {
    "policy evaluated when mode = evaluate (optimal = the hand-tuned reference controller)"},
   {NULL, "seed", KIND_U64, OFF(seed), 0, 9.2e18, false, false, NULL, "1",
    "root seed of every random generator (example gains, start poses, exploration)"},
+  {NULL, "corridor_length_m", KIND_DOUBLE, OFF(corridor_length_m), 4, 200, false, false, NULL, "10",
+   "corridor task: length from the start wall to the end wall [m]; must match the corridor driven "
+   "(the paper's first corridor and its simulation: 10 m)"},
 
   {"Loop timing", "tick_rate_hz", KIND_DOUBLE, OFF(tick_rate_hz), 1, 100, false, false, NULL, "10",
    "control rate; absolute deadlines on the monotonic clock"},
@@ -562,6 +565,8 @@ int fw_config_set(fw_config_t* cfg, const char* key, const char* value, const ch
   return -1;
 }
 
+bool fw_config_has_key(const char* key) { return find_key(key) != NULL; }
+
 void fw_config_defaults(fw_config_t* cfg) {
   memset(cfg, 0, sizeof *cfg);
   for (size_t i = 0; i < N_KEYS; ++i) {
@@ -646,6 +651,15 @@ int fw_config_set_arg(fw_config_t* cfg, const char* key_eq_value, char* err, siz
 }
 
 int fw_config_load_file(fw_config_t* cfg, const char* path, char* err, size_t err_cap) {
+  return fw_config_load_file_with(cfg, path, NULL, NULL, err, err_cap);
+}
+
+// Extra keys seen in one file, for the once-per-file rule (names are short; a file has few).
+#define EXTRA_SEEN_MAX 64
+#define EXTRA_KEY_MAX 64
+
+int fw_config_load_file_with(fw_config_t* cfg, const char* path, fw_config_extra_key_fn extra, void* user,
+                             char* err, size_t err_cap) {
   FILE* f = fopen(path, "r");
   if (f == NULL) {
     fmt(err, err_cap, "%s: cannot open config file: %s", path, strerror(errno));
@@ -655,6 +669,8 @@ int fw_config_load_file(fw_config_t* cfg, const char* path, char* err, size_t er
   char source[FW_CONFIG_STR_MAX + 32];
   bool seen[N_KEYS];
   memset(seen, 0, sizeof seen);
+  char extra_seen[EXTRA_SEEN_MAX][EXTRA_KEY_MAX];
+  size_t n_extra = 0;
   int line_no = 0;
   int rc = 0;
   while (fgets(line, sizeof line, f) != NULL) {
@@ -679,6 +695,28 @@ int fw_config_load_file(fw_config_t* cfg, const char* path, char* err, size_t er
       continue;
     }
     const key_desc_t* k = find_key(key);
+    if (k == NULL && extra != NULL) {
+      bool twice = false;
+      for (size_t i = 0; i < n_extra; ++i) {
+        twice = twice || strcmp(extra_seen[i], key) == 0;
+      }
+      if (twice) {
+        fmt(err, err_cap, "%s: key '%s' appears twice in this file", source, key);
+        rc = -1;
+        break;
+      }
+      const int r_extra = extra(user, key, value, source, err, err_cap);
+      if (r_extra < 0) {
+        rc = -1;
+        break;
+      }
+      if (r_extra == 0) {
+        if (n_extra < EXTRA_SEEN_MAX && strlen(key) < EXTRA_KEY_MAX) {
+          strcpy(extra_seen[n_extra++], key);
+        }
+        continue;
+      }
+    }
     if (k != NULL && seen[k - k_keys]) {
       fmt(err, err_cap, "%s: key '%s' appears twice in this file (first on line %u)", source, key,
           (unsigned)cfg->origins.key_line[k - k_keys]);

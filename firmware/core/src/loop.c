@@ -447,6 +447,7 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
   L->omega_max = cfg->max_rotation_radps;
 
   tasks_corridor_spec_default(&L->corridor);
+  L->corridor.length_m = cfg->corridor_length_m;
   L->corridor.omega_max_radps = L->omega_max;
   L->corridor.dt_s = L->dt_s;
   tasks_corridor_features_config(&L->corridor, &L->corridor_fc);

@@ -33,8 +33,14 @@ static void drain(fw_pubq_t* q, int* evals, int* successes) {
 
 static void run_case(bool canopen) {
   static inproc_sim_t sim;
+  static sim_world_t world;
   char err[FW_LOOP_ERR_MAX];
-  assert_int_equal(inproc_sim_open(&sim, g_world, canopen, 3, err, sizeof err), 0);
+  if (sim_world_load(g_world, &world, err, sizeof err) != SIM_WORLD_OK) {
+    fail_msg("world: %s", err);
+  }
+  const inproc_sim_options_t opt = {.canopen = canopen, .seed = 3, .trace_capacity = 16,
+                                    .alloc_probe = alloc_counter_peek};
+  assert_int_equal(inproc_sim_open(&sim, &world, &opt, err, sizeof err), 0);
   fw_config_t c;
   fw_config_defaults(&c);
   c.lockstep = true;

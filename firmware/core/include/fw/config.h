@@ -89,6 +89,7 @@ typedef struct fw_config {
   int32_t mode;                    ///< fw_mode_t
   int32_t evaluate_policy;         ///< fw_eval_policy_t (mode = evaluate only)
   uint64_t seed;                   ///< root of every random generator
+  double corridor_length_m;        ///< corridor task: start wall to end wall [m] (default 10)
 
   // Loop timing.
   double tick_rate_hz;             ///< control rate [1, 100], default 10
@@ -182,6 +183,10 @@ void fw_config_defaults(fw_config_t* cfg);
 int fw_config_set(fw_config_t* cfg, const char* key, const char* value, const char* source,
                   char* err, size_t err_cap);
 
+/// True when `key` is a key of the controller (tools use it to tell an unknown key from a key of a
+/// newer controller). O(number of keys).
+bool fw_config_has_key(const char* key);
+
 /// Applies a `key=value` command-line override (the argument of `--set`). Same errors as
 /// fw_config_set, plus a missing `=`.
 int fw_config_set_arg(fw_config_t* cfg, const char* key_eq_value, char* err, size_t err_cap);
@@ -190,6 +195,18 @@ int fw_config_set_arg(fw_config_t* cfg, const char* key_eq_value, char* err, siz
 /// -1 with the first error in err ("path:line: ..."), including an unreadable file. cfg may hold
 /// the keys of lines before the error. Lines longer than 1023 characters are an error.
 int fw_config_load_file(fw_config_t* cfg, const char* path, char* err, size_t err_cap);
+
+/// Handler of keys the controller does not know, for tools whose files add their own keys to the
+/// controller's format (e.g. the experiment runner's `experiment.*` keys). Returns 0 when it took
+/// the key, 1 when the key is not its either (the parser then reports an unknown key), -1 with a
+/// message in err naming source, key and value when the value is bad.
+typedef int (*fw_config_extra_key_fn)(void* user, const char* key, const char* value, const char* source,
+                                      char* err, size_t err_cap);
+
+/// fw_config_load_file, with keys unknown to the controller handed to `extra` (may be NULL:
+/// then it is fw_config_load_file). A key may appear once per file, extra keys included.
+int fw_config_load_file_with(fw_config_t* cfg, const char* path, fw_config_extra_key_fn extra, void* user,
+                             char* err, size_t err_cap);
 
 /// Cross-key checks after all sources were applied (e.g. 0.25° needs the 100° field, k_min ≤
 /// k_max, reposition = emulator needs emulator_control). Returns 0 or -1 with a message that

@@ -369,6 +369,59 @@ static void test_config_reference_file_matches_defaults(void** state) {
 }
 
 // Parsing and validation allocate only what stdio needs (no hidden growth per key).
+// Tools extend the format with keys of their own: the handler sees only keys the controller does
+// not know; it may take them, pass (then: unknown key) or refuse a value; each key once per file.
+typedef struct extra_seen {
+  int taken;
+  char last[64];
+} extra_seen_t;
+
+static int extra_handler(void* user, const char* key, const char* value, const char* source, char* err,
+                         size_t err_cap) {
+  extra_seen_t* x = (extra_seen_t*)user;
+  if (strncmp(key, "tool.", 5) != 0) {
+    return 1;
+  }
+  if (strcmp(value, "bad") == 0) {
+    snprintf(err, err_cap, "%s: bad value '%s' for key '%s'", source, value, key);
+    return -1;
+  }
+  x->taken++;
+  snprintf(x->last, sizeof x->last, "%s=%s", key, value);
+  return 0;
+}
+
+static void test_config_extra_keys_go_to_the_handler(void** state) {
+  (void)state;
+  fw_config_t c;
+  fw_config_defaults(&c);
+  char err[FW_CONFIG_ERR_MAX];
+  extra_seen_t x = {0, ""};
+  const char* p = write_tmp("x.conf", "tool.kind = sweep\nseed = 9\ncorridor_length_m = 15\ntool.n = 3\n");
+  assert_int_equal(fw_config_load_file_with(&c, p, extra_handler, &x, err, sizeof err), 0);
+  assert_int_equal(x.taken, 2);
+  assert_string_equal(x.last, "tool.n=3");
+  assert_true(c.seed == 9U && c.corridor_length_m == 15.0);
+  x.taken = 0;
+  assert_int_equal(fw_config_load_file_with(&c, write_tmp("y.conf", "tool.a = 1\ntool.a = 2\n"), extra_handler, &x,
+                                            err, sizeof err), -1);
+  assert_non_null(strstr(err, "y.conf:2"));
+  assert_non_null(strstr(err, "appears twice"));
+  assert_int_equal(fw_config_load_file_with(&c, write_tmp("z.conf", "tool.a = bad\n"), extra_handler, &x, err,
+                                            sizeof err), -1);
+  assert_non_null(strstr(err, "z.conf:1"));
+  assert_int_equal(fw_config_load_file_with(&c, write_tmp("w.conf", "other.a = 1\n"), extra_handler, &x, err,
+                                            sizeof err), -1);
+  assert_non_null(strstr(err, "unknown key 'other.a'"));
+  // Without a handler the tool's keys are unknown keys.
+  assert_int_equal(fw_config_load_file(&c, write_tmp("v.conf", "tool.a = 1\n"), err, sizeof err), -1);
+  assert_true(fw_config_has_key("corridor_length_m"));
+  assert_false(fw_config_has_key("tool.a"));
+  // The corridor length has a documented range.
+  assert_int_equal(fw_config_set(&c, "corridor_length_m", "3", "--set", err, sizeof err), -1);
+  assert_non_null(strstr(err, "[4, 200]"));
+}
+
 static void test_config_set_allocates_nothing(void** state) {
   (void)state;
   fw_config_t c;
@@ -397,6 +450,7 @@ int main(int argc, char** argv) {
       cmocka_unit_test(test_config_validate_cross_key_rules),
       cmocka_unit_test(test_config_validate_errors_carry_file_and_line),
       cmocka_unit_test(test_config_reference_file_matches_defaults),
+      cmocka_unit_test(test_config_extra_keys_go_to_the_handler),
       cmocka_unit_test(test_config_set_allocates_nothing),
   };
   return cmocka_run_group_tests_name("firmware.config", tests, setup, teardown);

@@ -2,16 +2,17 @@
 // In-process binding of the loop's I/O table to the ODE emulator (see inproc_sim.h).
 #include "inproc_sim.h"
 
-#include <b21r_test/alloc_counter.h>
-
 #include <stdio.h>
 #include <string.h>
 
-#define SIM_CALL(s, call)                               \
-  do {                                                  \
-    const uint64_t a0_ = alloc_counter_peek();          \
-    call;                                               \
-    (s)->sim_allocs += alloc_counter_peek() - a0_;      \
+// Every call into the emulator goes through this, so its allocations can be counted apart.
+#define SIM_CALL(s, call)                                                        \
+  do {                                                                           \
+    const uint64_t a0_ = (s)->opt.alloc_probe != NULL ? (s)->opt.alloc_probe() : 0; \
+    call;                                                                        \
+    if ((s)->opt.alloc_probe != NULL) {                                          \
+      (s)->sim_allocs += (s)->opt.alloc_probe() - a0_;                           \
+    }                                                                            \
   } while (0)
 
 // Moves the emulator's pending output into the binding's buffers; true when any is waiting.
@@ -19,7 +20,7 @@ static bool pull(inproc_sim_t* s) {
   size_t n = 0;
   SIM_CALL(s, n = sim_emu_laser_read(s->emu, s->laser_buf + s->laser_fill, sizeof s->laser_buf - s->laser_fill));
   s->laser_fill += (uint32_t)n;
-  if (!s->canopen) {
+  if (!s->opt.canopen) {
     SIM_CALL(s, n = sim_emu_base_read(s->emu, s->base_buf + s->base_fill, sizeof s->base_buf - s->base_fill));
     s->base_fill += (uint32_t)n;
   } else {
@@ -123,27 +124,24 @@ static const fw_io_vtable_t k_can = {v_now, v_wait,     v_laser_poll, v_laser_st
                                      NULL,  v_can_read, v_can_write,  v_request_start_pose};
 
 fw_io_t inproc_sim_io(inproc_sim_t* s) {
-  const fw_io_t io = {s->canopen ? &k_can : &k_rflex, s};
+  const fw_io_t io = {s->opt.canopen ? &k_can : &k_rflex, s};
   return io;
 }
 
-int inproc_sim_open(inproc_sim_t* s, const char* world_path, bool canopen, uint64_t seed, char* err, size_t cap) {
+int inproc_sim_open(inproc_sim_t* s, const sim_world_t* world, const inproc_sim_options_t* opt, char* err,
+                    size_t cap) {
   memset(s, 0, sizeof *s);
-  s->canopen = canopen;
+  s->opt = *opt;
   s->clock_us = 1000000;
-  static sim_world_t world;  // large; loaded once per open
-  if (sim_world_load(world_path, &world, err, cap) != SIM_WORLD_OK) {
-    return -1;
-  }
   sim_emu_config_t cfg;
   sim_emu_config_default(&cfg);
   cfg.mode = SIM_MODE_LOCKSTEP;
-  cfg.base = canopen ? SIM_BASE_CANOPEN : SIM_BASE_RFLEX;
-  cfg.seed = seed;
-  cfg.trace_capacity = 16;
-  s->emu = sim_emu_create(&world, &cfg);
+  cfg.base = opt->canopen ? SIM_BASE_CANOPEN : SIM_BASE_RFLEX;
+  cfg.seed = opt->seed;
+  cfg.trace_capacity = opt->trace_capacity < 16 ? 16 : opt->trace_capacity;
+  s->emu = sim_emu_create(world, &cfg);
   if (s->emu == NULL) {
-    snprintf(err, cap, "cannot create the emulator");
+    snprintf(err, cap, "cannot create the emulator (world '%s')", world->name);
     return -1;
   }
   (void)lms_decoder_init(&s->dec, LMS_ROLE_HOST, 0);

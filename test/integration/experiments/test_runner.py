@@ -1,0 +1,104 @@
+#!/usr/bin/env python3
+# SPDX-License-Identifier: MIT
+"""experiments.runner: b21r-experiment's contract with the sweep and with people.
+- a bad key or value in an experiment file is refused with the file, the line and the key;
+- --plan lists seeds x variants; an experiment needing controller keys this build lacks says so
+  in its plan and is refused (exit 3) when run;
+- an exploration study writes a complete result (no temporary file left) and is a function of
+  its seed (same seed: same runs; another seed: other runs);
+- corridor_length_m reaches the task and the emulator's world: the optimal controller needs
+  about (15 - 10) m / 0.6 m/s = 83 more steps in the 15 m corridor than in the 10 m one.
+usage: test_runner.py B21R_EXPERIMENT CONFIG_DIR"""
+import json
+import os
+import subprocess
+import sys
+import tempfile
+
+
+def fail(msg):
+    print("FAIL: " + msg)
+    sys.exit(1)
+
+
+def run(exe, *args):
+    return subprocess.run([exe, *args], capture_output=True, text=True)
+
+
+def main():
+    exe, configs = sys.argv[1:3]
+    with tempfile.TemporaryDirectory(prefix="b21r-runner-") as d:
+        bad = os.path.join(d, "bad.conf")
+        with open(bad, "w") as f:
+            f.write("task = corridor\nexperiment.seeds = 10\nhedger_capacity = lots\n")
+        p = run(exe, "--config", bad, "--plan")
+        if p.returncode != 2 or "bad.conf:3" not in p.stderr or "hedger_capacity" not in p.stderr:
+            fail("a bad value was not refused with file:line and key (%d): %s" % (p.returncode, p.stderr))
+        with open(bad, "w") as f:
+            f.write("experiment.vary = hedger_capacity=500|-3\n")
+        p = run(exe, "--config", bad, "--plan")
+        if p.returncode != 2 or "'-3'" not in p.stderr:
+            fail("a bad variant value was not refused (%d): %s" % (p.returncode, p.stderr))
+        with open(bad, "w") as f:
+            f.write("experiment.sedes = 3\n")
+        p = run(exe, "--config", bad, "--plan")
+        if p.returncode != 2 or "unknown key 'experiment.sedes'" not in p.stderr:
+            fail("an unknown experiment key was not refused (%d): %s" % (p.returncode, p.stderr))
+
+        p = run(exe, "--config", os.path.join(configs, "ablation_capacity.conf"), "--plan")
+        plan = json.loads(p.stdout)
+        if plan["seeds"] != list(range(1, 11)) or plan["variants"] != [
+                "hedger_capacity=20000", "hedger_capacity=2000", "hedger_capacity=500"]:
+            fail("unexpected plan: %s" % plan)
+        learner = os.path.join(configs, "ablation_learner.conf")
+        plan = json.loads(run(exe, "--config", learner, "--plan").stdout)
+        p = run(exe, "--config", learner, "--seed", "1", "--out", os.path.join(d, "x.json"))
+        if "unavailable" in plan:
+            if p.returncode != 3 or "learner" not in p.stderr:
+                fail("an unavailable experiment was not refused with exit 3 (%d): %s" % (p.returncode, p.stderr))
+        print("ablation_learner: %s" % plan.get("unavailable", "available"))
+
+        goal = os.path.join(configs, "table1_explore_goal.conf")
+        outs = []
+        for name, seed in (("a", 4), ("b", 4), ("c", 5)):
+            out = os.path.join(d, name + ".json")
+            p = run(exe, "--config", goal, "--seed", str(seed), "--variant", "experiment.explore_start_distance_m=2",
+                    "--set", "experiment.explore_runs=8", "--set", "experiment.explore_time_limit_s=3600", "--out", out)
+            if p.returncode != 0:
+                fail("explore_goal run failed: %s" % p.stderr)
+            if os.path.exists(out + ".tmp"):
+                fail("temporary result file left behind")
+            with open(out) as f:
+                r = json.load(f)
+            if r["format"] != "b21r-experiment-result/1" or len(r["explore"]["runs"]) != 8 or r["seed"] != seed:
+                fail("incomplete result: %s" % r)
+            if r["explore"]["start_distance_m"] != 2 or r["controller"]["task"] != "obstacles":
+                fail("the variant or the controller settings are not recorded: %s" % r["explore"])
+            outs.append(r["explore"]["runs"])
+        if outs[0] != outs[1]:
+            fail("the same seed gave different runs")
+        if outs[0] == outs[2]:
+            fail("another seed gave the same runs")
+        steps = {}
+        for length in (10, 15):
+            out = os.path.join(d, "len%d.json" % length)
+            p = run(exe, "--config", os.path.join(configs, "fig4_corridor_examples.conf"), "--seed", "1", "--out", out,
+                    "--set", "corridor_length_m=%d" % length, "--set", "experiment.references=optimal",
+                    "--set", "phase_one_runs=1", "--set", "phase_two_runs=0", "--set", "eval_starts=1")
+            if p.returncode != 0:
+                fail("corridor %d m: %s" % (length, p.stderr))
+            with open(out) as f:
+                r = json.load(f)
+            ref = r["references"]["optimal"]
+            if ref["successes"] != 1 or r["world"] != "corridor%d" % length:
+                fail("corridor %d m: optimal did not reach the goal in world %s" % (length, r["world"]))
+            steps[length] = ref["steps"][0]
+        print("optimal controller: %d steps in 10 m, %d steps in 15 m" % (steps[10], steps[15]))
+        if not 70 <= steps[15] - steps[10] <= 100:
+            fail("the 15 m corridor should take about 83 more steps than the 10 m one")
+    print("PASS")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,234 @@
+# SPDX-License-Identifier: MIT
+"""What the figures and the report show, computed once from the result files: learning curves
+across seeds, the comparators, and each claim of the paper with the test that decides it.
+
+Every claim is a dict: paper (what the paper says), measure (what we compare, with numbers),
+test (name and p), holds (True / False / None when the data cannot decide), and n (seeds)."""
+import math
+
+from b21r_exp import results, stats
+
+PAPER_HOURS = 2.0  # "all of the training was accomplished in approximately two hours"
+PAPER_TABLE1 = {1.0: (46.2, 2.03), 2.0: (25.0, 6.24), 3.0: (18.7, 6.54)}
+PAPER_FIRST_OBSTACLE_SUCCESS = 15  # phase-one runs before the first evaluation success (Fig. 9)
+
+
+def fmt_ci(m, hw, digits=1):
+    if m is None or math.isnan(m):
+        return "n/a"
+    if hw is None or math.isnan(hw):
+        return "%.*f" % (digits, m)
+    return "%.*f ± %.*f" % (digits, m, digits, hw)
+
+
+def fmt_p(p):
+    return "n/a" if p is None or math.isnan(p) else ("p < 0.001" if p < 0.001 else "p = %.3f" % p)
+
+
+def claim(paper, measure, test, holds, n):
+    return {"paper": paper, "measure": measure, "test": test, "holds": holds, "n": n}
+
+
+def paired_claim(paper, a_name, a, b_name, b, alternative, holds_if_significant=True):
+    t = stats.paired(a, b, alternative)
+    ma, ha, n = stats.mean_ci(a)
+    mb, hb, _ = stats.mean_ci(b)
+    measure = "%s %s vs %s %s steps; difference %s" % (a_name, fmt_ci(ma, ha), b_name, fmt_ci(mb, hb),
+                                                      fmt_ci(t["mean_diff"], t["ci"]))
+    holds = None if t["n"] < 2 else (t["significant"] if holds_if_significant else not t["significant"])
+    return claim(paper, measure, "%s, %s, n = %d seeds" % (t["test"], fmt_p(t["p"]), t["n"]), holds, t["n"])
+
+
+def learn_curve(seeds):
+    """Per evaluation block across seeds: training runs, phase, mean_all/mean_succ/successes
+    (mean, ci), and the fraction of seeds already in phase two."""
+    n_blocks = min(len(s["blocks"]) for s in seeds)
+    curve = []
+    for i in range(n_blocks):
+        bs = [s["blocks"][i] for s in seeds]
+        curve.append({
+            "training_runs": bs[0]["training_runs"],
+            "phase2_fraction": sum(1 for b in bs if b["phase"] == 2) / len(bs),
+            "mean_all": stats.mean_ci([b["mean_all"] for b in bs]),
+            "mean_succ": stats.mean_ci([b["mean_succ"] for b in bs]),
+            "successes": stats.mean_ci([b["successes"] for b in bs]),
+            "store_fill": stats.mean_ci([b["store_fill"] for b in bs]),
+        })
+    return curve
+
+
+def learn_summary(rs):
+    seeds = [results.learn_seed(r) for r in rs]
+    refs = sorted({k for s in seeds for k in s["refs"]})
+    return {
+        "n": len(seeds),
+        "seeds": seeds,
+        "seed_list": [s["seed"] for s in seeds],
+        "curve": learn_curve(seeds),
+        "best_example": stats.mean_ci([s["best_example"] for s in seeds]),
+        "mean_example": stats.mean_ci([s["mean_example"] for s in seeds]),
+        "refs": {k: stats.mean_ci([s["refs"][k]["mean_all"] for s in seeds if k in s["refs"]]) for k in refs},
+        "training_hours": stats.mean_ci([s["training_hours"] for s in seeds]),
+        "eval_hours": stats.mean_ci([s["eval_hours"] for s in seeds]),
+        "switch_after": stats.mean_ci([s["switch_after"] for s in seeds if s["switch_after"] is not None]),
+        "hours_to_switch": stats.mean_ci([s["training_hours_to_switch"] for s in seeds]),
+        "phase_two_sources": {k: stats.mean_ci([s["phase_two_sources"][k] for s in seeds])
+                              for k in results.SOURCES},
+        "wall_s": sum(s["wall_s"] for s in seeds),
+        "step_limit": seeds[0]["step_limit"],
+    }
+
+
+def _col(seeds, key, sub=None):
+    out = []
+    for s in seeds:
+        v = s.get(key)
+        if v is None:
+            out.append(math.nan)
+        elif sub is not None:
+            out.append(v[sub] if not isinstance(v, dict) or sub in v else math.nan)
+        else:
+            out.append(v)
+    return out
+
+
+def ref_col(seeds, name):
+    return [s["refs"][name]["mean_all"] if name in s["refs"] else math.nan for s in seeds]
+
+
+def corridor_claims(S, human):
+    """Claims of Figs. 4 and 5 (corridor)."""
+    seeds = S["seeds"]
+    n = S["n"]
+    out = []
+    p1 = _col(seeds, "last_phase_one", "mean_all")
+    fin = _col(seeds, "final", "mean_all")
+    first2 = _col(seeds, "first_phase_two", "mean_all")
+    if not human:
+        out.append(paired_claim(
+            "After 30 phase-one runs the learned policy is significantly better (95 %) than the shortest "
+            "phase-one training run (\"best example\").",
+            "learned, last phase-one block", p1, "best example (shortest phase-one run; jittered starts)",
+            _col(seeds, "best_example"), "less"))
+        out.append(paired_claim(
+            "(Fair form of the same claim) better than the example policy evaluated from the same 10 poses.",
+            "learned, last phase-one block", p1, "example policy at its nominal gain, same poses",
+            ref_col(seeds, "example"), "less"))
+    else:
+        out.append(paired_claim(
+            "After phase two the learned policy is significantly better than the phase-one (human) runs.",
+            "learned, final block", fin, "mean phase-one run (other start poses, same seed)",
+            _col(seeds, "mean_example"), "less"))
+        out.append(paired_claim(
+            "(Same poses) better than the example policy evaluated from the same 10 poses.",
+            "learned, final block", fin, "example policy at its nominal gain, same poses",
+            ref_col(seeds, "example"), "less"))
+    out.append(paired_claim(
+        "At the end the learned policy is indistinguishable (95 %) from \"optimal\" (tested as: not "
+        "significantly worse, one-sided).",
+        "learned, final block", fin, "optimal controller, same poses", ref_col(seeds, "optimal"), "greater",
+        holds_if_significant=False))
+    out.append(paired_claim(
+        "The first evaluation after the switch is worse than the last phase-one evaluation (the dip).",
+        "first phase-two block", first2, "last phase-one block", p1, "greater"))
+    out.append(paired_claim(
+        "After the dip the learned policy keeps improving in phase two.",
+        "final block", fin, "first phase-two block", first2, "less"))
+    all10 = [all(b["successes"] == b["n"] for b in s["phase_two_blocks"]) for s in seeds]
+    out.append(claim("(Issue 10) The goal is reached from all 10 poses in every phase-two block.",
+                     "%d of %d seeds" % (sum(all10), n), "count (every seed must)", n > 0 and all(all10), n))
+    return out
+
+
+def obstacle_claims(S):
+    seeds = S["seeds"]
+    n = S["n"]
+    out = []
+    firsts = [s["first_success_after"] for s in seeds]
+    found = [f for f in firsts if f is not None]
+    m, hw, k = stats.mean_ci(found)
+    out.append(claim(
+        "The learned policy first reaches the goal after about %d phase-one runs (Fig. 9)." % PAPER_FIRST_OBSTACLE_SUCCESS,
+        "first block with a success after %s training runs (%d of %d seeds ever succeed)" % (fmt_ci(m, hw), k, n),
+        "mean with 95 %% CI; the paper's value inside the interval: %s" % (
+            "yes" if k >= 2 and abs(m - PAPER_FIRST_OBSTACLE_SUCCESS) <= hw else "no"),
+        None if k < 2 else abs(m - PAPER_FIRST_OBSTACLE_SUCCESS) <= hw, k))
+    fin_succ = _col(seeds, "final", "successes")
+    all10 = sum(1 for x in fin_succ if x == 10)
+    out.append(claim("Once it reaches the goal from one pose it quickly learns to reach it from all of them.",
+                     "final block: %s of 10 poses reached; all 10 in %d of %d seeds" % (
+                         fmt_ci(*stats.mean_ci(fin_succ)[:2]), all10, n),
+                     "count (every seed must reach all 10 in the final block)", n > 0 and all10 == n, n))
+    out.append(paired_claim(
+        "The final steps to the goal are not significantly different (95 %) from \"optimal\" (successful runs).",
+        "learned, final block (successful runs)", _col(seeds, "final", "mean_succ"),
+        "optimal controller (successful runs), same poses",
+        [s["refs"]["optimal"]["mean_succ"] if "optimal" in s["refs"] else math.nan for s in seeds], "two-sided",
+        holds_if_significant=False))
+    out.append(paired_claim(
+        "The slight decrease just after the phase switch (steps, failures at the step limit).",
+        "first phase-two block", _col(seeds, "first_phase_two", "mean_all"), "last phase-one block",
+        _col(seeds, "last_phase_one", "mean_all"), "greater"))
+    return out
+
+
+def hours_claim(S):
+    m, hw, n = S["training_hours"]
+    holds = None if n < 2 else abs(m - PAPER_HOURS) <= max(hw, 0.5)
+    return claim("All of the training took approximately two hours of driving.",
+                 "%s h of training driving (plus %s h of evaluation runs)" % (fmt_ci(m, hw, 2), fmt_ci(*S["eval_hours"][:2], 2)),
+                 "mean with 95 % CI across seeds; \"approximately two hours\" taken as within ±0.5 h", holds, n)
+
+
+def explore_corridor_summary(variants):
+    rows = []
+    for var, rs in sorted(variants.items(), key=lambda kv: float(results.variant_value(kv[0]) or 0)):
+        seeds = [results.explore_seed(r) for r in rs]
+        times = [t for s in seeds for t, ok in zip(s["times_h"], s["success"]) if ok]
+        rows.append({"limit": float(results.variant_value(var)), "n_seeds": len(seeds),
+                     "runs": sum(s["runs"] for s in seeds), "successes": sum(s["successes"] for s in seeds),
+                     "hours": stats.mean_ci([s["mean_hours_succ"] for s in seeds]),
+                     "min_h": min(times) if times else math.nan,
+                     "median_h": sorted(times)[len(times) // 2] if times else math.nan,
+                     "times_h": times, "seeds": [s["seed"] for s in seeds],
+                     "wall_s": sum(s["wall_s"] for s in seeds), "limit_h": seeds[0]["limit_h"]})
+    return rows
+
+
+def explore_goal_summary(variants):
+    rows = []
+    for var, rs in sorted(variants.items(), key=lambda kv: float(results.variant_value(kv[0]) or 0)):
+        seeds = [results.explore_seed(r) for r in rs]
+        d = float(results.variant_value(var))
+        k = sum(s["successes"] for s in seeds)
+        n = sum(s["runs"] for s in seeds)
+        paper = PAPER_TABLE1.get(d)
+        rows.append({"distance": d, "n_seeds": len(seeds), "runs": n, "successes": k,
+                     "fraction": stats.mean_ci([s["fraction"] for s in seeds]),
+                     "pooled": stats.binomial(k, n, paper[0] / 100.0 if paper else 0.5, "two-sided"),
+                     "hours": stats.mean_ci([s["mean_hours_succ"] for s in seeds]),
+                     "paper": paper, "seeds": [s["seed"] for s in seeds],
+                     "wall_s": sum(s["wall_s"] for s in seeds), "limit_h": seeds[0]["limit_h"]})
+    return rows
+
+
+def ablation_comparisons(variants):
+    """Every variant against the first one (the baseline order of experiment.vary), paired by seed:
+    final block (failures at the step limit), training hours, phase switch point."""
+    names = list(variants.keys())
+    summ = {v: learn_summary(rs) for v, rs in variants.items()}
+    base = names[0]
+    comps = []
+    for v in names[1:]:
+        a = {s["seed"]: s for s in summ[v]["seeds"]}
+        b = {s["seed"]: s for s in summ[base]["seeds"]}
+        common = sorted(set(a) & set(b))
+        fa = [a[s]["final"]["mean_all"] for s in common]
+        fb = [b[s]["final"]["mean_all"] for s in common]
+        ha = [a[s]["training_hours"] for s in common]
+        hb = [b[s]["training_hours"] for s in common]
+        comps.append({"variant": v, "baseline": base,
+                      "final": stats.paired(fa, fb, "two-sided"),
+                      "hours": stats.paired(ha, hb, "two-sided"),
+                      "same_data": all(a[s]["digest"] == b[s]["digest"] for s in common)})
+    return summ, comps

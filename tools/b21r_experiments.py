@@ -1,0 +1,146 @@
+#!/usr/bin/env python3
+# SPDX-License-Identifier: MIT
+"""b21r_experiments: reproduce the paper's experiments (Smart & Kaelbling, ICRA 2002) in the
+emulator, over many seeds, and regenerate the figures and docs/RESULTS.md.
+
+Commands (default: all):
+  run      build b21r-experiment (host-release preset) and run the sweep of the chosen
+           experiments (tools/experiments/<name>.conf; default: every one) as Ray tasks, one
+           result file per (experiment, variant, seed) under OUT/results; finished tasks are
+           skipped (run again to resume; --rerun to redo)
+  figures  the paper-style figures (PNG, with captions) from the result files
+  report   docs/RESULTS.md: our numbers next to the paper's claims, every yes/no from a test
+  merge    one JSON per experiment with all its results (OUT/merged)
+  all      run, merge, figures, report
+On first use it installs the sweep's Python packages (tools/requirements-experiments.txt: Ray,
+SciPy) into build/venv. Ray runs on this machine with all its cores unless --num-cpus or a
+cluster --address is given; it is shut down when the command ends.
+Examples:
+  tools/b21r_experiments.py                                    # everything, 10 seeds each
+  tools/b21r_experiments.py run fig4_corridor_examples --seeds 3
+  tools/b21r_experiments.py figures report
+"""
+import b21r_bootstrap  # noqa: E402 (first: runs the tool in the project's venv)
+
+b21r_bootstrap.ensure(need_types=False)
+
+import argparse
+import glob
+import hashlib
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+REPO = b21r_bootstrap.REPO
+CONFIGS = REPO / "tools" / "experiments"
+REQUIREMENTS = REPO / "tools" / "requirements-experiments.txt"
+STAMP = b21r_bootstrap.VENV / ".requirements-experiments.sha256"
+PRESET = "host-release"
+
+
+def say(msg):
+    print("experiments: %s" % msg, flush=True)
+
+
+def ensure_packages():
+    """Installs tools/requirements-experiments.txt into the venv when it changed since last time."""
+    want = hashlib.sha256(REQUIREMENTS.read_bytes()).hexdigest()
+    if STAMP.exists() and STAMP.read_text().strip() == want:
+        return
+    say("installing the sweep's Python packages (%s) into %s" % (REQUIREMENTS.name, b21r_bootstrap.VENV))
+    subprocess.check_call([sys.executable, "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
+                           "-r", str(REQUIREMENTS)])
+    STAMP.write_text(want + "\n")
+
+
+def ensure_runner(jobs):
+    """Configures (once) and builds b21r-experiment in the host-release preset; returns its path."""
+    build = REPO / "build" / PRESET
+    log = REPO / "build" / "experiments-build.log"
+    log.parent.mkdir(parents=True, exist_ok=True)
+    with open(log, "w") as f:
+        if not (build / "build.ninja").exists():
+            say("configuring the %s preset" % PRESET)
+            if subprocess.call(["cmake", "--preset", PRESET], cwd=REPO, stdout=f, stderr=subprocess.STDOUT) != 0:
+                sys.exit("experiments: configuring failed (log: %s)" % log)
+        say("building b21r-experiment (%s preset, -j%d)" % (PRESET, jobs))
+        if subprocess.call(["cmake", "--build", "--preset", PRESET, "-j", str(jobs), "--target", "b21r_experiment"],
+                           cwd=REPO, stdout=f, stderr=subprocess.STDOUT) != 0:
+            sys.exit("experiments: building b21r-experiment failed (log: %s)" % log)
+    return str(build / "bin" / "b21r-experiment")
+
+
+def config_paths(configs, names):
+    if not names:
+        return sorted(glob.glob(str(configs / "*.conf")))
+    paths = []
+    for n in names:
+        p = configs / (n if n.endswith(".conf") else n + ".conf")
+        if not p.exists():
+            known = ", ".join(sorted(os.path.basename(x)[:-5] for x in glob.glob(str(configs / "*.conf"))))
+            sys.exit("experiments: no experiment '%s' (%s has: %s)" % (n, configs, known))
+        paths.append(str(p))
+    return paths
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("words", nargs="*", metavar="COMMAND|EXPERIMENT",
+                    help="commands (run, figures, report, merge, all) then experiment names")
+    ap.add_argument("--seeds", type=int, help="seeds per experiment (default: each file's experiment.seeds)")
+    ap.add_argument("--out", default=str(REPO / "build" / "experiments"), help="results folder (default build/experiments)")
+    ap.add_argument("--report", default=str(REPO / "docs" / "RESULTS.md"), help="report file; figures go to its figures/")
+    ap.add_argument("--address", help="Ray cluster address (default: a local Ray on this machine)")
+    ap.add_argument("--num-cpus", type=int, help="local Ray: CPUs to use (default: all)")
+    ap.add_argument("--jobs", type=int, default=2, help="build parallelism (default 2)")
+    ap.add_argument("--rerun", action="store_true", help="run finished tasks again")
+    ap.add_argument("--configs", default=str(CONFIGS), help="folder of the experiment files (default tools/experiments)")
+    ap.add_argument("--runner", help="use this b21r-experiment instead of building the host-release one")
+    args = ap.parse_args()
+    commands = [w for w in args.words if w in ("run", "figures", "report", "merge", "all")]
+    names = [w for w in args.words if w not in commands]
+    if not commands:
+        commands = ["all"]
+    if "all" in commands:
+        commands = ["run", "merge", "figures", "report"]
+    ensure_packages()
+    from b21r_exp import figures, report, sweep  # after the packages exist
+
+    status = 0
+    configs = Path(args.configs).resolve()
+    if "run" in commands:
+        exe = os.path.abspath(args.runner) if args.runner else ensure_runner(args.jobs)
+        plans = []
+        for c in config_paths(configs, names):
+            p = sweep.plan(exe, c, args.seeds)
+            if "unavailable" in p:
+                say("skipping %s: %s" % (p["name"], p["unavailable"]))
+                continue
+            plans.append(p)
+        os.environ["PYTHONPATH"] = os.pathsep.join([str(REPO / "tools")] + [x for x in os.environ.get("PYTHONPATH", "").split(os.pathsep) if x])
+        t0 = time.time()
+        failed = sweep.run(exe, plans, args.out, address=args.address, num_cpus=args.num_cpus, rerun=args.rerun,
+                           log=lambda m: print(m, flush=True))
+        say("sweep finished in %.0f s" % (time.time() - t0))
+        if failed:
+            say("%d task(s) FAILED (their results are missing; the others are kept):" % len(failed))
+            for task, err in failed:
+                say("  %s: %s" % (task.label(), err.splitlines()[-1] if err else "?"))
+            status = 1
+    if "merge" in commands:
+        for p in sweep.merge(args.out, str(configs)):
+            say("merged: %s" % p)
+    fig_dir = os.path.join(os.path.dirname(os.path.abspath(args.report)), "figures")
+    if "figures" in commands:
+        for p in figures.make_all(args.out, fig_dir, str(configs)):
+            say("figure: %s" % p)
+    if "report" in commands:
+        report.write(args.out, fig_dir, args.report, str(configs))
+        say("report: %s" % args.report)
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,133 @@
+// SPDX-License-Identifier: MIT
+/// experiment.h — b21r-experiment: one experiment of the paper, for one seed, in one process.
+///
+/// An experiment file is a controller config file (fw/config.h: the same format and the same
+/// keys, e.g. `task`, `phase_one_driver`, `hedger_capacity`, `phase_switch`) plus keys of the
+/// form `experiment.*` that say what to run around the controller (kind, seeds, references,
+/// the variants of a sweep, the exploration studies' settings). The keys are documented in
+/// one table (settings.c), printed by `b21r-experiment --print-reference-config`.
+///
+/// Kinds:
+/// - learn: the controller's two-phase schedule against the ODE emulator linked in-process
+///   (inproc_sim.h), then each reference controller (mode = evaluate) from the same 10 poses
+///   against a fresh emulator with the same seed. Result: every evaluation block, every run,
+///   who drove each step, store fill, simulated driving time (learn.c).
+/// - explore_corridor: the paper's Fig. 6 study on the idealised kinematic model: uniformly
+///   random rotation in [-limit, limit] from the corridor's start until the first reward.
+/// - explore_goal: the paper's Table I study: the obstacle-free goal task, rotation ~ N(0, var),
+///   from a start distance, pointing at the goal, up to a time limit (explore.c).
+///
+/// One invocation = one (experiment, variant, seed) = one result file (JSON, written atomically:
+/// temporary file, fsync, rename), so a sweep can skip finished tasks and merge results.
+/// Not on any real-time path: allocation and stdio are free here.
+#ifndef B21R_TOOLS_EXPERIMENT_H
+#define B21R_TOOLS_EXPERIMENT_H
+
+#include "fw/config.h"
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+
+#define EXP_STR_MAX 256U
+#define EXP_ERR_MAX 768U
+#define EXP_MAX_REFERENCES 4
+#define EXP_MAX_VARIANTS 16
+
+typedef enum exp_kind { EXP_LEARN = 0, EXP_EXPLORE_CORRIDOR = 1, EXP_EXPLORE_GOAL = 2 } exp_kind_t;
+
+/// The settings of an experiment beyond the controller's.
+typedef struct exp_settings {
+  char name[EXP_STR_MAX];          ///< identifier (result folder name); default: the file's base name
+  char title[EXP_STR_MAX];         ///< one line for figures and the report
+  int32_t kind;                    ///< exp_kind_t
+  int32_t seeds;                   ///< seeds of a sweep: first_seed .. first_seed + seeds - 1
+  int32_t first_seed;
+  char world[EXP_STR_MAX];         ///< world file ("" = built from the task's specification)
+  char config_dir[EXP_STR_MAX];    ///< folder of the experiment file (relative paths start there)
+  /// Reference controllers evaluated from the evaluation poses (values of evaluate_policy).
+  char references[EXP_MAX_REFERENCES][16];
+  int32_t n_references;
+  /// One sweep axis: `key=v1|v2|...` over a controller or experiment key ("" = no variants).
+  char vary_key[64];
+  char vary_values[EXP_MAX_VARIANTS][64];
+  int32_t n_vary;
+  /// Controller keys the experiment needs (experiment.requires) that this controller lacks: the
+  /// experiment cannot run with this build ("" = none missing).
+  char missing[EXP_STR_MAX];
+  // Exploration studies (kinds explore_*).
+  int32_t explore_runs;            ///< runs per seed
+  double explore_time_limit_s;     ///< simulated time limit of one run (one week: 604800)
+  double explore_omega_max_radps;  ///< explore_corridor: rotation drawn uniformly in [-max, max]
+  double explore_omega_variance;   ///< explore_goal: rotation ~ N(0, variance) [rad^2/s^2]
+  double explore_start_distance_m; ///< explore_goal: start distance from the goal [m]
+  double explore_start_x_m;        ///< explore_corridor: start distance from the start wall [m]
+  bool explore_accel_limits;       ///< use the B21r's acceleration limits (false: idealised model)
+} exp_settings_t;
+
+/// Defaults of every experiment key. O(keys).
+void exp_settings_defaults(exp_settings_t* s);
+
+/// Sets one key: an `experiment.*` key into *s, any other into *cfg (fw_config_set). Errors
+/// name source, key, value and what is allowed. Returns 0 or -1.
+int exp_set(exp_settings_t* s, fw_config_t* cfg, const char* key, const char* value, const char* source, char* err,
+            size_t err_cap);
+
+/// Loads an experiment file over (*s, *cfg): controller keys and experiment keys. Sets name
+/// (when the file does not) and config_dir. Returns 0 or -1 with "path:line: ..." in err.
+int exp_load_file(exp_settings_t* s, fw_config_t* cfg, const char* path, char* err, size_t err_cap);
+
+/// Cross-key checks (kind vs task, references only for learn, ...). Returns 0 or -1.
+int exp_validate(const exp_settings_t* s, const fw_config_t* cfg, char* err, size_t err_cap);
+
+/// Documentation of every experiment key in the config file format.
+void exp_print_reference(FILE* out);
+
+/// Resolves a path given in the experiment file (relative to its folder). Returns 0 or -1.
+int exp_resolve_path(const exp_settings_t* s, const char* path, char* out, size_t cap);
+
+/// A small streaming JSON writer (objects, arrays, numbers, strings) with commas handled.
+typedef struct json_writer {
+  FILE* f;
+  int depth;
+  bool first[32];
+} json_writer_t;
+
+void json_begin(json_writer_t* w, FILE* f);
+void json_object(json_writer_t* w, const char* key);  ///< key NULL inside arrays and at top level
+void json_array(json_writer_t* w, const char* key);
+void json_end_object(json_writer_t* w);
+void json_end_array(json_writer_t* w);
+void json_int(json_writer_t* w, const char* key, int64_t v);
+void json_num(json_writer_t* w, const char* key, double v);  ///< non-finite → null
+void json_bool(json_writer_t* w, const char* key, bool v);
+void json_null(json_writer_t* w, const char* key);
+void json_str(json_writer_t* w, const char* key, const char* v);
+
+/// What the runner was asked to do for one task.
+typedef struct exp_task {
+  const char* variant;          ///< label of the variant ("" = none)
+  uint64_t seed;
+  const char* out_path;         ///< result file (JSON)
+  const char* experience_log;   ///< optional LCM event log of B21R_EXPERIENCE (learn only), or NULL
+  const char* trace_svg;        ///< optional overhead picture of the learning runs (learn only), or NULL
+  bool verbose;                 ///< controller progress lines on stderr
+  const char* command_line;     ///< for the result file (reproduction)
+} exp_task_t;
+
+/// Runs a learn experiment and writes its result. Returns 0, or -1 with a message in err.
+int exp_run_learn(const exp_settings_t* s, const fw_config_t* cfg, const exp_task_t* task, char* err, size_t err_cap);
+
+/// Runs an exploration study and writes its result. Returns 0, or -1 with a message in err.
+int exp_run_explore(const exp_settings_t* s, const fw_config_t* cfg, const exp_task_t* task, char* err,
+                    size_t err_cap);
+
+/// Writes the header shared by every result (format, experiment, variant, seed, settings).
+void exp_write_header(json_writer_t* w, const exp_settings_t* s, const fw_config_t* cfg, const exp_task_t* task);
+
+/// Opens `<path>.tmp` for writing; exp_commit_file() fsyncs, closes and renames it to path.
+FILE* exp_open_result(const char* path, char* tmp_path, size_t tmp_cap, char* err, size_t err_cap);
+int exp_commit_result(FILE* f, const char* tmp_path, const char* path, char* err, size_t err_cap);
+
+#endif  // B21R_TOOLS_EXPERIMENT_H
