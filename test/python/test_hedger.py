@@ -264,7 +264,7 @@ class BindingContract(unittest.TestCase):
     def test_controller_learner_config(self):
         c = b21r_learn.controller_learner_config("corridor")
         self.assertEqual(c["state_dim"], 3)
-        self.assertEqual(c["input_scale"], [10.0, 0.5, 0.5, 0.25])
+        self.assertEqual(c["input_scale"], [1.0, 0.5, 0.5, 0.25])
         o = b21r_learn.controller_learner_config("obstacles", {"hedger_capacity": 5000})
         self.assertEqual((o["state_dim"], o["capacity"], o["gamma"]), (4, 5000, 0.9))
         with self.assertRaises(ValueError):

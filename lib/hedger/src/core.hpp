@@ -79,7 +79,8 @@ struct hedger {
   uint32_t magic;
   uint32_t dim;    ///< D = state_dim + 1
   uint32_t owned;  ///< storage allocated by hedger_create()
-  uint32_t replaying;
+  uint32_t replay_pending;  ///< a finished run's replay is under way (replay_step)
+  uint64_t generation;      ///< counts calls that may change the learned state (sliced saves check it)
   hedger_config_t cfg;
   // Derived constants.
   double h2;        ///< bandwidth²
@@ -113,6 +114,9 @@ struct hedger {
   uint32_t run_head;  ///< next write position
   uint32_t run_count;
   uint32_t run_stride;
+  uint32_t replay_pass;        ///< pass of the pending replay
+  uint32_t replay_k;           ///< records of this pass done (from the newest)
+  double replay_next_return;   ///< λ-return target of the record after the current one
   // Eviction generator (xorshift64*) and rewards seen.
   uint64_t rng;
   double r_min;
@@ -152,18 +156,19 @@ void scale_input(const hedger& h, const double* state, double action, double* x)
   x[D - 1] = action / h.cfg.input_scale[D - 1];
 }
 
-/// Adds every valid stored point (fresh buffer + active tree) to the set.
-template <int D, class Set>
+/// Adds every valid stored point (fresh buffer + active tree) to the set, by the distance over
+/// the first DQ coordinates (DQ = D: (state, action); DQ = D - 1: the state alone).
+template <int D, int DQ = D, class Set>
 void query_store(const hedger& h, const double* x, Set& rs) noexcept {
   const double* fp = h.fresh_pts;
   for (uint32_t i = 0; i < h.n_fresh; ++i, fp += D) {
-    const double d = dist2<D>(x, fp);
+    const double d = dist2<DQ>(x, fp);
     if (d <= rs.worst()) rs.add(d, h.fresh_slot[i]);
   }
   const uint64_t* seq = h.seq;
   const KdTree& t = h.tree[h.active];
   const uint64_t snap = t.snapshot;
-  kd_query<D>(t, x, rs, [seq, snap](uint32_t id) { return seq[id] <= snap; });
+  kd_query<D, DQ>(t, x, rs, [seq, snap](uint32_t id) { return seq[id] <= snap; });
 }
 
 /// Step 1 of a prediction: up to k_max nearest points with kernel weight >= weight_epsilon.
@@ -182,6 +187,7 @@ void predict_from(hedger& h, const double* x, const Neigh& nb, hedger_prediction
   using Mat = Eigen::Matrix<double, D + 1, D + 1>;
   p.n_neighbours = nb.n;
   p.fallback = HEDGER_FALLBACK_NONE;
+  p.std_error = 0.0;
   if (nb.n == 0 || nb.n < h.cfg.k_min) {
     p.kind = HEDGER_KIND_UNKNOWN;
     p.value = h.cfg.default_value;
@@ -246,6 +252,23 @@ void predict_from(hedger& h, const double* x, const Neigh& nb, hedger_prediction
         fb = HEDGER_FALLBACK_SINGULAR;
       } else if (lwr < q_min(h) || lwr > q_max(h)) {
         fb = HEDGER_FALLBACK_IMPLAUSIBLE;
+      } else {
+        // Standard error of the intercept: Var = s^2 c^T (X^T W^2 X) c with c = A^-1 e, and s^2
+        // the weighted residual variance with n - (D + 1) degrees of freedom (the fit is
+        // unbiased only in expectation; this ranks candidate actions, it is no exact interval).
+        Vec e = Vec::Zero();
+        e[D] = 1.0;
+        const Vec c = ldlt.solve(e);
+        double rss = 0.0, var_sum = 0.0;
+        for (uint32_t i = 0; i < nb.n; ++i) {
+          const double res = h.val[nb.nb[i].id] - rows[i].dot(beta);
+          rss += nb.w[i] * res * res;
+          const double rc = nb.w[i] * rows[i].dot(c);
+          var_sum += rc * rc;
+        }
+        const double dof = static_cast<double>(nb.n) - static_cast<double>(D + 1);
+        const double s2 = dof > 0.0 ? (rss / sw) * static_cast<double>(nb.n) / dof : 0.0;
+        p.std_error = std::sqrt(s2 * var_sum);
       }
     }
   }
@@ -268,6 +291,7 @@ void predict_from(hedger& h, const double* x, const Neigh& nb, hedger_prediction
   }
   p.kind = HEDGER_KIND_LWA;
   p.value = lwa;
+  p.std_error = 0.0;
   ++h.counters.predictions_lwa;
 }
 
@@ -284,76 +308,293 @@ struct GreedyResult {
   hedger_kind_t kind;
 };
 
-/// Greedy search at a raw state (see hedger_greedy()).
-template <int D>
-GreedyResult greedy_at(hedger& h, const double* state) noexcept {
-  double x[static_cast<size_t>(D)];
-  for (int i = 0; i < D - 1; ++i) x[i] = state[i] / h.cfg.input_scale[i];
-  const double sa = h.cfg.input_scale[D - 1];
+/// Rank of an evaluation in the greedy search: (support, score), compared lexicographically.
+/// Support: 2 = a local regression (LWR), 1 = an average (LWA), 0 = unknown; an unknown value
+/// never beats a known one, and an average never beats a regression: an average's value belongs
+/// to the states around the query (its neighbourhood spans the whole kernel), not to the action
+/// asked, so it must not compete with a regression on value. Score: value − κ · standard error
+/// (κ = cfg.greedy_pessimism), so a value the data barely support does not win on noise.
+struct GreedyRank {
+  int support;
+  double score;
+  bool beats(const GreedyRank& o) const noexcept { return support > o.support || (support == o.support && score > o.score); }
+};
+
+/// The action search of both greedy methods: a coarse scan of greedy_coarse_actions evenly spaced
+/// actions (both ends included), then golden-section refinement of the rank inside the grid
+/// interval around the best coarse action (greedy_refine_iters evaluations). `eval(a, &value,
+/// &kind)` returns the rank of action a. Ties keep the earlier evaluation (the smaller coarse
+/// action). Returns HEDGER_NO_KNOWN_ACTION when every evaluation has support 0.
+template <class Eval>
+GreedyResult greedy_search(const hedger& h, Eval&& eval) noexcept {
   const double amin = h.cfg.action_min, amax = h.cfg.action_max;
-  Neigh nb;
   GreedyResult best{HEDGER_NO_KNOWN_ACTION, 0.5 * (amin + amax), h.cfg.default_value, HEDGER_KIND_UNKNOWN};
-  // Value of an evaluation for the search: unknown never beats known.
-  auto eval = [&](double a) {
-    x[D - 1] = a / sa;
-    hedger_prediction_t p;
-    predict_x<D>(h, x, nb, p);
-    if (p.kind == HEDGER_KIND_UNKNOWN) return -std::numeric_limits<double>::infinity();
-    if (best.status != HEDGER_OK || p.value > best.value) best = GreedyResult{HEDGER_OK, a, p.value, p.kind};
-    return p.value;
+  GreedyRank best_rank{0, -std::numeric_limits<double>::infinity()};
+  auto try_action = [&](double a) {
+    double v = 0.0;
+    hedger_kind_t k = HEDGER_KIND_UNKNOWN;
+    const GreedyRank r = eval(a, &v, &k);
+    if (r.support > 0 && (best.status != HEDGER_OK || r.beats(best_rank))) {
+      best = GreedyResult{HEDGER_OK, a, v, k};
+      best_rank = r;
+    }
+    return r;
   };
-  ++h.counters.greedy_calls;
   const uint32_t m = h.cfg.greedy_coarse_actions;
   const double step = (amax - amin) / static_cast<double>(m - 1);
+  auto grid = [&](uint32_t j) { return (j + 1 == m) ? amax : amin + step * static_cast<double>(j); };
   uint32_t jbest = 0;
-  double fbest = -std::numeric_limits<double>::infinity();
-  bool any = false;
+  GreedyRank rbest{0, -std::numeric_limits<double>::infinity()};
   for (uint32_t j = 0; j < m; ++j) {
-    const double a = (j + 1 == m) ? amax : amin + step * static_cast<double>(j);
-    const double f = eval(a);
-    if (f > fbest) {
-      fbest = f;
+    const GreedyRank r = try_action(grid(j));
+    if (r.support > 0 && (rbest.support == 0 || r.beats(rbest))) {
+      rbest = r;
       jbest = j;
-      any = true;
     }
   }
-  if (!any) {
-    ++h.counters.greedy_all_unknown;
-    return best;
-  }
+  if (rbest.support == 0) return best;
   // Golden-section refinement inside the grid interval around the best coarse action.
-  const uint32_t r = h.cfg.greedy_refine_iters;
-  if (r > 0) {
-    auto grid = [&](uint32_t j) { return (j + 1 == m) ? amax : amin + step * static_cast<double>(j); };
+  const uint32_t iters = h.cfg.greedy_refine_iters;
+  if (iters > 0) {
     double lo = grid(jbest == 0 ? 0 : jbest - 1);
     double hi = grid(jbest + 1 >= m ? m - 1 : jbest + 1);
     constexpr double g = 0.6180339887498949;
     double x1 = hi - g * (hi - lo), x2 = lo + g * (hi - lo);
-    double f1 = eval(x1);
-    double f2 = -std::numeric_limits<double>::infinity();
+    GreedyRank f1 = try_action(x1);
+    GreedyRank f2{0, -std::numeric_limits<double>::infinity()};
     uint32_t evals = 1;
-    if (evals < r) {
-      f2 = eval(x2);
+    if (evals < iters) {
+      f2 = try_action(x2);
       ++evals;
     }
-    while (evals < r) {
-      if (f1 >= f2) {
+    while (evals < iters) {
+      if (!f2.beats(f1)) {
         hi = x2;
         x2 = x1;
         f2 = f1;
         x1 = hi - g * (hi - lo);
-        f1 = eval(x1);
+        f1 = try_action(x1);
       } else {
         lo = x1;
         x1 = x2;
         f1 = f2;
         x2 = lo + g * (hi - lo);
-        f2 = eval(x2);
+        f2 = try_action(x2);
       }
       ++evals;
     }
   }
   return best;
+}
+
+/// Greedy method HEDGER_GREEDY_PER_ACTION: every candidate action is a full prediction with its
+/// own neighbourhood of (state, action) points.
+template <int D>
+GreedyResult greedy_per_action(hedger& h, double* x) noexcept {
+  const double sa = h.cfg.input_scale[D - 1];
+  const double kappa = h.cfg.greedy_pessimism;
+  Neigh nb;
+  return greedy_search(h, [&](double a, double* value, hedger_kind_t* kind) {
+    x[D - 1] = a / sa;
+    hedger_prediction_t p;
+    predict_x<D>(h, x, nb, p);
+    *value = p.value;
+    *kind = p.kind;
+    const int support = p.kind == HEDGER_KIND_LWR ? 2 : (p.kind == HEDGER_KIND_LWA ? 1 : 0);
+    return GreedyRank{support, p.value - kappa * p.std_error};
+  });
+}
+
+/// Greedy method HEDGER_GREEDY_STATE_MODEL: one local model of the action's effect at the state.
+/// The neighbourhood is the k_max stored points nearest to the state alone (the action ignored,
+/// within the kernel's radius), weighted by the kernel of their state distance; the model is
+/// linear in the state and quadratic in the action, q ≈ β0 + β_s·Δs + β_u u + β_uu u²
+/// (u = action − the neighbourhood's mean action), fitted by ridge-regularised weighted least
+/// squares. Why one model: every candidate action is then judged on the same data and the same
+/// fit, so the comparison between actions is not drowned by the differences between separate
+/// neighbourhoods (each per-action fit carries its own bias from the states around it, larger
+/// than the effect of one action), and the quadratic term lets the best action lie inside the
+/// data's range instead of always on its edge.
+/// - Candidates: actions within the range of the neighbours' actions (the action's hull: the
+///   model never extrapolates in the action), ranked by model value − κ · standard error. The
+///   state part β_s·Δs is common to every candidate, so a query state at the edge of the data
+///   changes the values, never the ranking.
+/// - Value of the chosen action: the model's, when (state, action) lies inside the model's
+///   independent-variable hull and the value within [Q_min, Q_max] (kind LWR); otherwise the
+///   weighted average of the neighbours' values (kind LWA), which never extrapolates.
+/// Returns false when the model cannot be formed (fewer than max(k_min, D + 3) neighbours, or a
+/// singular fit): the caller falls back to the per-action search. Cost: one k-NN query, two
+/// (D+2)² factorisations, O(D²) per candidate; no allocation.
+template <int D>
+bool greedy_state_model(hedger& h, const double* x, double reach, GreedyResult& out) noexcept {
+  constexpr int P = D + 2;  // Δs (D − 1), u, u², 1
+  using Vec = Eigen::Matrix<double, P, 1>;
+  using Mat = Eigen::Matrix<double, P, P>;
+  const double h2 = h.h2 * reach * reach;
+  Neighbour nbuf[HEDGER_MAX_K];
+  KnnSet rs(nbuf, h.cfg.k_max, h.r2max * reach * reach);
+  query_store<D, D - 1>(h, x, rs);
+  const uint32_t n = rs.size();
+  if (n < h.cfg.k_min || n < static_cast<uint32_t>(P + 1)) return false;
+  double w[HEDGER_MAX_K];
+  double sw = 0.0, swa = 0.0, swq = 0.0;
+  for (uint32_t i = 0; i < n; ++i) {
+    w[i] = std::exp(-nbuf[i].d2 / h2);
+    sw += w[i];
+    swa += w[i] * h.pts[static_cast<size_t>(nbuf[i].id) * static_cast<size_t>(D) + (D - 1)];
+    swq += w[i] * h.val[nbuf[i].id];
+  }
+  const double abar = swa / sw;
+  Vec rows[HEDGER_MAX_K];
+  Mat a = Mat::Zero(), v = Mat::Zero(), b = Mat::Zero();
+  Vec xtwq = Vec::Zero();
+  const bool unweighted_ivh = (h.cfg.ivh_mode == static_cast<uint32_t>(HEDGER_IVH_UNWEIGHTED));
+  for (uint32_t i = 0; i < n; ++i) {
+    const double* xi = h.pts + static_cast<size_t>(nbuf[i].id) * static_cast<size_t>(D);
+    Vec& r = rows[i];
+    for (int j = 0; j < D - 1; ++j) r[j] = xi[j] - x[j];
+    const double u = xi[D - 1] - abar;
+    r[D - 1] = u;
+    r[D] = u * u;
+    r[D + 1] = 1.0;
+    a.noalias() += (w[i] * r) * r.transpose();
+    b.noalias() += (w[i] * w[i] * r) * r.transpose();
+    xtwq.noalias() += (w[i] * h.val[nbuf[i].id]) * r;
+    if (unweighted_ivh) v.noalias() += r * r.transpose();
+  }
+  if (!unweighted_ivh) v = a;
+  for (int j = 0; j < P - 1; ++j) a(j, j) += h.cfg.ridge;
+  Eigen::LDLT<Mat> af;
+  if (!factor_spd(af, a)) return false;
+  Vec beta = af.solve(xtwq);
+  if (beta[D] > 0.0) {
+    // Concave in the action, or linear: a value convex in the action has its maximum on an edge
+    // of the data, and which edge wins is decided by the noise in the curvature (measured on the
+    // corridor: the robot took the wrong edge and drove into a wall). The least-squares fit
+    // under β_uu <= 0 with the constraint active is the fit without the u² column.
+    a.row(D).setZero();
+    a.col(D).setZero();
+    a(D, D) = 1.0;
+    b.row(D).setZero();
+    b.col(D).setZero();
+    xtwq[D] = 0.0;
+    if (!factor_spd(af, a)) return false;
+    beta = af.solve(xtwq);
+  }
+  const Mat ainv = af.solve(Mat::Identity());
+  double rss = 0.0;
+  for (uint32_t i = 0; i < n; ++i) {
+    const double res = h.val[nbuf[i].id] - rows[i].dot(beta);
+    rss += w[i] * res * res;
+  }
+  const double s2 = (rss / sw) * static_cast<double>(n) / static_cast<double>(static_cast<int>(n) - P);
+  const Mat cov = ainv * b * ainv;  // Var(e·β) = s² eᵀ cov e
+  const double sa = h.cfg.input_scale[D - 1];
+  const double kappa = h.cfg.greedy_pessimism;
+  auto design = [&](double act) {
+    const double u = act / sa - abar;
+    Vec e = Vec::Zero();
+    e[D - 1] = u;
+    e[D] = u * u;
+    e[D + 1] = 1.0;
+    return e;
+  };
+  // The neighbours' policy at the query state: a locally linear regression of their actions on
+  // the state, u_i ≈ α0 + α·Δs_i. Its intercept anchors the pessimism, and its residuals give
+  // the range of actions the data holds at this state: the action's hull, tilted with the state.
+  // Why not the plain mean and range of the neighbours' actions: where the query lies at the
+  // edge of the visited states (a start pose heading off the axis: every neighbour has turned
+  // part of the way already) both are biased towards the actions of the less extreme states, and
+  // the robot turned too gently (measured: the first 2 s of a run from the corridor's start poses).
+  using SVec = Eigen::Matrix<double, D, 1>;
+  using SMat = Eigen::Matrix<double, D, D>;
+  SMat sa_m = SMat::Zero();
+  SVec sa_t = SVec::Zero();
+  for (uint32_t i = 0; i < n; ++i) {
+    SVec z;
+    for (int j = 0; j < D - 1; ++j) z[j] = rows[i][j];
+    z[D - 1] = 1.0;
+    sa_m.noalias() += (w[i] * z) * z.transpose();
+    sa_t.noalias() += (w[i] * rows[i][D - 1]) * z;
+  }
+  for (int j = 0; j < D - 1; ++j) sa_m(j, j) += h.cfg.ridge;
+  Eigen::LDLT<SMat> sa_f;
+  if (!factor_spd(sa_f, sa_m)) return false;
+  const SVec alpha = sa_f.solve(sa_t);
+  const double u_anchor = alpha[D - 1];
+  double rmin = std::numeric_limits<double>::infinity(), rmax = -rmin;
+  for (uint32_t i = 0; i < n; ++i) {
+    double pred = alpha[D - 1];
+    for (int j = 0; j < D - 1; ++j) pred += alpha[j] * rows[i][j];
+    const double res = rows[i][D - 1] - pred;
+    rmin = res < rmin ? res : rmin;
+    rmax = res > rmax ? res : rmax;
+  }
+  const double umin = u_anchor + rmin;
+  const double umax = u_anchor + rmax;
+  const double tol = 1e-12 * (1.0 + umax - umin);
+  GreedyResult g = greedy_search(h, [&](double act, double* value, hedger_kind_t* kind) {
+    const Vec e = design(act);
+    *kind = HEDGER_KIND_UNKNOWN;
+    *value = h.cfg.default_value;
+    if (e[D - 1] < umin - tol || e[D - 1] > umax + tol) return GreedyRank{0, 0.0};
+    const double q = e.dot(beta);
+    if (!std::isfinite(q)) return GreedyRank{0, 0.0};
+    *value = q;
+    *kind = HEDGER_KIND_LWR;
+    // Pessimism on the action's effect relative to the neighbourhood's mean action (u = 0):
+    // the state part and the intercept are common to every candidate, so only the uncertainty
+    // of β_u u + β_uu u² matters for the choice.
+    Vec d = Vec::Zero();
+    d[D - 1] = e[D - 1] - u_anchor;
+    d[D] = e[D] - u_anchor * u_anchor;
+    return GreedyRank{2, q - kappa * std::sqrt(s2 * d.dot(cov * d))};
+  });
+  if (g.status != HEDGER_OK) return false;
+  // The value of the chosen action: the regression where it interpolates, else the average.
+  bool lwr = false;
+  Eigen::LDLT<Mat> vf;
+  if (reach <= 1.0 && factor_spd(vf, v) && g.value >= q_min(h) && g.value <= q_max(h)) {
+    const Mat vinv = vf.solve(Mat::Identity());
+    double hmax = 0.0;
+    for (uint32_t i = 0; i < n; ++i) {
+      double hi = rows[i].dot(vinv * rows[i]);
+      if (!unweighted_ivh) hi *= w[i];
+      if (hi > hmax) hmax = hi;
+    }
+    const Vec e = design(g.action);
+    lwr = e.dot(vinv * e) <= hmax * (1.0 + kIvhTol);
+  }
+  if (!lwr) {
+    g.value = swq / sw;
+    g.kind = HEDGER_KIND_LWA;
+  }
+  out = g;
+  return true;
+}
+
+/// Greedy search at a raw state (see hedger_greedy()).
+template <int D>
+GreedyResult greedy_at(hedger& h, const double* state) noexcept {
+  double x[static_cast<size_t>(D)];
+  for (int i = 0; i < D - 1; ++i) x[i] = state[i] / h.cfg.input_scale[i];
+  x[D - 1] = 0.0;
+  ++h.counters.greedy_calls;
+  GreedyResult g;
+  if (h.cfg.greedy_method == static_cast<uint32_t>(HEDGER_GREEDY_STATE_MODEL)) {
+    if (greedy_state_model<D>(h, x, 1.0, g)) {
+      ++h.counters.greedy_state_model;
+      return g;
+    }
+    if (h.cfg.greedy_reach > 1.0 && greedy_state_model<D>(h, x, h.cfg.greedy_reach, g)) {
+      ++h.counters.greedy_state_model;
+      ++h.counters.greedy_reached;
+      return g;
+    }
+  }
+  g = greedy_per_action<D>(h, x);
+  if (g.status != HEDGER_OK) ++h.counters.greedy_all_unknown;
+  return g;
 }
 
 // ---- Store maintenance ---------------------------------------------------------------------
@@ -591,26 +832,11 @@ inline void record_run(hedger& h, const double* s, double a, double r, const dou
   }
 }
 
-/// The training update (hedger.md steps 1–6). Inputs are validated by the caller.
+/// Steps 2–6 of the training update for (s, a) with a given target r + γ q' (info.target set by
+/// the caller): q = Q(s, a), q_new = q + α (target − q), store (s, a) with q_new, pull the
+/// neighbours, track r.
 template <int D>
-void update(hedger& h, const double* s, double a, double r, const double* sn, int terminal,
-            hedger_update_info_t& info) noexcept {
-  h.call_work = 0;
-  // 1. q' from the greedy search at s' (done once; returned for reuse as the next action).
-  if (terminal) {
-    info.next_status = HEDGER_NO_KNOWN_ACTION;
-    info.next_action = 0.5 * (h.cfg.action_min + h.cfg.action_max);
-    info.next_value = h.cfg.default_value;
-    info.next_kind = HEDGER_KIND_UNKNOWN;
-    info.q_next = 0.0;
-  } else {
-    const GreedyResult g = greedy_at<D>(h, sn);
-    info.next_status = g.status;
-    info.next_action = g.action;
-    info.next_value = g.value;
-    info.next_kind = g.kind;
-    info.q_next = g.value;
-  }
+void learn_target(hedger& h, const double* s, double a, double r, int terminal, hedger_update_info_t& info) noexcept {
   // 2. q = Q(s, a) with its neighbourhood.
   double x[static_cast<size_t>(D)];
   scale_input<D>(h, s, a, x);
@@ -619,8 +845,7 @@ void update(hedger& h, const double* s, double a, double r, const double* sn, in
   predict_x<D>(h, x, nb, p);
   info.q_old = p.value;
   info.kind = p.kind;
-  // 3. Q-learning target and new value.
-  info.target = r + h.cfg.gamma * info.q_next;
+  // 3. New value.
   const double q_new = p.value + h.cfg.alpha * (info.target - p.value);
   info.q_new = q_new;
   // 4. Store (s, a). Remember the neighbours' sequence numbers: a neighbour evicted by the
@@ -646,12 +871,56 @@ void update(hedger& h, const double* s, double a, double r, const double* sn, in
   // 6. Rewards seen bound plausible values from now on.
   track_reward(h, r);
   ++h.counters.updates;
-  if (h.replaying) {
-    ++h.counters.replayed_updates;
-  } else {
-    record_run(h, s, a, r, sn, terminal);
-  }
   maintain<D>(h);
+}
+
+/// The greedy result at s' as the update's q' (q' = 0 for a terminal transition).
+template <int D>
+void next_greedy(hedger& h, const double* sn, int terminal, hedger_update_info_t& info) noexcept {
+  if (terminal) {
+    info.next_status = HEDGER_NO_KNOWN_ACTION;
+    info.next_action = 0.5 * (h.cfg.action_min + h.cfg.action_max);
+    info.next_value = h.cfg.default_value;
+    info.next_kind = HEDGER_KIND_UNKNOWN;
+    info.q_next = 0.0;
+    return;
+  }
+  const GreedyResult g = greedy_at<D>(h, sn);
+  info.next_status = g.status;
+  info.next_action = g.action;
+  info.next_value = g.value;
+  info.next_kind = g.kind;
+  info.q_next = g.value;
+}
+
+template <int D>
+uint32_t replay_step(hedger& h, uint32_t max_updates) noexcept;
+
+/// The training update (hedger.md steps 1–6), Q-learning target r + γ max_a' Q(s', a'). Inputs
+/// are validated by the caller. A pending replay is completed first (see hedger_end_run_begin).
+template <int D>
+void update(hedger& h, const double* s, double a, double r, const double* sn, int terminal,
+            hedger_update_info_t& info) noexcept {
+  if (h.replay_pending) replay_step<D>(h, std::numeric_limits<uint32_t>::max());
+  h.call_work = 0;
+  // 1. q' from the greedy search at s' (done once; returned for reuse as the next action).
+  next_greedy<D>(h, sn, terminal, info);
+  info.target = r + h.cfg.gamma * info.q_next;
+  learn_target<D>(h, s, a, r, terminal, info);
+  record_run(h, s, a, r, sn, terminal);
+}
+
+/// Steps 2–6 with q' given by the caller (hedger_learn): the second half of update().
+template <int D>
+void learn(hedger& h, const double* s, double a, double r, const double* sn, int terminal, double q_next,
+           hedger_update_info_t& info) noexcept {
+  if (h.replay_pending) replay_step<D>(h, std::numeric_limits<uint32_t>::max());
+  h.call_work = 0;
+  info.next_status = HEDGER_OK;
+  info.q_next = terminal ? 0.0 : q_next;
+  info.target = r + h.cfg.gamma * info.q_next;
+  learn_target<D>(h, s, a, r, terminal, info);
+  record_run(h, s, a, r, sn, terminal);
 }
 
 /// hedger_insert(): store with value q, no pull.
@@ -673,22 +942,66 @@ hedger_store_op_t insert(hedger& h, const double* s, double a, double q, uint8_t
   return op;
 }
 
-/// Replays the run buffer newest first (hedger_end_run()).
+/// Starts the replay of the recorded run (cfg.replay): replay_passes backward passes. Returns the
+/// number of updates it will take.
+inline uint32_t replay_begin(hedger& h) noexcept {
+  if (!h.cfg.replay || h.run_count == 0) {
+    h.run_head = 0;
+    h.run_count = 0;
+    return 0;
+  }
+  h.replay_pending = 1;
+  h.replay_pass = 0;
+  h.replay_k = 0;
+  h.replay_next_return = 0.0;
+  return h.run_count * h.cfg.replay_passes;
+}
+
+/// Advances the pending replay by at most max_updates updates; returns the updates done. When the
+/// last pass ends the run buffer is cleared. Each pass goes newest first with the λ-return target
+///   T_t = r_t + γ ((1 − λ) V(s_{t+1}) + λ T_{t+1}),   T of the newest = r (terminal) or r + γ V(s'),
+/// V = the greedy value (HEDGER_GREEDY_* at s'): λ = 0 is the Q-learning target, λ = 1 the
+/// return of the run as driven, bootstrapped only where the run was cut short.
 template <int D>
-uint32_t replay_run(hedger& h) noexcept {
+uint32_t replay_step(hedger& h, uint32_t max_updates) noexcept {
   const uint32_t sd = h.cfg.state_dim;
+  const double lambda = h.cfg.replay_lambda;
   uint32_t done = 0;
-  h.replaying = 1;
-  uint32_t idx = h.run_head;
-  for (uint32_t k = 0; k < h.run_count; ++k) {
-    idx = (idx == 0) ? h.run_cap - 1 : idx - 1;
+  while (h.replay_pending && done < max_updates) {
+    // Record k of the pass counts back from the newest.
+    uint32_t idx = (h.run_head + h.run_cap - 1u - h.replay_k % h.run_cap) % h.run_cap;
     const double* rec = h.run + static_cast<size_t>(idx) * h.run_stride;
+    const double* s = rec;
+    const double a = rec[sd];
+    const double r = rec[sd + 1];
+    const double* sn = rec + sd + 2;
     const int terminal = rec[2 * sd + 2] > 0.5 ? 1 : 0;
     hedger_update_info_t info;
-    update<D>(h, rec, rec[sd], rec[sd + 1], rec + sd + 2, terminal, info);
+    h.call_work = 0;
+    if (h.replay_k == 0 || lambda < 1.0) {
+      next_greedy<D>(h, sn, terminal, info);
+    } else {
+      info = hedger_update_info_t{};
+      info.next_status = HEDGER_NO_KNOWN_ACTION;
+      info.q_next = 0.0;
+    }
+    const double boot = terminal ? 0.0 : info.q_next;
+    info.target = (h.replay_k == 0) ? r + h.cfg.gamma * boot
+                                    : r + h.cfg.gamma * ((1.0 - lambda) * boot + lambda * h.replay_next_return);
+    if (terminal) info.target = r;
+    learn_target<D>(h, s, a, r, terminal, info);
+    ++h.counters.replayed_updates;
+    h.replay_next_return = info.target;
     ++done;
+    if (++h.replay_k == h.run_count) {
+      h.replay_k = 0;
+      if (++h.replay_pass == h.cfg.replay_passes) {
+        h.replay_pending = 0;
+        h.run_head = 0;
+        h.run_count = 0;
+      }
+    }
   }
-  h.replaying = 0;
   return done;
 }
 

@@ -48,6 +48,14 @@ bool valid_config(const hedger_config_t* c) {
   if (c->fresh_capacity < 8 || c->fresh_capacity > HEDGER_MAX_FRESH) return false;
   if (c->run_capacity > HEDGER_MAX_RUN) return false;
   if (c->replay > 1 || (c->replay == 1 && c->run_capacity == 0)) return false;
+  if (c->replay_passes < 1 || c->replay_passes > HEDGER_MAX_REPLAY_PASSES) return false;
+  if (!(c->replay_lambda >= 0.0 && c->replay_lambda <= 1.0)) return false;
+  if (c->greedy_method != static_cast<uint32_t>(HEDGER_GREEDY_PER_ACTION) &&
+      c->greedy_method != static_cast<uint32_t>(HEDGER_GREEDY_STATE_MODEL)) {
+    return false;
+  }
+  if (!std::isfinite(c->greedy_pessimism) || !(c->greedy_pessimism >= 0.0)) return false;
+  if (!std::isfinite(c->greedy_reach) || !(c->greedy_reach >= 1.0) || c->greedy_reach > 100.0) return false;
   return true;
 }
 
@@ -106,7 +114,10 @@ decltype(auto) with_dim(uint32_t d, F&& f) {
   }
 }
 
+/// After every call that may change the learned state: gauges, and the generation that
+/// hedger_save_step() checks.
 void refresh_gauges(hedger_t* h) {
+  ++h->generation;
   h->counters.store_fill = h->fill;
   h->counters.store_protected = h->n_protected;
   h->counters.fresh_fill = h->n_fresh;
@@ -128,6 +139,9 @@ void reset_learned_state(hedger_t* h) {
   h->building = 0;
   h->run_head = 0;
   h->run_count = 0;
+  h->replay_pending = 0;
+  h->replay_pass = 0;
+  h->replay_k = 0;
   h->r_min = 0.0;
   h->r_max = 0.0;
   h->reward_seen = 0;
@@ -158,11 +172,13 @@ struct Crc32Table {
 };
 constexpr Crc32Table kCrc;
 
-uint32_t crc32(const uint8_t* p, size_t n) {
-  uint32_t c = 0xFFFFFFFFu;
+/// CRC-32 register after n more bytes (start with 0xFFFFFFFF; the CRC is the register ^ 0xFFFFFFFF).
+uint32_t crc32_update(uint32_t c, const uint8_t* p, size_t n) {
   for (size_t i = 0; i < n; ++i) c = kCrc.t[(c ^ p[i]) & 0xFFu] ^ (c >> 8);
-  return c ^ 0xFFFFFFFFu;
+  return c;
 }
+
+uint32_t crc32(const uint8_t* p, size_t n) { return crc32_update(0xFFFFFFFFu, p, n) ^ 0xFFFFFFFFu; }
 
 void put_u32(uint8_t* p, uint32_t v) {
   for (int i = 0; i < 4; ++i) p[i] = static_cast<uint8_t>(v >> (8 * i));
@@ -244,6 +260,11 @@ hedger_config_t hedger_config_default(void) HEDGER_NOEXCEPT {
   c.rebuild_work_per_update = 0;
   c.run_capacity = 0;
   c.replay = 0;
+  c.replay_passes = 1;
+  c.replay_lambda = 0.0;
+  c.greedy_method = static_cast<uint32_t>(HEDGER_GREEDY_PER_ACTION);
+  c.greedy_pessimism = 0.0;
+  c.greedy_reach = 1.0;
   return c;
 }
 
@@ -368,15 +389,54 @@ hedger_status_t hedger_update(hedger_t* self, const double* state, double action
   return HEDGER_OK;
 }
 
-hedger_status_t hedger_end_run(hedger_t* self, uint32_t* replayed) HEDGER_NOEXCEPT {
-  if (!live(self)) return HEDGER_ERR_INVALID_ARG;
-  uint32_t n = 0;
-  if (self->cfg.replay && self->run_count > 0) {
-    n = with_dim(self->dim, [&](auto dc) { return hg::replay_run<decltype(dc)::value>(*self); });
+hedger_status_t hedger_learn(hedger_t* self, const double* state, double action, double reward, const double* state_next,
+                             int terminal, double q_next, hedger_update_info_t* info) HEDGER_NOEXCEPT {
+  if (!live(self) || state == nullptr || (!terminal && state_next == nullptr)) return HEDGER_ERR_INVALID_ARG;
+  const uint32_t sd = self->cfg.state_dim;
+  if (!finite_all(state, sd) || !std::isfinite(action) || !std::isfinite(reward) ||
+      (!terminal && (!finite_all(state_next, sd) || !std::isfinite(q_next)))) {
+    return reject_non_finite(self);
   }
-  self->run_head = 0;
-  self->run_count = 0;
+  hedger_update_info_t local;
+  hedger_update_info_t& inf = (info != nullptr) ? *info : local;
+  inf = hedger_update_info_t{};
+  with_dim(self->dim, [&](auto dc) {
+    hg::learn<decltype(dc)::value>(*self, state, action, reward, state_next, terminal ? 1 : 0, q_next, inf);
+  });
   refresh_gauges(self);
+  return HEDGER_OK;
+}
+
+hedger_status_t hedger_end_run_begin(hedger_t* self, uint32_t* pending) HEDGER_NOEXCEPT {
+  if (!live(self)) return HEDGER_ERR_INVALID_ARG;
+  if (self->replay_pending) {
+    with_dim(self->dim, [&](auto dc) { hg::replay_step<decltype(dc)::value>(*self, 0xFFFFFFFFu); });
+  }
+  const uint32_t n = hg::replay_begin(*self);
+  refresh_gauges(self);
+  if (pending != nullptr) *pending = n;
+  return HEDGER_OK;
+}
+
+hedger_status_t hedger_end_run_step(hedger_t* self, uint32_t max_updates, uint32_t* remaining) HEDGER_NOEXCEPT {
+  if (!live(self)) return HEDGER_ERR_INVALID_ARG;
+  if (self->replay_pending && max_updates > 0) {
+    with_dim(self->dim, [&](auto dc) { hg::replay_step<decltype(dc)::value>(*self, max_updates); });
+  }
+  refresh_gauges(self);
+  if (remaining != nullptr) {
+    *remaining = self->replay_pending
+                     ? (self->cfg.replay_passes - self->replay_pass) * self->run_count - self->replay_k
+                     : 0u;
+  }
+  return HEDGER_OK;
+}
+
+hedger_status_t hedger_end_run(hedger_t* self, uint32_t* replayed) HEDGER_NOEXCEPT {
+  uint32_t n = 0;
+  const hedger_status_t st = hedger_end_run_begin(self, &n);
+  if (st != HEDGER_OK) return st;
+  (void)hedger_end_run_step(self, 0xFFFFFFFFu, nullptr);
   if (replayed != nullptr) *replayed = n;
   return HEDGER_OK;
 }
@@ -399,6 +459,7 @@ hedger_status_t hedger_observe_reward(hedger_t* self, double reward) HEDGER_NOEX
   if (!live(self)) return HEDGER_ERR_INVALID_ARG;
   if (!std::isfinite(reward)) return reject_non_finite(self);
   hg::track_reward(*self, reward);
+  refresh_gauges(self);
   return HEDGER_OK;
 }
 
@@ -428,8 +489,9 @@ size_t hedger_serialized_max_size(const hedger_config_t* cfg) HEDGER_NOEXCEPT {
   return valid_config(cfg) ? format_size(cfg->state_dim + 1, cfg->capacity) : 0;
 }
 
-hedger_status_t hedger_save(const hedger_t* self, void* buf, size_t size, size_t* written) HEDGER_NOEXCEPT {
-  if (!live(self) || buf == nullptr) return HEDGER_ERR_INVALID_ARG;
+hedger_status_t hedger_save_begin(const hedger_t* self, void* buf, size_t size, hedger_save_cursor_t* cursor)
+    HEDGER_NOEXCEPT {
+  if (!live(self) || buf == nullptr || cursor == nullptr) return HEDGER_ERR_INVALID_ARG;
   const uint32_t d = self->dim;
   const size_t total = format_size(d, self->fill);
   if (size < total) return HEDGER_ERR_CAPACITY;
@@ -449,7 +511,31 @@ hedger_status_t hedger_save(const hedger_t* self, void* buf, size_t size, size_t
   put_u64(p + 72, self->rng);
   size_t off = kHeaderFixed;
   for (uint32_t i = 0; i < d; ++i, off += 8) put_f64(p + off, self->cfg.input_scale[i]);
-  for (uint32_t s = 0; s < self->fill; ++s) {
+  cursor->buf = p;
+  cursor->size = total;
+  cursor->offset = off;
+  cursor->next_point = 0;
+  cursor->crc = crc32_update(0xFFFFFFFFu, p, off);
+  cursor->generation = self->generation;
+  cursor->done = 0;
+  return HEDGER_OK;
+}
+
+hedger_status_t hedger_save_step(const hedger_t* self, hedger_save_cursor_t* cursor, uint32_t max_points,
+                                 size_t* written) HEDGER_NOEXCEPT {
+  if (!live(self) || cursor == nullptr || cursor->buf == nullptr) return HEDGER_ERR_INVALID_ARG;
+  if (cursor->done) {
+    if (written != nullptr) *written = cursor->size;
+    return HEDGER_OK;
+  }
+  if (cursor->generation != self->generation) return HEDGER_ERR_CHANGED;
+  const uint32_t d = self->dim;
+  uint8_t* p = cursor->buf;
+  size_t off = cursor->offset;
+  const size_t start = off;
+  uint32_t s = cursor->next_point;
+  const uint32_t end = (self->fill - s) > max_points ? s + max_points : self->fill;
+  for (; s < end; ++s) {
     const double* x = self->pts + static_cast<size_t>(s) * d;
     for (uint32_t i = 0; i < d; ++i, off += 8) put_f64(p + off, x[i]);
     put_f64(p + off, self->val[s]);
@@ -457,9 +543,24 @@ hedger_status_t hedger_save(const hedger_t* self, void* buf, size_t size, size_t
     put_u32(p + off, self->flags[s]);
     off += 4;
   }
-  put_u32(p + off, crc32(p, off));
-  if (written != nullptr) *written = total;
+  cursor->crc = crc32_update(cursor->crc, p + start, off - start);
+  cursor->offset = off;
+  cursor->next_point = s;
+  if (s == self->fill) {
+    put_u32(p + off, cursor->crc ^ 0xFFFFFFFFu);
+    cursor->done = 1;
+    if (written != nullptr) *written = cursor->size;
+  } else if (written != nullptr) {
+    *written = 0;
+  }
   return HEDGER_OK;
+}
+
+hedger_status_t hedger_save(const hedger_t* self, void* buf, size_t size, size_t* written) HEDGER_NOEXCEPT {
+  hedger_save_cursor_t c;
+  const hedger_status_t st = hedger_save_begin(self, buf, size, &c);
+  if (st != HEDGER_OK) return st;
+  return hedger_save_step(self, &c, 0xFFFFFFFFu, written);
 }
 
 hedger_status_t hedger_load(hedger_t* self, const void* buf, size_t size) HEDGER_NOEXCEPT {
@@ -557,6 +658,8 @@ const char* hedger_status_str(hedger_status_t status) HEDGER_NOEXCEPT {
       return "HEDGER state buffer corrupted (CRC-32 mismatch)";
     case HEDGER_ERR_CONFIG_MISMATCH:
       return "HEDGER state saved under an incompatible config";
+    case HEDGER_ERR_CHANGED:
+      return "the learned state changed during a sliced save (start it again)";
   }
   return "unknown status";
 }

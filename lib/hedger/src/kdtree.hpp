@@ -438,13 +438,16 @@ inline uint64_t kd_build_work_estimate(uint64_t n) {
   return n * (2 + 4 * levels) + 2 * kd_nodes_for(n) + 16;
 }
 
-template <int D, class Set, class Valid>
+/// Recursive search. Distances count the first DQ coordinates only (DQ = D: the full point;
+/// DQ = D - 1: HEDGER's state-only neighbourhoods, the action ignored); a split along an ignored
+/// dimension prunes nothing.
+template <int D, int DQ, class Set, class Valid>
 void kd_search(const KdTree& t, uint32_t ni, const double* q, Set& rs, double rdist, double* dists,
                const Valid& valid) {
   const Node& nd = t.nodes[ni];
   if (nd.dim == kLeaf) {
     for (uint32_t i = nd.a; i < nd.b; ++i) {
-      const double d = dist2<D>(q, t.pts + static_cast<size_t>(i) * static_cast<size_t>(D));
+      const double d = dist2<DQ>(q, t.pts + static_cast<size_t>(i) * static_cast<size_t>(D));
       if (d <= rs.worst()) {
         const uint32_t id = t.ids[i];
         if (valid(id)) rs.add(d, id);
@@ -453,6 +456,11 @@ void kd_search(const KdTree& t, uint32_t ni, const double* q, Set& rs, double rd
     return;
   }
   const uint32_t dim = nd.dim;
+  if (dim >= static_cast<uint32_t>(DQ)) {
+    kd_search<D, DQ>(t, nd.a, q, rs, rdist, dists, valid);
+    kd_search<D, DQ>(t, nd.b, q, rs, rdist, dists, valid);
+    return;
+  }
   const double v = q[dim];
   const double diff1 = v - nd.lo;
   const double diff2 = v - nd.hi;
@@ -467,25 +475,28 @@ void kd_search(const KdTree& t, uint32_t ni, const double* q, Set& rs, double rd
     other = nd.a;
     cut = diff1 * diff1;
   }
-  kd_search<D>(t, best, q, rs, rdist, dists, valid);
+  kd_search<D, DQ>(t, best, q, rs, rdist, dists, valid);
   const double saved = dists[dim];
   const double nr = rdist + cut - saved;
   if (nr <= rs.worst() * kPruneSlack) {
     dists[dim] = cut;
-    kd_search<D>(t, other, q, rs, nr, dists, valid);
+    kd_search<D, DQ>(t, other, q, rs, nr, dists, valid);
     dists[dim] = saved;
   }
 }
 
-/// Adds the tree's valid points to a KnnSet or RadiusSet. Cost O(log n + visited leaves · D).
-template <int D, class Set, class Valid>
+/// Adds the tree's valid points to a KnnSet or RadiusSet, by the distance over the first DQ
+/// coordinates (default: all D). Cost O(log n + visited leaves · D) for DQ = D; with DQ < D every
+/// split along an ignored dimension visits both children.
+template <int D, int DQ = D, class Set, class Valid>
 void kd_query(const KdTree& t, const double* q, Set& rs, const Valid& valid) {
+  static_assert(DQ >= 1 && DQ <= D, "DQ counts leading coordinates");
   if (t.n == 0 || t.n_nodes == 0) return;
   // Start from the distance to the bounding box of all points (nanoflann does the same): a
   // query outside the data prunes from the first split on.
   double dists[static_cast<size_t>(D)];
   double rdist = 0.0;
-  for (int j = 0; j < D; ++j) {
+  for (int j = 0; j < DQ; ++j) {
     double d = 0.0;
     if (q[j] < t.root_lo[j]) d = t.root_lo[j] - q[j];
     if (q[j] > t.root_hi[j]) d = q[j] - t.root_hi[j];
@@ -493,14 +504,15 @@ void kd_query(const KdTree& t, const double* q, Set& rs, const Valid& valid) {
     rdist += dists[j];
   }
   if (rdist > rs.worst() * kPruneSlack) return;
-  kd_search<D>(t, 0, q, rs, rdist, dists, valid);
+  kd_search<D, DQ>(t, 0, q, rs, rdist, dists, valid);
 }
 
-/// Brute-force reference over n points (row-major n × D, ids = index): the oracle of the tests.
-template <int D, class Set>
+/// Brute-force reference over n points (row-major n × D, ids = index), distance over the first DQ
+/// coordinates: the oracle of the tests.
+template <int D, int DQ = D, class Set>
 void brute_query(const double* pts, uint32_t n, const double* q, Set& rs) {
   for (uint32_t i = 0; i < n; ++i) {
-    const double d = dist2<D>(q, pts + static_cast<size_t>(i) * static_cast<size_t>(D));
+    const double d = dist2<DQ>(q, pts + static_cast<size_t>(i) * static_cast<size_t>(D));
     if (d <= rs.worst()) rs.add(d, i);
   }
 }
