@@ -260,6 +260,7 @@ sim_env_status_t sim_env_seed(sim_env_t* env, uint64_t seed) {
   env->seed = seed;
   uint64_t st = seed;
   tasks_rng_seed(&env->start_rng, tasks_rng_splitmix64(&st));
+  memset(&env->ep.start_cycle, 0, sizeof env->ep.start_cycle);  // training starts: a new cycle
   env->fresh = true;
   env->running = false;
   env->cmd_v = 0.0;

@@ -154,9 +154,10 @@ features_pose_t tasks_episode_eval_start(const tasks_episode_t* ep, uint32_t ind
                          : tasks_obstacles_eval_start(&ep->obstacles, index);
 }
 
-features_pose_t tasks_episode_training_start(const tasks_episode_t* ep, tasks_rng_t* rng) {
-  return is_corridor(ep) ? tasks_corridor_training_start(&ep->corridor, rng)
-                         : tasks_obstacles_training_start(&ep->obstacles, rng);
+features_pose_t tasks_episode_training_start(tasks_episode_t* ep, tasks_rng_t* rng) {
+  const uint32_t k = tasks_start_cycle_next(&ep->start_cycle, rng);
+  return is_corridor(ep) ? tasks_corridor_training_start_near(&ep->corridor, k, rng)
+                         : tasks_obstacles_training_start_near(&ep->obstacles, k, rng);
 }
 
 uint32_t tasks_episode_step_limit(const tasks_episode_t* ep) {

@@ -67,11 +67,11 @@ static double jitter_norm(double dx, double dy, double dth, double jx, double jy
 // and clear of the world (`is_clear(spec, pose)`). Returns 1 with the pose in *out, or 0 after
 // TASKS_START_ATTEMPTS tries with *out = the last pose tried and *base_out = the chosen evaluation
 // start, so the caller can apply its task's fallback. O(TASKS_START_ATTEMPTS).
-static int jittered_start(const features_pose_t eval_starts[TASKS_N_EVAL_STARTS], double jx, double jy,
-                          double jth, int (*is_clear)(const void* spec, features_pose_t),
+static int jittered_start(const features_pose_t eval_starts[TASKS_N_EVAL_STARTS], uint32_t index, double jx,
+                          double jy, double jth, int (*is_clear)(const void* spec, features_pose_t),
                           const void* spec, tasks_rng_t* rng, features_pose_t* out,
                           features_pose_t* base_out) {
-  const features_pose_t base = eval_starts[tasks_rng_below(rng, TASKS_N_EVAL_STARTS)];
+  const features_pose_t base = eval_starts[index % TASKS_N_EVAL_STARTS];
   *base_out = base;
   *out = base;
   for (int attempt = 0; attempt < TASKS_START_ATTEMPTS; ++attempt) {
@@ -100,9 +100,14 @@ static int corridor_pose_clear(const void* spec_v, features_pose_t p) {
 }
 
 features_pose_t tasks_corridor_training_start(const tasks_corridor_spec_t* spec, tasks_rng_t* rng) {
+  return tasks_corridor_training_start_near(spec, tasks_rng_below(rng, TASKS_N_EVAL_STARTS), rng);
+}
+
+features_pose_t tasks_corridor_training_start_near(const tasks_corridor_spec_t* spec, uint32_t index,
+                                                   tasks_rng_t* rng) {
   features_pose_t p;
   features_pose_t base;
-  if (jittered_start(spec->eval_starts, spec->train_jitter_x_m, spec->train_jitter_y_m,
+  if (jittered_start(spec->eval_starts, index, spec->train_jitter_x_m, spec->train_jitter_y_m,
                      spec->train_jitter_theta_rad, corridor_pose_clear, spec, rng, &p, &base)) {
     return p;
   }
@@ -234,9 +239,14 @@ static int obstacles_pose_clear(const void* spec_v, features_pose_t p) {
 
 features_pose_t tasks_obstacles_training_start(const tasks_obstacles_spec_t* spec,
                                                tasks_rng_t* rng) {
+  return tasks_obstacles_training_start_near(spec, tasks_rng_below(rng, TASKS_N_EVAL_STARTS), rng);
+}
+
+features_pose_t tasks_obstacles_training_start_near(const tasks_obstacles_spec_t* spec, uint32_t index,
+                                                    tasks_rng_t* rng) {
   features_pose_t p;
   features_pose_t base;
-  if (jittered_start(spec->eval_starts, spec->train_jitter_x_m, spec->train_jitter_y_m,
+  if (jittered_start(spec->eval_starts, index, spec->train_jitter_x_m, spec->train_jitter_y_m,
                      spec->train_jitter_theta_rad, obstacles_pose_clear, spec, rng, &p, &base)) {
     return p;
   }
@@ -274,4 +284,22 @@ double tasks_clamp_omega(double omega_radps, double omega_max_radps) {
     return 0.0;
   }
   return clampd(omega_radps, -omega_max_radps, omega_max_radps);
+}
+
+uint32_t tasks_start_cycle_next(tasks_start_cycle_t* cycle, tasks_rng_t* rng) {
+  if (!cycle->started || cycle->next >= TASKS_N_EVAL_STARTS) {
+    // Fisher-Yates shuffle of 0..9.
+    for (uint32_t i = 0U; i < TASKS_N_EVAL_STARTS; ++i) {
+      cycle->order[i] = (uint8_t)i;
+    }
+    for (uint32_t i = TASKS_N_EVAL_STARTS - 1U; i > 0U; --i) {
+      const uint32_t j = tasks_rng_below(rng, i + 1U);
+      const uint8_t t = cycle->order[i];
+      cycle->order[i] = cycle->order[j];
+      cycle->order[j] = t;
+    }
+    cycle->next = 0U;
+    cycle->started = 1U;
+  }
+  return cycle->order[cycle->next++];
 }

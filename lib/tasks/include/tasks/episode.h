@@ -66,6 +66,7 @@ typedef struct tasks_episode {
   features_pose_t odom_at_start;                 ///< odometry pose at the start of the run
   features_corridor_t corridor_state;            ///< newest corridor features (corridor task)
   features_obstacles_t obstacles_state;          ///< newest obstacle features (obstacle task)
+  tasks_start_cycle_t start_cycle;               ///< order of the training starts' base poses
 } tasks_episode_t;
 
 /// Sets up task with the given specs (NULL: the defaults of tasks_*_spec_default); both specs
@@ -109,8 +110,10 @@ double tasks_episode_driver_action(const tasks_episode_t* ep, tasks_driver_t* dr
 /// Evaluation start pose `index` (modulo TASKS_N_EVAL_STARTS), task frame. O(1).
 features_pose_t tasks_episode_eval_start(const tasks_episode_t* ep, uint32_t index);
 
-/// A training start pose drawn from rng (tasks_*_training_start). Bounded draws.
-features_pose_t tasks_episode_training_start(const tasks_episode_t* ep, tasks_rng_t* rng);
+/// The next training start pose: jittered around the evaluation pose the episode's start cycle
+/// names (tasks_start_cycle_next: every pose once per ten runs, shuffled), drawn from rng
+/// (tasks_*_training_start_near). Advances the cycle. Bounded draws.
+features_pose_t tasks_episode_training_start(tasks_episode_t* ep, tasks_rng_t* rng);
 
 /// The run's step limit (the spec's; 0 = none). O(1).
 uint32_t tasks_episode_step_limit(const tasks_episode_t* ep);

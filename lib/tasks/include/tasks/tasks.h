@@ -114,6 +114,11 @@ features_pose_t tasks_corridor_eval_start(const tasks_corridor_spec_t* spec, uin
 /// into the corridor). Deterministic given the rng state.
 features_pose_t tasks_corridor_training_start(const tasks_corridor_spec_t* spec, tasks_rng_t* rng);
 
+/// As tasks_corridor_training_start, around the given evaluation pose (index modulo
+/// TASKS_N_EVAL_STARTS) instead of a uniformly drawn one (see tasks_start_cycle_next).
+features_pose_t tasks_corridor_training_start_near(const tasks_corridor_spec_t* spec, uint32_t index,
+                                                   tasks_rng_t* rng);
+
 /// Reward and termination of the corridor task for the transition into state f_next:
 /// - contact (bumper / emulator contact) -> reward 0, terminal (COLLISION): the paper's corridor
 ///   reward has no penalty; the run cannot continue, so the state is absorbing with value 0;
@@ -178,6 +183,26 @@ features_pose_t tasks_obstacles_eval_start(const tasks_obstacles_spec_t* spec, u
 /// jittered, never identical, at least robot_radius + 0.1 m clear of obstacles and walls).
 features_pose_t tasks_obstacles_training_start(const tasks_obstacles_spec_t* spec,
                                                tasks_rng_t* rng);
+
+/// As tasks_obstacles_training_start, around the given evaluation pose (index modulo
+/// TASKS_N_EVAL_STARTS).
+features_pose_t tasks_obstacles_training_start_near(const tasks_obstacles_spec_t* spec, uint32_t index,
+                                                    tasks_rng_t* rng);
+
+/// Stratified choice of the evaluation pose a training start is jittered around: each cycle of
+/// TASKS_N_EVAL_STARTS training runs visits every pose once, in an order shuffled per cycle, so
+/// that after n runs every pose has had floor(n / 10) nearby starts (a uniform draw leaves a pose
+/// without any nearby start in 30 runs with probability 0.04, and one of ten with 0.35). Plain
+/// data; zero-initialise, then call tasks_start_cycle_next for every training run. O(10).
+typedef struct tasks_start_cycle {
+  uint8_t order[TASKS_N_EVAL_STARTS];  ///< this cycle's order
+  uint32_t next;                       ///< position in order; TASKS_N_EVAL_STARTS or 0 after init = reshuffle
+  uint8_t started;                     ///< 0 until the first shuffle
+} tasks_start_cycle_t;
+
+/// The evaluation-pose index of the next training start (see tasks_start_cycle_t); consumes
+/// TASKS_N_EVAL_STARTS - 1 draws of rng at the start of each cycle, none otherwise.
+uint32_t tasks_start_cycle_next(tasks_start_cycle_t* cycle, tasks_rng_t* rng);
 
 /// Reward and termination of the obstacle task for the transition into state f_next:
 /// contact -> collision_reward (-1), terminal (takes precedence); f_next->valid and
