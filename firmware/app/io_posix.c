@@ -89,7 +89,9 @@ static int v_request_start_pose(void* user, double x_m, double y_m, double theta
     return 0;  // a person places the robot and confirms over B21R_COMMAND
   }
   char line[128];
-  const int n = snprintf(line, sizeof line, "reset %.9g %.9g %.9g", x_m, y_m, theta_rad);
+  // 17 significant digits: the emulator parses back the exact double, so the pty path and the
+  // in-process path place the robot at bit-identical poses.
+  const int n = snprintf(line, sizeof line, "reset %.17g %.17g %.17g", x_m, y_m, theta_rad);
   if (send(io->control_fd, line, (size_t)n, MSG_NOSIGNAL) != n) {
     return -1;
   }

@@ -24,43 +24,6 @@ static int rflex_send(fw_loop_t* L, const rflex_packet_t* pkt) {
   return L->io.vt->base_write(L->io.user, buf, n);
 }
 
-static void rflex_handle(fw_loop_t* L, const rflex_packet_t* pkt) {
-  L->base_packets++;
-  switch (rflex_classify(pkt)) {
-    case RFLEX_MSG_MOTOR_REPORT: {
-      rflex_motor_report_t r;
-      if (rflex_parse_motor_report(pkt, &r) == PROTO_OK && rflex_odom_feed(&L->odo, &r) == PROTO_OK) {
-        L->odo_new[r.axis] = true;
-      }
-      break;
-    }
-    case RFLEX_MSG_SYS_STATUS: {
-      rflex_sys_status_t s;
-      if (pkt->dlen >= 9 && rflex_parse_sys_status(pkt, &s) == PROTO_OK) {
-        L->brake_reported = s.brake != 0 ? 1 : 0;
-        L->battery_v = rflex_battery_volts(s.voltage_raw, L->rflex.power_offset_v);
-      }
-      break;
-    }
-    case RFLEX_MSG_DIO_REPORT: {
-      rflex_dio_report_t d;
-      if (rflex_parse_dio_report(pkt, &d) == PROTO_OK) {
-        const int panel = rflex_dio_bumper_panel(d.address);
-        if (panel >= 0) {
-          if ((d.value & 0x0FU) != 0U) {
-            L->bumper_mask |= 1U << panel;
-          } else {
-            L->bumper_mask &= ~(1U << panel);
-          }
-        }
-      }
-      break;
-    }
-    default:
-      break;  // other reports (sonar, IR, joystick) are not used
-  }
-}
-
 static void rflex_poll(fw_loop_t* L) {
   // Bounded: at most 16 reads of 1 KB per poll (about 3 s of reports at 115200 Bd).
   for (int i = 0; i < 16; ++i) {
@@ -68,19 +31,9 @@ static void rflex_poll(fw_loop_t* L) {
     if (n <= 0) {
       break;
     }
-    const uint8_t* p = L->rbuf;
-    size_t left = (size_t)n;
-    while (left > 0) {
-      rflex_packet_t pkt;
-      bool got = false;
-      const size_t k = rflex_decoder_push(&L->rdec, p, left, &pkt, &got);
-      p += k;
-      left -= k;
-      if (got) {
-        rflex_handle(L, &pkt);
-      }
-    }
+    L->base_packets += (int64_t)rflex_host_feed(&L->base, L->rbuf, (size_t)n);
   }
+  L->bumper_mask = L->base.bumper_mask;
 }
 
 // ---- CANopen ----------------------------------------------------------------------------
@@ -125,8 +78,8 @@ static void can_handle(fw_loop_t* L, const canopen_frame_t* f, int64_t now_us) {
         r.axis = (uint8_t)i;
         r.position = t.position_actual;
         r.velocity = d->velocity;
-        if (rflex_odom_feed(&L->odo, &r) == PROTO_OK) {
-          L->odo_new[i] = true;
+        if (rflex_odom_feed(&L->base.odometry, &r) == PROTO_OK) {
+          L->base.report_new[i] = true;
         }
       }
       break;
@@ -185,21 +138,21 @@ void fw_base_poll(fw_loop_t* L, int64_t now_us) {
 
 bool fw_base_all_reports(const fw_loop_t* L) {
   if (is_rflex(L)) {
-    return L->odo_new[0] && L->odo_new[1];
+    return L->base.report_new[0] && L->base.report_new[1];
   }
   return L->drive[0].tpdo1_new && L->drive[0].tpdo2_new && L->drive[1].tpdo1_new && L->drive[1].tpdo2_new;
 }
 
 bool fw_base_any_report(const fw_loop_t* L) {
   if (is_rflex(L)) {
-    return L->odo_new[0] || L->odo_new[1];
+    return L->base.report_new[0] || L->base.report_new[1];
   }
   return L->drive[0].tpdo1_new || L->drive[0].tpdo2_new || L->drive[1].tpdo1_new || L->drive[1].tpdo2_new;
 }
 
 void fw_base_clear_flags(fw_loop_t* L) {
-  L->odo_new[0] = false;
-  L->odo_new[1] = false;
+  L->base.report_new[0] = false;
+  L->base.report_new[1] = false;
   for (int i = 0; i < 2; ++i) {
     L->drive[i].tpdo1_new = false;
     L->drive[i].tpdo2_new = false;
@@ -212,7 +165,7 @@ void fw_base_evaluate_faults(fw_loop_t* L, int64_t now_us) {
   if (is_rflex(L)) {
     // The rFLEX reports no faults; an engaged brake we did not ask for means its watchdog or an
     // emergency stop took the motors away.
-    if (L->brake_expected_released && L->brake_reported == 1) {
+    if (L->brake_expected_released && L->base.brake == 1) {
       L->base_fault = true;
       snprintf(L->base_fault_detail, sizeof L->base_fault_detail,
                "rFLEX reports the brake engaged (watchdog or emergency stop)");
@@ -260,9 +213,11 @@ void fw_base_command(fw_loop_t* L, double v_mps, double w_radps, bool stopping) 
   can_send_cycle(L, v_mps, w_radps, CIA402_REQ_ENABLE);
 }
 
-uint64_t fw_base_bytes_dropped(const fw_loop_t* L) { return is_rflex(L) ? L->rdec.counters.bytes_dropped : 0U; }
+uint64_t fw_base_bytes_dropped(const fw_loop_t* L) { return is_rflex(L) ? L->base.decoder.counters.bytes_dropped : 0U; }
 
-uint64_t fw_base_checksum_errors(const fw_loop_t* L) { return is_rflex(L) ? L->rdec.counters.bad_checksum : 0U; }
+uint64_t fw_base_checksum_errors(const fw_loop_t* L) {
+  return is_rflex(L) ? L->base.decoder.counters.bad_checksum : 0U;
+}
 
 static int64_t now(const fw_loop_t* L) { return L->io.vt->now_us(L->io.user); }
 

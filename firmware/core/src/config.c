@@ -3,6 +3,8 @@
 // the parser, the error messages, --help and the reference file cannot drift apart.
 #include "fw/config.h"
 
+#include <hedger/hedger.h>
+
 #include <errno.h>
 #include <math.h>
 #include <stdarg.h>
@@ -51,6 +53,8 @@ static const choice_t k_reposition[] = {
     {"operator", FW_REPOSITION_OPERATOR}, {"emulator", FW_REPOSITION_EMULATOR}, {NULL, 0}};
 static const choice_t k_driver[] = {
     {"example", FW_DRIVER_EXAMPLE}, {"joystick", FW_DRIVER_JOYSTICK}, {"human", FW_DRIVER_HUMAN}, {NULL, 0}};
+static const choice_t k_greedy[] = {
+    {"per_action", HEDGER_GREEDY_PER_ACTION}, {"state_model", HEDGER_GREEDY_STATE_MODEL}, {NULL, 0}};
 static const choice_t k_switch[] = {
     {"runs", FW_SWITCH_RUNS}, {"operator", FW_SWITCH_OPERATOR}, {"auto", FW_SWITCH_AUTO}, {NULL, 0}};
 
@@ -62,6 +66,8 @@ static const key_desc_t k_keys[] = {
    "learn: the two-phase schedule; evaluate: one evaluation block of evaluate_policy, then exit"},
   {NULL, "evaluate_policy", KIND_ENUM, OFF(evaluate_policy), 0, 0, false, false, k_eval_policy, "learned",
    "policy evaluated when mode = evaluate (optimal = the hand-tuned reference controller)"},
+  {NULL, "evaluate_example_gain", KIND_DOUBLE, OFF(evaluate_example_gain), 0, 100, false, false, NULL, "0",
+   "evaluate_policy = example: the example policy's gain [1/s] (0 = the middle of its training range)"},
   {NULL, "seed", KIND_U64, OFF(seed), 0, 9.2e18, false, false, NULL, "1",
    "root seed of every random generator (example gains, start poses, exploration)"},
   {NULL, "corridor_length_m", KIND_DOUBLE, OFF(corridor_length_m), 4, 200, false, false, NULL, "10",
@@ -73,9 +79,8 @@ static const key_desc_t k_keys[] = {
   {NULL, "lockstep", KIND_BOOL, OFF(lockstep), 0, 0, false, false, NULL, "false",
    "tick when the emulator's data for the next period has arrived instead of on the clock"},
   {NULL, "lockstep_timeout_s", KIND_DOUBLE, OFF(lockstep_timeout_s), 0.01, 60, false, false, NULL, "5",
-   "lockstep: longest wall-clock wait for any input; then the tick runs and counts silence"},
-  {NULL, "lockstep_grace_s", KIND_DOUBLE, OFF(lockstep_grace_s), 0.001, 10, false, false, NULL, "0.25",
-   "lockstep: once one device answered, how long to wait for the other one"},
+   "lockstep: a device silent this long (wall clock) ends the loop with status 5; the tick never runs without "
+   "the period's data"},
 
   {"Devices", "laser_device", KIND_STRING, OFF(laser_device), 0, 0, false, false, NULL, "/dev/ttyUSB0",
    "serial device of the SICK LMS200"},
@@ -143,7 +148,7 @@ static const key_desc_t k_keys[] = {
    "stored samples of the value function (fixed memory)"},
   {NULL, "hedger_k_min", KIND_INT, OFF(hedger_k_min), 1, 64, false, false, NULL, "6",
    "fewer neighbours than this and HEDGER answers 'unknown'"},
-  {NULL, "hedger_k_max", KIND_INT, OFF(hedger_k_max), 2, 64, false, false, NULL, "12",
+  {NULL, "hedger_k_max", KIND_INT, OFF(hedger_k_max), 2, 64, false, false, NULL, "32",
    "neighbourhood size of a prediction"},
   {NULL, "hedger_bandwidth", KIND_DOUBLE, OFF(hedger_bandwidth), 0, 100, true, false, NULL, "0.25",
    "kernel bandwidth h in scaled input units (inputs scaled to about [0, 1])"},
@@ -156,6 +161,22 @@ static const key_desc_t k_keys[] = {
    "evenly spaced actions the greedy search scans before refining"},
   {NULL, "hedger_replay", KIND_BOOL, OFF(hedger_replay), 0, 0, false, false, NULL, "true",
    "replay every finished training run backwards (propagates the sparse reward faster)"},
+  {NULL, "learn_updates_per_tick", KIND_INT, OFF(learn_updates_per_tick), 1, 100000, false, false, NULL, "8",
+   "between runs (the robot stands): backward-replay updates per tick; bounds the tick's time (see README)"},
+  {NULL, "checkpoint_points_per_tick", KIND_INT, OFF(checkpoint_points_per_tick), 1, 100000000, false, false, NULL,
+   "4096", "between runs: stored points serialised into the checkpoint per tick; bounds the tick's time"},
+  {NULL, "hedger_replay_passes", KIND_INT, OFF(hedger_replay_passes), 1, 64, false, false, NULL, "20",
+   "backward passes over every finished training run (between runs, sliced over ticks)"},
+  {NULL, "hedger_replay_lambda", KIND_DOUBLE, OFF(hedger_replay_lambda), 0, 1, false, false, NULL, "0.9",
+   "target of the replay: the lambda-return, 0 = Q-learning's r + gamma max Q, 1 = the run's own return"},
+  {NULL, "hedger_greedy_method", KIND_ENUM, OFF(hedger_greedy_method), 0, 0, false, false, k_greedy, "state_model",
+   "greedy action: per_action = one prediction per candidate; state_model = one local model at the "
+   "state, quadratic in the action (falls back to per_action where it cannot be formed)"},
+  {NULL, "hedger_greedy_pessimism", KIND_DOUBLE, OFF(hedger_greedy_pessimism), 0, 1000, false, false, NULL, "4",
+   "the greedy search ranks actions by value - this x the regression's standard error"},
+  {NULL, "hedger_greedy_reach", KIND_DOUBLE, OFF(hedger_greedy_reach), 1, 100, false, false, NULL, "3",
+   "state_model: where a state has too few neighbours, form the model again with the kernel widened by "
+   "this factor (1 = no)"},
   {NULL, "phase_one_driver", KIND_ENUM, OFF(phase_driver), 0, 0, false, false, k_driver, "example",
    "phase one is driven by the example policy (code), the operator's joystick (B21R_TELEOP), or a "
    "simulated sloppy human driver (code)"},
@@ -179,15 +200,16 @@ static const key_desc_t k_keys[] = {
   {NULL, "max_steps_per_run", KIND_INT, OFF(max_steps_per_run), 0, 1000000, false, false, NULL, "0",
    "step limit of a run (0 = the task's own limit)"},
   {NULL, "explore_sigma_radps", KIND_DOUBLE, OFF(explore_sigma_radps), 0, 4, false, false, NULL, "0.1",
-   "phase two: standard deviation of the Gaussian exploration noise [rad/s]"},
+   "phase two: standard deviation of the offset an exploration segment adds to the greedy action [rad/s]"},
   {NULL, "explore_probability", KIND_DOUBLE, OFF(explore_probability), 0, 1, false, false, NULL, "0.2",
-   "phase two: probability that a step gets exploration noise"},
+   "probability per training step (outside a segment) that an exploration segment starts"},
+  {NULL, "explore_hold_s", KIND_DOUBLE, OFF(explore_hold_s), 0, 100, false, false, NULL, "0",
+   "duration of an exploration segment: one offset held this long (0 = a new offset every step)"},
   {NULL, "advisor", KIND_BOOL, OFF(advisor), 0, 0, false, false, NULL, "true",
-   "phase two training: the example policy acts where HEDGER knows nothing, or rates its own greedy "
-   "action no better than the example's by advisor_margin"},
-  {NULL, "advisor_margin", KIND_DOUBLE, OFF(advisor_margin), 0, 10, false, false, NULL, "0.02",
-   "phase two: the greedy action is taken only where its Q comes from a local regression and exceeds "
-   "the example action's by this fraction"},
+   "phase two training: the example policy acts where HEDGER knows no action at all"},
+  {NULL, "example_noise_radps", KIND_DOUBLE, OFF(example_noise_radps), 0, 4, false, false, NULL, "0.3",
+   "phase one, example driver: standard deviation of Gaussian noise added to every example action "
+   "[rad/s] (spreads the actions the learner sees around the example's)"},
 
   {"Output", "lcm_url", KIND_STRING, OFF(lcm_url), 0, 0, false, false, NULL, "",
    "LCM provider (\"\" = LCM's default or $LCM_DEFAULT_URL; \"none\" = no LCM)"},

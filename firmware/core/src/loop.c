@@ -1,67 +1,19 @@
 // SPDX-License-Identifier: MIT
-// The control loop: tick, run lifecycle, learning, safety reactions, publishing, checkpoints.
+// The control loop: create/destroy, the tick, pacing, device start-up and shutdown.
+//
+// One tick reads top to bottom: sense (inputs, silence, faults, operator, the state) → safety
+// (the supervisor's verdict and its reactions) → decide (the run's lifecycle and this step's
+// action, run.c) → act (clamp, send) → learn (the step's update and between-run work, learning.c,
+// only after the command went out) → publish (pose, scan, status).
 #define _POSIX_C_SOURCE 200809L
 #include "loop_internal.h"
-#include "le_bytes.h"
 
-#include <errno.h>
 #include <math.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-// Checkpoint meta section: the schedule's progress, little-endian, versioned.
-#define META_MAGIC "FWMETA01"
-#define META_BYTES 96U
-#define FW_PI 3.14159265358979323846
-
-// ---- small helpers ----------------------------------------------------------------------
-
-static void fmt(char* err, size_t cap, const char* format, ...) __attribute__((format(printf, 3, 4)));
-static void fmt(char* err, size_t cap, const char* format, ...) {
-  if (err == NULL || cap == 0) {
-    return;
-  }
-  va_list ap;
-  va_start(ap, format);
-  (void)vsnprintf(err, cap, format, ap);
-  va_end(ap);
-}
-
-static double clampd(double x, double lo, double hi) { return x < lo ? lo : (x > hi ? hi : x); }
-
 static int64_t io_now(const fw_loop_t* L) { return L->io.vt->now_us(L->io.user); }
-
-static void notify(fw_loop_t* L) {
-  if (L->out.notify != NULL) {
-    L->out.notify(L->out.notify_user);
-  }
-}
-
-void fw_loop_log(fw_loop_t* L, int stream, const char* format, ...) {
-  char line[FW_TEXT_MAX];
-  va_list ap;
-  va_start(ap, format);
-  (void)vsnprintf(line, sizeof line, format, ap);
-  va_end(ap);
-  fw_msg_t* m = L->out.queue != NULL ? fw_pubq_reserve(L->out.queue, FW_MSG_TEXT) : NULL;
-  if (m == NULL) {
-    if (L->out.queue == NULL && stream == 2) {
-      // No publisher (start-up, tools): write directly; not on the tick path.
-      fprintf(stderr, "%s\n", line);
-    }
-    return;
-  }
-  m->u.text.stream = stream;
-  memcpy(m->u.text.line, line, sizeof line);
-  fw_pubq_commit(L->out.queue);
-  notify(L);
-}
-
-
-
-
 
 static bool all_finite(const double* v, uint32_t n) {
   for (uint32_t i = 0; i < n; ++i) {
@@ -72,354 +24,64 @@ static bool all_finite(const double* v, uint32_t n) {
   return true;
 }
 
-// ---- task glue ----------------------------------------------------------------------------
+// ---- set-up ---------------------------------------------------------------------------------
 
-static bool is_corridor(const fw_loop_t* L) { return L->cfg.task == FW_TASK_CORRIDOR; }
-
-static uint32_t step_limit(const fw_loop_t* L) {
-  if (L->cfg.max_steps_per_run > 0) {
-    return (uint32_t)L->cfg.max_steps_per_run;
+// The task as configured: specs (corridor length, action bound, period, step limit), the
+// command limits, the learner's state dimension and discount.
+static void setup_task(fw_loop_t* L) {
+  const fw_config_t* cfg = &L->cfg;
+  L->period_us = fw_config_period_us(cfg);
+  L->dt_s = (double)L->period_us * 1e-6;
+  L->omega_max = cfg->max_rotation_radps;
+  tasks_corridor_spec_t corridor;
+  tasks_corridor_spec_default(&corridor);
+  corridor.length_m = cfg->corridor_length_m;
+  corridor.omega_max_radps = L->omega_max;
+  corridor.dt_s = L->dt_s;
+  tasks_obstacles_spec_t obstacles;
+  tasks_obstacles_spec_default(&obstacles);
+  obstacles.omega_max_radps = L->omega_max;
+  obstacles.dt_s = L->dt_s;
+  if (cfg->max_steps_per_run > 0) {
+    corridor.step_limit = (uint32_t)cfg->max_steps_per_run;
+    obstacles.step_limit = (uint32_t)cfg->max_steps_per_run;
   }
-  return is_corridor(L) ? L->corridor.step_limit : L->obstacles.step_limit;
+  tasks_episode_init(&L->ep, cfg->task == FW_TASK_CORRIDOR ? TASKS_TASK_CORRIDOR : TASKS_TASK_OBSTACLES, &corridor,
+                     &obstacles);
+  L->limits.max_translation_mps = cfg->max_translation_mps;
+  L->limits.max_rotation_radps = cfg->max_rotation_radps;
+  L->limits.max_translation_accel_mps2 = cfg->max_translation_accel_mps2;
+  L->limits.max_rotation_accel_radps2 = cfg->max_rotation_accel_radps2;
+  L->state_dim = L->ep.state_dim;
+  L->gamma = cfg->gamma > 0.0 ? cfg->gamma : tasks_episode_gamma(&L->ep);
 }
 
-static features_pose_t eval_pose(const fw_loop_t* L, int32_t index) {
-  return is_corridor(L) ? tasks_corridor_eval_start(&L->corridor, (uint32_t)index)
-                        : tasks_obstacles_eval_start(&L->obstacles, (uint32_t)index);
-}
+// Every random stream derives from the one root seed, in this order.
+typedef struct seeds {
+  uint64_t pose, explore, hedger, driver;
+} seeds_t;
 
-static features_pose_t odom_pose(const fw_loop_t* L) {
-  const features_pose_t p = {L->odo.x_m, L->odo.y_m, L->odo.theta_rad};
-  return p;
-}
-
-// Features of the newest scan at the robot's odometry pose in the task frame. Returns false when
-// the state is not usable (invalid features or a non-finite value).
-static bool compute_state(fw_loop_t* L) {
-  const features_pose_t pose = features_odom_to_task(L->start_pose, L->odom_at_start, odom_pose(L));
-  if (is_corridor(L)) {
-    if (features_corridor_compute(&L->corridor_fc, &L->scan, &pose, &L->fcor) != FEATURES_OK || !L->fcor.valid) {
-      return false;
-    }
-    features_corridor_state(&L->fcor, L->s);
-  } else {
-    if (features_obstacles_compute(&L->obstacles_fc, &L->scan, &pose, L->obstacles.goal_x_m, L->obstacles.goal_y_m,
-                                   &L->fobs) != FEATURES_OK ||
-        !L->fobs.valid) {
-      return false;
-    }
-    (void)features_obstacles_state(&L->fobs, 1, L->s, FW_MAX_STATE);
-  }
-  return true;
-}
-
-static tasks_outcome_t outcome(const fw_loop_t* L, uint8_t contact, uint32_t steps_taken) {
-  if (is_corridor(L)) {
-    tasks_corridor_spec_t spec = L->corridor;
-    spec.step_limit = step_limit(L);
-    return tasks_corridor_outcome(&spec, &L->fcor, contact, steps_taken);
-  }
-  tasks_obstacles_spec_t spec = L->obstacles;
-  spec.step_limit = step_limit(L);
-  return tasks_obstacles_outcome(&spec, &L->fobs, contact, steps_taken);
-}
-
-static double speed(const fw_loop_t* L) {
-  return is_corridor(L) ? tasks_corridor_speed_mps(&L->corridor, &L->fcor) : tasks_obstacles_speed_mps(&L->obstacles);
-}
-
-static double driver_action(fw_loop_t* L) {
-  return is_corridor(L) ? tasks_driver_corridor(&L->driver, &L->fcor) : tasks_driver_obstacles(&L->driver, &L->fobs);
-}
-
-// ---- publishing ---------------------------------------------------------------------------
-
-static void publish_experience(fw_loop_t* L, double reward, bool terminal, double q, hedger_kind_t kind) {
-  if (L->out.queue == NULL) {
-    L->exp_seq++;
-    return;
-  }
-  fw_msg_t* m = fw_pubq_reserve(L->out.queue, FW_MSG_EXPERIENCE);
-  const int64_t seq = L->exp_seq++;  // a dropped experience leaves a gap in seq: detectable
-  if (m == NULL) {
-    L->exp_dropped++;
-    return;
-  }
-  b21r_experience_t* e = &m->u.experience;
-  memset(e, 0, sizeof *e);
-  e->utime = L->utime;
-  e->seq = seq;
-  e->run_id = L->run_id;
-  e->step_id = L->actions_taken - 1;
-  e->task = (int8_t)L->cfg.task;
-  e->phase = (int8_t)L->plan.phase;
-  e->source = L->prev_source;
-  e->evaluating = L->plan.kind == FW_RUN_EVAL ? 1 : 0;
-  e->state_dim = (int8_t)L->state_dim;
-  for (uint32_t i = 0; i < L->state_dim; ++i) {
-    e->s[i] = L->prev_s[i];
-    e->s_next[i] = L->s[i];
-  }
-  e->action_radps = L->prev_a;
-  e->translation_mps = L->prev_v;
-  e->reward = reward;
-  e->terminal = terminal ? 1 : 0;
-  e->q_value = isfinite(q) ? q : 0.0;
-  e->q_kind = (int8_t)(kind == HEDGER_KIND_LWR ? 0 : (kind == HEDGER_KIND_LWA ? 1 : 2));
-  fw_pubq_commit(L->out.queue);
-}
-
-static void publish_pose(fw_loop_t* L) {
-  if (L->out.queue == NULL) {
-    return;
-  }
-  fw_msg_t* m = fw_pubq_reserve(L->out.queue, FW_MSG_POSE);
-  if (m == NULL) {
-    return;
-  }
-  b21r_pose_t* p = &m->u.pose;
-  p->utime = L->utime;
-  p->run_id = L->run_id;
-  p->step_id = L->actions_taken;
-  p->x_m = L->odo.x_m;
-  p->y_m = L->odo.y_m;
-  p->theta_rad = L->odo.theta_rad;
-  p->translation_mps = L->odo.v_mps;
-  p->rotation_radps = L->odo.omega_radps;
-  fw_pubq_commit(L->out.queue);
-}
-
-static void publish_scan(fw_loop_t* L) {
-  if (L->out.queue == NULL || !L->cfg.publish_scan) {
-    return;
-  }
-  fw_msg_t* m = fw_pubq_reserve(L->out.queue, FW_MSG_SCAN);
-  if (m == NULL) {
-    return;
-  }
-  b21r_scan_t* s = &m->u.scan;
-  s->utime = L->utime;
-  s->run_id = L->run_id;
-  s->step_id = L->actions_taken;
-  s->angle_min_rad = (float)L->scan.angle_min_rad;
-  s->angle_increment_rad = (float)L->scan.angle_increment_rad;
-  s->n_beams = (int16_t)L->scan.n_beams;
-  for (uint16_t i = 0; i < L->scan.n_beams; ++i) {
-    s->no_return_reason[i] = (int8_t)L->scan.no_return[i];
-    s->ranges_m[i] = L->scan.no_return[i] != 0 ? 0.0F : L->scan.ranges_m[i];
-  }
-  fw_pubq_commit(L->out.queue);
-}
-
-static void publish_eval(fw_loop_t* L, const fw_eval_block_t* b) {
-  if (L->out.queue == NULL) {
-    return;
-  }
-  fw_msg_t* m = fw_pubq_reserve(L->out.queue, FW_MSG_EVAL);
-  if (m == NULL) {
-    return;
-  }
-  b21r_eval_t* e = &m->u.eval;
-  memset(e, 0, sizeof *e);
-  e->utime = L->utime;
-  e->block = b->block;
-  e->training_runs = b->training_runs;
-  e->phase = (int8_t)b->phase;
-  e->task = (int8_t)L->cfg.task;
-  e->n_starts = b->n_starts;
-  for (int32_t i = 0; i < b->n_starts && i < 16; ++i) {
-    e->steps[i] = b->steps[i];
-    e->success[i] = b->success[i] ? 1 : 0;
-  }
-  e->successes = b->successes;
-  e->mean_steps = b->mean_steps;
-  e->ci95_halfwidth = b->ci95_halfwidth;
-  fw_pubq_commit(L->out.queue);
-}
-
-static int8_t status_mode(const fw_loop_t* L) {
-  if (L->mode == B21R_STATUS_T_MODE_STOPPED && L->safety.reason == FW_STOP_OPERATOR) {
-    return B21R_STATUS_T_MODE_PAUSED;
-  }
-  return (int8_t)L->mode;
-}
-
-static void publish_status(fw_loop_t* L) {
-  if (L->out.queue == NULL) {
-    return;
-  }
-  fw_msg_t* m = fw_pubq_reserve(L->out.queue, FW_MSG_STATUS);
-  if (m == NULL) {
-    return;
-  }
-  b21r_status_t* s = &m->u.status.msg;
-  memset(s, 0, sizeof *s);
-  s->utime = L->utime;
-  s->phase = (int8_t)L->sched.p.phase;
-  s->mode = status_mode(L);
-  s->stop_reason = (int8_t)L->safety.reason;
-  memcpy(m->u.status.detail, L->safety.detail, sizeof m->u.status.detail);
-  s->run_id = L->run_id;
-  s->step_id = L->actions_taken;
-  s->training_runs = L->sched.p.training_runs;
-  s->eval_blocks = L->sched.p.eval_blocks;
-  const fw_timing_summary_t t = fw_timing_summary(&L->timing);
-  s->tick_p50_us = t.p50_us;
-  s->tick_p99_us = t.p99_us;
-  s->tick_max_us = t.max_us;
-  s->tick_overruns = t.overruns;
-  s->ticks = t.ticks;
-  const hedger_counters_t* hc = hedger_counters(L->hedger);
-  s->store_fill = (int32_t)hc->store_fill;
-  s->store_capacity = L->cfg.hedger_capacity;
-  s->hedger_lwr = (int64_t)hc->predictions_lwr;
-  s->hedger_lwa = (int64_t)hc->predictions_lwa;
-  s->hedger_unknown = (int64_t)hc->predictions_unknown;
-  s->hedger_evictions = (int64_t)hc->evictions;
-  s->hedger_rebuilds = (int64_t)hc->rebuilds;
-  s->laser_scans = L->laser_scans;
-  fw_laser_stats_t ls;
-  memset(&ls, 0, sizeof ls);
-  if (L->io.vt->laser_stats != NULL) {
-    L->io.vt->laser_stats(L->io.user, &ls);
-  }
-  s->laser_bytes_dropped = (int64_t)ls.bytes_dropped;
-  s->laser_crc_errors = (int64_t)ls.crc_errors;
-  s->base_packets = L->base_packets;
-  s->base_bytes_dropped = (int64_t)fw_base_bytes_dropped(L);
-  s->base_checksum_errors = (int64_t)fw_base_checksum_errors(L);
-  s->teleop_accepted = L->teleop_accepted;
-  s->teleop_rejected = L->teleop_rejected;
-  s->lcm_queue_drops = (int64_t)fw_pubq_drops(L->out.queue, -1);
-  // One snapshot of the writer's counters (each read takes the writer's lock).
-  fw_ckpt_counters_t ckpt;
-  memset(&ckpt, 0, sizeof ckpt);
-  if (L->out.checkpoints != NULL) {
-    ckpt = fw_ckpt_writer_counters(L->out.checkpoints);
-  }
-  s->checkpoints_written = (int64_t)ckpt.written;
-  s->safety_stops = L->safety.stops;
-  s->held_ticks = L->held_ticks;
-  s->teleop_rejected_nan = L->teleop_rejected_nan;
-  s->teleop_rejected_range = L->teleop_rejected_range;
-  s->teleop_rejected_seq = L->teleop_rejected_seq;
-  s->teleop_rejected_stale = L->teleop_rejected_stale;
-  s->commands_accepted = L->commands_accepted;
-  s->commands_rejected = L->commands_rejected;
-  s->checkpoint_failures = (int64_t)ckpt.failed;
-  s->laser_restarts = (int64_t)ls.restarts;
-  s->odometry_rejected = (int64_t)(L->odo.rejected_trans + L->odo.rejected_rot);
-  s->experiences = L->exp_seq;
-  s->experiences_dropped = L->exp_dropped;
-  s->tick_max_ever_us = t.max_ever_us;
-  s->battery_v = L->battery_v;
-  fw_pubq_commit(L->out.queue);
-}
-
-// ---- checkpoints --------------------------------------------------------------------------
-
-static size_t encode_meta(const fw_loop_t* L, uint8_t* p) {
-  memset(p, 0, META_BYTES);
-  memcpy(p, META_MAGIC, 8);
-  const fw_schedule_progress_t* g = &L->sched.p;
-  fw_put_u32(p + 8, (uint32_t)L->cfg.task);
-  fw_put_u32(p + 12, L->state_dim);
-  fw_put_u32(p + 16, (uint32_t)g->phase);
-  fw_put_u32(p + 20, (uint32_t)g->training_runs);
-  fw_put_u32(p + 24, (uint32_t)g->phase_one_runs);
-  fw_put_u32(p + 28, (uint32_t)g->phase_two_runs);
-  fw_put_u32(p + 32, (uint32_t)g->eval_blocks);
-  fw_put_u32(p + 36, (uint32_t)g->example_runs);
-  fw_put_f64(p + 40, g->example_steps_sum);
-  fw_put_u32(p + 48, (uint32_t)g->best_example_steps);
-  fw_put_u32(p + 52, (uint32_t)(L->run_id + 1));
-  return META_BYTES;
-}
-
-static void checkpoint(fw_loop_t* L) {
-  if (L->out.checkpoints == NULL) {
-    return;
-  }
-  void* meta = NULL;
-  void* payload = NULL;
-  size_t meta_cap = 0;
-  size_t payload_cap = 0;
-  const int h = fw_ckpt_writer_acquire(L->out.checkpoints, &meta, &meta_cap, &payload, &payload_cap);
-  if (h < 0) {
-    L->checkpoints_skipped++;
-    return;
-  }
-  size_t written = 0;
-  const size_t meta_size = encode_meta(L, (uint8_t*)meta);
-  if (hedger_save(L->hedger, payload, payload_cap, &written) != HEDGER_OK) {
-    fw_ckpt_writer_submit(L->out.checkpoints, h, 0, 0);  // never happens: sized by serialized_max
-    L->checkpoints_skipped++;
-    return;
-  }
-  fw_ckpt_writer_submit(L->out.checkpoints, h, meta_size, written);
-  L->checkpoints_submitted++;
-}
-
-// ---- create / destroy --------------------------------------------------------------------
-
-static void hedger_config_for(const fw_loop_t* L, hedger_config_t* hc) {
-  *hc = hedger_config_default();
-  hc->state_dim = L->state_dim;
-  hc->action_min = -L->omega_max;
-  hc->action_max = L->omega_max;
-  hc->capacity = (uint32_t)L->cfg.hedger_capacity;
-  hc->k_min = (uint32_t)L->cfg.hedger_k_min;
-  hc->k_max = (uint32_t)L->cfg.hedger_k_max;
-  hc->bandwidth = L->cfg.hedger_bandwidth;
-  hc->alpha = L->cfg.alpha;
-  hc->gamma = L->gamma;
-  // Input scales: one scaled unit is about the distance over which the value changes markedly,
-  // so one bandwidth means the same in every direction. The action's scale is small on purpose:
-  // actions far from those tried stay "unknown" and never win the greedy search.
-  if (L->cfg.hedger_input_scale_n > 0) {
-    for (int32_t i = 0; i < L->cfg.hedger_input_scale_n; ++i) {
-      hc->input_scale[i] = L->cfg.hedger_input_scale[i];
-    }
-  } else if (is_corridor(L)) {
-    // Measured on the corridor: a long scale along the corridor spreads the sparse reward's value
-    // back from the end wall; short lateral, angle and action scales keep the value of an action
-    // local (actions far from those tried stay unknown and never win the greedy search).
-    hc->input_scale[0] = 10.0;  // end distance [m]
-    hc->input_scale[1] = 0.5;   // lateral fraction of the width
-    hc->input_scale[2] = 0.5;   // target angle [rad]
-    hc->input_scale[3] = 0.25;  // rotation [rad/s]
-  } else {
-    hc->input_scale[0] = 1.0;   // goal bearing [rad]
-    hc->input_scale[1] = 1.0;   // goal distance [m]
-    hc->input_scale[2] = 1.0;   // obstacle bearing [rad]
-    hc->input_scale[3] = 1.0;   // obstacle distance [m]
-    hc->input_scale[4] = 0.5;   // rotation [rad/s]
-  }
-  hc->merge_radius = L->cfg.hedger_merge_radius;
-  hc->greedy_coarse_actions = (uint32_t)L->cfg.hedger_greedy_actions;
-  uint32_t run_cap = step_limit(L) + 8U;
-  hc->run_capacity = run_cap > HEDGER_MAX_RUN ? HEDGER_MAX_RUN : run_cap;
-  hc->replay = L->cfg.hedger_replay ? 1U : 0U;
+static seeds_t derive_seeds(uint64_t root) {
+  seeds_t s;
+  uint64_t st = root;
+  s.pose = tasks_rng_splitmix64(&st);
+  s.explore = tasks_rng_splitmix64(&st);
+  s.hedger = tasks_rng_splitmix64(&st);
+  s.driver = tasks_rng_splitmix64(&st);
+  return s;
 }
 
 void fw_loop_learner_config(const fw_config_t* cfg, hedger_config_t* out) {
-  // A throw-away loop state carries the task specs the config depends on.
+  // A throw-away loop state carries the task the learner's configuration depends on.
   fw_loop_t* L = (fw_loop_t*)calloc(1, sizeof *L);
   if (L == NULL) {
     *out = hedger_config_default();
     return;
   }
   L->cfg = *cfg;
-  L->omega_max = cfg->max_rotation_radps;
-  tasks_corridor_spec_default(&L->corridor);
-  tasks_obstacles_spec_default(&L->obstacles);
-  L->state_dim = is_corridor(L) ? FEATURES_CORRIDOR_STATE_DIM : FEATURES_OBSTACLES_STATE_DIM;
-  L->gamma = cfg->gamma > 0.0 ? cfg->gamma : (is_corridor(L) ? L->corridor.gamma : L->obstacles.gamma);
-  hedger_config_for(L, out);
-  uint64_t st = cfg->seed;
-  (void)tasks_rng_splitmix64(&st);
-  (void)tasks_rng_splitmix64(&st);
-  out->seed = tasks_rng_splitmix64(&st);
+  setup_task(L);
+  fw_learning_config(L, out);
+  out->seed = derive_seeds(cfg->seed).hedger;
   free(L);
 }
 
@@ -429,12 +91,12 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
     return NULL;
   }
   if (io == NULL || io->vt == NULL || io->vt->now_us == NULL || io->vt->wait == NULL || io->vt->laser_poll == NULL) {
-    fmt(err, err_cap, "loop: incomplete I/O binding");
+    snprintf(err, err_cap, "loop: incomplete I/O binding");
     return NULL;
   }
   fw_loop_t* L = (fw_loop_t*)calloc(1, sizeof *L);
   if (L == NULL) {
-    fmt(err, err_cap, "loop: out of memory");
+    snprintf(err, err_cap, "loop: out of memory");
     return NULL;
   }
   L->cfg = *cfg;
@@ -442,54 +104,38 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
   if (out != NULL) {
     L->out = *out;
   }
-  L->period_us = fw_config_period_us(cfg);
-  L->dt_s = (double)L->period_us * 1e-6;
-  L->omega_max = cfg->max_rotation_radps;
-
-  tasks_corridor_spec_default(&L->corridor);
-  L->corridor.length_m = cfg->corridor_length_m;
-  L->corridor.omega_max_radps = L->omega_max;
-  L->corridor.dt_s = L->dt_s;
-  tasks_corridor_features_config(&L->corridor, &L->corridor_fc);
-  tasks_obstacles_spec_default(&L->obstacles);
-  L->obstacles.omega_max_radps = L->omega_max;
-  L->obstacles.dt_s = L->dt_s;
-  tasks_obstacles_features_config(&L->obstacles, &L->obstacles_fc);
-  L->state_dim = is_corridor(L) ? FEATURES_CORRIDOR_STATE_DIM : FEATURES_OBSTACLES_STATE_DIM;
-  L->gamma = cfg->gamma > 0.0 ? cfg->gamma : (is_corridor(L) ? L->corridor.gamma : L->obstacles.gamma);
-
-  // Seeds: every stream derived from the one root seed.
-  uint64_t st = cfg->seed;
-  tasks_rng_seed(&L->pose_rng, tasks_rng_splitmix64(&st));
-  tasks_rng_seed(&L->explore_rng, tasks_rng_splitmix64(&st));
-  const uint64_t hedger_seed = tasks_rng_splitmix64(&st);
-  L->driver_seed_base = tasks_rng_splitmix64(&st);
+  setup_task(L);
+  const seeds_t seeds = derive_seeds(cfg->seed);
+  tasks_rng_seed(&L->pose_rng, seeds.pose);
+  tasks_rng_seed(&L->explore_rng, seeds.explore);
+  L->driver_seed_base = seeds.driver;
 
   hedger_config_t hc;
-  hedger_config_for(L, &hc);
-  hc.seed = hedger_seed;  // as fw_loop_learner_config derives it
+  fw_learning_config(L, &hc);
+  hc.seed = seeds.hedger;
   if (hedger_config_validate(&hc) != HEDGER_OK) {
-    fmt(err, err_cap, "loop: the learner's configuration is invalid (check hedger_* keys)");
+    snprintf(err, err_cap, "loop: the learner's configuration is invalid (check the hedger_* keys)");
     free(L);
     return NULL;
   }
   const size_t bytes = hedger_storage_size(&hc);
-  L->hedger_storage = aligned_alloc(HEDGER_STORAGE_ALIGN, (bytes + HEDGER_STORAGE_ALIGN - 1) & ~(size_t)(HEDGER_STORAGE_ALIGN - 1));
+  L->hedger_storage =
+      aligned_alloc(HEDGER_STORAGE_ALIGN, (bytes + HEDGER_STORAGE_ALIGN - 1) & ~(size_t)(HEDGER_STORAGE_ALIGN - 1));
   if (L->hedger_storage == NULL || hedger_init(&L->hedger, L->hedger_storage, bytes, &hc) != HEDGER_OK) {
-    fmt(err, err_cap, "loop: cannot set up the learner (%zu bytes for %d samples)", bytes, (int)cfg->hedger_capacity);
+    snprintf(err, err_cap, "loop: cannot set up the learner (%zu bytes for %d samples)", bytes,
+             (int)cfg->hedger_capacity);
     free(L->hedger_storage);
     free(L);
     return NULL;
   }
   L->hedger_save_max = hedger_serialized_max_size(&hc);
+  L->save_handle = -1;
 
   rflex_b21r_params_default(&L->rflex);
   L->rflex.trans_counts_per_m = cfg->distance_counts_per_m;
   L->rflex.rot_counts_per_rad = cfg->angle_counts_per_rad;
   L->rflex.trans_acc_mps2 = cfg->max_translation_accel_mps2;
-  (void)rflex_odom_init(&L->odo, &L->rflex);
-  rflex_decoder_init(&L->rdec);
-  L->brake_reported = -1;
+  (void)rflex_host_init(&L->base, &L->rflex);
   L->drive[0].node = (uint8_t)cfg->can_node_translation;
   L->drive[1].node = (uint8_t)cfg->can_node_rotation;
   for (int i = 0; i < 2; ++i) {
@@ -538,91 +184,22 @@ void fw_loop_destroy(fw_loop_t* L) {
 
 int64_t fw_loop_period_us(const fw_loop_t* L) { return L->period_us; }
 
-void fw_loop_checkpoint_capacity(const fw_loop_t* L, size_t* meta_bytes, size_t* payload_bytes) {
-  *meta_bytes = META_BYTES;
-  *payload_bytes = L->hedger_save_max;
-}
-
-void fw_loop_attach_checkpoints(fw_loop_t* L, fw_ckpt_writer_t* writer) { L->out.checkpoints = writer; }
-
-int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
-  const char* path = L->cfg.checkpoint_file;
-  if (path[0] == '\0') {
-    return 0;
-  }
-  size_t meta_size = 0;
-  size_t payload_size = 0;
-  int r = fw_checkpoint_peek(path, &meta_size, &payload_size, err, err_cap);
-  if (r <= 0) {
-    return r;
-  }
-  uint8_t meta[META_BYTES];
-  void* payload = malloc(payload_size + 1U);
-  if (payload == NULL) {
-    fmt(err, err_cap, "checkpoint %s: cannot allocate %zu bytes", path, payload_size);
-    return -1;
-  }
-  r = fw_checkpoint_read(path, meta, sizeof meta, &meta_size, payload, payload_size + 1U, &payload_size, err, err_cap);
-  if (r <= 0) {
-    free(payload);
-    return r;
-  }
-  if (meta_size != META_BYTES || memcmp(meta, META_MAGIC, 8) != 0) {
-    free(payload);
-    fmt(err, err_cap, "checkpoint %s: controller section of an unknown format; to start fresh, move the file away",
-        path);
-    return -1;
-  }
-  if (fw_get_u32(meta + 8) != (uint32_t)L->cfg.task || fw_get_u32(meta + 12) != L->state_dim) {
-    free(payload);
-    fmt(err, err_cap,
-        "checkpoint %s was learned for another task (%s); to start fresh, move the file away (e.g. mv '%s' '%s.other')",
-        path, fw_get_u32(meta + 8) == 0 ? "corridor" : "obstacles", path, path);
-    return -1;
-  }
-  const hedger_status_t hs = hedger_load(L->hedger, payload, payload_size);
-  free(payload);
-  if (hs != HEDGER_OK) {
-    fmt(err, err_cap,
-        "checkpoint %s: the learned state was refused (%s; hedger_capacity, the task or the action limits may differ "
-        "from when it was written); to start fresh, move the file away (e.g. mv '%s' '%s.bad')",
-        path, hedger_status_str(hs), path, path);
-    return -1;
-  }
-  fw_schedule_progress_t p;
-  memset(&p, 0, sizeof p);
-  p.phase = (int32_t)fw_get_u32(meta + 16);
-  p.training_runs = (int32_t)fw_get_u32(meta + 20);
-  p.phase_one_runs = (int32_t)fw_get_u32(meta + 24);
-  p.phase_two_runs = (int32_t)fw_get_u32(meta + 28);
-  p.eval_blocks = (int32_t)fw_get_u32(meta + 32);
-  p.example_runs = (int32_t)fw_get_u32(meta + 36);
-  p.example_steps_sum = fw_get_f64(meta + 40);
-  p.best_example_steps = (int32_t)fw_get_u32(meta + 48);
-  const fw_schedule_config_t sc = L->sched.cfg;  // a copy: init clears the schedule first
-  fw_schedule_init(&L->sched, &sc, &p);
-  L->run_id = (int32_t)fw_get_u32(meta + 52) - 1;
-  return 1;
-}
-
-// ---- inputs -------------------------------------------------------------------------------
+// ---- inputs ---------------------------------------------------------------------------------
 
 static void take_scan(fw_loop_t* L) {
   const lms_scan_t* r = &L->scan_raw;
   features_scan_t* s = &L->scan;
-  if (r->geometry_known) {
-    s->angle_min_rad = (double)r->start_angle_rad;
-    s->angle_increment_rad = (double)r->step_rad;
-    s->n_beams = r->count;
-  } else {
+  double angle_min = (double)r->start_angle_rad;
+  double increment = (double)r->step_rad;
+  uint16_t n = r->count;
+  if (!r->geometry_known) {
+    // Telegrams without the geometry: the configured field and resolution.
     (void)features_scan_set_lms200_geometry(s, L->cfg.laser_fov_deg, (double)L->cfg.laser_resolution_cdeg / 100.0);
+    angle_min = s->angle_min_rad;
+    increment = s->angle_increment_rad;
+    n = n < s->n_beams ? n : s->n_beams;
   }
-  const uint16_t n = r->count < s->n_beams ? r->count : s->n_beams;
-  s->n_beams = n;
-  for (uint16_t i = 0; i < n; ++i) {
-    s->ranges_m[i] = r->range_m[i];
-    s->no_return[i] = r->beam_status[i];
-  }
+  (void)features_scan_fill(s, angle_min, increment, n, r->range_m, r->beam_status);
   L->have_scan = true;
   L->scan_new = true;
   L->laser_scans++;
@@ -639,355 +216,26 @@ static void poll_inputs(fw_loop_t* L, int64_t now_us) {
   fw_base_poll(L, now_us);
 }
 
-// ---- operator input -----------------------------------------------------------------------
+// ---- the tick -------------------------------------------------------------------------------
 
-static void take_teleop(fw_loop_t* L, const b21r_teleop_t* m, int64_t arrival_us, int64_t now_us) {
-  if (!isfinite(m->rotation_radps) || !isfinite(m->translation_mps)) {
-    L->teleop_rejected_nan++;
-  } else if (fabs(m->rotation_radps) > L->cfg.max_rotation_radps ||
-             fabs(m->translation_mps) > L->cfg.max_translation_mps) {
-    L->teleop_rejected_range++;
-  } else if (L->teleop_have_seq && m->seq <= L->teleop_last_seq) {
-    L->teleop_rejected_seq++;
-  } else if (now_us - arrival_us > (int64_t)(L->cfg.teleop_timeout_s * 1e6)) {
-    L->teleop_rejected_stale++;
-  } else {
-    L->teleop_accepted++;
-    L->teleop_have_seq = true;
-    L->teleop_last_seq = m->seq;
-    L->teleop_deadman = m->deadman != 0;
-    L->teleop_rot_radps = m->rotation_radps;
-    L->teleop_last_us = arrival_us;
-    return;
-  }
-  L->teleop_rejected++;
-}
+/// What sensing found this tick.
+typedef struct sensed {
+  bool running;       ///< a run is under way
+  bool run_starting;  ///< repositioned, the start pose stands: a run may start on this scan
+  bool state_ok;      ///< a new scan gave a usable state (running or starting)
+  bool odo_finite;
+} sensed_t;
 
-static void take_command(fw_loop_t* L, const b21r_command_t* m) {
-  if (m->command < B21R_COMMAND_T_START_PHASE_TWO || m->command > B21R_COMMAND_T_SHUTDOWN ||
-      (L->cmd_have_seq && m->seq <= L->cmd_last_seq)) {
-    L->commands_rejected++;
-    return;
-  }
-  L->commands_accepted++;
-  L->cmd_have_seq = true;
-  L->cmd_last_seq = m->seq;
-  switch (m->command) {
-    case B21R_COMMAND_T_START_PHASE_TWO:
-      fw_schedule_request_phase_two(&L->sched);
-      fw_loop_log(L, 2, "b21r-controller: operator: phase two starts when the current training run ends");
-      break;
-    case B21R_COMMAND_T_CONFIRM_START_POSE:
-      L->confirm_pending = true;
-      break;
-    case B21R_COMMAND_T_PAUSE:
-      L->paused = true;
-      break;
-    case B21R_COMMAND_T_RESUME:
-      L->paused = false;
-      L->resume_now = true;
-      break;
-    default:
-      L->shutdown_requested = true;
-      break;
-  }
-}
+/// A command for the base.
+typedef struct command {
+  double v_mps;
+  double w_radps;
+  bool stopping;  ///< zero, decelerating at the configured limit
+} command_t;
 
-static void drain_mailboxes(fw_loop_t* L, int64_t now_us) {
-  b21r_teleop_t tel[FW_MAILBOX];
-  int64_t arr[FW_MAILBOX];
-  b21r_command_t cmd[FW_MAILBOX];
-  pthread_mutex_lock(&L->mbox_mu);
-  const uint32_t nt = L->teleop_n;
-  const uint32_t nc = L->cmd_n;
-  memcpy(tel, L->teleop_box, nt * sizeof tel[0]);
-  memcpy(arr, L->teleop_arrival, nt * sizeof arr[0]);
-  memcpy(cmd, L->cmd_box, nc * sizeof cmd[0]);
-  L->teleop_n = 0;
-  L->cmd_n = 0;
-  const uint64_t over_t = L->mbox_overflow_teleop;
-  const uint64_t over_c = L->mbox_overflow_cmd;
-  L->mbox_overflow_teleop = 0;
-  L->mbox_overflow_cmd = 0;
-  pthread_mutex_unlock(&L->mbox_mu);
-  L->teleop_rejected += (int64_t)over_t;
-  L->commands_rejected += (int64_t)over_c;
-  for (uint32_t i = 0; i < nt; ++i) {
-    take_teleop(L, &tel[i], arr[i], now_us);
-  }
-  for (uint32_t i = 0; i < nc; ++i) {
-    take_command(L, &cmd[i]);
-  }
-}
-
-void fw_loop_post_teleop(fw_loop_t* L, const b21r_teleop_t* msg, int64_t arrival_us) {
-  pthread_mutex_lock(&L->mbox_mu);
-  if (L->teleop_n == FW_MAILBOX) {
-    // Keep the newest: drop the oldest.
-    memmove(&L->teleop_box[0], &L->teleop_box[1], (FW_MAILBOX - 1) * sizeof L->teleop_box[0]);
-    memmove(&L->teleop_arrival[0], &L->teleop_arrival[1], (FW_MAILBOX - 1) * sizeof L->teleop_arrival[0]);
-    L->teleop_n--;
-    L->mbox_overflow_teleop++;
-  }
-  L->teleop_box[L->teleop_n] = *msg;
-  L->teleop_arrival[L->teleop_n] = arrival_us;
-  L->teleop_n++;
-  pthread_mutex_unlock(&L->mbox_mu);
-}
-
-void fw_loop_post_command(fw_loop_t* L, const b21r_command_t* msg, int64_t arrival_us) {
-  (void)arrival_us;
-  pthread_mutex_lock(&L->mbox_mu);
-  if (L->cmd_n == FW_MAILBOX) {
-    L->mbox_overflow_cmd++;
-  } else {
-    L->cmd_box[L->cmd_n++] = *msg;
-  }
-  pthread_mutex_unlock(&L->mbox_mu);
-}
-
-void fw_loop_signal(fw_loop_t* L, int signal_number) { atomic_store(&L->signal_number, signal_number); }
-
-// ---- runs ---------------------------------------------------------------------------------
-
-static bool joystick_drives(const fw_loop_t* L) {
-  return L->cfg.mode == FW_MODE_LEARN && L->cfg.phase_driver == FW_DRIVER_JOYSTICK &&
-         L->plan.kind == FW_RUN_TRAINING && L->plan.phase == 1 &&
-         (L->mode == B21R_STATUS_T_MODE_RUNNING || L->mode == B21R_STATUS_T_MODE_EVALUATING);
-}
-
-static const char* run_kind_name(const fw_loop_t* L) {
-  if (L->plan.kind == FW_RUN_EVAL) {
-    if (L->cfg.mode == FW_MODE_EVALUATE) {
-      return L->cfg.evaluate_policy == FW_EVAL_OPTIMAL ? "eval(optimal)"
-                                                         : (L->cfg.evaluate_policy == FW_EVAL_EXAMPLE ? "eval(example)"
-                                                                                                      : "eval(learned)");
-    }
-    return "eval";
-  }
-  return "train";
-}
-
-static void begin_run(fw_loop_t* L) {
-  L->run_id++;
-  L->actions_taken = 0;
-  L->have_prev = false;
-  L->run_return = 0.0;
-  L->odom_at_start = odom_pose(L);
-  // The driver of this run: the example policy in phase one, the advisor in phase two, or the
-  // evaluated reference. Its stream is seeded per run, so a run does not depend on earlier ones.
-  uint64_t st = L->driver_seed_base ^ ((uint64_t)(uint32_t)L->run_id * 0x9E3779B97F4A7C15ULL);
-  const uint64_t run_seed = tasks_rng_splitmix64(&st);
-  tasks_driver_kind_t kind = TASKS_DRIVER_PROPORTIONAL;
-  if (L->cfg.mode == FW_MODE_EVALUATE && L->cfg.evaluate_policy == FW_EVAL_OPTIMAL) {
-    kind = TASKS_DRIVER_OPTIMAL;
-  } else if (L->cfg.phase_driver == FW_DRIVER_HUMAN && L->plan.kind == FW_RUN_TRAINING && L->plan.phase == 1) {
-    kind = TASKS_DRIVER_HUMAN;
-  }
-  tasks_driver_begin_run(&L->driver, kind, is_corridor(L) ? TASKS_TASK_CORRIDOR : TASKS_TASK_OBSTACLES, L->omega_max,
-                         run_seed);
-  if (L->cfg.mode == FW_MODE_EVALUATE && L->cfg.evaluate_policy == FW_EVAL_EXAMPLE) {
-    // The example policy at its nominal gain: the middle of the range the runs are drawn from.
-    L->driver.gain = is_corridor(L)
-                         ? 0.5 * (TASKS_PROPORTIONAL_CORRIDOR_GAIN_MIN + TASKS_PROPORTIONAL_CORRIDOR_GAIN_MAX)
-                         : 0.5 * (TASKS_PROPORTIONAL_OBSTACLES_GAIN_MIN + TASKS_PROPORTIONAL_OBSTACLES_GAIN_MAX);
-  }
-  L->mode = L->plan.kind == FW_RUN_EVAL ? B21R_STATUS_T_MODE_EVALUATING : B21R_STATUS_T_MODE_RUNNING;
-  L->status_now = true;
-}
-
-static void begin_repositioning(fw_loop_t* L) {
-  L->mode = B21R_STATUS_T_MODE_REPOSITIONING;
-  L->pose_requested = L->stopped_pose_requested;
-  L->stopped_pose_requested = false;
-  L->awaiting_confirm = false;
-  L->confirm_pending = false;
-  L->settle_ticks = L->pose_requested ? (L->cfg.lockstep ? 0 : 3) : 0;
-  L->retry_countdown = 0;
-  L->plan = fw_schedule_next(&L->sched);
-  L->status_now = true;
-  if (L->plan.kind == FW_RUN_NONE) {
-    L->mode = B21R_STATUS_T_MODE_DONE;
-    L->done = true;
-    L->exit_status = 0;
-    fw_loop_log(L, 1, "schedule complete: %d training runs, %d evaluation blocks", L->sched.p.training_runs,
-                L->sched.p.eval_blocks);
-    return;
-  }
-  if (!L->pose_requested) {
-    L->start_pose = L->plan.kind == FW_RUN_EVAL
-                        ? eval_pose(L, L->plan.eval_index)
-                        : (is_corridor(L) ? tasks_corridor_training_start(&L->corridor, &L->pose_rng)
-                                          : tasks_obstacles_training_start(&L->obstacles, &L->pose_rng));
-  }
-}
-
-static void finish_run(fw_loop_t* L, bool reached_goal, bool aborted, const char* why) {
-  const bool training = L->plan.kind == FW_RUN_TRAINING && L->cfg.mode == FW_MODE_LEARN;
-  if (training) {
-    uint32_t replayed = 0;
-    (void)hedger_end_run(L->hedger, &replayed);  // backward replay (cfg.hedger_replay), between runs
-  }
-  const int32_t steps = reached_goal ? L->actions_taken : (int32_t)step_limit(L);
-  fw_eval_block_t block;
-  const bool block_done = fw_schedule_finish_run(&L->sched, reached_goal ? L->actions_taken : steps, reached_goal,
-                                                 aborted, &block);
-  if (aborted) {
-    L->runs_aborted++;
-  } else {
-    L->runs_finished++;
-    L->last_run_steps = L->actions_taken;
-    L->last_run_goal = reached_goal;
-  }
-  if (L->cfg.progress) {
-    fw_loop_log(L, 1, "run %4d  phase %d  %-13s %-9s %4d steps  (%s)  store %u/%d", L->run_id, L->plan.phase,
-                run_kind_name(L), aborted ? "ABORTED" : (reached_goal ? "goal" : "no goal"), L->actions_taken, why,
-                hedger_counters(L->hedger)->store_fill, L->cfg.hedger_capacity);
-  }
-  if (block_done) {
-    L->last_block = block;
-    publish_eval(L, &block);
-    if (L->cfg.progress) {
-      fw_loop_log(L, 1, "EVAL block %2d after %3d training runs (phase %d): %2d/%d reached the goal, mean %.1f +- %.1f steps",
-                  block.block, block.training_runs, block.phase, block.successes, block.n_starts, block.mean_steps,
-                  block.ci95_halfwidth);
-      if (L->sched.p.phase == 2 && block.phase == 1) {
-        fw_loop_log(L, 1, "PHASE TWO: the learned policy drives from now on");
-      }
-    }
-  }
-  if (training) {
-    checkpoint(L);
-  }
-  begin_repositioning(L);
-}
-
-// Phase-two training with the advisor on: the example policy's action is taken unless HEDGER's
-// greedy value comes from a local regression (LWR, inside the data's hull) and beats the
-// advisor's action by more than advisor_margin of its value: the learned policy acts where it
-// knows better. Measured on the corridor (fake robot, 30 + 35 runs, 3 seeds): without this rule
-// the greedy search follows approximation noise (Q differences between actions are about one
-// step's discount, 1 %), crashes, and the evaluations fall from 10/10 to 1-3/10; with it they
-// stay at 10/10. Evaluations never consult the advisor: they measure the learned policy alone.
-static bool advisor_wins(fw_loop_t* L, bool evaluating, double greedy_action, double advice) {
-  if (evaluating || !L->cfg.advisor || L->cfg.mode != FW_MODE_LEARN) {
-    return false;
-  }
-  hedger_prediction_t pg;
-  hedger_prediction_t pa;
-  if (hedger_predict(L->hedger, L->s, advice, &pa) != HEDGER_OK ||
-      hedger_predict(L->hedger, L->s, greedy_action, &pg) != HEDGER_OK) {
-    return false;
-  }
-  if (pa.kind == HEDGER_KIND_UNKNOWN || pg.kind != HEDGER_KIND_LWR) {
-    // Nothing to compare with, or the greedy value is an average (LWA) rather than a local model:
-    // HEDGER does not know better than the advisor here.
-    return true;
-  }
-  return pg.value <= pa.value + L->cfg.advisor_margin * fabs(pa.value);
-}
-
-// One learning step of a running run (a new scan arrived and no stop is in force).
-// contact: the bumper was hit this tick (the run ends as a collision).
-static void run_step(fw_loop_t* L, bool state_ok, uint8_t contact, double* v_cmd, double* w_cmd) {
-  const bool evaluating = L->plan.kind == FW_RUN_EVAL;
-  const bool learning = !evaluating && L->cfg.mode == FW_MODE_LEARN;
-  const bool learned_policy =
-      (evaluating && !(L->cfg.mode == FW_MODE_EVALUATE && L->cfg.evaluate_policy != FW_EVAL_LEARNED)) ||
-      (!evaluating && L->plan.phase == 2);
-  bool greedy_known = false;
-  double greedy_action = 0.0;
-  if (L->have_prev) {
-    const tasks_outcome_t o = outcome(L, contact, (uint32_t)L->actions_taken);
-    const bool terminal = o.terminal != 0;
-    double q = 0.0;
-    hedger_kind_t kind = HEDGER_KIND_UNKNOWN;
-    if (learning) {
-      hedger_update_info_t info;
-      if (hedger_update(L->hedger, L->prev_s, L->prev_a, o.reward, L->s, terminal ? 1 : 0, &info) == HEDGER_OK) {
-        q = info.q_old;
-        kind = info.kind;
-        greedy_known = info.next_status == HEDGER_OK;
-        greedy_action = info.next_action;
-      }
-    } else {
-      hedger_prediction_t pr;
-      if (hedger_predict(L->hedger, L->prev_s, L->prev_a, &pr) == HEDGER_OK) {
-        q = pr.value;
-        kind = pr.kind;
-      }
-      if (learned_policy && !o.end_run) {
-        greedy_known = hedger_greedy(L->hedger, L->s, &greedy_action, NULL, NULL) == HEDGER_OK;
-      }
-    }
-    publish_experience(L, o.reward, terminal, q, kind);
-    L->steps++;
-    L->run_return += o.reward;
-    if (o.end_run) {
-      *v_cmd = 0.0;
-      *w_cmd = 0.0;
-      const bool goal = o.reason == TASKS_END_GOAL;
-      finish_run(L, goal, false,
-                 goal ? "goal" : (o.reason == TASKS_END_COLLISION ? "collision" : "step limit"));
-      return;
-    }
-  } else if (learned_policy) {
-    greedy_known = hedger_greedy(L->hedger, L->s, &greedy_action, NULL, NULL) == HEDGER_OK;
-  }
-  (void)state_ok;
-  // The driver runs every step (even when it only advises) so its state follows the run.
-  const double advice = driver_action(L);
-  double a = 0.0;
-  int8_t source = B21R_EXPERIENCE_T_SOURCE_EXAMPLE;
-  if (!learned_policy) {
-    if (joystick_drives(L)) {
-      a = L->teleop_rot_radps;
-      source = B21R_EXPERIENCE_T_SOURCE_JOYSTICK;
-    } else {
-      a = advice;
-    }
-  } else if (greedy_known && !advisor_wins(L, evaluating, greedy_action, advice)) {
-    a = greedy_action;
-    source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
-    if (!evaluating && tasks_rng_uniform(&L->explore_rng) < L->cfg.explore_probability) {
-      a += L->cfg.explore_sigma_radps * tasks_rng_normal(&L->explore_rng);
-      source = B21R_EXPERIENCE_T_SOURCE_EXPLORATION;
-    }
-  } else if (!evaluating && L->cfg.advisor) {
-    a = advice;
-    source = B21R_EXPERIENCE_T_SOURCE_ADVISOR;
-  } else {
-    a = 0.0;  // nothing known: hold course (evaluations measure the learned policy alone)
-    source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
-  }
-  *w_cmd = a;
-  *v_cmd = speed(L);
-  L->prev_source = source;
-}
-
-// ---- the tick -----------------------------------------------------------------------------
-
-static void clamp_command(fw_loop_t* L, double* v, double* w) {
-  const double dv = L->cfg.max_translation_accel_mps2 * L->dt_s;
-  const double dw = L->cfg.max_rotation_accel_radps2 * L->dt_s;
-  *v = clampd(*v, -L->cfg.max_translation_mps, L->cfg.max_translation_mps);
-  *w = clampd(*w, -L->cfg.max_rotation_radps, L->cfg.max_rotation_radps);
-  *v = clampd(*v, L->cmd_v - dv, L->cmd_v + dv);
-  *w = clampd(*w, L->cmd_w - dw, L->cmd_w + dw);
-}
-
-static void abort_run(fw_loop_t* L, const char* why) {
-  if (L->mode == B21R_STATUS_T_MODE_RUNNING || L->mode == B21R_STATUS_T_MODE_EVALUATING) {
-    finish_run(L, false, true, why);
-  }
-}
-
-bool fw_loop_tick(fw_loop_t* L, int64_t now_us) {
-  L->tick_count++;
-  // In lockstep, time is the emulator's: tick × period, so identical runs log identical times.
-  L->utime = L->cfg.lockstep ? L->tick_count * L->period_us : now_us;
+static sensed_t sense(fw_loop_t* L, int64_t now_us) {
+  sensed_t in = {false, false, false, true};
   poll_inputs(L, now_us);
-
   if (L->scan_new) {
     L->laser_silent_ticks = 0;
     L->last_scan_us = now_us;
@@ -997,217 +245,194 @@ bool fw_loop_tick(fw_loop_t* L, int64_t now_us) {
   if (fw_base_any_report(L)) {
     L->base_silent_ticks = 0;
     L->last_base_us = now_us;
-    (void)rflex_odom_update(&L->odo);
+    (void)rflex_odom_update(&L->base.odometry);
   } else {
     L->base_silent_ticks++;
   }
   fw_base_evaluate_faults(L, now_us);
-  drain_mailboxes(L, now_us);
-
-  const bool running = L->mode == B21R_STATUS_T_MODE_RUNNING || L->mode == B21R_STATUS_T_MODE_EVALUATING;
-  const bool run_starting =
-      L->mode == B21R_STATUS_T_MODE_REPOSITIONING && L->pose_requested && L->settle_ticks == 0 && L->scan_new &&
-      (!L->awaiting_confirm || L->confirm_pending);
-  if (run_starting) {
-    L->odom_at_start = odom_pose(L);
+  fw_operator_drain(L, now_us);
+  in.running = fw_run_running(L);
+  in.run_starting = L->mode == B21R_STATUS_T_MODE_REPOSITIONING && L->pose_requested && L->settle_ticks == 0 &&
+                    L->scan_new && (!L->awaiting_confirm || L->confirm_pending) && fw_learning_idle(L);
+  if (in.run_starting) {
+    tasks_episode_begin(&L->ep, L->start_pose, fw_run_odom_pose(L));  // the run's frame
   }
-  // Features whenever a new scan arrives during (or at the start of) a run.
-  bool state_ok = false;
-  if (L->scan_new && (running || run_starting)) {
-    state_ok = compute_state(L) && all_finite(L->s, L->state_dim);
+  if (L->scan_new && (in.running || in.run_starting)) {
+    in.state_ok = fw_run_observe(L) && all_finite(L->s, L->state_dim);
   }
-  const double odo_vals[3] = {L->odo.x_m, L->odo.y_m, L->odo.theta_rad};
-  const bool odo_finite = all_finite(odo_vals, 3);
+  const double odo[3] = {L->base.odometry.x_m, L->base.odometry.y_m, L->base.odometry.theta_rad};
+  in.odo_finite = all_finite(odo, 3);
+  return in;
+}
 
-  fw_safety_inputs_t in;
-  memset(&in, 0, sizeof in);
-  in.laser_silent_ticks = L->laser_silent_ticks;
-  in.base_silent_ticks = L->base_silent_ticks;
-  in.laser_age_us = now_us - L->last_scan_us;
-  in.base_age_us = now_us - L->last_base_us;
-  in.base_fault = L->base_fault;
-  in.base_fault_detail = L->base_fault_detail;
-  in.bumper_mask = L->bumper_mask;
-  in.non_finite = !odo_finite || (L->scan_new && (running || run_starting) && !all_finite(L->s, L->state_dim));
-  in.non_finite_where = !odo_finite ? "odometry" : "task state";
+static fw_safety_event_t supervise(fw_loop_t* L, const sensed_t* in, int64_t now_us, command_t* cmd) {
+  fw_safety_inputs_t si;
+  memset(&si, 0, sizeof si);
+  si.laser_silent_ticks = L->laser_silent_ticks;
+  si.base_silent_ticks = L->base_silent_ticks;
+  si.laser_age_us = now_us - L->last_scan_us;
+  si.base_age_us = now_us - L->last_base_us;
+  si.device_lost = L->lockstep_lost;
+  si.device_lost_detail = L->device_lost_detail;
+  si.base_fault = L->base_fault;
+  si.base_fault_detail = L->base_fault_detail;
+  si.bumper_mask = L->bumper_mask;
+  si.non_finite = !in->odo_finite ||
+                  (L->scan_new && (in->running || in->run_starting) && !all_finite(L->s, L->state_dim));
+  si.non_finite_where = !in->odo_finite ? "odometry" : "task state";
   // The joystick must hold the deadman while it drives, and already in the tick its run starts.
-  in.deadman_required = joystick_drives(L) ||
-                        (run_starting && L->cfg.mode == FW_MODE_LEARN && L->cfg.phase_driver == FW_DRIVER_JOYSTICK &&
+  si.deadman_required = fw_run_joystick_drives(L) ||
+                        (in->run_starting && L->cfg.mode == FW_MODE_LEARN && L->cfg.phase_driver == FW_DRIVER_JOYSTICK &&
                          L->plan.kind == FW_RUN_TRAINING && L->plan.phase == 1);
-  in.deadman_fresh = L->teleop_deadman && now_us - L->teleop_last_us <= (int64_t)(L->cfg.teleop_timeout_s * 1e6);
-  in.signal_number = atomic_load(&L->signal_number);
-  in.operator_pause = L->paused;
-  in.operator_resume = L->resume_now;
+  si.deadman_fresh = L->teleop_deadman && now_us - L->teleop_last_us <= (int64_t)(L->cfg.teleop_timeout_s * 1e6);
+  si.signal_number = atomic_load(&L->signal_number);
+  si.operator_pause = L->paused;
+  si.operator_resume = L->resume_now;
   L->resume_now = false;
-  const fw_safety_event_t ev = fw_safety_update(&L->safety, &in);
+  const fw_safety_event_t ev = fw_safety_update(&L->safety, &si);
 
-  double v = 0.0;
-  double w = 0.0;
-  bool stopping = true;
   if (ev == FW_SAFETY_STOP_BEGAN) {
     fw_loop_log(L, 2, "b21r-controller: SAFETY STOP (%s): %s", fw_stop_reason_name(L->safety.reason), L->safety.detail);
-    if (running) {
-      if (L->safety.reason == FW_STOP_BUMPER && L->scan_new && state_ok && L->have_prev) {
-        // A bump ends the run as a collision: learn that last transition, then stop.
-        run_step(L, state_ok, 1, &v, &w);
+    if (in->running) {
+      if (L->safety.reason == FW_STOP_BUMPER && L->scan_new && in->state_ok && L->have_prev) {
+        // A bump ends the run as a collision: its last transition is learned, then the stop.
+        fw_run_step(L, 1, &cmd->v_mps, &cmd->w_radps);
       } else {
-        abort_run(L, fw_stop_reason_name(L->safety.reason));
+        fw_run_abort(L, fw_stop_reason_name(L->safety.reason));
       }
     }
     L->mode = B21R_STATUS_T_MODE_STOPPED;
     L->status_now = true;
-    v = 0.0;
-    w = 0.0;
     if (L->safety.reason == FW_STOP_SIGNAL) {
       L->done = true;
-      L->exit_status = 128 + in.signal_number;
+      L->exit_status = 128 + si.signal_number;
+    } else if (L->lockstep_lost) {
+      // In lockstep the loop cannot go on without the period's data.
+      L->done = true;
+      L->exit_status = FW_EXIT_LOCKSTEP_TIMEOUT;
     }
   } else if (ev == FW_SAFETY_STOPPED) {
     L->mode = B21R_STATUS_T_MODE_STOPPED;
-    // A bumped robot cannot clear its bumper by itself: with the emulator, reset it to the next
-    // start pose while stopped (on the robot the operator frees it).
-    if (L->safety.reason == FW_STOP_BUMPER && !L->stopped_pose_requested && L->io.vt->request_start_pose != NULL &&
-        L->cfg.reposition == FW_REPOSITION_EMULATOR) {
-      const fw_run_plan_t plan = fw_schedule_next(&L->sched);
-      if (plan.kind != FW_RUN_NONE) {
-        L->start_pose = plan.kind == FW_RUN_EVAL
-                            ? eval_pose(L, plan.eval_index)
-                            : (is_corridor(L) ? tasks_corridor_training_start(&L->corridor, &L->pose_rng)
-                                              : tasks_obstacles_training_start(&L->obstacles, &L->pose_rng));
-        L->stopped_pose_requested =
-            L->io.vt->request_start_pose(L->io.user, L->start_pose.x_m, L->start_pose.y_m, L->start_pose.theta_rad) == 1;
-      }
-    }
+    fw_run_request_pose_while_stopped(L);
   } else if (ev == FW_SAFETY_RESUMED) {
     fw_loop_log(L, 2, "b21r-controller: safety stop cleared; repositioning for the next run");
-    begin_repositioning(L);
+    fw_run_begin_repositioning(L);
   }
-
   if (L->shutdown_requested && !L->done) {
     fw_loop_log(L, 2, "b21r-controller: operator SHUTDOWN");
-    abort_run(L, "shutdown");
+    fw_run_abort(L, "shutdown");
     L->mode = B21R_STATUS_T_MODE_DONE;
     L->done = true;
     L->exit_status = 0;
   }
+  return ev;
+}
 
-  if (!L->safety.stopped && !L->done && (ev == FW_SAFETY_OK || ev == FW_SAFETY_RESUMED)) {
-    if (L->mode == B21R_STATUS_T_MODE_STARTING) {
-      begin_repositioning(L);
-    }
-    if (L->mode == B21R_STATUS_T_MODE_REPOSITIONING) {
-      if (!L->pose_requested) {
-        if (L->retry_countdown > 0) {
-          L->retry_countdown--;
-        } else {
-          const int r = L->io.vt->request_start_pose == NULL
-                            ? 0
-                            : L->io.vt->request_start_pose(L->io.user, L->start_pose.x_m, L->start_pose.y_m,
-                                                           L->start_pose.theta_rad);
-          if (r == 1) {
-            L->pose_requested = true;
-            // Lockstep: the data of the next period is already taken at the new pose. Real
-            // time: let a few scans pass that may predate the reset.
-            L->settle_ticks = L->cfg.lockstep ? 0 : 3;
-          } else if (r == 0) {
-            L->pose_requested = true;
-            L->awaiting_confirm = true;
-            fw_loop_log(L, 2,
-                        "b21r-controller: place the robot at x %.2f m, y %.2f m, heading %.2f rad (task frame) and send "
-                        "B21R_COMMAND CONFIRM_START_POSE",
-                        L->start_pose.x_m, L->start_pose.y_m, L->start_pose.theta_rad);
-          } else {
-            L->retry_countdown = 10;
-            fw_loop_log(L, 2, "b21r-controller: start pose request failed (%d); retrying", r);
-          }
-        }
-      } else if (L->settle_ticks > 0) {
-        L->settle_ticks--;
-      } else if (L->scan_new && (!L->awaiting_confirm || L->confirm_pending) && state_ok) {
-        begin_run(L);
-        run_step(L, state_ok, 0, &v, &w);
-        stopping = false;
-      }
-    } else if (L->mode == B21R_STATUS_T_MODE_RUNNING || L->mode == B21R_STATUS_T_MODE_EVALUATING) {
-      if (L->scan_new && state_ok) {
-        run_step(L, state_ok, 0, &v, &w);
-        stopping = L->mode != B21R_STATUS_T_MODE_RUNNING && L->mode != B21R_STATUS_T_MODE_EVALUATING;
-      } else {
-        // No new scan (or features unusable) this tick: hold the command, learn nothing.
-        L->held_ticks++;
-        v = L->cmd_v;
-        w = L->cmd_w;
-        stopping = false;
-      }
+static void decide(fw_loop_t* L, fw_safety_event_t ev, const sensed_t* in, command_t* cmd) {
+  cmd->stopping = true;
+  if (L->safety.stopped || L->done || !(ev == FW_SAFETY_OK || ev == FW_SAFETY_RESUMED)) {
+    return;
+  }
+  if (L->mode == B21R_STATUS_T_MODE_STARTING) {
+    fw_run_begin_repositioning(L);
+  }
+  if (L->mode == B21R_STATUS_T_MODE_REPOSITIONING) {
+    cmd->stopping = !fw_run_reposition(L, in->state_ok, &cmd->v_mps, &cmd->w_radps);
+  } else if (fw_run_running(L)) {
+    if (L->scan_new && in->state_ok) {
+      fw_run_step(L, 0, &cmd->v_mps, &cmd->w_radps);
+      cmd->stopping = !fw_run_running(L);
+    } else {
+      // No new scan (or features unusable) this tick: hold the command, learn nothing.
+      L->held_ticks++;
+      cmd->v_mps = L->cmd_v;
+      cmd->w_radps = L->cmd_w;
+      cmd->stopping = false;
     }
   }
+}
 
-  // Clamp and send. A stop commands zero at once (the base decelerates at its own limit).
-  if (stopping) {
-    v = 0.0;
-    w = 0.0;
+static void act(fw_loop_t* L, command_t* cmd) {
+  // A stop commands zero at once (the base decelerates at its own limit).
+  if (cmd->stopping) {
+    cmd->v_mps = 0.0;
+    cmd->w_radps = 0.0;
   } else {
-    clamp_command(L, &v, &w);
-    if (!isfinite(v) || !isfinite(w)) {
-      v = 0.0;  // the supervisor reports it next tick; never send a non-finite number
-      w = 0.0;
-    }
-    if (L->mode == B21R_STATUS_T_MODE_RUNNING || L->mode == B21R_STATUS_T_MODE_EVALUATING) {
+    // Limits; a non-finite value gives zero (the supervisor reports it next tick).
+    (void)tasks_command_clamp(&L->limits, L->dt_s, L->cmd_v, L->cmd_w, &cmd->v_mps, &cmd->w_radps);
+    if (fw_run_running(L)) {
       // The learner records what was executed: the clamped action.
-      for (uint32_t i = 0; i < L->state_dim; ++i) {
-        L->prev_s[i] = L->s[i];
-      }
-      L->prev_a = w;
-      L->prev_v = v;
+      memcpy(L->prev_s, L->s, sizeof L->prev_s);
+      L->prev_a = cmd->w_radps;
+      L->prev_v = cmd->v_mps;
       L->have_prev = true;
       L->actions_taken++;
     }
   }
-  fw_base_command(L, v, w, stopping);
-  L->cmd_v = v;
-  L->cmd_w = w;
+  fw_base_command(L, cmd->v_mps, cmd->w_radps, cmd->stopping);
+  L->cmd_v = cmd->v_mps;
+  L->cmd_w = cmd->w_radps;
+}
 
-  publish_pose(L);
+static void publish(fw_loop_t* L) {
+  fw_out_pose(L);
   if (L->scan_new) {
-    publish_scan(L);
+    fw_out_scan(L);
   }
   if (--L->status_countdown <= 0 || L->status_now) {
-    publish_status(L);
+    fw_out_status(L);
     L->status_countdown = L->cfg.status_period_ticks;
     L->status_now = false;
   }
-  notify(L);
+  fw_out_release_lines(L, false);
+  fw_out_notify(L);
+}
+
+bool fw_loop_tick(fw_loop_t* L, int64_t now_us) {
+  L->tick_count++;
+  // In lockstep, time is the emulator's: tick × period, so identical runs log identical times.
+  L->utime = L->cfg.lockstep ? L->tick_count * L->period_us : now_us;
+
+  const sensed_t in = sense(L, now_us);
+  command_t cmd = {0.0, 0.0, true};
+  const fw_safety_event_t ev = supervise(L, &in, now_us, &cmd);
+  decide(L, ev, &in, &cmd);
+  act(L, &cmd);
+  fw_learning_after_command(L);
+  publish(L);
 
   L->scan_new = false;
   fw_base_clear_flags(L);
   L->confirm_pending = false;
-
   const int64_t end_us = io_now(L);
-  const bool overrun =
-      L->cfg.lockstep ? (end_us - now_us > L->period_us) : (L->tick_deadline_us > 0 && end_us > L->tick_deadline_us + L->period_us);
+  const bool overrun = L->cfg.lockstep ? (end_us - now_us > L->period_us)
+                                       : (L->tick_deadline_us > 0 && end_us > L->tick_deadline_us + L->period_us);
   fw_timing_record(&L->timing, end_us - now_us, overrun);
   return !L->done;
 }
 
-// ---- pacing -------------------------------------------------------------------------------
+// ---- pacing ---------------------------------------------------------------------------------
 
 int64_t fw_loop_wait(fw_loop_t* L) {
   int64_t now = io_now(L);
   if (L->cfg.lockstep) {
-    const int64_t start = now;
-    int64_t deadline = start + (int64_t)(L->cfg.lockstep_timeout_s * 1e6);
-    bool grace_set = false;
+    // The tick waits for every device's data of the period, however long the machine takes:
+    // a lockstep run never depends on wall time. Only a device that stays silent for
+    // lockstep_timeout_s ends the loop, with its name.
+    const int64_t deadline = now + (int64_t)(L->cfg.lockstep_timeout_s * 1e6);
     for (;;) {
       poll_inputs(L, now);
       if (L->scan_new && fw_base_all_reports(L)) {
         break;
       }
-      if (!grace_set && (L->scan_new || fw_base_any_report(L))) {
-        grace_set = true;
-        const int64_t g = now + (int64_t)(L->cfg.lockstep_grace_s * 1e6);
-        deadline = g < deadline ? g : deadline;
-      }
       if (now >= deadline) {
+        fw_loop_log(L, 2, "b21r-controller: lockstep: no %s data within %.1f s (%s); the emulator stopped answering",
+                    !L->scan_new ? "laser" : "base", L->cfg.lockstep_timeout_s,
+                    !L->scan_new ? L->cfg.laser_device
+                                 : (L->cfg.base_protocol == FW_BASE_RFLEX ? L->cfg.base_device : "CAN bus"));
+        snprintf(L->device_lost_detail, sizeof L->device_lost_detail, "lockstep: no %s data within %.1f s",
+                 !L->scan_new ? "laser" : "base", L->cfg.lockstep_timeout_s);
+        L->lockstep_lost = true;
         break;
       }
       (void)L->io.vt->wait(L->io.user, deadline);
@@ -1246,7 +471,7 @@ int fw_loop_run(fw_loop_t* L) {
   return L->exit_status;
 }
 
-// ---- start-up and shutdown ----------------------------------------------------------------
+// ---- start-up and shutdown ------------------------------------------------------------------
 
 int fw_loop_start(fw_loop_t* L, char* err, size_t err_cap) {
   if (fw_base_start(L, err, err_cap) != 0) {
@@ -1262,18 +487,18 @@ int fw_loop_start(fw_loop_t* L, char* err, size_t err_cap) {
     const int64_t now = io_now(L);
     poll_inputs(L, now);
     if (fw_base_any_report(L)) {
-      (void)rflex_odom_update(&L->odo);
+      (void)rflex_odom_update(&L->base.odometry);
     }
     // The arrival flags are kept: the first tick then runs at once on this data (in lockstep
     // the emulator waits for our first command before it sends more).
-    if (L->have_scan && L->odo.baseline) {
+    if (L->have_scan && L->base.odometry.baseline) {
       break;
     }
     if (now - start > limit_us) {
-      fmt(err, err_cap, "%s: no %s within %d s (device %s); check the cable, the power and the *_device keys",
-          !L->have_scan ? "laser" : "base", !L->have_scan ? "scan" : "odometry", (int)(limit_us / 1000000),
-          !L->have_scan ? L->cfg.laser_device
-                        : (L->cfg.base_protocol == FW_BASE_RFLEX ? L->cfg.base_device : "CAN bus"));
+      snprintf(err, err_cap, "%s: no %s within %d s (device %s); check the cable, the power and the *_device keys",
+               !L->have_scan ? "laser" : "base", !L->have_scan ? "scan" : "odometry", (int)(limit_us / 1000000),
+               !L->have_scan ? L->cfg.laser_device
+                             : (L->cfg.base_protocol == FW_BASE_RFLEX ? L->cfg.base_device : "CAN bus"));
       return -1;
     }
     if (now >= next_cmd) {
@@ -1290,24 +515,27 @@ int fw_loop_start(fw_loop_t* L, char* err, size_t err_cap) {
 
 int fw_loop_shutdown(fw_loop_t* L) {
   fw_loop_log(L, 2, "b21r-controller: shutting down: zero command, brake set, devices off, final checkpoint");
-  abort_run(L, "shutdown");
+  fw_run_abort(L, "shutdown");
   fw_base_shutdown(L);
   if (L->io.vt->laser_stop != NULL) {
     L->io.vt->laser_stop(L->io.user);
   }
   // The learned state as it is now: nothing learned is lost, even mid-run.
-  checkpoint(L);
+  fw_learning_finish_now(L);
+  fw_learning_checkpoint_now(L);
   L->mode = B21R_STATUS_T_MODE_DONE;
   L->status_now = true;
-  publish_status(L);
-  notify(L);
+  fw_out_status(L);
+  int rc = 0;
   if (L->out.checkpoints != NULL) {
     fw_ckpt_writer_flush(L->out.checkpoints);
     if (fw_ckpt_writer_counters(L->out.checkpoints).failed > 0) {
-      return -1;
+      rc = -1;
     }
   }
-  return 0;
+  fw_out_release_lines(L, true);
+  fw_out_notify(L);
+  return rc;
 }
 
 void fw_loop_get_stats(const fw_loop_t* L, fw_loop_stats_t* out) {
@@ -1321,10 +549,10 @@ void fw_loop_get_stats(const fw_loop_t* L, fw_loop_stats_t* out) {
   out->training_runs = L->sched.p.training_runs;
   out->eval_blocks = L->sched.p.eval_blocks;
   out->phase = L->sched.p.phase;
-  out->mode = status_mode(L);
+  out->mode = fw_out_status_mode(L);
   out->stop_reason = L->safety.reason;
   out->safety_stops = L->safety.stops;
-  for (int i = 0; i < 9; ++i) {
+  for (int i = 0; i < FW_STOP_REASON_COUNT; ++i) {
     out->stops_by_reason[i] = L->safety.stops_by_reason[i];
   }
   out->held_ticks = L->held_ticks;
@@ -1340,4 +568,7 @@ void fw_loop_get_stats(const fw_loop_t* L, fw_loop_stats_t* out) {
       L->sched.p.example_runs > 0 ? L->sched.p.example_steps_sum / (double)L->sched.p.example_runs : 0.0;
   out->last_run_steps = L->last_run_steps;
   out->last_run_goal = L->last_run_goal;
+  out->learn_ticks = L->learn_ticks;
+  out->checkpoints_submitted = L->checkpoints_submitted;
+  out->exit_status = L->exit_status;
 }

@@ -1,6 +1,13 @@
 // SPDX-License-Identifier: MIT
-// Private state of the loop core, shared by loop.c (tick, schedule, learning) and base.c
-// (rFLEX / CANopen adapters).
+// Private state of the loop core and the functions its files share:
+//   loop.c      the tick (sense → safety → decide → act → learn → publish), pacing, start-up,
+//               shutdown;
+//   run.c       the run lifecycle (repositioning, runs, the schedule) and the action of a step;
+//   learning.c  the learner: its configuration, the per-step update after the command, the
+//               between-run work (backward replay, checkpoint) in bounded slices, checkpoints;
+//   outputs.c   the messages (experience, pose, scan, eval, status, text lines);
+//   operator.c  B21R_TELEOP / B21R_COMMAND mailboxes and their validation;
+//   base.c      the base adapters (rFLEX bytes, CANopen frames).
 #ifndef FW_LOOP_INTERNAL_H
 #define FW_LOOP_INTERNAL_H
 
@@ -13,12 +20,13 @@
 #include <proto/canopen.h>
 #include <proto/lms200.h>
 #include <proto/rflex.h>
+#include <tasks/episode.h>
 #include <tasks/tasks.h>
 
 #include <pthread.h>
 #include <stdatomic.h>
 
-#define FW_MAX_STATE 8
+#define FW_MAX_STATE TASKS_MAX_STATE_DIM
 #define FW_MAILBOX 8
 
 typedef struct fw_drive {
@@ -35,6 +43,36 @@ typedef struct fw_drive {
   bool emcy_seen;   // an EMCY with a non-zero code arrived and no good statusword since
 } fw_drive_t;
 
+/// The learner's work after a step or between runs (learning.c).
+typedef enum fw_learn_stage {
+  FW_LEARN_IDLE = 0,     ///< nothing to do between runs
+  FW_LEARN_REPLAY = 1,   ///< backward replay of the finished training run, in slices
+  FW_LEARN_SAVE = 2,     ///< serialising the learned state into the checkpoint writer, in slices
+} fw_learn_stage_t;
+
+/// A transition waiting to be learned (and published) after this tick's command was sent.
+typedef struct fw_pending_step {
+  bool active;
+  bool learning;        ///< update HEDGER (training) or only predict Q for the message (evaluation)
+  bool need_greedy;     ///< q' not known yet (the greedy at s was not needed for the action)
+  bool terminal;
+  bool evaluating;
+  int8_t source;        ///< who chose a (B21R_EXPERIENCE_T_SOURCE_*)
+  int8_t end_reason;    ///< tasks_end_reason_t of the transition
+  int32_t run_id;
+  int32_t step_id;
+  int32_t phase;
+  double q_next;        ///< greedy value at s_next (when !need_greedy)
+  double reward;
+  double a;             ///< rotation executed [rad/s]
+  double v;             ///< translation executed [m/s]
+  double s[FW_MAX_STATE];
+  double s_next[FW_MAX_STATE];
+} fw_pending_step_t;
+
+/// Progress lines waiting for the checkpoint of the run they report (outputs.c).
+#define FW_HELD_LINES 8
+
 struct fw_loop {
   fw_config_t cfg;
   fw_io_t io;
@@ -42,11 +80,9 @@ struct fw_loop {
   int64_t period_us;
   double dt_s;
 
-  // Task.
-  tasks_corridor_spec_t corridor;
-  features_corridor_config_t corridor_fc;
-  tasks_obstacles_spec_t obstacles;
-  features_obstacles_config_t obstacles_fc;
+  // Task: specs, feature extractors, the current run's frame and newest features.
+  tasks_episode_t ep;
+  tasks_command_limits_t limits;
   uint32_t state_dim;
   double omega_max;
   double gamma;
@@ -55,6 +91,15 @@ struct fw_loop {
   void* hedger_storage;
   hedger_t* hedger;
   size_t hedger_save_max;
+  fw_pending_step_t pending;
+  fw_learn_stage_t learn_stage;
+  hedger_save_cursor_t save_cursor;
+  int save_handle;             // checkpoint writer buffer being filled (-1: none)
+  void* save_payload;          // its payload section
+  uint32_t save_points_done;   // points of the save (or of its writer-less stand-in) done
+  size_t save_payload_cap;
+  size_t save_meta_size;
+  int64_t learn_ticks;         // ticks that did between-run work (replay or checkpoint slices)
 
   // Laser.
   lms_scan_t scan_raw;
@@ -65,25 +110,21 @@ struct fw_loop {
   int32_t laser_silent_ticks;
   int64_t laser_scans;
   bool laser_error_logged;
+  bool lockstep_lost;          // lockstep: a device delivered nothing for lockstep_timeout_s
+  char device_lost_detail[FW_SAFETY_DETAIL_MAX];
 
-  // Base (both protocols integrate odometry with the rFLEX rule).
-  rflex_odometry_t odo;
-  bool odo_new[2];
+  // Base (both protocols integrate odometry with the rFLEX rule, in base.odometry).
+  rflex_host_t base;           // rFLEX: decoder, odometry, report flags, bumpers, brake, battery
   int32_t base_silent_ticks;
   int64_t last_base_us;
   int64_t base_packets;
   uint32_t bumper_mask;
   bool base_fault;
   char base_fault_detail[128];
-  // rFLEX.
   rflex_b21r_params_t rflex;
-  rflex_decoder_t rdec;
   uint8_t rbuf[1024];
   bool brake_expected_released;
-  int8_t brake_reported;       // -1 unknown, 0 released, 1 engaged
   int32_t sys_status_countdown;
-  double battery_v;
-  // CANopen.
   fw_drive_t drive[2];
   int64_t can_start_us;
 
@@ -129,6 +170,9 @@ struct fw_loop {
   tasks_rng_t explore_rng;
   uint64_t driver_seed_base;
   tasks_driver_t driver;
+  tasks_start_cycle_t start_cycle;
+  int32_t explore_steps_left;  // of the exploration segment under way
+  double explore_offset;       // its action offset [rad/s]
 
   // Run state.
   int32_t mode;                // b21r_status_t MODE_*
@@ -139,7 +183,6 @@ struct fw_loop {
   int32_t retry_countdown;
   bool stopped_pose_requested; // a start pose was requested while stopped (bumper case)
   features_pose_t start_pose;
-  features_pose_t odom_at_start;
   int32_t run_id;
   int32_t actions_taken;       // actions executed in the current run
   bool have_prev;
@@ -148,9 +191,6 @@ struct fw_loop {
   double prev_v;
   int8_t prev_source;
   double s[FW_MAX_STATE];
-  bool s_valid;
-  features_corridor_t fcor;
-  features_obstacles_t fobs;
   double run_return;
 
   // Command.
@@ -178,9 +218,16 @@ struct fw_loop {
   fw_eval_block_t last_block;
   int64_t checkpoints_submitted;
   int64_t checkpoints_skipped;
+  // A finished training run's progress line (and the lines after it) wait until its checkpoint
+  // is on disk: a line on the screen means the run survives a kill.
+  char held_lines[FW_HELD_LINES][FW_TEXT_MAX];
+  uint32_t n_held_lines;
+  bool lines_holding;
+  uint64_t lines_release_at;   // writer's written + failed + superseded that releases them (0: not yet known)
+  bool end_run_pending;        // a training run ended: its replay starts after the pending step
 };
 
-// base.c: protocol adapters.
+// ---- base.c: protocol adapters ----
 int fw_base_start(fw_loop_t* L, char* err, size_t err_cap);
 void fw_base_poll(fw_loop_t* L, int64_t now_us);
 bool fw_base_all_reports(const fw_loop_t* L);
@@ -192,7 +239,50 @@ void fw_base_shutdown(fw_loop_t* L);
 uint64_t fw_base_bytes_dropped(const fw_loop_t* L);
 uint64_t fw_base_checksum_errors(const fw_loop_t* L);
 
-// loop.c helpers shared with base.c.
+// ---- outputs.c ----
 void fw_loop_log(fw_loop_t* L, int stream, const char* format, ...) __attribute__((format(printf, 3, 4)));
+void fw_out_experience(fw_loop_t* L, const fw_pending_step_t* step, double q, hedger_kind_t kind);
+void fw_out_pose(fw_loop_t* L);
+void fw_out_scan(fw_loop_t* L);
+void fw_out_eval(fw_loop_t* L, const fw_eval_block_t* block);
+void fw_out_status(fw_loop_t* L);
+void fw_out_notify(fw_loop_t* L);
+int8_t fw_out_status_mode(const fw_loop_t* L);
+
+// ---- operator.c ----
+void fw_operator_drain(fw_loop_t* L, int64_t now_us);
+
+// ---- run.c ----
+bool fw_run_is_corridor(const fw_loop_t* L);
+uint32_t fw_run_step_limit(const fw_loop_t* L);
+bool fw_run_joystick_drives(const fw_loop_t* L);
+bool fw_run_running(const fw_loop_t* L);
+features_pose_t fw_run_odom_pose(const fw_loop_t* L);
+/// The state of the newest scan (features at the odometry pose); false when unusable.
+bool fw_run_observe(fw_loop_t* L);
+void fw_run_begin_repositioning(fw_loop_t* L);
+/// Repositioning: requests the start pose, and starts the run once it stands (and the learner is
+/// idle). Sets *v/*w and returns true when the run's first command was decided.
+bool fw_run_reposition(fw_loop_t* L, bool state_ok, double* v, double* w);
+/// One step of a running run (a new, usable state this tick); contact = the bumper fired.
+void fw_run_step(fw_loop_t* L, uint8_t contact, double* v, double* w);
+void fw_run_abort(fw_loop_t* L, const char* why);
+/// While stopped for a bump in the emulator: asks for the next start pose once.
+void fw_run_request_pose_while_stopped(fw_loop_t* L);
+
+// ---- learning.c ----
+void fw_learning_config(const fw_loop_t* L, hedger_config_t* out);
+/// After the command: the pending step's update (or prediction), and a slice of between-run work.
+void fw_learning_after_command(fw_loop_t* L);
+/// A training run ended (its last transition is pending): replay and checkpoint follow.
+void fw_learning_run_ended(fw_loop_t* L);
+/// True when no between-run work is left (a run may start).
+bool fw_learning_idle(const fw_loop_t* L);
+/// Finishes all between-run work at once (shutdown; not for the tick).
+void fw_learning_finish_now(fw_loop_t* L);
+/// Serialises the learned state and the schedule's progress into the writer at once (shutdown).
+void fw_learning_checkpoint_now(fw_loop_t* L);
+/// Emits the held progress lines once the checkpoint they wait for is written (force: now).
+void fw_out_release_lines(fw_loop_t* L, bool force);
 
 #endif  // FW_LOOP_INTERNAL_H

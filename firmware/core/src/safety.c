@@ -7,7 +7,7 @@
 
 static const char* const k_names[FW_STOP_REASON_COUNT] = {
     "", "laser silent", "base silent", "base fault", "bumper", "non-finite value", "deadman released",
-    "signal", "operator pause"};
+    "signal", "operator pause", "device lost"};
 
 const char* fw_stop_reason_name(int32_t reason) {
   return (reason >= 0 && reason < FW_STOP_REASON_COUNT) ? k_names[reason] : "";
@@ -25,6 +25,8 @@ void fw_safety_init(fw_safety_t* s, const fw_safety_config_t* cfg) {
 static int rank(int32_t reason) {
   switch (reason) {
     case FW_STOP_SIGNAL:
+      return 9;
+    case FW_STOP_DEVICE_LOST:
       return 8;
     case FW_STOP_BASE_FAULT:
       return 7;
@@ -60,6 +62,10 @@ static int32_t current_cause(const fw_safety_t* s, const fw_safety_inputs_t* in,
   if (in->signal_number != 0) {
     snprintf(detail, cap, "signal %d received: zero command, brake set, checkpoint, exit", in->signal_number);
     return FW_STOP_SIGNAL;
+  }
+  if (in->device_lost) {
+    snprintf(detail, cap, "%s", in->device_lost_detail != NULL ? in->device_lost_detail : "a device was lost");
+    return FW_STOP_DEVICE_LOST;
   }
   if (in->base_fault) {
     snprintf(detail, cap, "base fault: %s", in->base_fault_detail != NULL ? in->base_fault_detail : "unspecified");

@@ -45,7 +45,6 @@ static void run_case(bool canopen) {
   fw_config_defaults(&c);
   c.lockstep = true;
   c.lockstep_timeout_s = 1.0;
-  c.lockstep_grace_s = 0.05;
   c.reposition = FW_REPOSITION_EMULATOR;
   strcpy(c.emulator_control, "in-process");
   c.base_protocol = canopen ? FW_BASE_CANOPEN : FW_BASE_RFLEX;

@@ -88,14 +88,14 @@ typedef struct fw_config {
   int32_t task;                    ///< fw_task_t
   int32_t mode;                    ///< fw_mode_t
   int32_t evaluate_policy;         ///< fw_eval_policy_t (mode = evaluate only)
+  double evaluate_example_gain;    ///< evaluate_policy = example: its gain [1/s]; 0 = nominal
   uint64_t seed;                   ///< root of every random generator
   double corridor_length_m;        ///< corridor task: start wall to end wall [m] (default 10)
 
   // Loop timing.
   double tick_rate_hz;             ///< control rate [1, 100], default 10
   bool lockstep;                   ///< tick when the emulator's data for t_k has arrived
-  double lockstep_timeout_s;       ///< lockstep: longest wait for any input before "silence"
-  double lockstep_grace_s;         ///< lockstep: wait for the second device once the first answered
+  double lockstep_timeout_s;       ///< lockstep: a device silent this long ends the loop (exit 5)
 
   // Devices.
   char laser_device[FW_CONFIG_STR_MAX];  ///< serial device of the LMS200
@@ -142,6 +142,13 @@ typedef struct fw_config {
   double hedger_merge_radius;      ///< merge a new point into a stored one closer than this (scaled)
   int32_t hedger_greedy_actions;   ///< evenly spaced actions scanned by the greedy search
   bool hedger_replay;              ///< replay each finished training run backwards
+  int32_t learn_updates_per_tick;  ///< between runs: replay updates per tick (bounds the tick)
+  int32_t checkpoint_points_per_tick; ///< between runs: stored points serialised per tick
+  int32_t hedger_replay_passes;    ///< backward passes per replayed run
+  double hedger_replay_lambda;     ///< λ of the replay's λ-return target (0 Q-learning, 1 the run's return)
+  int32_t hedger_greedy_method;    ///< hedger_greedy_method_t
+  double hedger_greedy_pessimism;  ///< κ: greedy ranks by value − κ · standard error
+  double hedger_greedy_reach;      ///< state model: kernel widening where the state has too few neighbours
   int32_t phase_driver;            ///< fw_driver_t: who drives phase one
   int32_t phase_switch;            ///< fw_phase_switch_t
   int32_t phase_one_runs;          ///< training runs in phase one (paper: 30)
@@ -153,9 +160,10 @@ typedef struct fw_config {
   bool eval_at_start;              ///< also evaluate before the first training run
   int32_t max_steps_per_run;       ///< step limit of a run (0 = the task's default)
   double explore_sigma_radps;      ///< phase two: std-dev of the exploration noise
-  double explore_probability;      ///< phase two: probability of adding noise to a step
+  double explore_probability;      ///< probability per step of starting an exploration segment
+  double explore_hold_s;           ///< duration of an exploration segment (one held offset)
   bool advisor;                    ///< phase two: example policy acts where HEDGER knows nothing
-  double advisor_margin;           ///< phase two: greedy must beat the advisor's Q by this fraction
+  double example_noise_radps;      ///< phase one, example driver: std-dev of noise on its actions
 
   // Output.
   char lcm_url[FW_CONFIG_STR_MAX]; ///< LCM provider URL; "" = LCM's default; "none" = off

@@ -40,6 +40,7 @@
 #include "fw/config.h"
 #include "fw/io.h"
 #include "fw/pubq.h"
+#include "fw/safety.h"
 #include "fw/schedule.h"
 
 #include <hedger/hedger.h>
@@ -65,6 +66,10 @@ typedef struct fw_loop_outputs {
   fw_ckpt_writer_t* checkpoints;   ///< background checkpoint writer (cfg.checkpoint_file)
 } fw_loop_outputs_t;
 
+/// Exit status of fw_loop_run() when, in lockstep, a device sent nothing for lockstep_timeout_s
+/// (the emulator died or hung): the loop cannot go on without the period's data.
+#define FW_EXIT_LOCKSTEP_TIMEOUT 5
+
 /// Capacity of the loop's error messages, including the NUL.
 #define FW_LOOP_ERR_MAX 512U
 
@@ -82,7 +87,7 @@ typedef struct fw_loop_stats {
   int32_t mode;                  ///< b21r_status_t MODE_*
   int32_t stop_reason;           ///< fw_stop_reason_t in force
   int64_t safety_stops;
-  int64_t stops_by_reason[9];
+  int64_t stops_by_reason[FW_STOP_REASON_COUNT];
   int64_t held_ticks;            ///< running ticks without a new scan (command held)
   int64_t teleop_accepted;
   int64_t teleop_rejected;
@@ -95,6 +100,9 @@ typedef struct fw_loop_stats {
   double mean_example_steps;
   int32_t last_run_steps;
   bool last_run_goal;
+  int64_t learn_ticks;           ///< ticks that did between-run learning work (replay, checkpoint)
+  int64_t checkpoints_submitted; ///< checkpoints handed to the writer (between runs and at shutdown)
+  int exit_status;               ///< what fw_loop_run returns once done
 } fw_loop_stats_t;
 
 /// Builds a loop: validates cfg, sizes and allocates HEDGER and every buffer, seeds the

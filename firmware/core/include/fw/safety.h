@@ -11,7 +11,7 @@
 /// a signal never clears).
 ///
 /// Reasons are numbered as b21r_status_t's STOP_* constants. Priority (highest first): signal,
-/// base fault, bumper, non-finite value, laser silence, base silence, deadman, operator.
+/// device lost, base fault, bumper, non-finite value, laser silence, base silence, deadman, operator.
 ///
 /// Transparent struct, no allocation, O(1) per tick. Not thread-safe: owned by the tick.
 #ifndef FW_SAFETY_H
@@ -34,7 +34,8 @@ typedef enum fw_stop_reason {
   FW_STOP_DEADMAN = 6,
   FW_STOP_SIGNAL = 7,
   FW_STOP_OPERATOR = 8,
-  FW_STOP_REASON_COUNT = 9
+  FW_STOP_DEVICE_LOST = 9,
+  FW_STOP_REASON_COUNT = 10
 } fw_stop_reason_t;
 
 /// Capacity of the detail text, including the NUL.
@@ -58,6 +59,8 @@ typedef struct fw_safety_inputs {
   int32_t base_silent_ticks;   ///< ticks since the last odometry report
   int64_t laser_age_us;        ///< now − time of the last scan
   int64_t base_age_us;         ///< now − time of the last odometry
+  bool device_lost;            ///< a device is gone (EOF, EIO, ENODEV, hang-up) or, in lockstep, silent
+  const char* device_lost_detail; ///< e.g. "laser device lost: /dev/ttyUSB0 (EIO)"
   bool base_fault;             ///< EMCY, statusword fault, heartbeat lost, watchdog
   const char* base_fault_detail;
   uint32_t bumper_mask;        ///< bit n = bump panel n pressed (B21r: 14 panels)

@@ -106,7 +106,9 @@ static int64_t mono_ns(void) {
 // One control period: drive, collide, then emit the new period's data.
 static void advance(fake_robot_t* f) {
   f->ticks++;
-  f->clock_us += (int64_t)llround(f->dt_s * 1e6);
+  if (!f->paced) {
+    f->clock_us += (int64_t)llround(f->dt_s * 1e6);
+  }
   double v = f->v_cmd;
   double w = f->w_cmd;
   if (f->canopen) {
@@ -175,7 +177,7 @@ static void handle_host_packet(fake_robot_t* f, const rflex_packet_t* p) {
         f->v_cmd = (double)s.vel_counts / f->k_d;
       } else {
         f->w_cmd = (double)s.vel_counts / f->k_a;
-        if (f->streaming) {
+        if (f->streaming && !f->paced) {
           advance_timed(f);
         }
       }
@@ -186,6 +188,7 @@ static void handle_host_packet(fake_robot_t* f, const rflex_packet_t* p) {
       uint32_t mask = 0;
       if (rflex_parse_odometry_request(p, &period, &mask) == PROTO_OK && mask != 0U && !f->streaming) {
         f->streaming = true;
+        f->next_period_us = f->clock_us + (int64_t)llround(f->dt_s * 1e6);
         emit_scan(f);  // t_0
         emit_base(f);
       } else if (mask == 0U) {
@@ -243,9 +246,19 @@ static void handle_frame(fake_robot_t* f, const canopen_frame_t* fr) {
 
 // ---- vtable -----------------------------------------------------------------------------
 
+// Real time: the periods whose end the clock has passed.
+static void catch_up(fake_robot_t* f) {
+  while (f->paced && f->streaming && f->clock_us >= f->next_period_us) {
+    advance_timed(f);
+    f->next_period_us += (int64_t)llround(f->dt_s * 1e6);
+  }
+}
+
 static int64_t v_now(void* user) {
   fake_robot_t* f = (fake_robot_t*)user;
-  return ++f->clock_us;  // time passes a little with every look at the clock
+  ++f->clock_us;  // time passes a little with every look at the clock
+  catch_up(f);
+  return f->clock_us;
 }
 
 static bool pending(const fake_robot_t* f) { return f->laser_fill > 0 || f->base_fill > 0 || f->n_frames > 0; }
@@ -258,7 +271,8 @@ static int v_wait(void* user, int64_t deadline_us) {
   if (deadline_us > f->clock_us) {
     f->clock_us = deadline_us;  // a blocking wait that nothing interrupts
   }
-  return 0;
+  catch_up(f);
+  return pending(f) ? 1 : 0;
 }
 
 static int v_laser_poll(void* user, int64_t now_us, lms_scan_t* out) {

@@ -45,6 +45,11 @@ typedef struct fake_robot {
   int64_t clock_us;
   int64_t ticks;        // periods simulated
   bool streaming;
+  /// false (default): lockstep, a period advances with each velocity command, as b21r-sim
+  /// --lockstep; true: real time, a period advances whenever the clock (moved by the loop's
+  /// waits) passes its end, as b21r-sim without --lockstep (rFLEX base).
+  bool paced;
+  int64_t next_period_us;  ///< paced: end of the period under way
   bool canopen;
   // Commands.
   double v_cmd;

@@ -10,7 +10,6 @@ void harness_config(fw_config_t* cfg) {
   fw_config_defaults(cfg);
   cfg->lockstep = true;
   cfg->lockstep_timeout_s = 1.0;
-  cfg->lockstep_grace_s = 0.05;
   cfg->reposition = FW_REPOSITION_EMULATOR;
   strcpy(cfg->emulator_control, "fake");
   strcpy(cfg->lcm_url, "none");
@@ -25,6 +24,7 @@ int harness_open(harness_t* h, const fw_config_t* cfg, bool canopen, uint64_t fa
     h->cfg.base_protocol = FW_BASE_CANOPEN;
   }
   fake_robot_init(&h->fake, canopen, 1.0 / h->cfg.tick_rate_hz, fake_seed);
+  h->fake.paced = !h->cfg.lockstep;  // real time: the fake's periods follow its clock
   h->q = fw_pubq_create((uint32_t)h->cfg.queue_capacity);
   if (h->q == NULL) {
     return -1;

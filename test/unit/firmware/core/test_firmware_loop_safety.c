@@ -33,6 +33,10 @@ static void open_running(bool canopen, void (*tweak)(fw_config_t*)) {
   harness_run(&g_h, 40);  // a run is under way, the robot moves
 }
 
+// Silence and corrupt data are faults of time: they are tested in real time (in lockstep a tick
+// never runs without the period's data, see test_loop_lockstep_silence_ends_loop).
+static void real_time(fw_config_t* c) { c->lockstep = false; }
+
 static double fake_v(void) {
   if (!g_h.fake.canopen) {
     return g_h.fake.v_cmd;
@@ -61,6 +65,10 @@ static int expect_stop_within(int reason, int max_ticks) {
   return -1;
 }
 
+// Between runs the learner replays the aborted run in slices before the next run starts: up to
+// replay_passes x the run's steps / learn_updates_per_tick ticks (runs here are under 100 steps).
+#define REPLAY_TICKS (20 * 100 / 8)
+
 static void expect_resume(int max_ticks) {
   fw_loop_stats_t st;
   for (int i = 0; i < max_ticks; ++i) {
@@ -78,25 +86,44 @@ static void expect_resume(int max_ticks) {
 // once scans are back.
 static void test_loop_laser_silence_stops_within_one_tick(void** state) {
   (void)state;
-  open_running(false, NULL);
+  open_running(false, real_time);
   g_h.fake.laser_drop_ticks = 8;
   const int ticks = expect_stop_within(FW_STOP_LASER_SILENT, 20);
-  assert_int_equal(ticks, 5);
-  assert_non_null(strstr(g_h.last_status_detail, "laser silent for 4 ticks"));
-  expect_resume(60);
+  // laser_timeout_s = 0.35: the tick 0.4 s after the last scan stops.
+  assert_true(ticks >= 4 && ticks <= 5);
+  assert_non_null(strstr(g_h.last_status_detail, "laser silent for 4"));
+  expect_resume(60 + REPLAY_TICKS);
   fw_loop_stats_t st;
   fw_loop_get_stats(g_h.loop, &st);
   assert_int_equal(st.runs_aborted, 1);
   harness_close(&g_h);
 }
 
+// In lockstep a tick never runs without the period's data: a laser that stays silent for
+// lockstep_timeout_s (the emulator died) stops the robot and ends the loop, naming the device.
+static void test_loop_lockstep_silence_ends_loop(void** state) {
+  (void)state;
+  open_running(false, NULL);
+  g_h.fake.laser_drop_ticks = 1000000;
+  const int64_t ticks = harness_run(&g_h, 10);
+  fw_loop_stats_t st;
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_true(ticks <= 2);
+  assert_true(st.done);
+  assert_int_equal(st.stop_reason, FW_STOP_DEVICE_LOST);
+  assert_int_equal(st.exit_status, FW_EXIT_LOCKSTEP_TIMEOUT);
+  assert_true(fabs(g_h.fake.v_cmd) < 1e-9 && fabs(g_h.fake.w_cmd) < 1e-9);
+  assert_non_null(strstr(g_h.last_status_detail, "no laser data"));
+  harness_close(&g_h);
+}
+
 // Base silence stops the robot.
 static void test_loop_base_silence_stops_within_one_tick(void** state) {
   (void)state;
-  open_running(false, NULL);
+  open_running(false, real_time);
   g_h.fake.base_silent_ticks = 8;
   expect_stop_within(FW_STOP_BASE_SILENT, 20);
-  expect_resume(60);
+  expect_resume(60 + REPLAY_TICKS);
   harness_close(&g_h);
 }
 
@@ -112,7 +139,7 @@ static void test_loop_bumper_stops_and_ends_run_as_collision(void** state) {
   assert_int_equal(st.runs_aborted, 0);
   assert_int_equal(st.runs_finished, 1);
   assert_false(st.last_run_goal);
-  expect_resume(60);
+  expect_resume(60 + REPLAY_TICKS);
   harness_close(&g_h);
 }
 
@@ -132,7 +159,7 @@ static void test_loop_drive_fault_stops_and_recovers(void** state) {
   fw_loop_get_stats(g_h.loop, &st);
   assert_int_equal(st.stop_reason, FW_STOP_BASE_FAULT);  // still faulted: no recovery by itself
   cia402_drive_set_fault(&g_h.fake.drive[1], 0);            // the cause is gone
-  expect_resume(80);
+  expect_resume(80 + REPLAY_TICKS);
   harness_close(&g_h);
 }
 
@@ -240,7 +267,7 @@ static void test_loop_operator_commands(void** state) {
   cmd.seq = 3;
   cmd.command = B21R_COMMAND_T_RESUME;
   fw_loop_post_command(g_h.loop, &cmd, 0);
-  expect_resume(20);
+  expect_resume(20 + REPLAY_TICKS);
   fw_loop_get_stats(g_h.loop, &st);
   assert_int_equal(st.commands_rejected, 2);
   cmd.seq = 4;
@@ -263,7 +290,7 @@ static void test_loop_operator_commands(void** state) {
 // Corrupted laser bytes are dropped by the CRC and counted, never crash the loop.
 static void test_loop_corrupt_bytes_counted(void** state) {
   (void)state;
-  open_running(false, NULL);
+  open_running(false, real_time);
   g_h.fake.corrupt_fraction = 0.0005;
   harness_run(&g_h, 200);
   g_h.fake.corrupt_fraction = 0.0;
@@ -277,6 +304,7 @@ static void test_loop_corrupt_bytes_counted(void** state) {
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_loop_laser_silence_stops_within_one_tick),
+      cmocka_unit_test(test_loop_lockstep_silence_ends_loop),
       cmocka_unit_test(test_loop_base_silence_stops_within_one_tick),
       cmocka_unit_test(test_loop_bumper_stops_and_ends_run_as_collision),
       cmocka_unit_test(test_loop_drive_fault_stops_and_recovers),

@@ -1,0 +1,327 @@
+// SPDX-License-Identifier: MIT
+// The learner inside the loop: HEDGER's configuration, the update of each step (after the
+// tick's command went out), the between-run work (backward replay, checkpoint) in bounded slices,
+// and the checkpoint's controller section.
+//
+// Why slices: the replay of a finished run costs replay_passes × run length updates, and the
+// serialisation of a full store O(n); done at once they take tens of milliseconds at 20k points
+// on this machine and seconds on a small onboard computer, and a stop command must never wait
+// for them. So the tick that ends a run only sends its command and learns its last transition;
+// the following ticks (the robot stands, repositioning) each do at most learn_updates_per_tick
+// replay updates, then checkpoint_points_per_tick points of the save, and the next run starts
+// when the work is done. The work is counted in updates and points, never in time, so a lockstep
+// run stays a function of its inputs however loaded the machine is.
+#include "loop_internal.h"
+#include "le_bytes.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+// Checkpoint meta section: the schedule's progress, little-endian, versioned.
+#define META_MAGIC "FWMETA01"
+#define META_BYTES 96U
+
+void fw_learning_config(const fw_loop_t* L, hedger_config_t* hc) {
+  *hc = hedger_config_default();
+  hc->state_dim = L->state_dim;
+  hc->action_min = -L->omega_max;
+  hc->action_max = L->omega_max;
+  hc->capacity = (uint32_t)L->cfg.hedger_capacity;
+  hc->k_min = (uint32_t)L->cfg.hedger_k_min;
+  hc->k_max = (uint32_t)L->cfg.hedger_k_max;
+  hc->bandwidth = L->cfg.hedger_bandwidth;
+  hc->alpha = L->cfg.alpha;
+  hc->gamma = L->gamma;
+  if (L->cfg.hedger_input_scale_n > 0) {
+    for (int32_t i = 0; i < L->cfg.hedger_input_scale_n; ++i) {
+      hc->input_scale[i] = L->cfg.hedger_input_scale[i];
+    }
+  } else if (fw_run_is_corridor(L)) {
+    // One scaled unit is about the distance over which the value of an action changes
+    // markedly. Along the corridor the value falls by 1 % per 6 cm of progress: a 1 m scale keeps
+    // a neighbourhood within a few tenths of a metre, where the value is nearly linear in the
+    // distance; lateral position and angle at half their useful ranges; the action's scale sets
+    // how far apart two actions must be to count as different.
+    hc->input_scale[0] = 1.0;   // end distance [m]
+    hc->input_scale[1] = 0.5;   // lateral fraction of the width
+    hc->input_scale[2] = 0.5;   // target angle [rad]
+    hc->input_scale[3] = 0.25;  // rotation [rad/s]
+  } else {
+    hc->input_scale[0] = 1.0;   // goal bearing [rad]
+    hc->input_scale[1] = 1.0;   // goal distance [m]
+    hc->input_scale[2] = 1.0;   // obstacle bearing [rad]
+    hc->input_scale[3] = 1.0;   // obstacle distance [m]
+    hc->input_scale[4] = 0.5;   // rotation [rad/s]
+  }
+  hc->merge_radius = L->cfg.hedger_merge_radius;
+  hc->greedy_coarse_actions = (uint32_t)L->cfg.hedger_greedy_actions;
+  const uint32_t run_cap = fw_run_step_limit(L) + 8U;
+  hc->run_capacity = run_cap > HEDGER_MAX_RUN ? HEDGER_MAX_RUN : run_cap;
+  hc->replay = L->cfg.hedger_replay ? 1U : 0U;
+  hc->replay_passes = (uint32_t)L->cfg.hedger_replay_passes;
+  hc->replay_lambda = L->cfg.hedger_replay_lambda;
+  hc->greedy_method = (uint32_t)L->cfg.hedger_greedy_method;
+  hc->greedy_pessimism = L->cfg.hedger_greedy_pessimism;
+  hc->greedy_reach = L->cfg.hedger_greedy_reach;
+}
+
+// ---- checkpoints --------------------------------------------------------------------------
+
+static size_t encode_meta(const fw_loop_t* L, uint8_t* p) {
+  memset(p, 0, META_BYTES);
+  memcpy(p, META_MAGIC, 8);
+  const fw_schedule_progress_t* g = &L->sched.p;
+  fw_put_u32(p + 8, (uint32_t)L->cfg.task);
+  fw_put_u32(p + 12, L->state_dim);
+  fw_put_u32(p + 16, (uint32_t)g->phase);
+  fw_put_u32(p + 20, (uint32_t)g->training_runs);
+  fw_put_u32(p + 24, (uint32_t)g->phase_one_runs);
+  fw_put_u32(p + 28, (uint32_t)g->phase_two_runs);
+  fw_put_u32(p + 32, (uint32_t)g->eval_blocks);
+  fw_put_u32(p + 36, (uint32_t)g->example_runs);
+  fw_put_f64(p + 40, g->example_steps_sum);
+  fw_put_u32(p + 48, (uint32_t)g->best_example_steps);
+  fw_put_u32(p + 52, (uint32_t)(L->run_id + 1));
+  return META_BYTES;
+}
+
+// Acquires a writer buffer and fills its meta section; false when none is free (counted).
+static bool checkpoint_acquire(fw_loop_t* L, void** payload, size_t* payload_cap) {
+  void* meta = NULL;
+  size_t meta_cap = 0;
+  L->save_handle = fw_ckpt_writer_acquire(L->out.checkpoints, &meta, &meta_cap, payload, payload_cap);
+  if (L->save_handle < 0) {
+    L->checkpoints_skipped++;
+    fw_out_release_lines(L, true);  // this checkpoint will not be written: nothing to wait for
+    return false;
+  }
+  L->save_meta_size = encode_meta(L, (uint8_t*)meta);
+  return true;
+}
+
+static void checkpoint_submit(fw_loop_t* L, size_t payload_size) {
+  fw_ckpt_writer_submit(L->out.checkpoints, L->save_handle, L->save_meta_size, payload_size);
+  L->save_handle = -1;
+  L->checkpoints_submitted++;
+  if (L->lines_holding && L->lines_release_at == 0) {
+    // Every submission ends written, failed or superseded: when the writer has settled as many
+    // as were submitted, this one is on disk (or reported).
+    L->lines_release_at = (uint64_t)L->checkpoints_submitted;
+  }
+}
+
+void fw_learning_checkpoint_now(fw_loop_t* L) {
+  if (L->out.checkpoints == NULL) {
+    return;
+  }
+  void* payload = NULL;
+  size_t payload_cap = 0;
+  if (!checkpoint_acquire(L, &payload, &payload_cap)) {
+    return;
+  }
+  size_t written = 0;
+  if (hedger_save(L->hedger, payload, payload_cap, &written) != HEDGER_OK) {
+    written = 0;  // never happens: the buffer is sized by hedger_serialized_max_size
+  }
+  checkpoint_submit(L, written);
+}
+
+void fw_loop_checkpoint_capacity(const fw_loop_t* L, size_t* meta_bytes, size_t* payload_bytes) {
+  *meta_bytes = META_BYTES;
+  *payload_bytes = L->hedger_save_max;
+}
+
+void fw_loop_attach_checkpoints(fw_loop_t* L, fw_ckpt_writer_t* writer) { L->out.checkpoints = writer; }
+
+int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
+  const char* path = L->cfg.checkpoint_file;
+  if (path[0] == '\0') {
+    return 0;
+  }
+  size_t meta_size = 0;
+  size_t payload_size = 0;
+  int r = fw_checkpoint_peek(path, &meta_size, &payload_size, err, err_cap);
+  if (r <= 0) {
+    return r;
+  }
+  uint8_t meta[META_BYTES];
+  void* payload = malloc(payload_size + 1U);
+  if (payload == NULL) {
+    snprintf(err, err_cap, "checkpoint %s: cannot allocate %zu bytes", path, payload_size);
+    return -1;
+  }
+  r = fw_checkpoint_read(path, meta, sizeof meta, &meta_size, payload, payload_size + 1U, &payload_size, err, err_cap);
+  if (r <= 0) {
+    free(payload);
+    return r;
+  }
+  if (meta_size != META_BYTES || memcmp(meta, META_MAGIC, 8) != 0) {
+    free(payload);
+    snprintf(err, err_cap, "checkpoint %s: controller section of an unknown format; to start fresh, move the file away",
+             path);
+    return -1;
+  }
+  if (fw_get_u32(meta + 8) != (uint32_t)L->cfg.task || fw_get_u32(meta + 12) != L->state_dim) {
+    free(payload);
+    snprintf(err, err_cap,
+             "checkpoint %s was learned for another task (%s); to start fresh, move the file away (e.g. mv '%s' "
+             "'%s.other')",
+             path, fw_get_u32(meta + 8) == 0 ? "corridor" : "obstacles", path, path);
+    return -1;
+  }
+  const hedger_status_t hs = hedger_load(L->hedger, payload, payload_size);
+  free(payload);
+  if (hs != HEDGER_OK) {
+    snprintf(err, err_cap,
+             "checkpoint %s: the learned state was refused (%s; hedger_capacity, the task or the action limits may "
+             "differ from when it was written); to start fresh, move the file away (e.g. mv '%s' '%s.bad')",
+             path, hedger_status_str(hs), path, path);
+    return -1;
+  }
+  fw_schedule_progress_t p;
+  memset(&p, 0, sizeof p);
+  p.phase = (int32_t)fw_get_u32(meta + 16);
+  p.training_runs = (int32_t)fw_get_u32(meta + 20);
+  p.phase_one_runs = (int32_t)fw_get_u32(meta + 24);
+  p.phase_two_runs = (int32_t)fw_get_u32(meta + 28);
+  p.eval_blocks = (int32_t)fw_get_u32(meta + 32);
+  p.example_runs = (int32_t)fw_get_u32(meta + 36);
+  p.example_steps_sum = fw_get_f64(meta + 40);
+  p.best_example_steps = (int32_t)fw_get_u32(meta + 48);
+  const fw_schedule_config_t sc = L->sched.cfg;  // a copy: init clears the schedule first
+  fw_schedule_init(&L->sched, &sc, &p);
+  L->run_id = (int32_t)fw_get_u32(meta + 52) - 1;
+  return 1;
+}
+
+// ---- the step's update and the between-run work -------------------------------------------
+
+void fw_learning_run_ended(fw_loop_t* L) {
+  L->end_run_pending = true;
+  if (L->out.checkpoints != NULL && L->cfg.progress) {
+    L->lines_holding = true;  // the run's line waits for its checkpoint
+  }
+}
+
+bool fw_learning_idle(const fw_loop_t* L) {
+  return !L->pending.active && !L->end_run_pending && L->learn_stage == FW_LEARN_IDLE;
+}
+
+// The pending transition: its HEDGER update (training) or the prediction of its Q (for the
+// message), then the experience message. Bounded: at most one greedy search and one update.
+static void learn_pending(fw_loop_t* L) {
+  fw_pending_step_t* p = &L->pending;
+  double q = 0.0;
+  hedger_kind_t kind = HEDGER_KIND_UNKNOWN;
+  if (p->learning) {
+    double q_next = 0.0;
+    if (!p->terminal) {
+      if (p->need_greedy) {
+        (void)hedger_greedy(L->hedger, p->s_next, NULL, &q_next, NULL);
+      } else {
+        q_next = p->q_next;
+      }
+    }
+    hedger_update_info_t info;
+    if (hedger_learn(L->hedger, p->s, p->a, p->reward, p->s_next, p->terminal ? 1 : 0, q_next, &info) == HEDGER_OK) {
+      q = info.q_old;
+      kind = info.kind;
+    }
+  } else {
+    hedger_prediction_t pr;
+    if (hedger_predict(L->hedger, p->s, p->a, &pr) == HEDGER_OK) {
+      q = pr.value;
+      kind = pr.kind;
+    }
+  }
+  fw_out_experience(L, p, q, kind);
+  p->active = false;
+}
+
+// The save of a checkpoint in slices. Without a writer (or with both of its buffers busy) the
+// same slices pass without writing, so that a lockstep run spends the same ticks between runs
+// with and without checkpoints (its experience stream does not depend on them).
+static void save_slice(fw_loop_t* L) {
+  const uint32_t fill = hedger_size(L->hedger);
+  const uint32_t per_tick = (uint32_t)L->cfg.checkpoint_points_per_tick;
+  if (L->save_handle < 0 && L->save_points_done == 0 && L->out.checkpoints != NULL) {
+    if (checkpoint_acquire(L, &L->save_payload, &L->save_payload_cap) &&
+        hedger_save_begin(L->hedger, L->save_payload, L->save_payload_cap, &L->save_cursor) != HEDGER_OK) {
+      L->save_handle = -1;  // never happens: the buffer is sized by hedger_serialized_max_size
+    }
+  }
+  if (L->save_handle >= 0) {
+    size_t written = 0;
+    if (hedger_save_step(L->hedger, &L->save_cursor, per_tick, &written) != HEDGER_OK) {
+      // Nothing changes the learner between runs; should it happen, the save starts over.
+      (void)hedger_save_begin(L->hedger, L->save_payload, L->save_payload_cap, &L->save_cursor);
+      L->save_points_done = 0;
+      return;
+    }
+    if (L->save_cursor.done) {
+      checkpoint_submit(L, written);
+    }
+  }
+  L->save_points_done = fill - L->save_points_done > per_tick ? L->save_points_done + per_tick : fill;
+  if (L->save_points_done >= fill) {
+    L->save_points_done = 0;
+    L->learn_stage = FW_LEARN_IDLE;
+  }
+}
+
+// One slice of the between-run work: at most learn_updates_per_tick replay updates and, once the
+// replay is done, at most checkpoint_points_per_tick points of the save.
+static void between_runs_slice(fw_loop_t* L) {
+  if (L->end_run_pending) {
+    L->end_run_pending = false;
+    (void)hedger_end_run_begin(L->hedger, NULL);
+    L->learn_stage = FW_LEARN_REPLAY;
+    L->save_points_done = 0;
+    L->save_handle = -1;
+  }
+  if (L->learn_stage == FW_LEARN_IDLE) {
+    return;
+  }
+  L->learn_ticks++;
+  if (L->learn_stage == FW_LEARN_REPLAY) {
+    uint32_t remaining = 0;
+    (void)hedger_end_run_step(L->hedger, (uint32_t)L->cfg.learn_updates_per_tick, &remaining);
+    if (remaining > 0) {
+      return;
+    }
+    L->learn_stage = FW_LEARN_SAVE;
+  }
+  save_slice(L);
+}
+
+void fw_learning_after_command(fw_loop_t* L) {
+  if (L->pending.active) {
+    learn_pending(L);
+    if (!L->end_run_pending) {
+      return;
+    }
+  }
+  between_runs_slice(L);
+}
+
+void fw_learning_finish_now(fw_loop_t* L) {
+  if (L->pending.active) {
+    learn_pending(L);
+  }
+  if (L->end_run_pending) {
+    L->end_run_pending = false;
+    (void)hedger_end_run_begin(L->hedger, NULL);
+  }
+  (void)hedger_end_run_step(L->hedger, UINT32_MAX, NULL);
+  if (L->learn_stage == FW_LEARN_SAVE && L->save_handle >= 0) {
+    // A slice-wise save was under way: finish it at once.
+    size_t written = 0;
+    if (hedger_save_step(L->hedger, &L->save_cursor, UINT32_MAX, &written) == HEDGER_OK && L->save_cursor.done) {
+      checkpoint_submit(L, written);
+    }
+  }
+  L->save_points_done = 0;
+  L->learn_stage = FW_LEARN_IDLE;
+}

@@ -1,0 +1,251 @@
+// SPDX-License-Identifier: MIT
+// The loop's messages: experience, pose, scan, evaluation block, status, and text lines, all
+// handed to the publisher queue (reserve / fill in place / commit: never blocks, a full queue
+// drops and counts).
+#include "loop_internal.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <string.h>
+
+void fw_out_notify(fw_loop_t* L) {
+  if (L->out.notify != NULL) {
+    L->out.notify(L->out.notify_user);
+  }
+}
+
+static void emit_line(fw_loop_t* L, int stream, const char* line) {
+  fw_msg_t* m = L->out.queue != NULL ? fw_pubq_reserve(L->out.queue, FW_MSG_TEXT) : NULL;
+  if (m == NULL) {
+    if (L->out.queue == NULL && stream == 2) {
+      // No publisher (start-up, tools): write directly; not on the tick path.
+      fprintf(stderr, "%s\n", line);
+    }
+    return;
+  }
+  m->u.text.stream = stream;
+  (void)snprintf(m->u.text.line, sizeof m->u.text.line, "%s", line);
+  fw_pubq_commit(L->out.queue);
+  fw_out_notify(L);
+}
+
+void fw_loop_log(fw_loop_t* L, int stream, const char* format, ...) {
+  char line[FW_TEXT_MAX];
+  va_list ap;
+  va_start(ap, format);
+  (void)vsnprintf(line, sizeof line, format, ap);
+  va_end(ap);
+  if (stream == 1 && L->lines_holding) {
+    // Progress lines keep their order behind a line that waits for its checkpoint.
+    if (L->n_held_lines == FW_HELD_LINES) {
+      fw_out_release_lines(L, true);
+    } else {
+      memcpy(L->held_lines[L->n_held_lines++], line, sizeof line);
+      return;
+    }
+  }
+  emit_line(L, stream, line);
+}
+
+void fw_out_release_lines(fw_loop_t* L, bool force) {
+  if (!L->lines_holding) {
+    return;
+  }
+  if (!force) {
+    if (L->lines_release_at == 0 || L->out.checkpoints == NULL) {
+      return;
+    }
+    const fw_ckpt_counters_t c = fw_ckpt_writer_counters(L->out.checkpoints);
+    if (c.written + c.failed + c.superseded < L->lines_release_at) {
+      return;
+    }
+  }
+  L->lines_holding = false;
+  L->lines_release_at = 0;
+  for (uint32_t i = 0; i < L->n_held_lines; ++i) {
+    emit_line(L, 1, L->held_lines[i]);
+  }
+  L->n_held_lines = 0;
+}
+
+void fw_out_experience(fw_loop_t* L, const fw_pending_step_t* step, double q, hedger_kind_t kind) {
+  const int64_t seq = L->exp_seq++;  // a dropped experience leaves a gap in seq: detectable
+  if (L->out.queue == NULL) {
+    return;
+  }
+  fw_msg_t* m = fw_pubq_reserve(L->out.queue, FW_MSG_EXPERIENCE);
+  if (m == NULL) {
+    L->exp_dropped++;
+    return;
+  }
+  b21r_experience_t* e = &m->u.experience;
+  memset(e, 0, sizeof *e);
+  e->utime = L->utime;
+  e->seq = seq;
+  e->run_id = step->run_id;
+  e->step_id = step->step_id;
+  e->task = (int8_t)L->cfg.task;
+  e->phase = (int8_t)step->phase;
+  e->source = step->source;
+  e->evaluating = step->evaluating ? 1 : 0;
+  e->state_dim = (int8_t)L->state_dim;
+  for (uint32_t i = 0; i < L->state_dim; ++i) {
+    e->s[i] = step->s[i];
+    e->s_next[i] = step->s_next[i];
+  }
+  e->action_radps = step->a;
+  e->translation_mps = step->v;
+  e->reward = step->reward;
+  e->terminal = step->terminal ? 1 : 0;
+  e->q_value = isfinite(q) ? q : 0.0;
+  e->q_kind = (int8_t)(kind == HEDGER_KIND_LWR ? 0 : (kind == HEDGER_KIND_LWA ? 1 : 2));
+  fw_pubq_commit(L->out.queue);
+}
+
+void fw_out_pose(fw_loop_t* L) {
+  if (L->out.queue == NULL) {
+    return;
+  }
+  fw_msg_t* m = fw_pubq_reserve(L->out.queue, FW_MSG_POSE);
+  if (m == NULL) {
+    return;
+  }
+  b21r_pose_t* p = &m->u.pose;
+  p->utime = L->utime;
+  p->run_id = L->run_id;
+  p->step_id = L->actions_taken;
+  p->x_m = L->base.odometry.x_m;
+  p->y_m = L->base.odometry.y_m;
+  p->theta_rad = L->base.odometry.theta_rad;
+  p->translation_mps = L->base.odometry.v_mps;
+  p->rotation_radps = L->base.odometry.omega_radps;
+  fw_pubq_commit(L->out.queue);
+}
+
+void fw_out_scan(fw_loop_t* L) {
+  if (L->out.queue == NULL || !L->cfg.publish_scan) {
+    return;
+  }
+  fw_msg_t* m = fw_pubq_reserve(L->out.queue, FW_MSG_SCAN);
+  if (m == NULL) {
+    return;
+  }
+  b21r_scan_t* s = &m->u.scan;
+  s->utime = L->utime;
+  s->run_id = L->run_id;
+  s->step_id = L->actions_taken;
+  s->angle_min_rad = (float)L->scan.angle_min_rad;
+  s->angle_increment_rad = (float)L->scan.angle_increment_rad;
+  s->n_beams = (int16_t)L->scan.n_beams;
+  for (uint16_t i = 0; i < L->scan.n_beams; ++i) {
+    s->no_return_reason[i] = (int8_t)L->scan.no_return[i];
+    s->ranges_m[i] = L->scan.no_return[i] != 0 ? 0.0F : L->scan.ranges_m[i];
+  }
+  fw_pubq_commit(L->out.queue);
+}
+
+void fw_out_eval(fw_loop_t* L, const fw_eval_block_t* b) {
+  if (L->out.queue == NULL) {
+    return;
+  }
+  fw_msg_t* m = fw_pubq_reserve(L->out.queue, FW_MSG_EVAL);
+  if (m == NULL) {
+    return;
+  }
+  b21r_eval_t* e = &m->u.eval;
+  memset(e, 0, sizeof *e);
+  e->utime = L->utime;
+  e->block = b->block;
+  e->training_runs = b->training_runs;
+  e->phase = (int8_t)b->phase;
+  e->task = (int8_t)L->cfg.task;
+  e->n_starts = b->n_starts;
+  for (int32_t i = 0; i < b->n_starts && i < 16; ++i) {
+    e->steps[i] = b->steps[i];
+    e->success[i] = b->success[i] ? 1 : 0;
+  }
+  e->successes = b->successes;
+  e->mean_steps = b->mean_steps;
+  e->ci95_halfwidth = b->ci95_halfwidth;
+  fw_pubq_commit(L->out.queue);
+}
+
+int8_t fw_out_status_mode(const fw_loop_t* L) {
+  if (L->mode == B21R_STATUS_T_MODE_STOPPED && L->safety.reason == FW_STOP_OPERATOR) {
+    return B21R_STATUS_T_MODE_PAUSED;
+  }
+  return (int8_t)L->mode;
+}
+
+void fw_out_status(fw_loop_t* L) {
+  if (L->out.queue == NULL) {
+    return;
+  }
+  fw_msg_t* m = fw_pubq_reserve(L->out.queue, FW_MSG_STATUS);
+  if (m == NULL) {
+    return;
+  }
+  b21r_status_t* s = &m->u.status.msg;
+  memset(s, 0, sizeof *s);
+  s->utime = L->utime;
+  s->phase = (int8_t)L->sched.p.phase;
+  s->mode = fw_out_status_mode(L);
+  s->stop_reason = (int8_t)L->safety.reason;
+  memcpy(m->u.status.detail, L->safety.detail, sizeof m->u.status.detail);
+  s->run_id = L->run_id;
+  s->step_id = L->actions_taken;
+  s->training_runs = L->sched.p.training_runs;
+  s->eval_blocks = L->sched.p.eval_blocks;
+  const fw_timing_summary_t t = fw_timing_summary(&L->timing);
+  s->tick_p50_us = t.p50_us;
+  s->tick_p99_us = t.p99_us;
+  s->tick_max_us = t.max_us;
+  s->tick_overruns = t.overruns;
+  s->ticks = t.ticks;
+  const hedger_counters_t* hc = hedger_counters(L->hedger);
+  s->store_fill = (int32_t)hc->store_fill;
+  s->store_capacity = L->cfg.hedger_capacity;
+  s->hedger_lwr = (int64_t)hc->predictions_lwr;
+  s->hedger_lwa = (int64_t)hc->predictions_lwa;
+  s->hedger_unknown = (int64_t)hc->predictions_unknown;
+  s->hedger_evictions = (int64_t)hc->evictions;
+  s->hedger_rebuilds = (int64_t)hc->rebuilds;
+  s->laser_scans = L->laser_scans;
+  fw_laser_stats_t ls;
+  memset(&ls, 0, sizeof ls);
+  if (L->io.vt->laser_stats != NULL) {
+    L->io.vt->laser_stats(L->io.user, &ls);
+  }
+  s->laser_bytes_dropped = (int64_t)ls.bytes_dropped;
+  s->laser_crc_errors = (int64_t)ls.crc_errors;
+  s->base_packets = L->base_packets;
+  s->base_bytes_dropped = (int64_t)fw_base_bytes_dropped(L);
+  s->base_checksum_errors = (int64_t)fw_base_checksum_errors(L);
+  s->teleop_accepted = L->teleop_accepted;
+  s->teleop_rejected = L->teleop_rejected;
+  s->lcm_queue_drops = (int64_t)fw_pubq_drops(L->out.queue, -1);
+  // One snapshot of the writer's counters (each read takes the writer's lock).
+  fw_ckpt_counters_t ckpt;
+  memset(&ckpt, 0, sizeof ckpt);
+  if (L->out.checkpoints != NULL) {
+    ckpt = fw_ckpt_writer_counters(L->out.checkpoints);
+  }
+  s->checkpoints_written = (int64_t)ckpt.written;
+  s->safety_stops = L->safety.stops;
+  s->held_ticks = L->held_ticks;
+  s->teleop_rejected_nan = L->teleop_rejected_nan;
+  s->teleop_rejected_range = L->teleop_rejected_range;
+  s->teleop_rejected_seq = L->teleop_rejected_seq;
+  s->teleop_rejected_stale = L->teleop_rejected_stale;
+  s->commands_accepted = L->commands_accepted;
+  s->commands_rejected = L->commands_rejected;
+  s->checkpoint_failures = (int64_t)ckpt.failed;
+  s->laser_restarts = (int64_t)ls.restarts;
+  s->odometry_rejected = (int64_t)(L->base.odometry.rejected_trans + L->base.odometry.rejected_rot);
+  s->experiences = L->exp_seq;
+  s->experiences_dropped = L->exp_dropped;
+  s->tick_max_ever_us = t.max_ever_us;
+  s->battery_v = L->base.battery_v;
+  fw_pubq_commit(L->out.queue);
+}

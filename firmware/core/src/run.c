@@ -1,0 +1,305 @@
+// SPDX-License-Identifier: MIT
+// The run lifecycle (repositioning, runs, the schedule) and the action of each step.
+#include "loop_internal.h"
+
+#include <math.h>
+#include <string.h>
+
+bool fw_run_is_corridor(const fw_loop_t* L) { return L->cfg.task == FW_TASK_CORRIDOR; }
+
+uint32_t fw_run_step_limit(const fw_loop_t* L) { return tasks_episode_step_limit(&L->ep); }
+
+bool fw_run_running(const fw_loop_t* L) {
+  return L->mode == B21R_STATUS_T_MODE_RUNNING || L->mode == B21R_STATUS_T_MODE_EVALUATING;
+}
+
+bool fw_run_joystick_drives(const fw_loop_t* L) {
+  return L->cfg.mode == FW_MODE_LEARN && L->cfg.phase_driver == FW_DRIVER_JOYSTICK &&
+         L->plan.kind == FW_RUN_TRAINING && L->plan.phase == 1 && fw_run_running(L);
+}
+
+features_pose_t fw_run_odom_pose(const fw_loop_t* L) {
+  const features_pose_t p = {L->base.odometry.x_m, L->base.odometry.y_m, L->base.odometry.theta_rad};
+  return p;
+}
+
+bool fw_run_observe(fw_loop_t* L) {
+  return tasks_episode_observe(&L->ep, &L->scan, fw_run_odom_pose(L), L->s) == 1;
+}
+
+static const char* run_kind_name(const fw_loop_t* L) {
+  if (L->plan.kind == FW_RUN_EVAL) {
+    if (L->cfg.mode == FW_MODE_EVALUATE) {
+      return L->cfg.evaluate_policy == FW_EVAL_OPTIMAL ? "eval(optimal)"
+                                                         : (L->cfg.evaluate_policy == FW_EVAL_EXAMPLE ? "eval(example)"
+                                                                                                      : "eval(learned)");
+    }
+    return "eval";
+  }
+  return "train";
+}
+
+static features_pose_t next_start_pose(fw_loop_t* L, const fw_run_plan_t* plan) {
+  return plan->kind == FW_RUN_EVAL ? tasks_episode_eval_start(&L->ep, (uint32_t)plan->eval_index)
+                                   : tasks_episode_training_start(&L->ep, &L->pose_rng);
+}
+
+static void begin_run(fw_loop_t* L) {
+  L->run_id++;
+  L->explore_steps_left = 0;
+  L->actions_taken = 0;
+  L->have_prev = false;
+  L->run_return = 0.0;
+  // The driver of this run: the example policy in phase one, the advisor in phase two, or the
+  // evaluated reference. Its stream is seeded per run, so a run does not depend on earlier ones.
+  uint64_t st = L->driver_seed_base ^ ((uint64_t)(uint32_t)L->run_id * 0x9E3779B97F4A7C15ULL);
+  const uint64_t run_seed = tasks_rng_splitmix64(&st);
+  tasks_driver_kind_t kind = TASKS_DRIVER_PROPORTIONAL;
+  if (L->cfg.mode == FW_MODE_EVALUATE && L->cfg.evaluate_policy == FW_EVAL_OPTIMAL) {
+    kind = TASKS_DRIVER_OPTIMAL;
+  } else if (L->cfg.phase_driver == FW_DRIVER_HUMAN && L->plan.kind == FW_RUN_TRAINING && L->plan.phase == 1) {
+    kind = TASKS_DRIVER_HUMAN;
+  }
+  tasks_driver_begin_run(&L->driver, kind, fw_run_is_corridor(L) ? TASKS_TASK_CORRIDOR : TASKS_TASK_OBSTACLES,
+                         L->omega_max, run_seed);
+  if (L->cfg.mode == FW_MODE_EVALUATE && L->cfg.evaluate_policy == FW_EVAL_EXAMPLE) {
+    // The example policy at a fixed gain: the configured one, or the middle of the range the
+    // training runs draw from.
+    const double nominal = fw_run_is_corridor(L)
+                               ? 0.5 * (TASKS_PROPORTIONAL_CORRIDOR_GAIN_MIN + TASKS_PROPORTIONAL_CORRIDOR_GAIN_MAX)
+                               : 0.5 * (TASKS_PROPORTIONAL_OBSTACLES_GAIN_MIN + TASKS_PROPORTIONAL_OBSTACLES_GAIN_MAX);
+    L->driver.gain = L->cfg.evaluate_example_gain > 0.0 ? L->cfg.evaluate_example_gain : nominal;
+    if (!fw_run_is_corridor(L)) {
+      L->driver.law[0] = L->driver.gain;
+    }
+  }
+  L->mode = L->plan.kind == FW_RUN_EVAL ? B21R_STATUS_T_MODE_EVALUATING : B21R_STATUS_T_MODE_RUNNING;
+  L->status_now = true;
+}
+
+void fw_run_begin_repositioning(fw_loop_t* L) {
+  L->mode = B21R_STATUS_T_MODE_REPOSITIONING;
+  L->pose_requested = L->stopped_pose_requested;
+  L->stopped_pose_requested = false;
+  L->awaiting_confirm = false;
+  L->confirm_pending = false;
+  L->settle_ticks = L->pose_requested ? (L->cfg.lockstep ? 0 : 3) : 0;
+  L->retry_countdown = 0;
+  L->plan = fw_schedule_next(&L->sched);
+  L->status_now = true;
+  if (L->plan.kind == FW_RUN_NONE) {
+    L->mode = B21R_STATUS_T_MODE_DONE;
+    L->done = true;
+    L->exit_status = 0;
+    fw_loop_log(L, 1, "schedule complete: %d training runs, %d evaluation blocks", L->sched.p.training_runs,
+                L->sched.p.eval_blocks);
+    return;
+  }
+  if (!L->pose_requested) {
+    L->start_pose = next_start_pose(L, &L->plan);
+  }
+}
+
+static void finish_run(fw_loop_t* L, bool reached_goal, bool aborted, const char* why) {
+  const bool training = L->plan.kind == FW_RUN_TRAINING && L->cfg.mode == FW_MODE_LEARN;
+  const int32_t steps = reached_goal ? L->actions_taken : (int32_t)fw_run_step_limit(L);
+  fw_eval_block_t block;
+  const bool block_done = fw_schedule_finish_run(&L->sched, steps, reached_goal, aborted, &block);
+  if (aborted) {
+    L->runs_aborted++;
+  } else {
+    L->runs_finished++;
+    L->last_run_steps = L->actions_taken;
+    L->last_run_goal = reached_goal;
+  }
+  if (training) {
+    // The replay of the run and the checkpoint run after this tick's command, in slices; the
+    // run's progress line waits until its checkpoint is written (see learning.c).
+    fw_learning_run_ended(L);
+  }
+  if (L->cfg.progress) {
+    fw_loop_log(L, 1, "run %4d  phase %d  %-13s %-9s %4d steps  (%s)  store %u/%d", L->run_id, L->plan.phase,
+                run_kind_name(L), aborted ? "ABORTED" : (reached_goal ? "goal" : "no goal"), L->actions_taken, why,
+                hedger_counters(L->hedger)->store_fill, L->cfg.hedger_capacity);
+  }
+  if (block_done) {
+    L->last_block = block;
+    fw_out_eval(L, &block);
+    if (L->cfg.progress) {
+      fw_loop_log(L, 1, "EVAL block %2d after %3d training runs (phase %d): %2d/%d reached the goal, mean %.1f +- %.1f steps",
+                  block.block, block.training_runs, block.phase, block.successes, block.n_starts, block.mean_steps,
+                  block.ci95_halfwidth);
+      if (L->sched.p.phase == 2 && block.phase == 1) {
+        fw_loop_log(L, 1, "PHASE TWO: the learned policy drives from now on");
+      }
+    }
+  }
+  fw_run_begin_repositioning(L);
+}
+
+void fw_run_abort(fw_loop_t* L, const char* why) {
+  if (fw_run_running(L)) {
+    finish_run(L, false, true, why);
+  }
+}
+
+bool fw_run_reposition(fw_loop_t* L, bool state_ok, double* v, double* w) {
+  if (!L->pose_requested) {
+    if (L->retry_countdown > 0) {
+      L->retry_countdown--;
+      return false;
+    }
+    const int r = L->io.vt->request_start_pose == NULL
+                      ? 0
+                      : L->io.vt->request_start_pose(L->io.user, L->start_pose.x_m, L->start_pose.y_m,
+                                                     L->start_pose.theta_rad);
+    if (r == 1) {
+      L->pose_requested = true;
+      // Lockstep: the data of the next period is already taken at the new pose. Real time: let a
+      // few scans pass that may predate the reset.
+      L->settle_ticks = L->cfg.lockstep ? 0 : 3;
+    } else if (r == 0) {
+      L->pose_requested = true;
+      L->awaiting_confirm = true;
+      fw_loop_log(L, 2,
+                  "b21r-controller: place the robot at x %.2f m, y %.2f m, heading %.2f rad (task frame) and send "
+                  "B21R_COMMAND CONFIRM_START_POSE",
+                  L->start_pose.x_m, L->start_pose.y_m, L->start_pose.theta_rad);
+    } else {
+      L->retry_countdown = 10;
+      fw_loop_log(L, 2, "b21r-controller: start pose request failed (%d); retrying", r);
+    }
+    return false;
+  }
+  if (L->settle_ticks > 0) {
+    L->settle_ticks--;
+    return false;
+  }
+  // The run starts on a new scan at the start pose (confirmed by the operator where a person
+  // places the robot) once the learner has finished with the last run.
+  if (L->scan_new && (!L->awaiting_confirm || L->confirm_pending) && state_ok && fw_learning_idle(L)) {
+    begin_run(L);
+    fw_run_step(L, 0, v, w);
+    return true;
+  }
+  return false;
+}
+
+void fw_run_request_pose_while_stopped(fw_loop_t* L) {
+  // A bumped robot cannot clear its bumper by itself: with the emulator, reset it to the next
+  // start pose while stopped (on the robot the operator frees it).
+  if (L->safety.reason != FW_STOP_BUMPER || L->stopped_pose_requested || L->io.vt->request_start_pose == NULL ||
+      L->cfg.reposition != FW_REPOSITION_EMULATOR) {
+    return;
+  }
+  const fw_run_plan_t plan = fw_schedule_next(&L->sched);
+  if (plan.kind == FW_RUN_NONE) {
+    return;
+  }
+  L->start_pose = next_start_pose(L, &plan);
+  L->stopped_pose_requested =
+      L->io.vt->request_start_pose(L->io.user, L->start_pose.x_m, L->start_pose.y_m, L->start_pose.theta_rad) == 1;
+}
+
+// Exploration of a training step: with explore_probability per step a segment starts that adds
+// one offset ~ N(0, sigma) to the actions for explore_hold_s (at least one step). Returns true
+// (with the offset) while a segment is running.
+static bool explore_offset(fw_loop_t* L, double sigma, double* offset) {
+  if (L->explore_steps_left == 0) {
+    if (sigma <= 0.0 || !(tasks_rng_uniform(&L->explore_rng) < L->cfg.explore_probability)) {
+      return false;
+    }
+    const int64_t hold = (int64_t)floor(L->cfg.explore_hold_s / L->dt_s + 0.5);
+    L->explore_steps_left = hold > 1 ? (int32_t)hold : 1;
+    L->explore_offset = sigma * tasks_rng_normal(&L->explore_rng);
+  }
+  L->explore_steps_left--;
+  *offset = L->explore_offset;
+  return true;
+}
+
+// The transition (prev_s, prev_a) -> s with its reward waits for learning.c, after the command.
+static void queue_transition(fw_loop_t* L, const tasks_outcome_t* o, bool learning) {
+  fw_pending_step_t* p = &L->pending;
+  p->active = true;
+  p->learning = learning;
+  p->need_greedy = true;
+  p->q_next = 0.0;
+  p->reward = o->reward;
+  p->terminal = o->terminal != 0;
+  p->end_reason = (int8_t)o->reason;
+  memcpy(p->s, L->prev_s, sizeof p->s);
+  memcpy(p->s_next, L->s, sizeof p->s_next);
+  p->a = L->prev_a;
+  p->v = L->prev_v;
+  p->source = L->prev_source;
+  p->run_id = L->run_id;
+  p->step_id = L->actions_taken - 1;
+  p->phase = L->plan.phase;
+  p->evaluating = L->plan.kind == FW_RUN_EVAL;
+}
+
+void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
+  const bool evaluating = L->plan.kind == FW_RUN_EVAL;
+  const bool learning = !evaluating && L->cfg.mode == FW_MODE_LEARN;
+  const bool learned_policy =
+      (evaluating && !(L->cfg.mode == FW_MODE_EVALUATE && L->cfg.evaluate_policy != FW_EVAL_LEARNED)) ||
+      (!evaluating && L->plan.phase == 2);
+  if (L->have_prev) {
+    const tasks_outcome_t o = tasks_episode_outcome(&L->ep, contact, (uint32_t)L->actions_taken);
+    queue_transition(L, &o, learning);
+    L->steps++;
+    L->run_return += o.reward;
+    if (o.end_run) {
+      *v_cmd = 0.0;
+      *w_cmd = 0.0;
+      const bool goal = o.reason == TASKS_END_GOAL;
+      finish_run(L, goal, false, goal ? "goal" : (o.reason == TASKS_END_COLLISION ? "collision" : "step limit"));
+      return;
+    }
+  }
+  // The greedy search at s chooses the learned policy's action; its value is also the q' of the
+  // transition into s (hedger_learn after the command), so it runs once.
+  bool greedy_known = false;
+  double greedy_action = 0.0;
+  if (learned_policy) {
+    double value = 0.0;
+    greedy_known = hedger_greedy(L->hedger, L->s, &greedy_action, &value, NULL) == HEDGER_OK;
+    if (L->pending.active) {
+      L->pending.need_greedy = false;
+      L->pending.q_next = value;  // the default value when no action is known, as hedger_update
+    }
+  }
+  // The driver runs every step (even when it only advises) so its state follows the run.
+  const double advice = tasks_episode_driver_action(&L->ep, &L->driver);
+  double a = 0.0;
+  double offset = 0.0;
+  int8_t source = B21R_EXPERIENCE_T_SOURCE_EXAMPLE;
+  if (!learned_policy) {
+    if (fw_run_joystick_drives(L)) {
+      a = L->teleop_rot_radps;
+      source = B21R_EXPERIENCE_T_SOURCE_JOYSTICK;
+    } else {
+      a = advice;
+      if (!evaluating && L->cfg.example_noise_radps > 0.0 && explore_offset(L, L->cfg.example_noise_radps, &offset)) {
+        a += offset;  // phase-one dither: the learner sees actions around the example's
+      }
+    }
+  } else if (greedy_known) {
+    a = greedy_action;
+    source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
+    if (!evaluating && explore_offset(L, L->cfg.explore_sigma_radps, &offset)) {
+      a += offset;
+      source = B21R_EXPERIENCE_T_SOURCE_EXPLORATION;
+    }
+  } else if (!evaluating && L->cfg.advisor) {
+    a = advice;  // HEDGER knows no action here: the example policy advises
+    source = B21R_EXPERIENCE_T_SOURCE_ADVISOR;
+  } else {
+    a = 0.0;  // nothing known: hold course (evaluations measure the learned policy alone)
+    source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
+  }
+  *w_cmd = a;
+  *v_cmd = tasks_episode_speed_mps(&L->ep);
+  L->prev_source = source;
+}
