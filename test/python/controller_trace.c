@@ -98,8 +98,14 @@ int main(int argc, char** argv) {
   const int runs = atoi(argv[4]);
   const int max_steps = atoi(argv[5]);
   static inproc_sim_t sim;
+  static sim_world_t world_map;  // large: not on the stack
   char err[FW_LOOP_ERR_MAX];
-  if (inproc_sim_open(&sim, world, false, seed, err, sizeof err) != 0) {
+  if (sim_world_load(world, &world_map, err, sizeof err) != SIM_WORLD_OK) {
+    fprintf(stderr, "controller_trace: %s\n", err);
+    return 1;
+  }
+  const inproc_sim_options_t opt = {.canopen = false, .seed = seed, .trace_capacity = 16, .alloc_probe = NULL};
+  if (inproc_sim_open(&sim, &world_map, &opt, err, sizeof err) != 0) {
     fprintf(stderr, "controller_trace: %s\n", err);
     return 1;
   }
@@ -109,13 +115,15 @@ int main(int argc, char** argv) {
   c.seed = seed;
   c.lockstep = true;
   c.lockstep_timeout_s = 1.0;
-  c.lockstep_grace_s = 0.05;
   c.reposition = FW_REPOSITION_EMULATOR;
   strcpy(c.emulator_control, "in-process");
   c.phase_driver = FW_DRIVER_JOYSTICK;
   c.phase_one_runs = runs + 1;
   c.eval_every_runs = 100000;
   c.max_steps_per_run = max_steps;
+  // Between runs the learner's backward replay keeps the robot standing for some periods (sliced
+  // work); the environment's reset repeats only the zero-command periods of a run change.
+  c.hedger_replay = false;
   strncpy(c.checkpoint_file, argv[7], sizeof c.checkpoint_file - 1);
   remove(argv[7]);
 

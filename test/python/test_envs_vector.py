@@ -19,7 +19,7 @@ N_STEPS = 120
 def run(task, backend, mode):
     envs = gymnasium.make_vec(ENV_IDS[task], num_envs=N_ENVS, vectorization_mode=mode,
                               vector_kwargs={"autoreset_mode": gymnasium.vector.AutoresetMode.SAME_STEP},
-                              backend=backend)
+                              backend=backend, max_episode_steps=50)  # truncations: autoreset is exercised
     try:
         obs, _ = envs.reset(seed=[10, 11, 12])
         rng = np.random.default_rng(0)

@@ -23,7 +23,9 @@ from b21r import experience_t
 import fwtest
 from b21r_log import read_log
 
-SESSION = {"phase_one_runs": 30, "eval_every_runs": 1000, "eval_starts": 1}
+# 4 replay passes instead of the default 20: the sanitizer build is slow.
+SESSION = {"phase_one_runs": 30, "eval_every_runs": 1000, "eval_starts": 1, "hedger_replay_passes": 4}
+TRAINER_SETS = ["--set", "hedger_replay_passes=4"]
 
 
 def sections(path):
@@ -37,7 +39,7 @@ def sections(path):
 
 
 def train(exe, args, expect_rc=0):
-    p = subprocess.run([exe, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, timeout=300)
+    p = subprocess.run([exe, *TRAINER_SETS, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, timeout=300)
     if p.returncode != expect_rc:
         fwtest.fail("b21r-train %s: exit %d, expected %d\n%s%s" % (" ".join(args), p.returncode, expect_rc, p.stdout,
                                                                  p.stderr))

@@ -159,6 +159,11 @@ const Field<hedger_config_t> kHedgerFields[] = {
     B21R_U32(hedger_config_t, rebuild_work_per_update),
     B21R_U32(hedger_config_t, run_capacity),
     B21R_U32(hedger_config_t, replay),
+    B21R_U32(hedger_config_t, replay_passes),
+    B21R_F64(hedger_config_t, replay_lambda),
+    B21R_U32(hedger_config_t, greedy_method),
+    B21R_F64(hedger_config_t, greedy_pessimism),
+    B21R_F64(hedger_config_t, greedy_reach),
 };
 
 nb::object pose_get(const features_pose_t& p) { return nb::make_tuple(p.x_m, p.y_m, p.theta_rad); }
@@ -414,10 +419,11 @@ struct Prediction {
   int kind;
   int fallback;
   uint32_t n_neighbours;
+  double std_error;
 };
 
 Prediction to_py(const hedger_prediction_t& p) {
-  return Prediction{p.value, static_cast<int>(p.kind), static_cast<int>(p.fallback), p.n_neighbours};
+  return Prediction{p.value, static_cast<int>(p.kind), static_cast<int>(p.fallback), p.n_neighbours, p.std_error};
 }
 
 class Hedger {
@@ -567,6 +573,8 @@ class Hedger {
     B21R_C(fallback_singular);
     B21R_C(greedy_calls);
     B21R_C(greedy_all_unknown);
+    B21R_C(greedy_state_model);
+    B21R_C(greedy_reached);
     B21R_C(updates);
     B21R_C(replayed_updates);
     B21R_C(run_overflows);
@@ -686,6 +694,7 @@ NB_MODULE(_core, m) {
       .def_ro("kind", &Prediction::kind)
       .def_ro("fallback", &Prediction::fallback)
       .def_ro("n_neighbours", &Prediction::n_neighbours)
+      .def_ro("std_error", &Prediction::std_error)
       .def("__repr__", [](const Prediction& p) {
         return "Prediction(value=" + std::to_string(p.value) + ", kind=" + hedger_kind_str(static_cast<hedger_kind_t>(p.kind)) +
                ", n_neighbours=" + std::to_string(p.n_neighbours) + ")";
