@@ -537,11 +537,14 @@ proto_status_t rflex_parse_sonar_run(const rflex_packet_t* pkt, uint32_t* echo_d
 // ---------------------------------------------------------------------------------------------
 // Streaming decoder
 
-void rflex_decoder_init(rflex_decoder_t* dec) {
+void rflex_decoder_init_role(rflex_decoder_t* dec, rflex_role_t role) {
   if (dec != NULL) {
     memset(dec, 0, sizeof *dec);
+    dec->role = (uint8_t)(role == RFLEX_ROLE_DEVICE ? RFLEX_ROLE_DEVICE : RFLEX_ROLE_HOST);
   }
 }
+
+void rflex_decoder_init(rflex_decoder_t* dec) { rflex_decoder_init_role(dec, RFLEX_ROLE_HOST); }
 
 static void rx_drop_front(rflex_decoder_t* dec, size_t n) {
   memmove(dec->buf, dec->buf + n, dec->fill - n);
@@ -693,7 +696,10 @@ static rx_result_t rx_scan(rflex_decoder_t* dec, rflex_packet_t* out) {
     dec->pending = (uint16_t)used;
     return RX_PACKET;
   }
-  const verdict_t vr = interpret_raw(dec->buf, dec->fill, out, &used, &flag);
+  // The base always stuffs its output (protocols.md A.2): the host role never falls back to raw
+  // framing, which would accept a stuffed packet that lost a byte with its fields shifted.
+  const verdict_t vr =
+      dec->role == RFLEX_ROLE_DEVICE ? interpret_raw(dec->buf, dec->fill, out, &used, &flag) : vs;
   if (vr == V_OK) {
     dec->counters.packets_ok++;
     if (flag) {
