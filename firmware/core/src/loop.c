@@ -2,7 +2,7 @@
 // The control loop: tick, run lifecycle, learning, safety reactions, publishing, checkpoints.
 #define _POSIX_C_SOURCE 200809L
 #include "loop_internal.h"
-#include "le_bytes.h"
+#include "fw/progress.h"
 
 #include <errno.h>
 #include <math.h>
@@ -11,9 +11,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-// Checkpoint meta section: the schedule's progress, little-endian, versioned.
-#define META_MAGIC "FWMETA01"
-#define META_BYTES 96U
 #define FW_PI 3.14159265358979323846
 
 // ---- small helpers ----------------------------------------------------------------------
@@ -319,21 +316,9 @@ static void publish_status(fw_loop_t* L) {
 // ---- checkpoints --------------------------------------------------------------------------
 
 static size_t encode_meta(const fw_loop_t* L, uint8_t* p) {
-  memset(p, 0, META_BYTES);
-  memcpy(p, META_MAGIC, 8);
-  const fw_schedule_progress_t* g = &L->sched.p;
-  fw_put_u32(p + 8, (uint32_t)L->cfg.task);
-  fw_put_u32(p + 12, L->state_dim);
-  fw_put_u32(p + 16, (uint32_t)g->phase);
-  fw_put_u32(p + 20, (uint32_t)g->training_runs);
-  fw_put_u32(p + 24, (uint32_t)g->phase_one_runs);
-  fw_put_u32(p + 28, (uint32_t)g->phase_two_runs);
-  fw_put_u32(p + 32, (uint32_t)g->eval_blocks);
-  fw_put_u32(p + 36, (uint32_t)g->example_runs);
-  fw_put_f64(p + 40, g->example_steps_sum);
-  fw_put_u32(p + 48, (uint32_t)g->best_example_steps);
-  fw_put_u32(p + 52, (uint32_t)(L->run_id + 1));
-  return META_BYTES;
+  const fw_progress_t g = {
+      .task = L->cfg.task, .state_dim = L->state_dim, .schedule = L->sched.p, .run_id = L->run_id};
+  return fw_progress_encode(&g, p);
 }
 
 static void checkpoint(fw_loop_t* L) {
@@ -538,7 +523,7 @@ void fw_loop_destroy(fw_loop_t* L) {
 int64_t fw_loop_period_us(const fw_loop_t* L) { return L->period_us; }
 
 void fw_loop_checkpoint_capacity(const fw_loop_t* L, size_t* meta_bytes, size_t* payload_bytes) {
-  *meta_bytes = META_BYTES;
+  *meta_bytes = FW_PROGRESS_BYTES;
   *payload_bytes = L->hedger_save_max;
 }
 
@@ -555,7 +540,7 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
   if (r <= 0) {
     return r;
   }
-  uint8_t meta[META_BYTES];
+  uint8_t meta[FW_PROGRESS_BYTES];
   void* payload = malloc(payload_size + 1U);
   if (payload == NULL) {
     fmt(err, err_cap, "checkpoint %s: cannot allocate %zu bytes", path, payload_size);
@@ -566,17 +551,20 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
     free(payload);
     return r;
   }
-  if (meta_size != META_BYTES || memcmp(meta, META_MAGIC, 8) != 0) {
+  // The controller section is validated before the learner is touched: a refusal changes nothing.
+  fw_progress_t g;
+  char why[FW_PROGRESS_WHY_MAX];
+  if (fw_progress_decode(meta, meta_size, &g, why, sizeof why) != 0) {
     free(payload);
-    fmt(err, err_cap, "checkpoint %s: controller section of an unknown format; to start fresh, move the file away",
+    fmt(err, err_cap, "checkpoint %s is corrupt (controller section: %s); " FW_CHECKPOINT_FRESH_HINT, path, why, path,
         path);
     return -1;
   }
-  if (fw_get_u32(meta + 8) != (uint32_t)L->cfg.task || fw_get_u32(meta + 12) != L->state_dim) {
+  if (g.task != L->cfg.task || g.state_dim != L->state_dim) {
     free(payload);
     fmt(err, err_cap,
         "checkpoint %s was learned for another task (%s); to start fresh, move the file away (e.g. mv '%s' '%s.other')",
-        path, fw_get_u32(meta + 8) == 0 ? "corridor" : "obstacles", path, path);
+        path, g.task == FW_TASK_CORRIDOR ? "corridor" : "obstacles", path, path);
     return -1;
   }
   const hedger_status_t hs = hedger_load(L->hedger, payload, payload_size);
@@ -588,19 +576,9 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
         path, hedger_status_str(hs), path, path);
     return -1;
   }
-  fw_schedule_progress_t p;
-  memset(&p, 0, sizeof p);
-  p.phase = (int32_t)fw_get_u32(meta + 16);
-  p.training_runs = (int32_t)fw_get_u32(meta + 20);
-  p.phase_one_runs = (int32_t)fw_get_u32(meta + 24);
-  p.phase_two_runs = (int32_t)fw_get_u32(meta + 28);
-  p.eval_blocks = (int32_t)fw_get_u32(meta + 32);
-  p.example_runs = (int32_t)fw_get_u32(meta + 36);
-  p.example_steps_sum = fw_get_f64(meta + 40);
-  p.best_example_steps = (int32_t)fw_get_u32(meta + 48);
   const fw_schedule_config_t sc = L->sched.cfg;  // a copy: init clears the schedule first
-  fw_schedule_init(&L->sched, &sc, &p);
-  L->run_id = (int32_t)fw_get_u32(meta + 52) - 1;
+  fw_schedule_init(&L->sched, &sc, &g.schedule);
+  L->run_id = g.run_id;
   return 1;
 }
 
