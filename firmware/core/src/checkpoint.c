@@ -142,14 +142,56 @@ int fw_checkpoint_write(const char* path, const void* meta, size_t meta_size, co
   return 0;
 }
 
-#define FRESH_HINT "to start fresh with an empty learner, move the file away (e.g. mv '%s' '%s.bad')"
+#define FRESH_HINT FW_CHECKPOINT_FRESH_HINT
+
+// Opens path for reading: 1 (open, *out set), 0 (no such file), -1 (err says why). A directory
+// or another non-regular file is refused by name: reading one would look like a truncated file.
+static int open_checkpoint(const char* path, FILE** out, char* err, size_t err_cap) {
+  FILE* f = fopen(path, "rb");
+  if (f == NULL) {
+    if (errno == ENOENT) {
+      return 0;
+    }
+    fmt(err, err_cap, "checkpoint %s: cannot open: %s", path, strerror(errno));
+    return -1;
+  }
+  struct stat st;
+  if (fstat(fileno(f), &st) != 0) {
+    fmt(err, err_cap, "checkpoint %s: cannot stat: %s", path, strerror(errno));
+    fclose(f);
+    return -1;
+  }
+  if (S_ISDIR(st.st_mode)) {
+    fmt(err, err_cap,
+        "checkpoint %s is a directory; checkpoint_file must name a file (e.g. '%s/hedger.ckpt'), which is created "
+        "if it does not exist",
+        path, path);
+    fclose(f);
+    return -1;
+  }
+  if (!S_ISREG(st.st_mode)) {
+    fmt(err, err_cap, "checkpoint %s is not a regular file; checkpoint_file must name a file", path);
+    fclose(f);
+    return -1;
+  }
+  *out = f;
+  return 1;
+}
+
+// "truncated" for a short file, the system's reason for a failed read.
+static void short_read(FILE* f, const char* path, const char* what, char* err, size_t err_cap) {
+  if (ferror(f)) {
+    fmt(err, err_cap, "checkpoint %s: cannot read: %s", path, strerror(errno));
+  } else {
+    fmt(err, err_cap, "checkpoint %s is truncated (%s); " FRESH_HINT, path, what, path, path);
+  }
+}
 
 static int read_header(FILE* f, const char* path, uint64_t* meta_size, uint64_t* payload_size, uint32_t* meta_crc,
                        uint32_t* payload_crc, char* err, size_t err_cap) {
   uint8_t h[FW_CHECKPOINT_HEADER_SIZE];
   if (fread(h, 1, sizeof h, f) != sizeof h) {
-    fmt(err, err_cap, "checkpoint %s is truncated (shorter than its %u-byte header); " FRESH_HINT, path,
-        FW_CHECKPOINT_HEADER_SIZE, path, path);
+    short_read(f, path, "shorter than its header", err, err_cap);
     return -1;
   }
   if (memcmp(h, k_magic, sizeof k_magic) != 0) {
@@ -175,13 +217,10 @@ static int read_header(FILE* f, const char* path, uint64_t* meta_size, uint64_t*
 }
 
 int fw_checkpoint_peek(const char* path, size_t* meta_size, size_t* payload_size, char* err, size_t err_cap) {
-  FILE* f = fopen(path, "rb");
-  if (f == NULL) {
-    if (errno == ENOENT) {
-      return 0;
-    }
-    fmt(err, err_cap, "checkpoint %s: cannot open: %s", path, strerror(errno));
-    return -1;
+  FILE* f = NULL;
+  const int o = open_checkpoint(path, &f, err, err_cap);
+  if (o <= 0) {
+    return o;
   }
   uint64_t m = 0;
   uint64_t p = 0;
@@ -203,13 +242,10 @@ int fw_checkpoint_peek(const char* path, size_t* meta_size, size_t* payload_size
 
 int fw_checkpoint_read(const char* path, void* meta, size_t meta_cap, size_t* meta_size, void* payload,
                        size_t payload_cap, size_t* payload_size, char* err, size_t err_cap) {
-  FILE* f = fopen(path, "rb");
-  if (f == NULL) {
-    if (errno == ENOENT) {
-      return 0;
-    }
-    fmt(err, err_cap, "checkpoint %s: cannot open: %s", path, strerror(errno));
-    return -1;
+  FILE* f = NULL;
+  const int o = open_checkpoint(path, &f, err, err_cap);
+  if (o <= 0) {
+    return o;
   }
   uint64_t m = 0;
   uint64_t p = 0;
@@ -224,8 +260,7 @@ int fw_checkpoint_read(const char* path, void* meta, size_t meta_cap, size_t* me
     rc = -1;
   }
   if (rc == 0 && (fread(meta, 1, (size_t)m, f) != (size_t)m || fread(payload, 1, (size_t)p, f) != (size_t)p)) {
-    fmt(err, err_cap, "checkpoint %s is truncated (sections shorter than the header says); " FRESH_HINT, path,
-        path, path);
+    short_read(f, path, "sections shorter than the header says", err, err_cap);
     rc = -1;
   }
   if (rc == 0 && fgetc(f) != EOF) {
