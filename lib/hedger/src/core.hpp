@@ -81,16 +81,26 @@ constexpr double kScatterRatioMin = 1e-12;
 /// bound: with D = 4, 4 neighbours and the query at one of them (rank 4 of 5), 4 of 10 000
 /// random neighbourhoods passed a 1e-12 pivot-ratio test.
 ///
-/// Cost. The eigensolver costs about 1 µs at D = 4, a third of a prediction, so a cheap
-/// certificate comes first: λmin ≥ det(S) / λmax^(D−1) and λmax ≤ tr(S), so
-/// det(S) > kScatterRatioMin · tr(S)^D proves full rank. det is the product of the pivots of an
-/// LDLT of S, which exactly factors a matrix within 2D²ε·tr(S) of S (backward error of the
-/// diagonally pivoted factorisation of a semidefinite matrix, |L| <= 1); the bound below allows
-/// twice that. A rank-deficient S has det ≈ 0 (a non-positive pivot counts as 0), so it always
-/// reaches the eigensolver, which decides. Measured (hedger.bench, D = 4): with the eigensolver
-/// on every prediction the p50 of a prediction grew by about 35 %; with the certificate first the
+/// Cost. The eigensolver costs about 1 µs at D = 4, a third of a prediction, so two cheap
+/// certificates come first, from the pivots d_i of a diagonally pivoted LDLT of S. Those are the
+/// exact pivots of a matrix S' within δ = 4D²ε·tr(S) of S (backward error of the factorisation
+/// of a semidefinite matrix, |L| <= 1; the bound allows twice that), and eigenvalues move by at
+/// most δ between S and S'.
+/// - Full rank: λmin ≥ det / λmax^(D−1) with det = Π d_i and λmax <= tr(S), so
+///   det > (kScatterRatioMin·tr + δ)(tr + δ)^(D−1) proves λmin(S) > kScatterRatioMin·λmax(S).
+/// - Rank deficient: every pivot is at least λmin of a leading block, hence at least λmin(S')
+///   (interlacing; a non-positive pivot means S' is not positive definite at all), and
+///   λmax(S) >= tr(S)/D, so min d_i + δ <= kScatterRatioMin·tr/D proves the opposite (and
+///   δ < kScatterRatioMin·tr/D for every D <= 9, so a non-positive pivot always qualifies).
+///   An exactly rank-deficient S typically has a last pivot of order ε·tr and lands here.
+/// Whatever neither certificate settles goes to the eigensolver, which decides. Measured
+/// (hedger.bench, D = 4): the eigensolver on
+/// every prediction made a prediction's p50 about 35 % slower; with the certificates first the
 /// change is within the benchmark's run-to-run noise. O(n D² + D³) in fixed-size Eigen types
 /// (the eigensolver's QR sweeps are capped by Eigen at 30 D), no allocation, deterministic.
+static_assert(4.0 * kMaxDim * kMaxDim * kMaxDim * std::numeric_limits<double>::epsilon() < kScatterRatioMin,
+              "spans_inputs(): the backward-error allowance must stay below the rank threshold");
+
 template <int D>
 bool spans_inputs(const Eigen::Matrix<double, D + 1, 1>* rows, uint32_t n) noexcept {
   using VecD = Eigen::Matrix<double, D, 1>;
@@ -108,14 +118,20 @@ bool spans_inputs(const Eigen::Matrix<double, D + 1, 1>* rows, uint32_t n) noexc
   if (!(tr > 0.0) || !std::isfinite(tr)) return false;
   {
     constexpr double eps = std::numeric_limits<double>::epsilon();
-    const double delta = 4.0 * D * D * eps * tr;  // backward error of the LDLT, absolute
+    const double delta = 4.0 * D * D * eps * tr;
     Eigen::LDLT<MatD> ldlt(scatter);
     if (ldlt.info() == Eigen::Success) {
+      const auto piv = ldlt.vectorD();
       double det = 1.0;
-      for (int i = 0; i < D; ++i) det *= ldlt.vectorD()[i] > 0.0 ? ldlt.vectorD()[i] : 0.0;
+      double dmin = piv[0];
+      for (int i = 0; i < D; ++i) {
+        det *= piv[i] > 0.0 ? piv[i] : 0.0;
+        dmin = piv[i] < dmin ? piv[i] : dmin;
+      }
       double bound = kScatterRatioMin * tr + delta;
       for (int i = 1; i < D; ++i) bound *= tr + delta;
       if (det * (1.0 - 4.0 * D * eps) > bound) return true;
+      if (dmin + delta <= kScatterRatioMin * tr / D) return false;
     }
   }
   Eigen::SelfAdjointEigenSolver<MatD> eig;
