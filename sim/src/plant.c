@@ -297,13 +297,13 @@ static void ray_callback(void* data, dGeomID o1, dGeomID o2) {
 
 double sim_plant_ray(sim_plant_t* p, double x_m, double y_m, double dir_rad, double max_range_m) {
   if (!(max_range_m > 0.0) || !isfinite(max_range_m)) {
-    return INFINITY;
+    return HUGE_VAL;
   }
   dGeomRaySetLength(p->ray, max_range_m);
   dGeomRaySet(p->ray, x_m, y_m, SIM_LASER_HEIGHT_M, cos(dir_rad), sin(dir_rad), 0.0);
-  p->ray_hit_m = INFINITY;
+  p->ray_hit_m = HUGE_VAL;
   dSpaceCollide2(p->ray, (dGeomID)p->space, p, &ray_callback);
-  return p->ray_hit_m <= max_range_m ? p->ray_hit_m : (double)INFINITY;
+  return p->ray_hit_m <= max_range_m ? p->ray_hit_m : HUGE_VAL;
 }
 
 void sim_plant_scan(sim_plant_t* p, double angle_min_rad, double increment_rad, size_t n,
