@@ -541,12 +541,15 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
     return r;
   }
   uint8_t meta[FW_PROGRESS_BYTES];
-  void* payload = malloc(payload_size + 1U);
+  // At most the largest learned state this configuration can hold, whatever the header claims:
+  // fw_checkpoint_read refuses a larger (or corrupt) size with a message instead.
+  const size_t payload_cap = payload_size < L->hedger_save_max ? payload_size : L->hedger_save_max;
+  void* payload = malloc(payload_cap + 1U);
   if (payload == NULL) {
-    fmt(err, err_cap, "checkpoint %s: cannot allocate %zu bytes", path, payload_size);
+    fmt(err, err_cap, "checkpoint %s: cannot allocate %zu bytes", path, payload_cap);
     return -1;
   }
-  r = fw_checkpoint_read(path, meta, sizeof meta, &meta_size, payload, payload_size + 1U, &payload_size, err, err_cap);
+  r = fw_checkpoint_read(path, meta, sizeof meta, &meta_size, payload, payload_cap, &payload_size, err, err_cap);
   if (r <= 0) {
     free(payload);
     return r;

@@ -193,6 +193,34 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
   assert_int_equal(st.phase, 1);
   assert_int_equal(st.store_fill, 0);
   harness_close(&g_h);
+
+  // A header claiming more learned state than this configuration can hold is refused without
+  // allocating that much (found by fuzz_checkpoint: the claimed size was allocated first).
+  uint8_t header[FW_CHECKPOINT_HEADER_SIZE];
+  memset(header, 0, sizeof header);
+  memcpy(header, "B21RCKPT", 8);
+  const uint64_t sizes[2] = {FW_PROGRESS_BYTES, (uint64_t)1 << 40};
+  header[8] = FW_CHECKPOINT_VERSION;
+  header[12] = FW_CHECKPOINT_HEADER_SIZE;
+  for (int k = 0; k < 2; ++k) {
+    for (int i = 0; i < 8; ++i) {
+      header[16 + 8 * k + i] = (uint8_t)(sizes[k] >> (8 * i));
+    }
+  }
+  const uint32_t hcrc = fw_crc32(0, header, 44);
+  for (int i = 0; i < 4; ++i) {
+    header[44 + i] = (uint8_t)(hcrc >> (8 * i));
+  }
+  FILE* hf = fopen(c.checkpoint_file, "wb");
+  assert_non_null(hf);
+  assert_int_equal(fwrite(header, 1, sizeof header, hf), sizeof header);
+  fclose(hf);
+  assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
+  assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), -1);
+  assert_non_null(strstr(err, "more than this configuration can load"));
+  assert_non_null(strstr(err, "to start fresh"));
+  harness_close(&g_h);
+
   // The good file back: it loads again.
   assert_int_equal(fw_checkpoint_write(c.checkpoint_file, meta, ms, payload, ps, err, sizeof err), 0);
   free(payload);
