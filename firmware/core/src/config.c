@@ -303,8 +303,6 @@ int fw_config_set(fw_config_t* cfg, const char* key, const char* value, const ch
     fmt(err, err_cap, "%s: unknown key '%s' (b21r-controller --help lists every key)", source, key);
     return -1;
   }
-  char allowed[256];
-  describe_allowed(k, allowed, sizeof allowed);
   char* field = (char*)cfg + k->offset;
   switch (k->kind) {
     case KIND_BOOL: {
@@ -353,7 +351,10 @@ int fw_config_set(fw_config_t* cfg, const char* key, const char* value, const ch
       if (n >= FW_CONFIG_STR_MAX) {
         break;
       }
-      memcpy(field, value, n + 1U);
+      // The whole field, so that no tail of an earlier, longer value stays behind the NUL: equal
+      // settings are equal bytes.
+      memset(field, 0, FW_CONFIG_STR_MAX);
+      memcpy(field, value, n);
       return 0;
     }
     case KIND_DLIST: {
@@ -410,6 +411,8 @@ int fw_config_set(fw_config_t* cfg, const char* key, const char* value, const ch
       }
       break;
   }
+  char allowed[256];
+  describe_allowed(k, allowed, sizeof allowed);
   fmt(err, err_cap, "%s: bad value '%s' for key '%s': expected %s (default %s)", source, value, key, allowed,
       k->def[0] != '\0' ? k->def : "\"\"");
   return -1;
