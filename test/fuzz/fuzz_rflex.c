@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
-// libFuzzer target: the rFLEX streaming decoder, typed parsers, odometry, and the property that
-// every decoded packet re-encodes (stuffed) and decodes back to itself.
+// libFuzzer target: the rFLEX streaming decoder in both roles (input byte 0 bit 7: the device
+// role, else the host role), typed parsers, odometry, and the property that every decoded packet
+// re-encodes (stuffed) and decodes back to itself in the host role. Bits 0..6 of byte 0 pick the
+// chunk size.
 #include <proto/rflex.h>
 
 #include <math.h>
@@ -65,8 +67,8 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   rflex_b21r_params_t params;
   rflex_b21r_params_default(&params);
   check(rflex_odom_init(&g_odo, &params) == PROTO_OK);
-  rflex_decoder_init(&g_dec);
-  const size_t chunk = (size_t)(data[0] % 23U) + 1U;
+  rflex_decoder_init_role(&g_dec, (data[0] & 0x80U) != 0 ? RFLEX_ROLE_DEVICE : RFLEX_ROLE_HOST);
+  const size_t chunk = (size_t)((data[0] & 0x7FU) % 23U) + 1U;
   size_t off = 1;
   while (off < size) {
     const size_t c = size - off < chunk ? size - off : chunk;
@@ -90,6 +92,7 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   }
   check(g_dec.counters.bytes_in == size - 1);
   check(g_dec.counters.bytes_dropped <= size - 1);
+  check(g_dec.role == RFLEX_ROLE_DEVICE || g_dec.counters.packets_raw_esc == 0);  // the host de-stuffs only
   // The host encoder's no-raw-ESC rule holds for velocities taken from the input.
   if (size >= 9) {
     int32_t v;
