@@ -142,13 +142,12 @@ int fw_checkpoint_write(const char* path, const void* meta, size_t meta_size, co
   return 0;
 }
 
-#define FRESH_HINT FW_CHECKPOINT_FRESH_HINT
-
 // Opens path for reading: 1 (open, *out set), 0 (no such file), -1 (err says why). A directory
-// or another non-regular file is refused by name: reading one would look like a truncated file.
+// or another non-regular file is refused by name (reading a directory would look like a
+// truncated file); O_NONBLOCK keeps the open of a FIFO from waiting for a writer.
 static int open_checkpoint(const char* path, FILE** out, char* err, size_t err_cap) {
-  FILE* f = fopen(path, "rb");
-  if (f == NULL) {
+  const int fd = open(path, O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+  if (fd < 0) {
     if (errno == ENOENT) {
       return 0;
     }
@@ -156,22 +155,26 @@ static int open_checkpoint(const char* path, FILE** out, char* err, size_t err_c
     return -1;
   }
   struct stat st;
-  if (fstat(fileno(f), &st) != 0) {
+  const char* problem = NULL;
+  if (fstat(fd, &st) != 0) {
     fmt(err, err_cap, "checkpoint %s: cannot stat: %s", path, strerror(errno));
-    fclose(f);
-    return -1;
-  }
-  if (S_ISDIR(st.st_mode)) {
+    problem = "stat";
+  } else if (S_ISDIR(st.st_mode)) {
     fmt(err, err_cap,
         "checkpoint %s is a directory; checkpoint_file must name a file (e.g. '%s/hedger.ckpt'), which is created "
         "if it does not exist",
         path, path);
-    fclose(f);
-    return -1;
-  }
-  if (!S_ISREG(st.st_mode)) {
+    problem = "directory";
+  } else if (!S_ISREG(st.st_mode)) {
     fmt(err, err_cap, "checkpoint %s is not a regular file; checkpoint_file must name a file", path);
-    fclose(f);
+    problem = "type";
+  }
+  FILE* f = problem == NULL ? fdopen(fd, "rb") : NULL;
+  if (f == NULL) {
+    if (problem == NULL) {
+      fmt(err, err_cap, "checkpoint %s: cannot open: %s", path, strerror(errno));
+    }
+    close(fd);
     return -1;
   }
   *out = f;
@@ -183,7 +186,7 @@ static void short_read(FILE* f, const char* path, const char* what, char* err, s
   if (ferror(f)) {
     fmt(err, err_cap, "checkpoint %s: cannot read: %s", path, strerror(errno));
   } else {
-    fmt(err, err_cap, "checkpoint %s is truncated (%s); " FRESH_HINT, path, what, path, path);
+    fmt(err, err_cap, "checkpoint %s is truncated (%s); " FW_CHECKPOINT_FRESH_HINT, path, what, path, path);
   }
 }
 
@@ -195,17 +198,18 @@ static int read_header(FILE* f, const char* path, uint64_t* meta_size, uint64_t*
     return -1;
   }
   if (memcmp(h, k_magic, sizeof k_magic) != 0) {
-    fmt(err, err_cap, "%s is not a B21r checkpoint (bad magic); " FRESH_HINT, path, path, path);
+    fmt(err, err_cap, "%s is not a B21r checkpoint (bad magic); " FW_CHECKPOINT_FRESH_HINT, path, path, path);
     return -1;
   }
   if (fw_get_u32(h + 44) != fw_crc32(0, h, 44)) {
-    fmt(err, err_cap, "checkpoint %s is corrupt (header checksum mismatch); " FRESH_HINT, path, path, path);
+    fmt(err, err_cap, "checkpoint %s is corrupt (header checksum mismatch); " FW_CHECKPOINT_FRESH_HINT,
+        path, path, path);
     return -1;
   }
   const uint32_t version = fw_get_u32(h + 8);
   if (version != FW_CHECKPOINT_VERSION || fw_get_u32(h + 12) != FW_CHECKPOINT_HEADER_SIZE) {
     fmt(err, err_cap,
-        "checkpoint %s has format version %u; this controller reads version %u only; " FRESH_HINT, path,
+        "checkpoint %s has format version %u; this controller reads version %u only; " FW_CHECKPOINT_FRESH_HINT, path,
         (unsigned)version, FW_CHECKPOINT_VERSION, path, path);
     return -1;
   }
@@ -232,7 +236,8 @@ int fw_checkpoint_peek(const char* path, size_t* meta_size, size_t* payload_size
     return -1;
   }
   if (m > SIZE_MAX / 2 || p > SIZE_MAX / 2) {
-    fmt(err, err_cap, "checkpoint %s is corrupt (implausible section sizes); " FRESH_HINT, path, path, path);
+    fmt(err, err_cap, "checkpoint %s is corrupt (implausible section sizes); " FW_CHECKPOINT_FRESH_HINT,
+        path, path, path);
     return -1;
   }
   *meta_size = (size_t)m;
@@ -255,7 +260,7 @@ int fw_checkpoint_read(const char* path, void* meta, size_t meta_cap, size_t* me
   if (rc == 0 && (m > meta_cap || p > payload_cap)) {
     fmt(err, err_cap,
         "checkpoint %s holds %llu + %llu bytes, more than this configuration can load (%zu + %zu; "
-        "was it written with a larger hedger_capacity?); " FRESH_HINT,
+        "was it written with a larger hedger_capacity?); " FW_CHECKPOINT_FRESH_HINT,
         path, (unsigned long long)m, (unsigned long long)p, meta_cap, payload_cap, path, path);
     rc = -1;
   }
@@ -264,11 +269,13 @@ int fw_checkpoint_read(const char* path, void* meta, size_t meta_cap, size_t* me
     rc = -1;
   }
   if (rc == 0 && fgetc(f) != EOF) {
-    fmt(err, err_cap, "checkpoint %s has trailing bytes after its sections; " FRESH_HINT, path, path, path);
+    fmt(err, err_cap, "checkpoint %s has trailing bytes after its sections; " FW_CHECKPOINT_FRESH_HINT,
+        path, path, path);
     rc = -1;
   }
   if (rc == 0 && (fw_crc32(0, meta, (size_t)m) != mc || fw_crc32(0, payload, (size_t)p) != pc)) {
-    fmt(err, err_cap, "checkpoint %s is corrupt (section checksum mismatch); " FRESH_HINT, path, path, path);
+    fmt(err, err_cap, "checkpoint %s is corrupt (section checksum mismatch); " FW_CHECKPOINT_FRESH_HINT,
+        path, path, path);
     rc = -1;
   }
   fclose(f);

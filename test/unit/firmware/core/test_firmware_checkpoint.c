@@ -170,8 +170,8 @@ static void test_checkpoint_damage_refused_with_fresh_hint(void** state) {
   assert_non_null(strstr(err, "to start fresh"));
 }
 
-// A directory or a device given as the checkpoint is refused by what it is, not as "truncated";
-// a missing file is no error (fresh start).
+// A directory, a device or a FIFO given as the checkpoint is refused by what it is, not as
+// "truncated".
 static void test_checkpoint_not_a_regular_file_named(void** state) {
   (void)state;
   char err[FW_CHECKPOINT_ERR_MAX];
@@ -188,6 +188,13 @@ static void test_checkpoint_not_a_regular_file_named(void** state) {
   assert_non_null(strstr(err, "is a directory"));
   assert_int_equal(fw_checkpoint_peek("/dev/null", &ms, &ps, err, sizeof err), -1);
   assert_non_null(strstr(err, "not a regular file"));
+  // A FIFO is refused at once (opening it must not wait for a writer).
+  char fifo[300];
+  snprintf(fifo, sizeof fifo, "%s/fifo", g_dir);
+  assert_int_equal(mkfifo(fifo, 0600), 0);
+  assert_int_equal(fw_checkpoint_peek(fifo, &ms, &ps, err, sizeof err), -1);
+  assert_non_null(strstr(err, "not a regular file"));
+  assert_int_equal(unlink(fifo), 0);
 }
 
 // A file from another format version is refused by name of the version.
