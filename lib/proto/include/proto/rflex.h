@@ -340,8 +340,9 @@ void rflex_decoder_reset(rflex_decoder_t* dec);
 /// de-stuffed length and a valid checksum, or, in the device role only, (b) its raw form framed
 /// by DLEN (DLEN + 9 bytes ending in ESC ETX) does. While hunting, ESC ESC restarts the hunt.
 /// After a failed candidate the bytes already held are rescanned from the next ESC STX, so no
-/// packet that starts inside a corrupt one is lost. Cost per byte O(1) except at candidate ends
-/// (O(packet length)); no allocation.
+/// packet that starts inside a corrupt one is lost. Cost: each byte re-checks the open candidate,
+/// O(its length), so an n-byte packet costs O(n²) (n <= RFLEX_DECODER_BUF_BYTES; about 600
+/// byte steps for a 34-byte motor report); no allocation.
 /// @param out written only when *got_packet is set. @param got_packet always written.
 size_t rflex_decoder_push(rflex_decoder_t* dec, const uint8_t* bytes, size_t len,
                           rflex_packet_t* out, bool* got_packet);
