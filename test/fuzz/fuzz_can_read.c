@@ -1,7 +1,9 @@
 // SPDX-License-Identifier: MIT
-// libFuzzer target: the SocketCAN read path (drivers/can.h, drv_can_recv) over the emulated bus
-// transport, a SOCK_SEQPACKET socket pair. The input is a sequence of records, each a length
-// byte (0..31) and that many bytes, sent as one datagram each: well-formed struct can_frame
+// libFuzzer target: the SocketCAN read path (drivers/can.h, drv_can_recv) over a SOCK_SEQPACKET
+// socket pair (the kernel here has no CAN; the pair carries the same struct can_frame records),
+// attached as the emulated bus or, when input byte 0 is odd, as a SocketCAN socket. The rest of
+// the input is a sequence of records, each a length byte (0..31) and that many bytes, sent as one
+// datagram each: well-formed struct can_frame
 // records, short and long ones, empty ones, extended/RTR/error ids and DLCs above 8. Properties:
 // every frame passed up is a standard data frame (id <= 0x7FF, dlc <= 8);
 // every record is either passed up or counted as dropped; the peer is never taken for closed
@@ -20,9 +22,10 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (g_fd[0] < 0) {
     FUZZ_CHECK(socketpair(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0, g_fd) == 0);
   }
-  drv_can_t port;
-  FUZZ_CHECK(drv_can_attach(&port, g_fd[1], DRV_CAN_SEQPACKET, false) == 0);
   fuzz_in_t in = {data, size};
+  const drv_can_transport_t transport = (fuzz_u8(&in) & 1U) != 0 ? DRV_CAN_SOCKETCAN : DRV_CAN_SEQPACKET;
+  drv_can_t port;
+  FUZZ_CHECK(drv_can_attach(&port, g_fd[1], transport, false) == 0);
   uint64_t records = 0;
   uint64_t frames = 0;
   while (fuzz_more(&in)) {

@@ -165,11 +165,14 @@ def more_seeds() -> None:
     write("lms200_driver", "start_up_and_scans", start_up + dev(scan) + dev(scan) + b"\x01\x64\x00" + dev(scan))
     write("lms200_driver", "timeouts_and_naks", b"\x01\xb8\x0b" + dev(b"\x15") + b"\x01\x10\x27" + dev(ok)
           + b"\x02" + dev(b"\x06" + telegram(0x80, 0x92, b"", 0)) + b"\x03")
-    # SocketCAN records: good frames, extended / RTR / error ids, DLC 9, short and long records.
-    write("can_read", "mixed_records", can_record(0x181, bytes(6)) + can_record(0x701, b"\x05")
+    # CAN records (byte 0: 0 = emulated bus, 1 = SocketCAN): good frames, extended / RTR / error
+    # ids, DLC 9, short, long and empty records.
+    write("can_read", "mixed_records", b"\x00" + can_record(0x181, bytes(6)) + can_record(0x701, b"\x05")
           + can_record(0x80000123, bytes(8)) + can_record(0x40000181, b"") + can_record(0x20000004, bytes(8))
           + can_record(0x181, bytes(8), dlc=9) + bytes([8]) + bytes(8) + bytes([20]) + bytes(20)
           + can_record(0x081, b"\x10\x23\x03\x00\x00\x00\x00\x00"))
+    write("can_read", "socketcan_records", b"\x01" + can_record(0x701, b"\x05") + bytes([0])
+          + can_record(0x80000001, bytes(8)) + can_record(0x202, bytes(6)))
     # Operator messages through the loop (op 0 TELEOP, 1 COMMAND, 2 ticks, 3 signal).
     drive = b"".join(teleop(i, True, 0.1 * (i % 5) - 0.2, 0.3, 0) + ticks(1) for i in range(1, 40))
     write("loop_commands", "joystick_drive", drive)
