@@ -13,7 +13,7 @@
 /// (rflex_role_t): the host role de-stuffs only, since the base always stuffs its output; the
 /// device role also accepts DLEN-framed raw packets, since host output is not stuffed.
 ///
-/// Memory: rflex_packet_t is 260 bytes, rflex_decoder_t about 730 bytes. No allocation.
+/// Memory: rflex_packet_t is 260 bytes, rflex_decoder_t about 1 KB. No allocation.
 #ifndef PROTO_RFLEX_H
 #define PROTO_RFLEX_H
 
@@ -314,12 +314,22 @@ typedef enum rflex_role {
   RFLEX_ROLE_DEVICE = 1,
 } rflex_role_t;
 
+/// Private: how far the stuffed form of the candidate at the front of the buffer has been read.
+typedef struct rflex_stuffed_scan {
+  uint16_t pos;       ///< Next raw byte to read (0 = not started).
+  uint16_t n;         ///< De-stuffed bytes so far.
+  uint8_t stuffed;    ///< An ESC NUL or ESC SOH was seen.
+  uint8_t verdict;    ///< 0 while undecided, else the final verdict for this candidate.
+  uint8_t body[4U + RFLEX_MAX_DATA + 1U];  ///< PORT ID OPCODE DLEN DATA CHK, de-stuffed.
+} rflex_stuffed_scan_t;
+
 /// Decoder state (fixed size). Read `counters` directly; other fields are private.
 typedef struct rflex_decoder {
   uint16_t fill;      ///< Raw bytes held.
   uint16_t pending;   ///< Bytes of the emitted packet to discard on the next push.
   uint8_t role;       ///< rflex_role_t.
   uint8_t buf[RFLEX_DECODER_BUF_BYTES];
+  rflex_stuffed_scan_t scan;
   rflex_decoder_counters_t counters;
 } rflex_decoder_t;
 
@@ -340,9 +350,9 @@ void rflex_decoder_reset(rflex_decoder_t* dec);
 /// de-stuffed length and a valid checksum, or, in the device role only, (b) its raw form framed
 /// by DLEN (DLEN + 9 bytes ending in ESC ETX) does. While hunting, ESC ESC restarts the hunt.
 /// After a failed candidate the bytes already held are rescanned from the next ESC STX, so no
-/// packet that starts inside a corrupt one is lost. Cost: each byte re-checks the open candidate,
-/// O(its length), so an n-byte packet costs O(n²) (n <= RFLEX_DECODER_BUF_BYTES; about 600
-/// byte steps for a 34-byte motor report); no allocation.
+/// packet that starts inside a corrupt one is lost. Cost: O(1) per byte, plus O(packet length)
+/// where a candidate ends or is dropped (the bytes after a dropped ESC are read again, so a
+/// stream of false starts costs at most RFLEX_DECODER_BUF_BYTES per byte); no allocation.
 /// @param out written only when *got_packet is set. @param got_packet always written.
 size_t rflex_decoder_push(rflex_decoder_t* dec, const uint8_t* bytes, size_t len,
                           rflex_packet_t* out, bool* got_packet);
