@@ -4,7 +4,9 @@
 // every base read takes the next input record, op byte first: 0 = bytes (length byte, bytes)
 // or one frame (id u16, dlc, 8 data bytes) from the input; 1 = the fake robot's genuine data;
 // 2 = nothing (the read ends). Input byte 0 bit 0 picks CANopen. The loop ticks until the input
-// is used up (4 ticks at most), then once more on genuine data.
+// is used up (2 ticks at most), then once more on genuine data. The loop evaluates the example
+// policy (no learning: the target is about the base's input, and learning made each tick five
+// times dearer).
 // Properties (fuzz_loop.c): the loop survives anything and commands only finite values within
 // the configured limits; its counters stay consistent.
 #include "fuzz_loop.h"
@@ -66,8 +68,11 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
                                    .user = &src};
   fw_config_t cfg;
   fuzz_loop_config(&cfg, canopen);
+  cfg.mode = FW_MODE_EVALUATE;
+  cfg.evaluate_policy = FW_EVAL_EXAMPLE;
+  cfg.eval_starts = 16;
   (void)fuzz_loop_ready(fl, &cfg, &input);
-  for (int ticks = 0; fuzz_more(&src.in) && ticks < 4 && fuzz_loop_tick(fl); ++ticks) {
+  for (int ticks = 0; fuzz_more(&src.in) && ticks < 2 && fuzz_loop_tick(fl); ++ticks) {
   }
   (void)fuzz_loop_tick(fl);
   fw_loop_stats_t st;

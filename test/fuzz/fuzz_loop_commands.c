@@ -4,7 +4,7 @@
 // on the fake robot (a loop that lives on across inputs, fuzz_loop.h). The input is a sequence
 // of records, op byte first (op % 8): 0-2 = TELEOP (seq i64, deadman, rotation f64, translation
 // f64, arrival offset i16 ms from the loop's clock); 3-4 = COMMAND (seq u16, command i8,
-// argument i32); 5-6 = 1..4 ticks (8 per input at most); 7 = a signal, then a tick.
+// argument i32); 5-6 = 1..4 ticks (4 per input at most); 7 = a signal, then a tick.
 // Properties: every message is accepted or rejected (counted) once the loop has seen it; the
 // base gets finite commands within the limits (fuzz_loop.c); after a signal the loop ends in
 // that tick with a zero command.
@@ -49,7 +49,7 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       ++commands;
     } else if (op <= 6) {
       const int n = 1 + fuzz_u8(&in) % 4;
-      for (int i = 0; i < n && ticks < 8 && fuzz_loop_tick(&fl); ++i, ++ticks) {
+      for (int i = 0; i < n && ticks < 4 && fuzz_loop_tick(&fl); ++i, ++ticks) {
       }
     } else {
       fw_loop_signal(fl.loop, SIGINT);
