@@ -3,6 +3,7 @@
 #define _GNU_SOURCE 1
 #include "fw/checkpoint.h"
 #include "fw/config.h"
+#include "fw/endpoints.h"
 #include "fw/loop.h"
 #include "fw/publisher.h"
 #include "fw/pubq.h"
@@ -59,58 +60,6 @@ static void usage(FILE* f) {
           "Exit status: 0 schedule done or SHUTDOWN; 2 usage or configuration error; 3 checkpoint\n"
           "refused; 4 a device did not start; 128+N after signal N (the base is stopped and braked\n"
           "and the learned state saved first).\n");
-}
-
-// Applies b21r-sim's ready line: "laser=/dev/pts/5 base=/dev/pts/6 can=PATH control=PATH".
-static int apply_endpoints(fw_config_t* cfg, const char* arg, char* err, size_t cap) {
-  char line[1024];
-  FILE* f = fopen(arg, "r");
-  if (f != NULL) {
-    const bool ok = fgets(line, sizeof line, f) != NULL;
-    fclose(f);
-    if (!ok) {
-      snprintf(err, cap, "--endpoints %s: empty file", arg);
-      return -1;
-    }
-  } else if (strchr(arg, '=') != NULL && strlen(arg) < sizeof line) {
-    strcpy(line, arg);
-  } else {
-    snprintf(err, cap, "--endpoints %s: neither a readable file nor a 'laser=... base=...' line", arg);
-    return -1;
-  }
-  struct {
-    const char* field;
-    const char* key;
-  } map[] = {{"laser", "laser_device"}, {"base", "base_device"}, {"can", "can_socket"}, {"control", "emulator_control"}};
-  int found = 0;
-  for (char* tok = strtok(line, " \t\r\n"); tok != NULL; tok = strtok(NULL, " \t\r\n")) {
-    char* eq = strchr(tok, '=');
-    if (eq == NULL) {
-      continue;
-    }
-    *eq = '\0';
-    for (size_t i = 0; i < sizeof map / sizeof map[0]; ++i) {
-      if (strcmp(tok, map[i].field) == 0) {
-        if (fw_config_set(cfg, map[i].key, eq + 1, "--endpoints", err, cap) != 0) {
-          return -1;
-        }
-        found++;
-        if (strcmp(tok, "can") == 0) {
-          cfg->base_protocol = FW_BASE_CANOPEN;
-        } else if (strcmp(tok, "base") == 0) {
-          cfg->base_protocol = FW_BASE_RFLEX;
-        } else if (strcmp(tok, "control") == 0) {
-          cfg->reposition = FW_REPOSITION_EMULATOR;
-        }
-      }
-    }
-  }
-  if (found == 0) {
-    snprintf(err, cap, "--endpoints %s: no laser=/base=/can=/control= fields", arg);
-    return -1;
-  }
-  cfg->base_write_gap_us = 0;
-  return 0;
 }
 
 // ---- LCM receive thread --------------------------------------------------------------------
@@ -188,7 +137,7 @@ int main(int argc, char** argv) {
       rc = fw_config_set_arg(&cfg, v, err, sizeof err);
       ++i;
     } else if (strcmp(a, "--endpoints") == 0) {
-      rc = apply_endpoints(&cfg, v, err, sizeof err);
+      rc = fw_endpoints_apply(&cfg, v, err, sizeof err);
       ++i;
     } else if (strcmp(a, "--checkpoint") == 0) {
       rc = fw_config_set(&cfg, "checkpoint_file", v, a, err, sizeof err);

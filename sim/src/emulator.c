@@ -524,6 +524,11 @@ sim_emu_ctrl_t sim_emu_control(sim_emu_t* e, const char* line, char* reply, size
     if (n != 4 || !number(tok[1], &x) || !number(tok[2], &y) || !number(tok[3], &th)) {
       return reply_error(reply, cap, "usage: reset <x_m> <y_m> <theta_rad>");
     }
+    // Within the coordinates a world may use: far beyond them ODE's numbers lose their meaning.
+    if (!(fabs(x) <= SIM_WORLD_MAX_ABS && fabs(y) <= SIM_WORLD_MAX_ABS && fabs(th) <= SIM_WORLD_MAX_ABS)) {
+      (void)snprintf(reply, cap, "error reset: x, y and theta must lie within +-%g (m, rad)", SIM_WORLD_MAX_ABS);
+      return SIM_EMU_CTRL_ERROR;
+    }
     sim_emu_reset(e, x, y, th);
     return reply_ok(reply, cap);
   }

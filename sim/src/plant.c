@@ -283,7 +283,7 @@ void sim_plant_get_state(const sim_plant_t* p, sim_plant_state_t* out) {
 
 double sim_plant_ray(sim_plant_t* p, double x_m, double y_m, double dir_rad, double max_range_m) {
   if (!(max_range_m > 0.0) || !isfinite(max_range_m)) {
-    return INFINITY;
+    return HUGE_VAL;
   }
   // The laser's plane (0.355 m) crosses every wall and cylinder (1 m tall) and never the robot:
   // the exact 2-D intersection with the world's geometry equals a ray cast against the ODE geoms

@@ -56,7 +56,7 @@ sim_rflex_t* sim_rflex_create(const sim_rflex_config_t* cfg) {
     return NULL;
   }
   d->cfg = *cfg;
-  rflex_decoder_init(&d->dec);
+  rflex_decoder_init_role(&d->dec, RFLEX_ROLE_DEVICE);  // host commands: raw 0x1B allowed
   sim_byteq_init(&d->out);
   d->brake = cfg->brake_at_power_up;
   set_default_accels(d);

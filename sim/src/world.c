@@ -123,7 +123,7 @@ sim_world_status_t sim_world_add_arena(sim_world_t* w, double min_x_m, double mi
 }
 
 void sim_world_compute_bounds(sim_world_t* w) {
-  double lo_x = INFINITY, lo_y = INFINITY, hi_x = -INFINITY, hi_y = -INFINITY;
+  double lo_x = HUGE_VAL, lo_y = HUGE_VAL, hi_x = -HUGE_VAL, hi_y = -HUGE_VAL;
 #define WORLD_GROW(px, py)     \
   do {                         \
     lo_x = fmin(lo_x, (px));   \
@@ -190,11 +190,12 @@ static size_t tokenize(char* line, char** tok, size_t cap, int* too_many) {
   return n;
 }
 
+// A file's number: at most SIM_WORLD_MAX_ABS in magnitude (NaN fails the test too).
 static int parse_number(const char* s, double* out) {
   char* end = NULL;
   errno = 0;
   const double v = strtod(s, &end);
-  if (end == s || *end != '\0' || errno == ERANGE || !isfinite(v)) {
+  if (end == s || *end != '\0' || errno == ERANGE || !(fabs(v) <= SIM_WORLD_MAX_ABS)) {
     return 0;
   }
   *out = v;
@@ -263,7 +264,8 @@ static sim_world_status_t parse_line(sim_world_t* w, char** tok, size_t n, int* 
   double a[WORLD_MAX_TOKENS] = {0};
   for (size_t i = 0; i < n_args; ++i) {
     if (!parse_number(tok[i + 1], &a[i])) {
-      set_err(err, err_cap, "line %zu: '%s' is not a finite number", line_no, tok[i + 1]);
+      set_err(err, err_cap, "line %zu: '%s' is not a number of magnitude at most %g", line_no, tok[i + 1],
+              SIM_WORLD_MAX_ABS);
       return SIM_WORLD_ERR_SYNTAX;
     }
   }

@@ -1,13 +1,17 @@
 #!/usr/bin/env python3
 # SPDX-License-Identifier: MIT
-"""Writes the seed corpus of the fuzz targets (test/fuzz/corpus/<target>/) from the protocol
-facts of protocols.md: valid telegrams, packets and frames, plus a few damaged variants.
-Deterministic; re-run after changing a protocol so the seeds stay meaningful."""
+"""Writes the seed corpus of the fuzz targets (test/fuzz/corpus/<target>/): valid telegrams,
+packets and frames from the protocol facts of protocols.md, plus a few damaged variants; the
+reference config, ready lines, worlds, control commands and operator messages; record streams
+for the driver and loop targets (their formats are described in each fuzz_<target>.c).
+Deterministic; re-run after changing a format so the seeds stay meaningful. The checkpoint seeds
+come from the target itself: B21R_FUZZ_SEEDS_OUT=test/fuzz/corpus/checkpoint fuzz_checkpoint."""
 import functools
 import pathlib
 import struct
 
 HERE = pathlib.Path(__file__).resolve().parent
+ROOT = HERE.parent.parent
 
 
 def sick_crc(data: bytes) -> int:
@@ -75,9 +79,11 @@ def main() -> None:
     write("rflex", "stuffed_reports", b"\x02" + rflex(2, 3, 33, motor, True)
           + rflex(1, 4, 1, struct.pack(">IIB", 5, 2480, 1), True)
           + rflex(5, 5, 1, struct.pack(">IBH", 9, 0x45, 0x0B), True))
-    write("rflex", "raw_esc_and_filler", b"\x09" + rflex(2, 0, 7, struct.pack(">BIIIB", 0, 0x1B1B,
-          0x1B, 30000, 1), False) + b"\x1b\x02\x1b\x02\x02\x00\x0a\x1b\x01\x00\x08\x1b\x03"
-          + b"\x1b\x1b\x02\x09\x00" + rflex(6, 0, 1, bytes(range(40)), True))
+    raw = rflex(2, 0, 7, struct.pack(">BIIIB", 0, 0x1B1B, 0x1B, 30000, 1), False) \
+        + b"\x1b\x02\x1b\x02\x02\x00\x0a\x1b\x01\x00\x08\x1b\x03" + b"\x1b\x1b\x02\x09\x00" \
+        + rflex(6, 0, 1, bytes(range(40)), True)
+    write("rflex", "raw_esc_and_filler", b"\x09" + raw)  # host role: the raw packet is refused
+    write("rflex", "raw_esc_device_role", b"\x89" + raw)  # device role (byte 0 bit 7)
     # CANopen: 11-byte records (id u16 LE, dlc, 8 data bytes).
     write("canopen", "enable_sequence", b"".join([
         can(0x000, b"\x01\x00"), can(0x080, b""), can(0x201, b"\x06\x00\x00\x00\x00\x00"),
@@ -88,5 +94,104 @@ def main() -> None:
         can(0x201, b"\x80\x00\x00\x00\x00\x00"), can(0x182, b"\x18\x02\x00\x00\x00\x00")]))
 
 
+def can_record(can_id: int, data: bytes, dlc=None) -> bytes:
+    """A struct can_frame (16 bytes) as one length-prefixed record of fuzz_can_read."""
+    frame = struct.pack("<IB3x", can_id, len(data) if dlc is None else dlc) + data.ljust(8, b"\x00")
+    return bytes([len(frame)]) + frame
+
+
+def progress(task: int, state_dim: int, phase: int, p1: int, p2: int, blocks: int, ex_runs: int,
+             ex_sum: float, best: int, run_id: int) -> bytes:
+    body = b"FWMETA01" + struct.pack("<IIIIIIIIdII", task, state_dim, phase, p1 + p2, p1, p2, blocks,
+                                     ex_runs, ex_sum, best, run_id + 1)
+    return body.ljust(96, b"\x00")
+
+
+def teleop(seq: int, deadman: bool, rot: float, trans: float, offset_ms: int) -> bytes:
+    return b"\x00" + struct.pack("<qBddh", seq, int(deadman), rot, trans, offset_ms)
+
+
+def command(seq: int, cmd: int, arg: int = 0) -> bytes:
+    return b"\x01" + struct.pack("<Hbi", seq, cmd, arg)
+
+
+def ticks(n: int) -> bytes:
+    return bytes([2, n - 1])
+
+
+def more_seeds() -> None:
+    # Config: the reference file, and --set arguments (byte 0 picks the form).
+    ref = (ROOT / "firmware/app/b21r-controller.conf").read_bytes()
+    write("config", "reference_file", b"\x00" + ref)
+    write("config", "small_file", b"\x00" + b"task = obstacles\n# comment\nlog_file = \"out dir/#1\"  # c\n"
+          b"hedger_input_scale = 1, 2,3 ,4,0.5\nlaser_resolution_deg = 0.25\nlaser_fov_deg = 100\n")
+    write("config", "set_args", b"\x01" + b"\n".join([
+        b"tick_rate_hz=20", b"lockstep = true", b"seed=18446744073709551615", b"hedger_k_min=70",
+        b"checkpoint_file=/tmp/h.ckpt", b"max_rotation_radps=0", b"gamma=-0", b"nokey=1", b"=1",
+        b"phase_switch=auto", b"hedger_input_scale=", b"alpha=1e-320"]))
+    # --endpoints: b21r-sim's ready lines.
+    write("endpoints", "rflex", b"laser=/dev/pts/5 base=/dev/pts/6 control=/tmp/b21r.ctl\n")
+    write("endpoints", "canopen", b"laser=/dev/pts/7\tcan=/tmp/b21r.can control=/tmp/c.ctl world=x\n")
+    write("endpoints", "bad", b"laser= base=/dev/pts/1 can")
+    # Checkpoint controller sections.
+    write("progress", "fresh", progress(0, 3, 1, 0, 0, 0, 0, 0.0, 0, -1))
+    write("progress", "phase_two", progress(1, 4, 2, 30, 12, 9, 27, 27 * 130.0 + 17, 126, 130))
+    write("progress", "bad_phase", progress(0, 3, 7, 3, 0, 1, 2, 300.0, 140, 5))
+    # Worlds: the ones the product ships.
+    for w in sorted((ROOT / "sim/worlds").glob("*.world")):
+        write("world", w.stem, w.read_bytes())
+    write("world", "edge_cases", b"b21r-world 1\nname x.y-z_1\narena -1e6 -1e6 1e6 1e6\n"
+          b"wall 0 0 1e-300 1 0.1 # thin\ncylinder 3 3 1e-9\ngoal 1 1 0.5\nstart 0 0 -7\nbounds -2 -2 2 2\n")
+    # Emulator control commands (byte 0: bit 0 = CANopen emulator, bits 1..7 = reply capacity).
+    cmds = b"pose\nstatus\nreset 1.5 0.2 0.3\nfault laser_drop 1500\nfault corrupt 0.1\n" \
+           b"fault base_silent 200\nfault latency 200\nfault bumper 3\nfault bumper 0x4d\n" \
+           b"fault drive_fault 2\nfault clear\nreset nan 0 0\nfault\nquit\n"
+    write("emu_control", "rflex_commands", b"\x00" + cmds)
+    write("emu_control", "canopen_commands", b"\x01" + cmds)
+    write("emu_control", "short_replies", b"\x07" + cmds)
+    # LMS200 driver: the scanner's side of a whole start-up, then scans (op 0 = bytes, 1 = time).
+    def dev(b: bytes) -> bytes:
+        out = b""
+        for i in range(0, len(b), 200):
+            out += bytes([0, len(b[i:i + 200])]) + b[i:i + 200]
+        return out
+    ok = b"\x06" + telegram(0x80, 0xA0, b"\x00", 0)
+    vals = b"".join(struct.pack("<H", (i * 37) % 8192) for i in range(181))
+    scan = telegram(0x80, 0xB0, struct.pack("<H", 181) + vals, 0)
+    # A first step with no bytes: the driver sends its request, then each reply answers one.
+    start_up = (b"\x01\x00\x00" + dev(ok) + dev(ok) + dev(b"\x06" + telegram(0x80, 0xBA, b"LMS200;30106", 0)) + dev(ok)
+                + dev(b"\x06" + telegram(0x80, 0xBB, b"\x01\xb4\x00\x64\x00", 0))
+                + dev(b"\x06" + telegram(0x80, 0xF4, bytes(32), 0)) + dev(ok))
+    write("lms200_driver", "start_up_and_scans", start_up + dev(scan) + dev(scan) + b"\x01\x64\x00" + dev(scan))
+    write("lms200_driver", "timeouts_and_naks", b"\x01\xb8\x0b" + dev(b"\x15") + b"\x01\x10\x27" + dev(ok)
+          + b"\x02" + dev(b"\x06" + telegram(0x80, 0x92, b"", 0)) + b"\x03")
+    # CAN records (byte 0: 0 = emulated bus, 1 = SocketCAN): good frames, extended / RTR / error
+    # ids, DLC 9, short, long and empty records.
+    write("can_read", "mixed_records", b"\x00" + can_record(0x181, bytes(6)) + can_record(0x701, b"\x05")
+          + can_record(0x80000123, bytes(8)) + can_record(0x40000181, b"") + can_record(0x20000004, bytes(8))
+          + can_record(0x181, bytes(8), dlc=9) + bytes([8]) + bytes(8) + bytes([20]) + bytes(20)
+          + can_record(0x081, b"\x10\x23\x03\x00\x00\x00\x00\x00"))
+    write("can_read", "socketcan_records", b"\x01" + can_record(0x701, b"\x05") + bytes([0])
+          + can_record(0x80000001, bytes(8)) + can_record(0x202, bytes(6)))
+    # Operator messages through the loop (op 0 TELEOP, 1 COMMAND, 2 ticks, 3 signal).
+    drive = b"".join(teleop(i, True, 0.1 * (i % 5) - 0.2, 0.3, 0) + ticks(1) for i in range(1, 40))
+    write("loop_commands", "joystick_drive", drive)
+    write("loop_commands", "operator_commands", ticks(16) + command(1, 3) + ticks(4) + command(2, 4) + ticks(4)
+          + command(3, 1) + ticks(8) + command(3, 2) + command(4, 2) + ticks(8) + command(5, 5) + ticks(2))
+    write("loop_commands", "bad_teleops", teleop(5, True, float("nan"), 0.0, 0) + teleop(4, True, 0.1, 0.0, 0)
+          + teleop(6, True, 9.0, 0.0, 0) + teleop(7, True, 0.1, 0.0, -5000) + ticks(3) + b"\x03")
+    # Base input: genuine data (op 1) with injected packets / frames (op 0) and gaps (op 2).
+    genuine = b"\x01" * 40
+    motor = struct.pack(">IIBiiII", 0, 0x1B1B, 1, -0x1B1B, 27, 0, 0)
+    pk = rflex(2, 3, 33, motor, True) + rflex(5, 5, 1, struct.pack(">IBH", 9, 0x45, 0x0B), True) \
+        + rflex(1, 4, 1, struct.pack(">IIB", 5, 2480, 1), True)
+    write("base_dispatch", "rflex_injected", b"\x00" + genuine + bytes([0, len(pk)]) + pk + genuine + b"\x02" * 8
+          + genuine)
+    frames = b"".join(b"\x00" + struct.pack("<HB", i, d) + data.ljust(8, b"\x00") for i, d, data in [
+        (0x081, 8, b"\x10\x23\x03"), (0x181, 6, b"\x08\x02"), (0x701, 1, b"\x04"), (0x281, 4, b"\xff\xff\xff\x7f")])
+    write("base_dispatch", "canopen_injected", b"\x01" + genuine + frames + genuine + b"\x02" * 8 + genuine)
+
+
 if __name__ == "__main__":
     main()
+    more_seeds()

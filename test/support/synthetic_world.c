@@ -63,14 +63,14 @@ static double ray_segment(double ox, double oy, double dx, double dy, const synt
   const double ey = s->y1_m - s->y0_m;
   const double denom = dx * ey - dy * ex;  // cross(d, e)
   if (fabs(denom) < 1e-15) {
-    return INFINITY;  // parallel (a collinear grazing ray sees the wall edge-on: no return)
+    return HUGE_VAL;  // parallel (a collinear grazing ray sees the wall edge-on: no return)
   }
   const double wx = s->x0_m - ox;
   const double wy = s->y0_m - oy;
   const double t = (wx * ey - wy * ex) / denom;
   const double u = (wx * dy - wy * dx) / denom;
   if (t < 0.0 || u < 0.0 || u > 1.0) {
-    return INFINITY;
+    return HUGE_VAL;
   }
   return t;
 }
@@ -85,12 +85,12 @@ static double ray_circle(double ox, double oy, double dx, double dy, const synth
   }
   const double disc = b * b - cc;
   if (disc < 0.0) {
-    return INFINITY;
+    return HUGE_VAL;
   }
   // The nearer root, in the cancellation-free form cc / q.
   const double q = -b + sqrt(disc);
   if (b >= 0.0 || q <= 0.0) {
-    return INFINITY;  // circle behind the origin
+    return HUGE_VAL;  // circle behind the origin
   }
   return cc / q;
 }
@@ -99,7 +99,7 @@ double synth_world_raycast(const synth_world_t* w, double ox_m, double oy_m, dou
                            synth_hit_t* hit) {
   const double dx = cos(dir_rad);
   const double dy = sin(dir_rad);
-  double best = INFINITY;
+  double best = HUGE_VAL;
   synth_hit_t h = {(uint8_t)SYNTH_HIT_NONE, 0U};
   for (uint32_t i = 0U; i < w->n_segments; ++i) {
     const double t = ray_segment(ox_m, oy_m, dx, dy, &w->segments[i]);
@@ -133,7 +133,7 @@ static double point_segment_distance(double px, double py, const synth_segment_t
 }
 
 double synth_world_clearance(const synth_world_t* w, double x_m, double y_m) {
-  double best = INFINITY;
+  double best = HUGE_VAL;
   for (uint32_t i = 0U; i < w->n_segments; ++i) {
     best = fmin(best, point_segment_distance(x_m, y_m, &w->segments[i]));
   }

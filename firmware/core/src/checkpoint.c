@@ -142,28 +142,74 @@ int fw_checkpoint_write(const char* path, const void* meta, size_t meta_size, co
   return 0;
 }
 
-#define FRESH_HINT "to start fresh with an empty learner, move the file away (e.g. mv '%s' '%s.bad')"
+// Opens path for reading: 1 (open, *out set), 0 (no such file), -1 (err says why). A directory
+// or another non-regular file is refused by name (reading a directory would look like a
+// truncated file); O_NONBLOCK keeps the open of a FIFO from waiting for a writer.
+static int open_checkpoint(const char* path, FILE** out, char* err, size_t err_cap) {
+  const int fd = open(path, O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+  if (fd < 0) {
+    if (errno == ENOENT) {
+      return 0;
+    }
+    fmt(err, err_cap, "checkpoint %s: cannot open: %s", path, strerror(errno));
+    return -1;
+  }
+  struct stat st;
+  const char* problem = NULL;
+  if (fstat(fd, &st) != 0) {
+    fmt(err, err_cap, "checkpoint %s: cannot stat: %s", path, strerror(errno));
+    problem = "stat";
+  } else if (S_ISDIR(st.st_mode)) {
+    fmt(err, err_cap,
+        "checkpoint %s is a directory; checkpoint_file must name a file (e.g. '%s/hedger.ckpt'), which is created "
+        "if it does not exist",
+        path, path);
+    problem = "directory";
+  } else if (!S_ISREG(st.st_mode)) {
+    fmt(err, err_cap, "checkpoint %s is not a regular file; checkpoint_file must name a file", path);
+    problem = "type";
+  }
+  FILE* f = problem == NULL ? fdopen(fd, "rb") : NULL;
+  if (f == NULL) {
+    if (problem == NULL) {
+      fmt(err, err_cap, "checkpoint %s: cannot open: %s", path, strerror(errno));
+    }
+    close(fd);
+    return -1;
+  }
+  *out = f;
+  return 1;
+}
+
+// "truncated" for a short file, the system's reason for a failed read.
+static void short_read(FILE* f, const char* path, const char* what, char* err, size_t err_cap) {
+  if (ferror(f)) {
+    fmt(err, err_cap, "checkpoint %s: cannot read: %s", path, strerror(errno));
+  } else {
+    fmt(err, err_cap, "checkpoint %s is truncated (%s); " FW_CHECKPOINT_FRESH_HINT, path, what, path, path);
+  }
+}
 
 static int read_header(FILE* f, const char* path, uint64_t* meta_size, uint64_t* payload_size, uint32_t* meta_crc,
                        uint32_t* payload_crc, char* err, size_t err_cap) {
   uint8_t h[FW_CHECKPOINT_HEADER_SIZE];
   if (fread(h, 1, sizeof h, f) != sizeof h) {
-    fmt(err, err_cap, "checkpoint %s is truncated (shorter than its %u-byte header); " FRESH_HINT, path,
-        FW_CHECKPOINT_HEADER_SIZE, path, path);
+    short_read(f, path, "shorter than its header", err, err_cap);
     return -1;
   }
   if (memcmp(h, k_magic, sizeof k_magic) != 0) {
-    fmt(err, err_cap, "%s is not a B21r checkpoint (bad magic); " FRESH_HINT, path, path, path);
+    fmt(err, err_cap, "%s is not a B21r checkpoint (bad magic); " FW_CHECKPOINT_FRESH_HINT, path, path, path);
     return -1;
   }
   if (fw_get_u32(h + 44) != fw_crc32(0, h, 44)) {
-    fmt(err, err_cap, "checkpoint %s is corrupt (header checksum mismatch); " FRESH_HINT, path, path, path);
+    fmt(err, err_cap, "checkpoint %s is corrupt (header checksum mismatch); " FW_CHECKPOINT_FRESH_HINT,
+        path, path, path);
     return -1;
   }
   const uint32_t version = fw_get_u32(h + 8);
   if (version != FW_CHECKPOINT_VERSION || fw_get_u32(h + 12) != FW_CHECKPOINT_HEADER_SIZE) {
     fmt(err, err_cap,
-        "checkpoint %s has format version %u; this controller reads version %u only; " FRESH_HINT, path,
+        "checkpoint %s has format version %u; this controller reads version %u only; " FW_CHECKPOINT_FRESH_HINT, path,
         (unsigned)version, FW_CHECKPOINT_VERSION, path, path);
     return -1;
   }
@@ -175,13 +221,10 @@ static int read_header(FILE* f, const char* path, uint64_t* meta_size, uint64_t*
 }
 
 int fw_checkpoint_peek(const char* path, size_t* meta_size, size_t* payload_size, char* err, size_t err_cap) {
-  FILE* f = fopen(path, "rb");
-  if (f == NULL) {
-    if (errno == ENOENT) {
-      return 0;
-    }
-    fmt(err, err_cap, "checkpoint %s: cannot open: %s", path, strerror(errno));
-    return -1;
+  FILE* f = NULL;
+  const int o = open_checkpoint(path, &f, err, err_cap);
+  if (o <= 0) {
+    return o;
   }
   uint64_t m = 0;
   uint64_t p = 0;
@@ -193,7 +236,8 @@ int fw_checkpoint_peek(const char* path, size_t* meta_size, size_t* payload_size
     return -1;
   }
   if (m > SIZE_MAX / 2 || p > SIZE_MAX / 2) {
-    fmt(err, err_cap, "checkpoint %s is corrupt (implausible section sizes); " FRESH_HINT, path, path, path);
+    fmt(err, err_cap, "checkpoint %s is corrupt (implausible section sizes); " FW_CHECKPOINT_FRESH_HINT,
+        path, path, path);
     return -1;
   }
   *meta_size = (size_t)m;
@@ -203,13 +247,10 @@ int fw_checkpoint_peek(const char* path, size_t* meta_size, size_t* payload_size
 
 int fw_checkpoint_read(const char* path, void* meta, size_t meta_cap, size_t* meta_size, void* payload,
                        size_t payload_cap, size_t* payload_size, char* err, size_t err_cap) {
-  FILE* f = fopen(path, "rb");
-  if (f == NULL) {
-    if (errno == ENOENT) {
-      return 0;
-    }
-    fmt(err, err_cap, "checkpoint %s: cannot open: %s", path, strerror(errno));
-    return -1;
+  FILE* f = NULL;
+  const int o = open_checkpoint(path, &f, err, err_cap);
+  if (o <= 0) {
+    return o;
   }
   uint64_t m = 0;
   uint64_t p = 0;
@@ -219,21 +260,22 @@ int fw_checkpoint_read(const char* path, void* meta, size_t meta_cap, size_t* me
   if (rc == 0 && (m > meta_cap || p > payload_cap)) {
     fmt(err, err_cap,
         "checkpoint %s holds %llu + %llu bytes, more than this configuration can load (%zu + %zu; "
-        "was it written with a larger hedger_capacity?); " FRESH_HINT,
+        "was it written with a larger hedger_capacity?); " FW_CHECKPOINT_FRESH_HINT,
         path, (unsigned long long)m, (unsigned long long)p, meta_cap, payload_cap, path, path);
     rc = -1;
   }
   if (rc == 0 && (fread(meta, 1, (size_t)m, f) != (size_t)m || fread(payload, 1, (size_t)p, f) != (size_t)p)) {
-    fmt(err, err_cap, "checkpoint %s is truncated (sections shorter than the header says); " FRESH_HINT, path,
-        path, path);
+    short_read(f, path, "sections shorter than the header says", err, err_cap);
     rc = -1;
   }
   if (rc == 0 && fgetc(f) != EOF) {
-    fmt(err, err_cap, "checkpoint %s has trailing bytes after its sections; " FRESH_HINT, path, path, path);
+    fmt(err, err_cap, "checkpoint %s has trailing bytes after its sections; " FW_CHECKPOINT_FRESH_HINT,
+        path, path, path);
     rc = -1;
   }
   if (rc == 0 && (fw_crc32(0, meta, (size_t)m) != mc || fw_crc32(0, payload, (size_t)p) != pc)) {
-    fmt(err, err_cap, "checkpoint %s is corrupt (section checksum mismatch); " FRESH_HINT, path, path, path);
+    fmt(err, err_cap, "checkpoint %s is corrupt (section checksum mismatch); " FW_CHECKPOINT_FRESH_HINT,
+        path, path, path);
     rc = -1;
   }
   fclose(f);

@@ -410,7 +410,8 @@ static void describe_allowed(const key_desc_t* k, char* out, size_t cap) {
                k->max_open ? ')' : ']');
       break;
     case KIND_STRING:
-      snprintf(out, cap, "text of at most %u characters", FW_CONFIG_STR_MAX - 1U);
+      snprintf(out, cap, "text of at most %u characters, without double quotes or control characters",
+               FW_CONFIG_STR_MAX - 1U);
       break;
     case KIND_DLIST:
       snprintf(out, cap, "empty, or 1 to %d comma-separated numbers in (%g, %g]", FW_CONFIG_MAX_SCALES, k->min, k->max);
@@ -445,6 +446,17 @@ static bool parse_double(const char* v, double* out) {
     return false;
   }
   *out = d;
+  return true;
+}
+
+// A string setting must survive fw_config_print and a reload: the file format has no escapes, so
+// a double quote (or a line break, or another control character) in a value cannot be written.
+static bool printable_text(const char* v) {
+  for (const unsigned char* p = (const unsigned char*)v; *p != '\0'; ++p) {
+    if (*p == '"' || *p < 0x20U || *p == 0x7FU) {
+      return false;
+    }
+  }
   return true;
 }
 
@@ -501,10 +513,13 @@ static int set_value(fw_config_t* cfg, const key_desc_t* k, const char* value) {
     }
     case KIND_STRING: {
       const size_t n = strlen(value);
-      if (n >= FW_CONFIG_STR_MAX) {
+      if (n >= FW_CONFIG_STR_MAX || !printable_text(value)) {
         break;
       }
-      memcpy(field, value, n + 1U);
+      // The whole field, so that no tail of an earlier, longer value stays behind the NUL: equal
+      // settings are equal bytes.
+      memset(field, 0, FW_CONFIG_STR_MAX);
+      memcpy(field, value, n);
       return 0;
     }
     case KIND_DLIST: {

@@ -12,16 +12,12 @@
 // when the work is done. The work is counted in updates and points, never in time, so a lockstep
 // run stays a function of its inputs however loaded the machine is.
 #include "loop_internal.h"
-#include "le_bytes.h"
+#include "fw/progress.h"
 
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-
-// Checkpoint meta section: the schedule's progress, little-endian, versioned.
-#define META_MAGIC "FWMETA01"
-#define META_BYTES 96U
 
 void fw_learning_config(const fw_loop_t* L, hedger_config_t* hc) {
   *hc = hedger_config_default();
@@ -70,21 +66,9 @@ void fw_learning_config(const fw_loop_t* L, hedger_config_t* hc) {
 // ---- checkpoints --------------------------------------------------------------------------
 
 static size_t encode_meta(const fw_loop_t* L, uint8_t* p) {
-  memset(p, 0, META_BYTES);
-  memcpy(p, META_MAGIC, 8);
-  const fw_schedule_progress_t* g = &L->sched.p;
-  fw_put_u32(p + 8, (uint32_t)L->cfg.task);
-  fw_put_u32(p + 12, L->state_dim);
-  fw_put_u32(p + 16, (uint32_t)g->phase);
-  fw_put_u32(p + 20, (uint32_t)g->training_runs);
-  fw_put_u32(p + 24, (uint32_t)g->phase_one_runs);
-  fw_put_u32(p + 28, (uint32_t)g->phase_two_runs);
-  fw_put_u32(p + 32, (uint32_t)g->eval_blocks);
-  fw_put_u32(p + 36, (uint32_t)g->example_runs);
-  fw_put_f64(p + 40, g->example_steps_sum);
-  fw_put_u32(p + 48, (uint32_t)g->best_example_steps);
-  fw_put_u32(p + 52, (uint32_t)(L->run_id + 1));
-  return META_BYTES;
+  const fw_progress_t g = {
+      .task = L->cfg.task, .state_dim = L->state_dim, .schedule = L->sched.p, .run_id = L->run_id};
+  return fw_progress_encode(&g, p);
 }
 
 // Acquires a writer buffer and fills its meta section; false when none is free (counted).
@@ -129,7 +113,7 @@ void fw_learning_checkpoint_now(fw_loop_t* L) {
 }
 
 void fw_loop_checkpoint_capacity(const fw_loop_t* L, size_t* meta_bytes, size_t* payload_bytes) {
-  *meta_bytes = META_BYTES;
+  *meta_bytes = FW_PROGRESS_BYTES;
   *payload_bytes = L->hedger_save_max;
 }
 
@@ -146,29 +130,35 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
   if (r <= 0) {
     return r;
   }
-  uint8_t meta[META_BYTES];
-  void* payload = malloc(payload_size + 1U);
+  uint8_t meta[FW_PROGRESS_BYTES];
+  // At most the largest learned state this configuration can hold, whatever the header claims:
+  // fw_checkpoint_read refuses a larger (or corrupt) size with a message instead.
+  const size_t payload_cap = payload_size < L->hedger_save_max ? payload_size : L->hedger_save_max;
+  void* payload = malloc(payload_cap + 1U);
   if (payload == NULL) {
-    snprintf(err, err_cap, "checkpoint %s: cannot allocate %zu bytes", path, payload_size);
+    snprintf(err, err_cap, "checkpoint %s: cannot allocate %zu bytes", path, payload_cap);
     return -1;
   }
-  r = fw_checkpoint_read(path, meta, sizeof meta, &meta_size, payload, payload_size + 1U, &payload_size, err, err_cap);
+  r = fw_checkpoint_read(path, meta, sizeof meta, &meta_size, payload, payload_cap, &payload_size, err, err_cap);
   if (r <= 0) {
     free(payload);
     return r;
   }
-  if (meta_size != META_BYTES || memcmp(meta, META_MAGIC, 8) != 0) {
+  // The controller section is validated before the learner is touched: a refusal changes nothing.
+  fw_progress_t g;
+  char why[FW_PROGRESS_WHY_MAX];
+  if (fw_progress_decode(meta, meta_size, &g, why, sizeof why) != 0) {
     free(payload);
-    snprintf(err, err_cap, "checkpoint %s: controller section of an unknown format; to start fresh, move the file away",
-             path);
+    snprintf(err, err_cap, "checkpoint %s is corrupt (controller section: %s); " FW_CHECKPOINT_FRESH_HINT, path, why,
+             path, path);
     return -1;
   }
-  if (fw_get_u32(meta + 8) != (uint32_t)L->cfg.task || fw_get_u32(meta + 12) != L->state_dim) {
+  if (g.task != L->cfg.task || g.state_dim != L->state_dim) {
     free(payload);
     snprintf(err, err_cap,
              "checkpoint %s was learned for another task (%s); to start fresh, move the file away (e.g. mv '%s' "
              "'%s.other')",
-             path, fw_get_u32(meta + 8) == 0 ? "corridor" : "obstacles", path, path);
+             path, g.task == FW_TASK_CORRIDOR ? "corridor" : "obstacles", path, path);
     return -1;
   }
   const hedger_status_t hs = hedger_load(L->hedger, payload, payload_size);
@@ -180,19 +170,9 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
              path, hedger_status_str(hs), path, path);
     return -1;
   }
-  fw_schedule_progress_t p;
-  memset(&p, 0, sizeof p);
-  p.phase = (int32_t)fw_get_u32(meta + 16);
-  p.training_runs = (int32_t)fw_get_u32(meta + 20);
-  p.phase_one_runs = (int32_t)fw_get_u32(meta + 24);
-  p.phase_two_runs = (int32_t)fw_get_u32(meta + 28);
-  p.eval_blocks = (int32_t)fw_get_u32(meta + 32);
-  p.example_runs = (int32_t)fw_get_u32(meta + 36);
-  p.example_steps_sum = fw_get_f64(meta + 40);
-  p.best_example_steps = (int32_t)fw_get_u32(meta + 48);
   const fw_schedule_config_t sc = L->sched.cfg;  // a copy: init clears the schedule first
-  fw_schedule_init(&L->sched, &sc, &p);
-  L->run_id = (int32_t)fw_get_u32(meta + 52) - 1;
+  fw_schedule_init(&L->sched, &sc, &g.schedule);
+  L->run_id = g.run_id;
   return 1;
 }
 

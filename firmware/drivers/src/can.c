@@ -229,6 +229,13 @@ int drv_can_send(drv_can_t* port, const canopen_frame_t* frame) {
   }
 }
 
+// recv() returns 0 both at the end of the stream and for an empty record: only the socket's
+// hang-up state tells them apart.
+static bool peer_closed(int fd) {
+  struct pollfd pfd = {.fd = fd, .events = POLLIN | POLLRDHUP, .revents = 0};
+  return poll(&pfd, 1, 0) > 0 && (pfd.revents & (POLLHUP | POLLRDHUP)) != 0;
+}
+
 int drv_can_recv(drv_can_t* port, canopen_frame_t* frame) {
   if (port == NULL || port->fd < 0 || frame == NULL) {
     return -EINVAL;
@@ -247,9 +254,10 @@ int drv_can_recv(drv_can_t* port, canopen_frame_t* frame) {
       port->counters.errors++;
       return -errno;
     }
-    if (n == 0 && port->transport == DRV_CAN_SEQPACKET) {
+    if (n == 0 && port->transport == DRV_CAN_SEQPACKET && peer_closed(port->fd)) {
       return -EPIPE;  // the bus server closed its end
     }
+    // Otherwise an empty record (SOCK_SEQPACKET keeps zero-length records): malformed below.
     // SocketCAN may deliver CAN FD sized records only when enabled (it is not): any size other
     // than one classic frame is malformed on either transport.
     if (n != (ssize_t)sizeof cf) {

@@ -118,8 +118,8 @@ static double max_d(double a, double b) { return a > b ? a : b; }
 // Extent [lo, hi] of the values recorded in the non-empty bins among b-1, b, b+1.
 static void span3(const uint16_t* h, const double* lo_v, const double* hi_v, int nb, int b,
                   double* lo, double* hi) {
-  *lo = (double)INFINITY;
-  *hi = -(double)INFINITY;
+  *lo = HUGE_VAL;
+  *hi = -HUGE_VAL;
   for (int j = b - 1; j <= b + 1; ++j) {
     if (j >= 0 && j < nb && h[j] > 0U) {
       *lo = min_d(*lo, lo_v[j]);
@@ -385,8 +385,8 @@ static void refit_walls(const features_corridor_config_t* cfg, const features_po
   uint32_t cnt[3] = {0U, 0U, 0U};
   const int use[3] = {w->left_ok, w->right_ok, w->has_end};
   uint8_t group[FEATURES_MAX_BEAMS];
-  double lo[3] = {(double)INFINITY, (double)INFINITY, (double)INFINITY};  // extent along each line
-  double hi[3] = {-(double)INFINITY, -(double)INFINITY, -(double)INFINITY};
+  double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL};  // extent along each line
+  double hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
   for (uint16_t i = 0U; i < n_beams; ++i) {
     group[i] = 3U;  // none
     if (pts[i].valid == 0U) continue;
@@ -489,8 +489,8 @@ static uint16_t find_end_wall(const features_corridor_config_t* cfg, const featu
   const double s_max = (double)MAX_END_BINS * BIN_M;
   for (int b = 0; b < MAX_END_BINS; ++b) {
     hist[b] = 0U;
-    lat_lo[b] = (double)INFINITY;
-    lat_hi[b] = -(double)INFINITY;
+    lat_lo[b] = HUGE_VAL;
+    lat_hi[b] = -HUGE_VAL;
   }
   const double cs = cos(w->phi_rad);
   const double sn = sin(w->phi_rad);

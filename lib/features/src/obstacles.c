@@ -75,7 +75,7 @@ static void judge_cluster(const features_obstacles_config_t* cfg, const features
                           int first, int last, int prev, int next, features_obstacles_t* out) {
   uint16_t n = 0U;
   double sx = 0.0, sy = 0.0;
-  double best_d = (double)INFINITY;
+  double best_d = HUGE_VAL;
   for (int i = first; i <= last; ++i) {
     if (pts[i].valid == 0U) continue;
     ++n;

@@ -64,25 +64,39 @@ inline double dist2(const double* a, const double* b) {
 }
 
 /// The k smallest (d2, id) with d2 <= r2max, kept sorted in a caller buffer of capacity k.
+///
+/// k = 0 (or a null buffer) is rejected at construction, without exceptions: the set is then
+/// empty for good (ok() is false, worst() is -inf so that every search prunes at once, add()
+/// stores nothing) and never touches the buffer. Callers that cannot have k = 0 (HEDGER's
+/// k_min, k_max >= 1 by config validation) need not check ok().
 class KnnSet {
  public:
-  KnnSet(Neighbour* buf, uint32_t k, double r2max) : buf_(buf), k_(k), n_(0), r2max_(r2max) {}
-  /// Current acceptance bound: r2max until full, then the k-th distance.
-  double worst() const { return (n_ < k_) ? r2max_ : buf_[k_ - 1].d2; }
+  KnnSet(Neighbour* buf, uint32_t k, double r2max)
+      : buf_(k > 0 && buf != nullptr ? buf : nullptr),
+        k_(buf_ != nullptr ? k : 0),
+        n_(0),
+        r2max_(r2max),
+        bound_(buf_ != nullptr ? r2max : -std::numeric_limits<double>::infinity()) {}
+  /// False when construction was rejected (k = 0 or no buffer).
+  bool ok() const { return k_ > 0; }
+  /// Current acceptance bound: r2max until full, then the k-th distance (kept in a member, so
+  /// reading it never indexes the buffer).
+  double worst() const { return bound_; }
   void add(double d2, uint32_t id) {
     if (k_ == 0 || d2 > r2max_) return;
     uint32_t pos;
-    if (n_ == k_) {
+    if (n_ < k_) {
+      pos = n_++;
+    } else {
       if (!nb_less(d2, id, buf_[k_ - 1].d2, buf_[k_ - 1].id)) return;
       pos = k_ - 1;
-    } else {
-      pos = n_++;
     }
     while (pos > 0 && nb_less(d2, id, buf_[pos - 1].d2, buf_[pos - 1].id)) {
       buf_[pos] = buf_[pos - 1];
       --pos;
     }
     buf_[pos] = Neighbour{d2, id};
+    if (n_ == k_) bound_ = buf_[k_ - 1].d2;
   }
   uint32_t size() const { return n_; }
   const Neighbour* data() const { return buf_; }
@@ -92,6 +106,7 @@ class KnnSet {
   uint32_t k_;
   uint32_t n_;
   double r2max_;
+  double bound_;
 };
 
 /// All (d2, id) with d2 <= r2, written into a caller buffer of capacity cap. total() counts every

@@ -537,15 +537,19 @@ proto_status_t rflex_parse_sonar_run(const rflex_packet_t* pkt, uint32_t* echo_d
 // ---------------------------------------------------------------------------------------------
 // Streaming decoder
 
-void rflex_decoder_init(rflex_decoder_t* dec) {
+void rflex_decoder_init_role(rflex_decoder_t* dec, rflex_role_t role) {
   if (dec != NULL) {
     memset(dec, 0, sizeof *dec);
+    dec->role = (uint8_t)(role == RFLEX_ROLE_DEVICE ? RFLEX_ROLE_DEVICE : RFLEX_ROLE_HOST);
   }
 }
+
+void rflex_decoder_init(rflex_decoder_t* dec) { rflex_decoder_init_role(dec, RFLEX_ROLE_HOST); }
 
 static void rx_drop_front(rflex_decoder_t* dec, size_t n) {
   memmove(dec->buf, dec->buf + n, dec->fill - n);
   dec->fill = (uint16_t)(dec->fill - n);
+  memset(&dec->scan, 0, sizeof dec->scan);  // a new candidate is scanned from its start
 }
 
 void rflex_decoder_reset(rflex_decoder_t* dec) {
@@ -558,6 +562,7 @@ void rflex_decoder_reset(rflex_decoder_t* dec) {
   }
   dec->counters.bytes_dropped += dec->fill;
   dec->fill = 0;
+  memset(&dec->scan, 0, sizeof dec->scan);
 }
 
 // Verdict of one interpretation of the candidate at the front of the buffer.
@@ -614,46 +619,62 @@ static verdict_t interpret_raw(const uint8_t* buf, size_t fill, rflex_packet_t* 
 }
 
 // Stuffed interpretation: ESC NUL -> 0x1B, ESC SOH dropped, ESC ETX ends (what the base sends).
-static verdict_t interpret_stuffed(const uint8_t* buf, size_t fill, rflex_packet_t* out,
-                                   size_t* used, bool* had_stuffing) {
-  uint8_t body[4U + RFLEX_MAX_DATA + 1U];
-  size_t n = 0;
-  bool stuffed = false;
-  for (size_t i = 2; i < fill; ++i) {
-    uint8_t b = buf[i];
+// Incremental: the de-stuffed body and the scan position of the candidate at the front of the
+// buffer live in dec->scan and carry over between calls, so each byte is examined once; a
+// verdict other than V_NEED_MORE is final for the candidate (more bytes cannot repair it) and is
+// kept until the candidate is dropped (rx_drop_front resets the scan).
+static verdict_t interpret_stuffed(rflex_decoder_t* dec, rflex_packet_t* out, size_t* used, bool* had_stuffing) {
+  rflex_stuffed_scan_t* st = &dec->scan;
+  if (st->verdict != (uint8_t)V_NEED_MORE) {
+    return (verdict_t)st->verdict;
+  }
+  if (st->pos < 2U) {
+    st->pos = 2U;
+  }
+  const size_t fill = dec->fill;
+  verdict_t v = V_NEED_MORE;
+  size_t i = st->pos;
+  while (i < fill && v == V_NEED_MORE) {
+    uint8_t b = dec->buf[i];
     if (b == RFLEX_ESC) {
       if (i + 1U >= fill) {
-        return V_NEED_MORE;
+        break;  // resume at this ESC once its partner has arrived
       }
-      const uint8_t next = buf[++i];
+      const uint8_t next = dec->buf[i + 1U];
+      i += 2U;
       if (next == RFLEX_ETX) {
-        const verdict_t v = check_body(body, n, out);
+        v = check_body(st->body, st->n, out);
         if (v == V_OK) {
-          *used = i + 1U;
-          *had_stuffing = stuffed;
+          *used = i;
+          *had_stuffing = st->stuffed != 0U;
         }
-        return v;
+        break;
       }
       if (next == RFLEX_SOH) {
-        stuffed = true;
+        st->stuffed = 1U;
         continue;
       }
       if (next != RFLEX_NUL) {
-        return V_BAD_FRAMING;
+        v = V_BAD_FRAMING;
+        break;
       }
-      stuffed = true;
+      st->stuffed = 1U;
       b = RFLEX_ESC;
+    } else {
+      ++i;
     }
-    if (n == 0U && !port_ok(b)) {
-      return V_BAD_PORT;
+    if (st->n == 0U && !port_ok(b)) {
+      v = V_BAD_PORT;
+    } else if (st->n >= sizeof st->body || (st->n >= 4U && st->n >= (size_t)st->body[3] + 5U)) {
+      // Longer than DLEN says (PORT ID OP DLEN data CHK) without an ESC ETX: not a packet.
+      v = V_BAD_FRAMING;
+    } else {
+      st->body[st->n++] = b;
     }
-    // Longer than DLEN says (PORT ID OP DLEN data CHK) without an ESC ETX: not a packet.
-    if (n >= sizeof body || (n >= 4U && n >= (size_t)body[3] + 5U)) {
-      return V_BAD_FRAMING;
-    }
-    body[n++] = b;
   }
-  return V_NEED_MORE;
+  st->pos = (uint16_t)i;
+  st->verdict = (uint8_t)v;
+  return v;
 }
 
 typedef enum rx_result { RX_NEED_MORE, RX_DROPPED, RX_PACKET } rx_result_t;
@@ -684,7 +705,7 @@ static rx_result_t rx_scan(rflex_decoder_t* dec, rflex_packet_t* out) {
   }
   size_t used = 0;
   bool flag = false;
-  const verdict_t vs = interpret_stuffed(dec->buf, dec->fill, out, &used, &flag);
+  const verdict_t vs = interpret_stuffed(dec, out, &used, &flag);
   if (vs == V_OK) {
     dec->counters.packets_ok++;
     if (flag) {
@@ -693,7 +714,10 @@ static rx_result_t rx_scan(rflex_decoder_t* dec, rflex_packet_t* out) {
     dec->pending = (uint16_t)used;
     return RX_PACKET;
   }
-  const verdict_t vr = interpret_raw(dec->buf, dec->fill, out, &used, &flag);
+  // The base always stuffs its output (protocols.md A.2): the host role never falls back to raw
+  // framing, which would accept a stuffed packet that lost a byte with its fields shifted.
+  const verdict_t vr =
+      dec->role == RFLEX_ROLE_DEVICE ? interpret_raw(dec->buf, dec->fill, out, &used, &flag) : vs;
   if (vr == V_OK) {
     dec->counters.packets_ok++;
     if (flag) {

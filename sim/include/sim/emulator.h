@@ -45,7 +45,8 @@
 /// ## Control (sim_emu_control; the b21r-sim control socket carries the same text)
 /// One command per call, one reply: "ok ..." or "error <reason>".
 /// - `reset <x_m> <y_m> <theta_rad>`: place the robot (velocities zero, contacts cleared); used
-///   between runs. Time and odometry keep running. Starts a new run in the trace.
+///   between runs. Time and odometry keep running. Starts a new run in the trace. Each value
+///   must lie within +-SIM_WORLD_MAX_ABS (the range of world files), else `error reset: ...`.
 /// - `pose`: `ok <t_s> <x_m> <y_m> <theta_rad> <collided 0|1>` (ground truth; collided latches
 ///   from the first contact until the next reset).
 /// - `fault laser_drop <ms>` | `fault corrupt <fraction>` | `fault base_silent <ms>` |

@@ -22,7 +22,9 @@
 ///                                    # all of them are the evaluation start poses, in order
 /// bounds <xmin> <ymin> <xmax> <ymax> # drawing area (optional; default: contents + 1 m)
 /// ```
-/// `#` starts a comment; blank lines are ignored; numbers are C decimal floating point.
+/// `#` starts a comment; blank lines are ignored; numbers are C decimal floating point of magnitude
+/// at most SIM_WORLD_MAX_ABS (1e6: a world fits in a 2000 km square, and the drawing area and
+/// every distance the emulator derives from it stay exact enough to compare).
 /// Everything is metres and radians in the world frame (x east, y north, theta CCW from x).
 /// Walls and cylinders are 1 m tall (WORLD_OBSTACLE_HEIGHT_M), so the laser (0.355 m) and the
 /// base skirt (0-0.30 m) both meet them.
@@ -44,13 +46,16 @@ extern "C" {
 #define SIM_WORLD_NAME_CAP 48         ///< bytes of sim_world_t::name, including the NUL
 #define SIM_WORLD_WALL_THICKNESS_DEFAULT_M 0.10
 #define SIM_WORLD_OBSTACLE_HEIGHT_M 1.0
+/// Largest magnitude of any number of a world (metres, radians): larger ones are refused.
+#define SIM_WORLD_MAX_ABS 1e6
 
 /// Status of the world functions.
 typedef enum sim_world_status {
   SIM_WORLD_OK = 0,
   SIM_WORLD_ERR_INVALID_ARG = 2,  ///< NULL pointer or a non-finite / non-positive value
   SIM_WORLD_ERR_CAPACITY,         ///< more walls, cylinders or starts than the capacities
-  SIM_WORLD_ERR_SYNTAX,           ///< unknown directive, wrong argument count, bad number
+  SIM_WORLD_ERR_SYNTAX,           ///< unknown directive, wrong argument count, bad number (also
+                                  ///< one beyond SIM_WORLD_MAX_ABS)
   SIM_WORLD_ERR_IO,               ///< the file could not be opened or read
 } sim_world_status_t;
 

@@ -1,19 +1,25 @@
 #!/usr/bin/env python3
 # SPDX-License-Identifier: MIT
-"""experiments.learning_regression: a small version of the paper's Fig. 4 experiment that catches
-a change that breaks learning. Corridor, proportional examples, 5 seeds (1-5), 15 phase-one runs,
-10 phase-two runs, an evaluation block (10 poses, learning off) every 5 runs. Failures count at
-the step limit. Comparisons are paired by seed, one-sided t-tests at the 95 % level (Student-t
-0.95 quantile for 4 degrees of freedom: 2.132).
+"""experiments.learning_regression: the paper's Fig. 4 experiment at full size, as a regression
+test of learning. Corridor (10 m), proportional examples in phase one (30 runs), the learned
+policy with exploration in phase two (35 runs), an evaluation block (the 10 fixed start poses,
+learning off, greedy policy only) every 5 training runs; the example policy (its nominal gain)
+and the optimal controller are evaluated from the same 10 poses. 10 seeds (1-10), two at a time.
+Failed runs count at the step limit. Comparisons are paired by seed; one-sided t-tests at the
+95 % level (Student-t 0.95 quantile, 9 degrees of freedom: 1.833).
 
 Claims, each printed with its numbers; ASSERTED ones fail the test when they do not hold:
-  improves   the learned policy after the 15 phase-one runs is significantly better than after 5
-  keeps      phase two does not make it significantly worse (final block vs last phase-one block)
-  reaches    the final block reaches the goal from at least 9 of 10 poses on average
-  beats_examples  (the paper's Fig. 4 claim; not asserted until the learner of issue 10 lands:
-             then set ASSERTED to True) the final block is significantly better than the mean
-             example run of the same seed
+  improves        the learned policy after phase one is significantly better than after 5 runs
+  keeps           phase two does not make it significantly worse (final block vs end of phase one)
+  reaches         the final block reaches the goal from at least 9.5 of 10 poses on average
+  within_3pct     guard: the final block's excess over the optimal controller, upper 95 % bound,
+                  is below 3 % (measured: about 2 %)
+  beats_examples  the paper's Fig. 4 claim: the final block is significantly better than the
+                  example policy from the same poses (not reproduced; reported, not asserted)
+  near_optimal    the paper's claim for phase two: the final block is not significantly worse than
+                  the optimal controller (not reproduced; reported, not asserted)
 usage: test_learning_regression.py B21R_EXPERIMENT FIG4_CONFIG"""
+import concurrent.futures
 import json
 import math
 import os
@@ -21,73 +27,86 @@ import subprocess
 import sys
 import tempfile
 
-SEEDS = [1, 2, 3, 4, 5]
-T95_ONE_SIDED_DF4 = 2.132
-SCHEDULE = ["phase_one_runs=15", "phase_two_runs=10", "eval_every_runs=5", "eval_starts=10",
-            "experiment.references="]
-ASSERTED = {"improves": True, "keeps": True, "reaches": True, "beats_examples": False}
+SEEDS = list(range(1, 11))
+T95_ONE_SIDED_DF9 = 1.833
+ASSERTED = {"improves": True, "keeps": True, "reaches": True, "within_3pct": True,
+            "beats_examples": False, "near_optimal": False}
 
 
 def run(exe, conf, seed, d):
     out = os.path.join(d, "seed-%d.json" % seed)
     cmd = [exe, "--config", conf, "--seed", str(seed), "--out", out]
-    for s in SCHEDULE:
-        cmd += ["--set", s]
     p = subprocess.run(cmd, capture_output=True, text=True)
     if p.returncode != 0:
-        print("FAIL: %s: exit status %d: %s" % (" ".join(cmd), p.returncode, p.stderr))
-        sys.exit(1)
+        raise RuntimeError("%s: exit status %d: %s" % (" ".join(cmd), p.returncode, p.stderr))
     with open(out) as f:
         return json.load(f)
 
 
-def mean_all(block):
-    return sum(block["steps"]) / len(block["steps"])
+def mean(xs):
+    return sum(xs) / len(xs)
 
 
-def one_sided_less(a, b):
-    """Paired: is mean(a - b) significantly below 0? Returns (mean difference, t, holds)."""
+def paired(a, b):
+    """Mean of a - b, its t statistic and its 95 % two-sided interval half-width (df 9)."""
     d = [x - y for x, y in zip(a, b)]
     n = len(d)
-    m = sum(d) / n
+    m = mean(d)
     sd = math.sqrt(sum((x - m) ** 2 for x in d) / (n - 1))
-    if sd == 0.0:
-        return m, -math.inf if m < 0 else math.inf, m < 0
-    t = m / (sd / math.sqrt(n))
-    return m, t, t < -T95_ONE_SIDED_DF4
+    se = sd / math.sqrt(n)
+    t = m / se if se > 0 else (math.inf if m > 0 else (-math.inf if m < 0 else 0.0))
+    return m, t, 2.262 * se  # Student-t 0.975 quantile, 9 degrees of freedom
 
 
 def main():
     exe, conf = sys.argv[1:3]
     with tempfile.TemporaryDirectory(prefix="b21r-regression-") as d:
-        rs = [run(exe, conf, s, d) for s in SEEDS]
-    first, last_p1, final, example, successes = [], [], [], [], []
+        with concurrent.futures.ThreadPoolExecutor(max_workers=2) as pool:
+            try:
+                rs = list(pool.map(lambda s: run(exe, conf, s, d), SEEDS))
+            except RuntimeError as e:
+                print("FAIL:", e)
+                return 1
+    first, end_p1, final, example, optimal, successes = [], [], [], [], [], []
     for r in rs:
         blocks = r["learning"]["blocks"]
         p1 = [b for b in blocks if b["phase"] == 1]
-        if len(blocks) != 5 or len(p1) != 3:
-            print("FAIL: seed %d: expected 5 blocks (3 in phase one), got %d (%d)" % (r["seed"], len(blocks), len(p1)))
+        if len(blocks) != 13 or len(p1) != 6:
+            print("FAIL: seed %d: expected 13 blocks (6 in phase one), got %d (%d)" % (r["seed"], len(blocks), len(p1)))
             return 1
-        first.append(mean_all(blocks[0]))
-        last_p1.append(mean_all(p1[-1]))
-        final.append(mean_all(blocks[-1]))
+        src = r["learning"]["totals"]["phase_two_steps_by_source"]
+        # Phase two is the learner's: the example advisor may step in only where no action is known.
+        if src["example"] + src["joystick"] > 0 or src["advisor"] > 0.01 * sum(src.values()):
+            print("FAIL: seed %d: phase two was not driven by the learner: %s" % (r["seed"], src))
+            return 1
+        first.append(mean(blocks[0]["steps"]))
+        end_p1.append(mean(p1[-1]["steps"]))
+        final.append(mean(blocks[-1]["steps"]))
         successes.append(blocks[-1]["successes"])
-        runs = [x for x in r["learning"]["runs"] if x["kind"] == "train" and x["phase"] == 1]
-        example.append(sum(x["steps"] if x["outcome"] == "goal" else r["step_limit"] for x in runs) / len(runs))
-        print("seed %d: steps after 5 runs %.1f, after phase one %.1f, final %.1f (%d/10), mean example run %.1f" % (
-            r["seed"], first[-1], last_p1[-1], final[-1], successes[-1], example[-1]))
+        example.append(mean(r["references"]["example"]["steps"]))
+        optimal.append(mean(r["references"]["optimal"]["steps"]))
+        print("seed %2d: after 5 runs %.1f, after phase one %.1f, final %.1f (%d/10); example %.1f, optimal %.1f; "
+              "phase two steps: greedy %d, exploration %d, advisor %d" % (
+                  r["seed"], first[-1], end_p1[-1], final[-1], successes[-1], example[-1], optimal[-1],
+                  src["greedy"], src["exploration"], src["advisor"]))
     results = {}
-    m, t, ok = one_sided_less(last_p1, first)
-    results["improves"] = (ok, "after phase one vs after 5 runs: %+.1f steps, t = %.2f" % (m, t))
-    m, t, worse = one_sided_less(last_p1, final)  # final significantly worse = last_p1 - final significantly < 0
-    results["keeps"] = (not worse, "final vs after phase one: %+.1f steps, t = %.2f (worse if t > %.3f)" % (-m, -t, T95_ONE_SIDED_DF4))
-    mean_succ = sum(successes) / len(successes)
-    results["reaches"] = (mean_succ >= 9.0, "final block: %.1f of 10 poses reached on average" % mean_succ)
-    m, t, ok = one_sided_less(final, example)
-    results["beats_examples"] = (ok, "final vs mean example run: %+.1f steps, t = %.2f" % (m, t))
+    m, t, h = paired(end_p1, first)
+    results["improves"] = (t < -T95_ONE_SIDED_DF9, "after phase one minus after 5 runs: %+.1f ± %.1f steps, t = %.2f" % (m, h, t))
+    m, t, h = paired(final, end_p1)
+    results["keeps"] = (t <= T95_ONE_SIDED_DF9, "final minus after phase one: %+.1f ± %.1f steps, t = %.2f" % (m, h, t))
+    ms = mean(successes)
+    results["reaches"] = (ms >= 9.5, "final block: %.1f of 10 poses reached on average" % ms)
+    excess = [100.0 * (f / o - 1.0) for f, o in zip(final, optimal)]
+    m, t, h = paired(excess, [0.0] * len(excess))
+    results["within_3pct"] = (m + h * T95_ONE_SIDED_DF9 / 2.262 < 3.0,
+                              "final excess over optimal: %+.2f %% ± %.2f %%" % (m, h))
+    m, t, h = paired(final, example)
+    results["beats_examples"] = (t < -T95_ONE_SIDED_DF9, "final minus example policy: %+.1f ± %.1f steps, t = %.2f" % (m, h, t))
+    m, t, h = paired(final, optimal)
+    results["near_optimal"] = (t <= T95_ONE_SIDED_DF9, "final minus optimal: %+.1f ± %.1f steps, t = %.2f" % (m, h, t))
     failed = False
     for name, (ok, text) in results.items():
-        status = "holds" if ok else ("FAILS" if ASSERTED[name] else "does not hold (not asserted yet)")
+        status = "holds" if ok else ("FAILS" if ASSERTED[name] else "does not hold (reported, not asserted)")
         print("%-15s %s: %s" % (name, status, text))
         failed = failed or (ASSERTED[name] and not ok)
     print("FAIL" if failed else "PASS")

@@ -192,6 +192,46 @@ void test_kdtree_radius_sort_orders_by_distance_then_id(void**) {
   for (uint32_t i = 0; i < 5; ++i) assert_int_equal(buf[i].id, want[i]);
 }
 
+// k = 0 (or no buffer) is rejected at construction: the set stays empty, prunes every search at
+// once and never reads or writes the buffer (a guard element around it must stay untouched).
+void test_kdtree_knn_set_rejects_k_zero(void**) {
+  constexpr int D = 3;
+  const uint32_t n = 200;
+  const std::vector<double> pts = make_points(n, D, false, 21);
+  TreeMem mem(n, D);
+  hg::kd_build_all<D>(mem.t, pts.data(), nullptr, n, 0);
+  const Neighbour guard{-1.0, 0xDEADBEEFu};
+  Neighbour buf[3] = {guard, guard, guard};
+  const double q[D] = {0.0, 0.0, 0.0};
+  KnnSet zero(buf + 1, 0, 1e300);
+  assert_false(zero.ok());
+  assert_true(zero.worst() < -1e308);
+  zero.add(0.0, 7);
+  hg::kd_query<D>(mem.t, q, zero, [](uint32_t) { return true; });
+  hg::brute_query<D>(pts.data(), n, q, zero);
+  assert_int_equal(zero.size(), 0);
+  KnnSet no_buffer(nullptr, 4, 1e300);
+  assert_false(no_buffer.ok());
+  no_buffer.add(0.0, 7);
+  hg::kd_query<D>(mem.t, q, no_buffer, [](uint32_t) { return true; });
+  assert_int_equal(no_buffer.size(), 0);
+  for (const Neighbour& b : buf) {
+    assert_true(b.d2 == guard.d2);
+    assert_int_equal(b.id, guard.id);
+  }
+  // k = 1 is accepted and finds the nearest point.
+  KnnSet one(buf + 1, 1, 1e300);
+  assert_true(one.ok());
+  hg::kd_query<D>(mem.t, q, one, [](uint32_t) { return true; });
+  Neighbour want[1];
+  KnnSet brute(want, 1, 1e300);
+  hg::brute_query<D>(pts.data(), n, q, brute);
+  expect_same(buf + 1, one.size(), want, brute.size());
+  assert_true(one.worst() == want[0].d2);
+  assert_int_equal(buf[0].id, guard.id);
+  assert_int_equal(buf[2].id, guard.id);
+}
+
 // Queries and sliced builds allocate nothing.
 void test_kdtree_queries_do_not_allocate(void**) {
   constexpr int D = 4;
@@ -236,6 +276,7 @@ int main(void) {
       cmocka_unit_test(test_kdtree_predicate_filters_entries),
       cmocka_unit_test(test_kdtree_snapshot_filter_copies_old_points_only),
       cmocka_unit_test(test_kdtree_radius_sort_orders_by_distance_then_id),
+      cmocka_unit_test(test_kdtree_knn_set_rejects_k_zero),
       cmocka_unit_test(test_kdtree_queries_do_not_allocate),
       cmocka_unit_test(test_kdtree_node_count_formula_exact),
   };

@@ -233,6 +233,107 @@ static void test_predict_weighted_ivh_mode_works(void** state) {
   hedger_destroy(h);
 }
 
+// Rank-deficient neighbourhoods (hedger.h, HEDGER_FALLBACK_SINGULAR) never give LWR.
+// Reproducer: D = 4 (3-D state + action), 4 stored points, query at a stored point: the design
+// matrix [x_i, 1] has rank 4 of 5, yet the pivots of its LDLT looked regular (this exact set was
+// answered by LWR before the rank test).
+static const double k_rep_s[4][3] = {{0x1.22efecb05e6f7p-5, 0x1.9f3b6e1e10e8dp-7, 0x1.edd93d78d808dp-5},
+                                     {0x1.ef16b26c3160ap-5, 0x1.9fcb55360976dp-4, 0x1.6947b8afe3729p-3},
+                                     {0x1.00eb72819e48p-5, 0x1.940e76765f6c1p-3, 0x1.41fe5f7c81b95p-3},
+                                     {0x1.ccf170668119dp-5, 0x1.39fc63edba89p-3, 0x1.66629365d7f7ap-4}};
+static const double k_rep_a[4] = {0x1.2399c55b578d6p-3, 0x1.27a54ba840226p-3, -0x1.f008f0b141e5cp-5,
+                                  -0x1.44406696736bap-4};
+static const double k_rep_q[4] = {0x1.6bd3cae5931dep-1, 0x1.6efa423618e3p-5, 0x1.4f54f1a80d03ep-2,
+                                  0x1.77f32404b4b8p-4};
+
+static hedger_config_t rank_config(void) {
+  hedger_config_t c = hedger_config_default();  // state_dim 3: D = 4
+  c.capacity = 64;
+  c.merge_radius = 0.0;
+  c.bandwidth = 0.2;
+  c.k_min = 3;
+  return c;
+}
+
+// Stores n points: states s (n rows of 3), actions a, values q.
+static hedger_t* rank_instance(const double* s, const double* a, const double* q, int n) {
+  const hedger_config_t c = rank_config();
+  hedger_t* h = ht_create(&c);
+  for (int i = 0; i < n; ++i) {
+    assert_int_equal(hedger_insert(h, s + 3 * i, a[i], q[i], 0, NULL), HEDGER_OK);
+  }
+  hedger_observe_reward(h, -1.0);
+  hedger_observe_reward(h, 1.0);
+  return h;
+}
+
+static void test_predict_rank_deficient_reproducer_singular(void** state) {
+  (void)state;
+  hedger_t* h = rank_instance(&k_rep_s[0][0], k_rep_a, k_rep_q, 4);
+  hedger_prediction_t p;
+  assert_int_equal(hedger_predict(h, k_rep_s[0], k_rep_a[0], &p), HEDGER_OK);
+  assert_int_equal(p.n_neighbours, 4);
+  assert_int_equal(p.kind, HEDGER_KIND_LWA);
+  assert_int_equal(p.fallback, HEDGER_FALLBACK_SINGULAR);
+  assert_int_equal(hedger_counters(h)->fallback_singular, 1);
+  hedger_destroy(h);
+}
+
+// The same for every one of 4000 random 4-point neighbourhoods queried at a stored point, and
+// for 12 points on a tilted hyperplane (enough points, still rank 4 of 5); D + 1 points in
+// general position are not refused.
+static void test_predict_rank_deficient_random_singular(void** state) {
+  (void)state;
+  uint64_t rs = 7;
+  for (int t = 0; t < 4000; ++t) {
+    double s[4][3], a[4], q[4];
+    for (int i = 0; i < 4; ++i) {
+      for (int j = 0; j < 3; ++j) s[i][j] = ht_uniform(&rs, 0.0, 0.2);
+      a[i] = ht_uniform(&rs, -0.2, 0.2);
+      q[i] = ht_uniform(&rs, 0.0, 1.0);
+    }
+    hedger_t* h = rank_instance(&s[0][0], a, q, 4);
+    hedger_prediction_t p;
+    assert_int_equal(hedger_predict(h, s[t % 4], a[t % 4], &p), HEDGER_OK);
+    assert_int_equal(p.fallback, HEDGER_FALLBACK_SINGULAR);
+    hedger_destroy(h);
+  }
+  for (int t = 0; t < 200; ++t) {
+    // Points with n·x = 0.05 for a random normal n (x = state, action): rank 4 of 5.
+    double n[4], s[12][3], a[12], q[12];
+    for (int j = 0; j < 4; ++j) n[j] = ht_uniform(&rs, 0.5, 1.0);
+    for (int i = 0; i < 12; ++i) {
+      for (int j = 0; j < 3; ++j) s[i][j] = ht_uniform(&rs, 0.0, 0.1);
+      a[i] = (0.05 - n[0] * s[i][0] - n[1] * s[i][1] - n[2] * s[i][2]) / n[3];
+      q[i] = ht_uniform(&rs, 0.0, 1.0);
+    }
+    hedger_t* h = rank_instance(&s[0][0], a, q, 12);
+    hedger_prediction_t p;
+    assert_int_equal(hedger_predict(h, s[t % 12], a[t % 12], &p), HEDGER_OK);
+    assert_int_equal(p.n_neighbours, 12);
+    assert_int_equal(p.fallback, HEDGER_FALLBACK_SINGULAR);
+    hedger_destroy(h);
+  }
+  for (int t = 0; t < 200; ++t) {
+    double s[5][3], a[5], q[5], centre[3] = {0.0, 0.0, 0.0}, ca = 0.0;
+    for (int i = 0; i < 5; ++i) {
+      for (int j = 0; j < 3; ++j) {
+        s[i][j] = ht_uniform(&rs, 0.0, 0.2);
+        centre[j] += s[i][j] / 5.0;
+      }
+      a[i] = ht_uniform(&rs, -0.2, 0.2);
+      ca += a[i] / 5.0;
+      q[i] = ht_uniform(&rs, 0.0, 1.0);
+    }
+    hedger_t* h = rank_instance(&s[0][0], a, q, 5);
+    hedger_prediction_t p;
+    assert_int_equal(hedger_predict(h, centre, ca, &p), HEDGER_OK);
+    assert_int_equal(p.n_neighbours, 5);
+    assert_true(p.fallback != HEDGER_FALLBACK_SINGULAR);
+    hedger_destroy(h);
+  }
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_predict_linear_data_lwr_exact),
@@ -242,6 +343,8 @@ int main(void) {
       cmocka_unit_test(test_predict_fewer_than_kmin_unknown),
       cmocka_unit_test(test_predict_neighbours_sorted_weights_gaussian),
       cmocka_unit_test(test_predict_weighted_ivh_mode_works),
+      cmocka_unit_test(test_predict_rank_deficient_reproducer_singular),
+      cmocka_unit_test(test_predict_rank_deficient_random_singular),
   };
   return cmocka_run_group_tests_name("hedger.predict", tests, NULL, NULL);
 }

@@ -12,6 +12,7 @@
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <stdio.h>
 #include <string.h>
 
 #include <cmocka.h>
@@ -209,14 +210,15 @@ static void test_rflex_device_stuffing_round_trip(void** state) {
 typedef struct want_pkt {
   uint8_t port, opcode, dlen;
   uint8_t chk;
+  bool raw_only;  // decodable in the device role only (raw 0x1B framed by DLEN)
 } want_pkt_t;
 
 static want_pkt_t summary(const rflex_packet_t* p) {
-  return (want_pkt_t){p->port, p->opcode, p->dlen, rflex_checksum(p)};
+  return (want_pkt_t){p->port, p->opcode, p->dlen, rflex_checksum(p), false};
 }
 
-// Builds a device-to-host stream with garbage, fillers, duplicated markers, ESC ESC, a corrupt
-// packet, a truncated packet and a raw (unstuffed) 0x1B packet between eight good packets.
+// Builds a stream with garbage, fillers, duplicated markers, ESC ESC, a corrupt packet, a
+// truncated packet and a raw (unstuffed) 0x1B host packet between eight good packets.
 static size_t build_mixed_stream(uint8_t* out, want_pkt_t* want, size_t* n_want) {
   size_t n = 0;
   size_t w = 0;
@@ -266,7 +268,8 @@ static size_t build_mixed_stream(uint8_t* out, want_pkt_t* want, size_t* n_want)
   (void)rflex_make_set_dir(&pk, 0, 0x00001B1BU, 0x1B, 30000, 1);
   assert_true(rflex_packet_has_esc(&pk));
   n += rflex_encode(out + n, 512, &pk, RFLEX_HOST_RAW);
-  want[w++] = summary(&pk);
+  want[w] = summary(&pk);
+  want[w++].raw_only = true;
   // A packet with an invalid port, then 7: odometry request; 8: a packet with the maximum DLEN.
   out[n++] = 0x1B;
   out[n++] = 0x02;
@@ -329,39 +332,162 @@ static void assert_pkts_equal(const want_pkt_t* got, size_t n_got, const want_pk
   }
 }
 
+// The packets of the mixed stream a decoder of this role must find.
+static size_t wanted_for(rflex_role_t role, const want_pkt_t* all, size_t n_all, want_pkt_t* out) {
+  size_t n = 0;
+  for (size_t i = 0; i < n_all; ++i) {
+    if (role == RFLEX_ROLE_DEVICE || !all[i].raw_only) {
+      out[n++] = all[i];
+    }
+  }
+  return n;
+}
+
 // The mixed stream yields the same packets and counters whole, byte by byte, and cut in two at
-// every byte boundary.
-static void test_rflex_decoder_split_every_boundary_same_packets(void** state) {
-  (void)state;
+// every byte boundary, in both roles; only the device role accepts the raw 0x1B packet.
+static void split_every_boundary(rflex_role_t role) {
+  want_pkt_t all[16];
+  size_t n_all = 0;
+  const size_t n = build_mixed_stream(g_stream, all, &n_all);
   want_pkt_t want[16];
-  size_t n_want = 0;
-  const size_t n = build_mixed_stream(g_stream, want, &n_want);
+  const size_t n_want = wanted_for(role, all, n_all, want);
   want_pkt_t got[16];
-  rflex_decoder_init(&g_dec);
+  rflex_decoder_init_role(&g_dec, role);
   size_t n_got = run_stream(&g_dec, g_stream, n, NULL, 0, got, 16);
   assert_pkts_equal(got, n_got, want, n_want);
   const rflex_decoder_counters_t whole = g_dec.counters;
   assert_int_equal(whole.bytes_in, n);
-  assert_int_equal(whole.packets_ok, 8);
+  assert_int_equal(whole.packets_ok, role == RFLEX_ROLE_DEVICE ? 8 : 7);
   assert_int_equal(whole.packets_stuffed, 3);  // motor report, status (SOH), LCD dump
-  assert_int_equal(whole.packets_raw_esc, 1);
+  assert_int_equal(whole.packets_raw_esc, role == RFLEX_ROLE_DEVICE ? 1 : 0);
   assert_true(whole.bad_checksum >= 1U);
   assert_true(whole.bad_port >= 1U);
   assert_true(whole.bad_framing >= 1U);
   assert_true(whole.bytes_garbage >= 9U);
 
   const size_t one = 1;
-  rflex_decoder_init(&g_dec);
+  rflex_decoder_init_role(&g_dec, role);
   n_got = run_stream(&g_dec, g_stream, n, &one, 1, got, 16);
   assert_pkts_equal(got, n_got, want, n_want);
   assert_memory_equal(&g_dec.counters, &whole, sizeof whole);
   for (size_t cut = 1; cut < n; ++cut) {
     const size_t plan[2] = {cut, n - cut};
-    rflex_decoder_init(&g_dec);
+    rflex_decoder_init_role(&g_dec, role);
     n_got = run_stream(&g_dec, g_stream, n, plan, 2, got, 16);
     assert_pkts_equal(got, n_got, want, n_want);
     assert_memory_equal(&g_dec.counters, &whole, sizeof whole);
   }
+}
+
+static void test_rflex_decoder_split_every_boundary_same_packets(void** state) {
+  (void)state;
+  split_every_boundary(RFLEX_ROLE_DEVICE);
+  split_every_boundary(RFLEX_ROLE_HOST);
+  // rflex_decoder_init() is the host role.
+  rflex_decoder_init(&g_dec);
+  assert_int_equal(g_dec.role, RFLEX_ROLE_HOST);
+}
+
+// What the B21r's base sends at 10 Hz (protocols.md A.5, A.6), as the emulator models it: per
+// period two MOT_SYSTEM_REPORTs (translation slowing down from 0.5 m/s to a stop, rotation at
+// 0.3 rad/s, 4 ms timestamps, running packet ids), a SYS_STATUS reply every 20 periods, a bump
+// panel pressed and released. About one in twenty carries a 0x1B byte (an id, a position,
+// velocity or timestamp byte, a checksum), stuffed as ESC NUL on the wire.
+static size_t realistic_device_packets(rflex_packet_t* pk, size_t cap) {
+  size_t n = 0;
+  uint8_t id = 0;
+  int32_t trans = 1234567;
+  int32_t bearing = -32500;
+  for (int k = 0; k < 600 && n + 4U <= cap; ++k) {
+    const uint32_t ts = 0x00100000U + 25U * (uint32_t)k;
+    const int32_t vel = k < 599 ? 51500 - 86 * k : 0;
+    trans += vel / 10;
+    bearing += 1050;  // 0.3 rad/s × 0.1 s × 35000 counts/rad
+    const rflex_motor_report_t rt = {.rv = 0, .timestamp = ts, .axis = 0, .position = trans,
+                                     .velocity = vel, .acceleration = 72100, .torque = 30000};
+    const rflex_motor_report_t rr = {.rv = 0, .timestamp = ts, .axis = 1, .position = bearing,
+                                     .velocity = 10500, .acceleration = 100000, .torque = 35000};
+    (void)rflex_make_motor_report(&pk[n++], id++, &rt);
+    (void)rflex_make_motor_report(&pk[n++], id++, &rr);
+    if (k % 20 == 7) {
+      const rflex_sys_status_t st = {.timestamp = ts, .voltage_raw = 2480U - (uint32_t)k / 4U, .brake = 0};
+      (void)rflex_make_sys_status(&pk[n++], id++, &st);
+    }
+    if (k == 90 || k == 95) {
+      const rflex_dio_report_t d = {.timestamp = ts, .address = 0x43, .value = k == 90 ? 0x0003 : 0};
+      (void)rflex_make_dio_report(&pk[n++], id++, &d);
+    }
+  }
+  return n;
+}
+
+// Feeds `bytes` and counts the decoded packets; *sentinel_ok is set when exactly `sentinel` came
+// out last and every other decoded packet differs from `original` (a corrupted acceptance).
+static void decode_damaged(rflex_role_t role, const uint8_t* bytes, size_t n, const rflex_packet_t* sentinel,
+                           int* corrupted, int* sentinels) {
+  rflex_decoder_init_role(&g_dec, role);
+  const uint8_t* p = bytes;
+  size_t left = n;
+  while (left > 0U) {
+    rflex_packet_t out;
+    bool have = false;
+    const size_t k = rflex_decoder_push(&g_dec, p, left, &out, &have);
+    p += k;
+    left -= k;
+    if (!have) {
+      continue;
+    }
+    if (out.port == sentinel->port && out.id == sentinel->id && out.opcode == sentinel->opcode &&
+        out.dlen == sentinel->dlen && memcmp(out.data, sentinel->data, out.dlen) == 0) {
+      ++*sentinels;
+    } else {
+      ++*corrupted;
+    }
+  }
+}
+
+// A byte lost on the line (UART overrun) never yields a packet with shifted fields, and never
+// swallows the genuine packet after it: every single-byte deletion of every realistic device
+// packet, followed by the next packet, decodes to exactly that next packet in the host role.
+// The device role's raw fallback is what used to accept such packets (printed for comparison).
+static void test_rflex_host_rejects_every_single_byte_deletion(void** state) {
+  (void)state;
+  static rflex_packet_t pk[1300];
+  const size_t np = realistic_device_packets(pk, 1300);
+  size_t with_esc = 0;
+  int deletions = 0;
+  int host_corrupted = 0;
+  int host_lost = 0;
+  int device_corrupted = 0;
+  for (size_t i = 0; i + 1U < np; ++i) {
+    with_esc += rflex_packet_has_esc(&pk[i]) ? 1U : 0U;
+    uint8_t wire[2 * RFLEX_MAX_STUFFED_BYTES];
+    const size_t a = rflex_encode(wire, sizeof wire, &pk[i], RFLEX_DEVICE_STUFFED);
+    const size_t b = rflex_encode(wire + a, sizeof wire - a, &pk[i + 1U], RFLEX_DEVICE_STUFFED);
+    assert_true(a > 0U && b > 0U);
+    for (size_t del = 0; del < a; ++del) {
+      uint8_t damaged[sizeof wire];
+      memcpy(damaged, wire, del);
+      memcpy(damaged + del, wire + del + 1U, a + b - del - 1U);
+      const size_t n = a + b - 1U;
+      int corrupted = 0;
+      int sentinels = 0;
+      decode_damaged(RFLEX_ROLE_HOST, damaged, n, &pk[i + 1U], &corrupted, &sentinels);
+      host_corrupted += corrupted;
+      host_lost += sentinels == 1 ? 0 : 1;
+      int dev_sentinels = 0;
+      decode_damaged(RFLEX_ROLE_DEVICE, damaged, n, &pk[i + 1U], &device_corrupted, &dev_sentinels);
+      ++deletions;
+    }
+  }
+  printf("rflex: %zu realistic device packets, %zu with a stuffed 0x1B; %d single-byte deletions: "
+         "host role accepted %d corrupted and lost %d genuine packets; device role (raw fallback) "
+         "accepted %d corrupted\n",
+         np - 1U, with_esc, deletions, host_corrupted, host_lost, device_corrupted);
+  assert_true(np > 1200U);
+  assert_true(with_esc >= 50U);
+  assert_int_equal(host_corrupted, 0);
+  assert_int_equal(host_lost, 0);
 }
 
 // A candidate padded beyond the buffer with ESC SOH fillers is dropped as too long, and the
@@ -632,7 +758,7 @@ static void test_rflex_decoder_no_allocation(void** state) {
   want_pkt_t want[16];
   size_t n_want = 0;
   const size_t n = build_mixed_stream(g_stream, want, &n_want);
-  rflex_decoder_init(&g_dec);
+  rflex_decoder_init_role(&g_dec, RFLEX_ROLE_DEVICE);
   alloc_counter_begin();
   for (int rep = 0; rep < 100; ++rep) {
     const uint8_t* p = g_stream;
@@ -711,6 +837,7 @@ int main(void) {
       cmocka_unit_test(test_rflex_host_strict_refuses_esc),
       cmocka_unit_test(test_rflex_device_stuffing_round_trip),
       cmocka_unit_test(test_rflex_decoder_split_every_boundary_same_packets),
+      cmocka_unit_test(test_rflex_host_rejects_every_single_byte_deletion),
       cmocka_unit_test(test_rflex_decoder_too_long_recovers),
       cmocka_unit_test(test_rflex_reports_round_trip),
       cmocka_unit_test(test_rflex_device_parses_host_commands),

@@ -58,6 +58,15 @@ static void test_emu_control_reset_pose_and_errors(void** state) {
   assert_int_equal(ctl(e, "reset 1 2"), SIM_EMU_CTRL_ERROR);
   assert_non_null(strstr(g_reply, "usage: reset"));
   assert_int_equal(ctl(e, "reset a b c"), SIM_EMU_CTRL_ERROR);
+  // Beyond the coordinates a world may use: refused (found by fuzz_emu_control: a reset to
+  // x = 1e300 went into ODE). The robot stays where it was.
+  assert_int_equal(ctl(e, "reset 1e300 0 0"), SIM_EMU_CTRL_ERROR);
+  assert_non_null(strstr(g_reply, "must lie within +-1e+06"));
+  assert_int_equal(ctl(e, "reset 0 -1000000.5 0"), SIM_EMU_CTRL_ERROR);
+  assert_int_equal(ctl(e, "reset 0 0 2e6"), SIM_EMU_CTRL_ERROR);
+  sim_plant_state_t st;
+  sim_emu_state(e, &st);
+  assert_true(st.x_m == 1.5 && st.y_m == -2.0);
   assert_int_equal(ctl(e, "jump"), SIM_EMU_CTRL_ERROR);
   assert_int_equal(strncmp(g_reply, "error ", 6), 0);
   assert_int_equal(ctl(e, ""), SIM_EMU_CTRL_ERROR);

@@ -76,6 +76,14 @@ static void test_world_parse_errors_name_the_line(void** state) {
                    SIM_WORLD_ERR_INVALID_ARG);
   assert_int_equal(parse("b21r-world 1\nname bad/name\n", err, sizeof(err)), SIM_WORLD_ERR_SYNTAX);
   assert_int_equal(parse("", err, sizeof(err)), SIM_WORLD_ERR_SYNTAX);
+  // Numbers beyond 1e6 in magnitude are refused (found by fuzz_world: a goal at x = 1e47 made
+  // the drawing area's min and max equal after adding the margin).
+  assert_int_equal(parse("b21r-world 1\ngoal 1e47 2 2\n", err, sizeof(err)), SIM_WORLD_ERR_SYNTAX);
+  assert_non_null(strstr(err, "line 2"));
+  assert_non_null(strstr(err, "magnitude at most 1e+06"));
+  assert_int_equal(parse("b21r-world 1\nstart 0 0 -1000001\n", err, sizeof(err)), SIM_WORLD_ERR_SYNTAX);
+  assert_int_equal(parse("b21r-world 1\narena -1e6 -1e6 1e6 1e6\n", err, sizeof(err)), SIM_WORLD_OK);
+  assert_true(g_world.bounds_min_x_m < g_world.bounds_max_x_m);
 }
 
 // More entries than the capacity are rejected with SIM_WORLD_ERR_CAPACITY.

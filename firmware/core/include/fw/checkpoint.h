@@ -34,6 +34,10 @@ extern "C" {
 #define FW_CHECKPOINT_HEADER_SIZE 48U
 /// Capacity of the error messages below, including the NUL.
 #define FW_CHECKPOINT_ERR_MAX 512U
+/// How every refusal of a checkpoint ends: how to start fresh (a printf format taking the path
+/// twice).
+#define FW_CHECKPOINT_FRESH_HINT \
+  "to start fresh with an empty learner, move the file away (e.g. mv '%s' '%s.bad')"
 
 /// CRC-32 (IEEE, reflected, init and final XOR 0xFFFFFFFF) of n bytes, continuing from crc
 /// (pass 0 to start). O(n), no allocation.
@@ -47,8 +51,8 @@ int fw_checkpoint_write(const char* path, const void* meta, size_t meta_size, co
                         size_t payload_size, char* err, size_t err_cap);
 
 /// Reads the header and reports the section sizes so the caller can size its buffers.
-/// Returns 1 (file present and the header valid), 0 (no file at path), -1 (unreadable or
-/// corrupt: err says what and how to start fresh).
+/// Returns 1 (file present and the header valid), 0 (no file at path), -1 (not a regular file,
+/// e.g. a directory; unreadable; or corrupt: err says what and how to fix it or start fresh).
 int fw_checkpoint_peek(const char* path, size_t* meta_size, size_t* payload_size, char* err, size_t err_cap);
 
 /// Reads and verifies a whole checkpoint into caller buffers. Returns 1 (loaded; *meta_size and

@@ -6,6 +6,8 @@
 /// - one `key = value` per line; blanks around `=` and at both ends are ignored;
 /// - `#` starts a comment anywhere outside a double-quoted value; blank lines are ignored;
 /// - string values may be double-quoted (`log_file = "out dir/log"`), which keeps spaces and `#`;
+///   a value itself may not contain a double quote or a control character (tab, line break, ...),
+///   so that fw_config_print() always writes a file that loads back to the same settings;
 /// - a key may appear once per file; later sources (more files, then `--set`) override earlier ones.
 /// Every error names the source (`file:line` or `--set`), the key, the bad value and what is
 /// allowed (range, choices), so the operator can fix it without reading code. An unknown key

@@ -36,7 +36,7 @@ typedef struct drv_can_counters {
   uint64_t frames_tx;
   uint64_t frames_rx;
   uint64_t rx_dropped_kind;   ///< Extended, RTR or error frames received and dropped.
-  uint64_t rx_bad_size;       ///< Records that were not one struct can_frame, or DLC > 8.
+  uint64_t rx_bad_size;       ///< Records that were not one struct can_frame (empty ones too), or DLC > 8.
   uint64_t tx_would_block;    ///< Sends refused because the socket buffer was full.
   uint64_t errors;            ///< Other send/receive failures.
 } drv_can_counters_t;

@@ -166,7 +166,13 @@ typedef enum hedger_fallback {
   HEDGER_FALLBACK_NONE = 0,
   HEDGER_FALLBACK_HULL = 1,        ///< query outside the independent-variable hull
   HEDGER_FALLBACK_IMPLAUSIBLE = 2, ///< LWR value outside [Q_min, Q_max]
-  HEDGER_FALLBACK_SINGULAR = 3,    ///< normal equations numerically singular (e.g. < D+1 independent points)
+  /// The local regression is singular: the usable neighbours do not span every input dimension
+  /// (fewer than D+1 of them, or λmin <= 1e-12 λmax for the eigenvalues of their centred scatter
+  /// matrix Σ (x_i − m)(x_i − m)^T in scaled units, i.e. a spread ratio of 1e-6 between the
+  /// thinnest and the widest direction; e.g. all on one hyperplane, or all with the same action),
+  /// or a factorisation of the normal equations failed. Rank-deficient neighbourhoods always
+  /// land here, whatever the ridge.
+  HEDGER_FALLBACK_SINGULAR = 3,
 } hedger_fallback_t;
 
 /// Weighting of the design matrix of the IVH test (hedger.md step 4 "(choice)").

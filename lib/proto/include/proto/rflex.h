@@ -9,10 +9,11 @@
 /// nudged by one count instead, see rflex_make_axis_velocity()).
 ///
 /// Both sides are here: the host (controller) builds commands and parses reports; the device
-/// (emulator) parses commands and builds reports. The streaming decoder accepts both stuffed
-/// (device output) and DLEN-framed raw (host output) packets, so one decoder serves both sides.
+/// (emulator) parses commands and builds reports. The streaming decoder has a role per side
+/// (rflex_role_t): the host role de-stuffs only, since the base always stuffs its output; the
+/// device role also accepts DLEN-framed raw packets, since host output is not stuffed.
 ///
-/// Memory: rflex_packet_t is 260 bytes, rflex_decoder_t about 700 bytes. No allocation.
+/// Memory: rflex_packet_t is 260 bytes, rflex_decoder_t about 1 KB. No allocation.
 #ifndef PROTO_RFLEX_H
 #define PROTO_RFLEX_H
 
@@ -291,7 +292,7 @@ typedef struct rflex_decoder_counters {
   uint64_t bytes_in;          ///< Every byte consumed.
   uint64_t packets_ok;        ///< Valid packets emitted.
   uint64_t packets_stuffed;   ///< ... of which contained ESC NUL or ESC SOH.
-  uint64_t packets_raw_esc;   ///< ... of which carried a raw 0x1B, accepted by DLEN framing.
+  uint64_t packets_raw_esc;   ///< ... of which carried a raw 0x1B, accepted by DLEN framing (device role).
   uint64_t bytes_garbage;     ///< Bytes skipped while hunting for ESC STX.
   uint64_t bad_port;          ///< Candidates dropped: PORT not 1..6.
   uint64_t bad_checksum;      ///< Candidates dropped: framing fine but CHK wrong.
@@ -300,27 +301,58 @@ typedef struct rflex_decoder_counters {
   uint64_t bytes_dropped;     ///< Bytes discarded in total (garbage + dropped candidates).
 } rflex_decoder_counters_t;
 
+/// Which side's output a decoder reads (protocols.md A.2).
+typedef enum rflex_role {
+  /// The controller reads the base's output, which is always stuffed: ESC NUL for a literal
+  /// 0x1B, ESC SOH fillers, ESC ETX at the end. Only that form is accepted, so a byte lost on
+  /// the line (UART overrun) can never turn a stuffed packet into a "valid" raw one with shifted
+  /// fields, and a false raw frame cannot swallow the genuine packets after it.
+  RFLEX_ROLE_HOST = 0,
+  /// The emulator reads a host's output, which is not stuffed and may carry a raw 0x1B (other
+  /// drivers send them): a packet is accepted in its de-stuffed form or in its raw form framed
+  /// by DLEN (DLEN + 9 bytes ending in ESC ETX).
+  RFLEX_ROLE_DEVICE = 1,
+} rflex_role_t;
+
+/// Private: how far the stuffed form of the candidate at the front of the buffer has been read.
+typedef struct rflex_stuffed_scan {
+  uint16_t pos;       ///< Next raw byte to read (0 = not started).
+  uint16_t n;         ///< De-stuffed bytes so far.
+  uint8_t stuffed;    ///< An ESC NUL or ESC SOH was seen.
+  uint8_t verdict;    ///< 0 while undecided, else the final verdict for this candidate.
+  uint8_t body[4U + RFLEX_MAX_DATA + 1U];  ///< PORT ID OPCODE DLEN DATA CHK, de-stuffed.
+} rflex_stuffed_scan_t;
+
 /// Decoder state (fixed size). Read `counters` directly; other fields are private.
 typedef struct rflex_decoder {
   uint16_t fill;      ///< Raw bytes held.
   uint16_t pending;   ///< Bytes of the emitted packet to discard on the next push.
+  uint8_t role;       ///< rflex_role_t.
   uint8_t buf[RFLEX_DECODER_BUF_BYTES];
+  rflex_stuffed_scan_t scan;
   rflex_decoder_counters_t counters;
 } rflex_decoder_t;
 
-/// Initialises a decoder, zeroing counters. O(1).
+/// Initialises a decoder for the host role (RFLEX_ROLE_HOST: the controller reading the base),
+/// zeroing counters. O(1).
 void rflex_decoder_init(rflex_decoder_t* dec);
+
+/// Initialises a decoder for the given role (an unknown value means RFLEX_ROLE_HOST), zeroing
+/// counters. O(1).
+void rflex_decoder_init_role(rflex_decoder_t* dec, rflex_role_t role);
 
 /// Drops any partial packet (counted in bytes_dropped). O(1).
 void rflex_decoder_reset(rflex_decoder_t* dec);
 
 /// Feeds bytes; consumes until one packet completes or all bytes are used and returns the
-/// number consumed (> 0 when len > 0). Accepts a packet when either (a) its ESC-de-stuffed form
-/// (ESC NUL -> 0x1B, ESC SOH dropped, ended by ESC ETX) or (b) its raw form framed by DLEN
-/// (DLEN + 9 bytes ending in ESC ETX) has a valid PORT and checksum. While hunting, ESC ESC
-/// restarts the hunt. After a failed candidate the bytes already held are rescanned from the
-/// next ESC STX, so no packet that starts inside a corrupt one is lost. Cost per byte O(1)
-/// except at candidate ends (O(packet length)); no allocation.
+/// number consumed (> 0 when len > 0). Accepts a packet when (a) its ESC-de-stuffed form
+/// (ESC NUL -> 0x1B, ESC SOH dropped, ended by ESC ETX) has a valid PORT, a DLEN equal to the
+/// de-stuffed length and a valid checksum, or, in the device role only, (b) its raw form framed
+/// by DLEN (DLEN + 9 bytes ending in ESC ETX) does. While hunting, ESC ESC restarts the hunt.
+/// After a failed candidate the bytes already held are rescanned from the next ESC STX, so no
+/// packet that starts inside a corrupt one is lost. Cost: O(1) per byte, plus O(packet length)
+/// where a candidate ends or is dropped (the bytes after a dropped ESC are read again, so a
+/// stream of false starts costs at most RFLEX_DECODER_BUF_BYTES per byte); no allocation.
 /// @param out written only when *got_packet is set. @param got_packet always written.
 size_t rflex_decoder_push(rflex_decoder_t* dec, const uint8_t* bytes, size_t len,
                           rflex_packet_t* out, bool* got_packet);

@@ -398,7 +398,7 @@ void fake_robot_init(fake_robot_t* f, bool canopen, double dt_s, uint64_t seed) 
   f->canopen = canopen;
   f->clock_us = 1000000;
   (void)lms_decoder_init(&f->lms_dec, LMS_ROLE_HOST, 0);
-  rflex_decoder_init(&f->host_dec);
+  rflex_decoder_init_role(&f->host_dec, RFLEX_ROLE_DEVICE);
   cia402_drive_init(&f->drive[0]);
   cia402_drive_init(&f->drive[1]);
 }

@@ -170,6 +170,33 @@ static void test_checkpoint_damage_refused_with_fresh_hint(void** state) {
   assert_non_null(strstr(err, "to start fresh"));
 }
 
+// A directory, a device or a FIFO given as the checkpoint is refused by what it is, not as
+// "truncated".
+static void test_checkpoint_not_a_regular_file_named(void** state) {
+  (void)state;
+  char err[FW_CHECKPOINT_ERR_MAX];
+  size_t ms = 0;
+  size_t ps = 0;
+  assert_int_equal(fw_checkpoint_peek(g_dir, &ms, &ps, err, sizeof err), -1);
+  assert_non_null(strstr(err, g_dir));
+  assert_non_null(strstr(err, "is a directory"));
+  assert_null(strstr(err, "truncated"));
+  uint8_t meta[8];
+  uint8_t payload[8];
+  assert_int_equal(fw_checkpoint_read(g_dir, meta, sizeof meta, &ms, payload, sizeof payload, &ps, err, sizeof err),
+                   -1);
+  assert_non_null(strstr(err, "is a directory"));
+  assert_int_equal(fw_checkpoint_peek("/dev/null", &ms, &ps, err, sizeof err), -1);
+  assert_non_null(strstr(err, "not a regular file"));
+  // A FIFO is refused at once (opening it must not wait for a writer).
+  char fifo[300];
+  snprintf(fifo, sizeof fifo, "%s/fifo", g_dir);
+  assert_int_equal(mkfifo(fifo, 0600), 0);
+  assert_int_equal(fw_checkpoint_peek(fifo, &ms, &ps, err, sizeof err), -1);
+  assert_non_null(strstr(err, "not a regular file"));
+  assert_int_equal(unlink(fifo), 0);
+}
+
 // A file from another format version is refused by name of the version.
 static void test_checkpoint_other_version_refused(void** state) {
   (void)state;
@@ -312,6 +339,7 @@ int main(void) {
       cmocka_unit_test_setup(test_checkpoint_round_trip_identical, reset_file),
       cmocka_unit_test_setup(test_checkpoint_missing_file_is_not_an_error, reset_file),
       cmocka_unit_test_setup(test_checkpoint_damage_refused_with_fresh_hint, reset_file),
+      cmocka_unit_test_setup(test_checkpoint_not_a_regular_file_named, reset_file),
       cmocka_unit_test_setup(test_checkpoint_other_version_refused, reset_file),
       cmocka_unit_test_setup(test_checkpoint_too_big_for_buffers_refused, reset_file),
       cmocka_unit_test_setup(test_checkpoint_kill9_random_instants_never_broken, reset_file),

@@ -244,6 +244,34 @@ static void test_config_set_arg_overrides_and_errors(void** state) {
   assert_non_null(strstr(err, "--set: unknown key 'nope'"));
 }
 
+// A string value with a double quote or a control character is refused: the file format cannot
+// write it back (found by fuzz_config: `log_file = x"a b"` printed as a line that no longer
+// parsed); a shorter value replaces a longer one completely.
+static void test_config_strings_round_trip_through_print(void** state) {
+  (void)state;
+  fw_config_t c;
+  fw_config_defaults(&c);
+  const fw_config_t before = c;
+  char err[FW_CONFIG_ERR_MAX];
+  assert_int_equal(fw_config_set_arg(&c, "log_file = x\"out dir/#1\"", err, sizeof err), -1);
+  assert_non_null(strstr(err, "without double quotes or control characters"));
+  assert_int_equal(fw_config_set(&c, "log_file", "a\nb", "--set", err, sizeof err), -1);
+  assert_int_equal(fw_config_set(&c, "log_file", "tab\there", "--set", err, sizeof err), -1);
+  assert_memory_equal(&c, &before, sizeof c);  // a refusal does not even record an origin
+  assert_int_equal(fw_config_set(&c, "log_file", "a long name for a log file #1.lcmlog", "--set", err, sizeof err), 0);
+  assert_int_equal(fw_config_set(&c, "log_file", "short", "--set", err, sizeof err), 0);
+  const char* p = write_tmp("printed.conf", "");
+  FILE* f = fopen(p, "w");
+  assert_non_null(f);
+  fw_config_print(&c, f);
+  fclose(f);
+  fw_config_t back;
+  fw_config_defaults(&back);
+  assert_int_equal(fw_config_load_file(&back, p, err, sizeof err), 0);
+  // Settings byte for byte (no stale tail after "short"); origins name the file, not "--set".
+  assert_memory_equal(&back, &c, offsetof(fw_config_t, origins));
+}
+
 // Cross-key rules are enforced with a message that names both keys.
 static void test_config_validate_cross_key_rules(void** state) {
   (void)state;
@@ -449,6 +477,7 @@ int main(int argc, char** argv) {
       cmocka_unit_test(test_config_set_arg_overrides_and_errors),
       cmocka_unit_test(test_config_validate_cross_key_rules),
       cmocka_unit_test(test_config_validate_errors_carry_file_and_line),
+      cmocka_unit_test(test_config_strings_round_trip_through_print),
       cmocka_unit_test(test_config_reference_file_matches_defaults),
       cmocka_unit_test(test_config_extra_keys_go_to_the_handler),
       cmocka_unit_test(test_config_set_allocates_nothing),

@@ -4,6 +4,7 @@
 #define _POSIX_C_SOURCE 200809L
 #include "loop_harness.h"
 
+#include "fw/progress.h"
 #include "fw/safety.h"
 
 #include <b21r_test/alloc_counter.h>
@@ -165,6 +166,78 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
   assert_true(st.done);
   assert_int_equal(st.training_runs, 6);
   assert_int_equal(st.phase, 2);
+  harness_close(&g_h);
+
+  // Valid checksums but a progress field out of range (as a bug or another writer could leave
+  // it): refused like a corrupt file, naming the file, the field and the way out; the loop is
+  // left as it was (the learner untouched too).
+  uint8_t meta[FW_PROGRESS_BYTES];
+  size_t ms = 0;
+  size_t ps = 0;
+  uint8_t* payload = malloc(payload_cap);
+  assert_non_null(payload);
+  assert_int_equal(fw_checkpoint_read(c.checkpoint_file, meta, sizeof meta, &ms, payload, payload_cap, &ps, err,
+                                      sizeof err),
+                   1);
+  fw_progress_t g;
+  assert_int_equal(fw_progress_decode(meta, ms, &g, NULL, 0), 0);
+  assert_int_equal(g.schedule.training_runs, 3);  // written by the first session
+  g.schedule.phase = 7;
+  uint8_t bad[FW_PROGRESS_BYTES];
+  (void)fw_progress_encode(&g, bad);
+  assert_int_equal(fw_checkpoint_write(c.checkpoint_file, bad, sizeof bad, payload, ps, err, sizeof err), 0);
+  assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
+  assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), -1);
+  assert_non_null(strstr(err, c.checkpoint_file));
+  assert_non_null(strstr(err, "is corrupt (controller section: phase 7, expected 1 or 2)"));
+  assert_non_null(strstr(err, "to start fresh"));
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.training_runs, 0);
+  assert_int_equal(st.phase, 1);
+  assert_int_equal(st.store_fill, 0);
+  harness_close(&g_h);
+
+  // A header claiming more learned state than this configuration can hold is refused without
+  // allocating that much (found by fuzz_checkpoint: the claimed size was allocated first).
+  uint8_t header[FW_CHECKPOINT_HEADER_SIZE];
+  memset(header, 0, sizeof header);
+  memcpy(header, "B21RCKPT", 8);
+  const uint64_t sizes[2] = {FW_PROGRESS_BYTES, (uint64_t)1 << 40};
+  header[8] = FW_CHECKPOINT_VERSION;
+  header[12] = FW_CHECKPOINT_HEADER_SIZE;
+  for (int k = 0; k < 2; ++k) {
+    for (int i = 0; i < 8; ++i) {
+      header[16 + 8 * k + i] = (uint8_t)(sizes[k] >> (8 * i));
+    }
+  }
+  const uint32_t hcrc = fw_crc32(0, header, 44);
+  for (int i = 0; i < 4; ++i) {
+    header[44 + i] = (uint8_t)(hcrc >> (8 * i));
+  }
+  FILE* hf = fopen(c.checkpoint_file, "wb");
+  assert_non_null(hf);
+  assert_int_equal(fwrite(header, 1, sizeof header, hf), sizeof header);
+  fclose(hf);
+  assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
+  assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), -1);
+  assert_non_null(strstr(err, "more than this configuration can load"));
+  assert_non_null(strstr(err, "to start fresh"));
+  harness_close(&g_h);
+
+  // The good file back: it loads again.
+  assert_int_equal(fw_checkpoint_write(c.checkpoint_file, meta, ms, payload, ps, err, sizeof err), 0);
+  free(payload);
+  assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
+  assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), 1);
+  harness_close(&g_h);
+
+  // A directory given as the checkpoint is named as such (not "truncated").
+  fw_config_t cd = c;
+  snprintf(cd.checkpoint_file, sizeof cd.checkpoint_file, "%s", dir);
+  assert_int_equal(harness_open(&g_h, &cd, false, 3), 0);
+  assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), -1);
+  assert_non_null(strstr(err, "is a directory"));
+  assert_null(strstr(err, "truncated"));
   harness_close(&g_h);
 
   // Damage the file: refused, with the way out in the message.

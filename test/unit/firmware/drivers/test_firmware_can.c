@@ -99,6 +99,9 @@ static void test_can_recv_drops_foreign_records(void** state) {
   uint8_t big[40];
   memset(big, 0, sizeof big);
   assert_int_equal(send(fx->fds[1], big, sizeof big, 0), 40);
+  // An empty record is malformed, not the end of the bus (found by fuzz_can_read: recv() returns
+  // 0 for it, which was taken for the peer's hang-up).
+  assert_int_equal(send(fx->fds[1], big, 0, 0), 0);
   cf.can_id = 0x181;
   cf.can_dlc = 9;
   assert_int_equal(send(fx->fds[1], &cf, sizeof cf, 0), (ssize_t)sizeof cf);
@@ -111,7 +114,7 @@ static void test_can_recv_drops_foreign_records(void** state) {
   assert_int_equal(g.dlc, 1);
   assert_int_equal(g.data[0], CANOPEN_NMT_STATE_OPERATIONAL);
   assert_int_equal(fx->host.counters.rx_dropped_kind, 3);
-  assert_int_equal(fx->host.counters.rx_bad_size, 3);
+  assert_int_equal(fx->host.counters.rx_bad_size, 4);
   assert_int_equal(fx->host.counters.frames_rx, 1);
 }
 

@@ -211,7 +211,7 @@ static void test_serial_rflex_packets_through_pty(void** state) {
   uint8_t wire[128];
   read_exact(fx->master, wire, total);
   rflex_decoder_t dec;
-  rflex_decoder_init(&dec);
+  rflex_decoder_init_role(&dec, RFLEX_ROLE_DEVICE);  // reads what the host sent
   int got = 0;
   const uint8_t* q = wire;
   size_t left = total;

@@ -1,0 +1,64 @@
+// SPDX-License-Identifier: MIT
+/// fw/progress.h — The controller's section of a checkpoint (fw/checkpoint.h, "meta"): which
+/// task the learned state belongs to and how far the schedule got, so that a restart resumes.
+///
+/// Byte layout (FW_PROGRESS_BYTES, integers little-endian, unused bytes 0):
+/// ```
+///  0  8  magic "FWMETA01"
+///  8  4  task (fw_task_t)                    12  4  state dimension
+/// 16  4  phase                               20  4  training runs (both phases)
+/// 24  4  phase-one runs                      28  4  phase-two runs
+/// 32  4  evaluation blocks                   36  4  successful phase-one runs
+/// 40  8  their summed steps (IEEE-754 double) 48  4  shortest of them (0 = none)
+/// 52  4  run id + 1 (0 = no run started)     56 40  reserved, 0
+/// ```
+/// Decoding validates every field against the ranges below, so a section with a valid CRC but
+/// impossible contents (a bug, or bytes written by something else) is refused like a corrupt
+/// file instead of steering the schedule. Ranges (fw_progress_decode):
+/// - task: FW_TASK_CORRIDOR or FW_TASK_OBSTACLES; state dimension 1..HEDGER_MAX_STATE_DIM;
+/// - phase 1 or 2; every counter and the run id + 1 in [0, INT32_MAX];
+/// - training runs = phase-one runs + phase-two runs; phase-two runs = 0 in phase 1;
+/// - successful phase-one runs <= phase-one runs; with none, their sum and shortest are 0;
+///   otherwise the sum is a whole number with shortest × runs <= sum <= runs × INT32_MAX;
+/// - run id + 1 >= training runs (every training run started as a run).
+/// Reserved bytes must be 0 (room for later fields under a new magic).
+///
+/// Pure functions: no I/O, no allocation, O(1).
+#ifndef FW_PROGRESS_H
+#define FW_PROGRESS_H
+
+#include "fw/schedule.h"
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/// Size of the encoded section.
+#define FW_PROGRESS_BYTES 96U
+/// Capacity of fw_progress_decode()'s reason text, including the NUL.
+#define FW_PROGRESS_WHY_MAX 160U
+
+/// What a checkpoint records besides the learned state.
+typedef struct fw_progress {
+  int32_t task;                     ///< fw_task_t the learned state belongs to
+  uint32_t state_dim;               ///< its state dimension
+  fw_schedule_progress_t schedule;  ///< schedule progress (fw/schedule.h)
+  int32_t run_id;                   ///< last run started, -1 = none
+} fw_progress_t;
+
+/// Writes p into out[0..FW_PROGRESS_BYTES). Returns FW_PROGRESS_BYTES. Does not validate: a
+/// value outside the ranges above is written as is (and refused by the decoder).
+size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]);
+
+/// Decodes and validates n bytes. Returns 0 with *out filled, or -1 with a one-line reason in
+/// why (e.g. "phase 7, expected 1 or 2"; capacity why_cap, may be 0) and *out untouched.
+int fw_progress_decode(const uint8_t* bytes, size_t n, fw_progress_t* out, char* why, size_t why_cap);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif  // FW_PROGRESS_H

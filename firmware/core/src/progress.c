@@ -1,0 +1,137 @@
+// SPDX-License-Identifier: MIT
+// The checkpoint's controller section: encoding and a validating decoder (fw/progress.h).
+#include "fw/progress.h"
+
+#include "fw/config.h"
+#include "le_bytes.h"
+
+#include <hedger/hedger.h>
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdbool.h>
+#include <stdio.h>
+#include <string.h>
+
+#define MAGIC "FWMETA01"
+#define USED_BYTES 56U
+
+static void fmt(char* why, size_t cap, const char* format, ...) __attribute__((format(printf, 3, 4)));
+static void fmt(char* why, size_t cap, const char* format, ...) {
+  if (why == NULL || cap == 0) {
+    return;
+  }
+  va_list ap;
+  va_start(ap, format);
+  (void)vsnprintf(why, cap, format, ap);
+  va_end(ap);
+}
+
+size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]) {
+  const fw_schedule_progress_t* g = &p->schedule;
+  memset(out, 0, FW_PROGRESS_BYTES);
+  memcpy(out, MAGIC, 8);
+  fw_put_u32(out + 8, (uint32_t)p->task);
+  fw_put_u32(out + 12, p->state_dim);
+  fw_put_u32(out + 16, (uint32_t)g->phase);
+  fw_put_u32(out + 20, (uint32_t)g->training_runs);
+  fw_put_u32(out + 24, (uint32_t)g->phase_one_runs);
+  fw_put_u32(out + 28, (uint32_t)g->phase_two_runs);
+  fw_put_u32(out + 32, (uint32_t)g->eval_blocks);
+  fw_put_u32(out + 36, (uint32_t)g->example_runs);
+  fw_put_f64(out + 40, g->example_steps_sum);
+  fw_put_u32(out + 48, (uint32_t)g->best_example_steps);
+  fw_put_u32(out + 52, (uint32_t)p->run_id + 1U);
+  return FW_PROGRESS_BYTES;
+}
+
+static bool is_zero(double x) { return x >= 0.0 && x <= 0.0; }
+
+// Reads a counter at off into *v; false (with the reason) when it exceeds INT32_MAX.
+static bool counter(const uint8_t* b, size_t off, const char* name, int32_t* v, char* why, size_t cap) {
+  const uint32_t u = fw_get_u32(b + off);
+  if (u > (uint32_t)INT32_MAX) {
+    fmt(why, cap, "%s %u, expected at most %d", name, (unsigned)u, INT32_MAX);
+    return false;
+  }
+  *v = (int32_t)u;
+  return true;
+}
+
+int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why, size_t cap) {
+  if (n != FW_PROGRESS_BYTES || memcmp(b, MAGIC, 8) != 0) {
+    fmt(why, cap, "unknown format (%zu bytes%s, expected %u starting with " MAGIC ")", n,
+        n >= 8 && memcmp(b, MAGIC, 8) != 0 ? ", other magic" : "", FW_PROGRESS_BYTES);
+    return -1;
+  }
+  for (size_t i = USED_BYTES; i < FW_PROGRESS_BYTES; ++i) {
+    if (b[i] != 0) {
+      fmt(why, cap, "reserved byte %zu is 0x%02x, expected 0", i, b[i]);
+      return -1;
+    }
+  }
+  fw_progress_t p;
+  memset(&p, 0, sizeof p);
+  fw_schedule_progress_t* g = &p.schedule;
+  const uint32_t task = fw_get_u32(b + 8);
+  if (task != (uint32_t)FW_TASK_CORRIDOR && task != (uint32_t)FW_TASK_OBSTACLES) {
+    fmt(why, cap, "task %u, expected %d (corridor) or %d (obstacles)", (unsigned)task, FW_TASK_CORRIDOR,
+        FW_TASK_OBSTACLES);
+    return -1;
+  }
+  p.task = (int32_t)task;
+  p.state_dim = fw_get_u32(b + 12);
+  if (p.state_dim < 1U || p.state_dim > HEDGER_MAX_STATE_DIM) {
+    fmt(why, cap, "state dimension %u, expected 1..%u", (unsigned)p.state_dim, HEDGER_MAX_STATE_DIM);
+    return -1;
+  }
+  const uint32_t phase = fw_get_u32(b + 16);
+  if (phase != 1U && phase != 2U) {
+    fmt(why, cap, "phase %u, expected 1 or 2", (unsigned)phase);
+    return -1;
+  }
+  g->phase = (int32_t)phase;
+  int32_t run_id_plus_1 = 0;
+  if (!counter(b, 20, "training runs", &g->training_runs, why, cap) ||
+      !counter(b, 24, "phase-one runs", &g->phase_one_runs, why, cap) ||
+      !counter(b, 28, "phase-two runs", &g->phase_two_runs, why, cap) ||
+      !counter(b, 32, "evaluation blocks", &g->eval_blocks, why, cap) ||
+      !counter(b, 36, "successful phase-one runs", &g->example_runs, why, cap) ||
+      !counter(b, 48, "shortest phase-one run", &g->best_example_steps, why, cap) ||
+      !counter(b, 52, "run id + 1", &run_id_plus_1, why, cap)) {
+    return -1;
+  }
+  g->example_steps_sum = fw_get_f64(b + 40);
+  if ((int64_t)g->phase_one_runs + g->phase_two_runs != g->training_runs) {
+    fmt(why, cap, "training runs %d != phase-one runs %d + phase-two runs %d", (int)g->training_runs,
+        (int)g->phase_one_runs, (int)g->phase_two_runs);
+    return -1;
+  }
+  if (g->phase == 1 && g->phase_two_runs != 0) {
+    fmt(why, cap, "phase 1 with %d phase-two runs", (int)g->phase_two_runs);
+    return -1;
+  }
+  if (g->example_runs > g->phase_one_runs) {
+    fmt(why, cap, "successful phase-one runs %d > phase-one runs %d", (int)g->example_runs, (int)g->phase_one_runs);
+    return -1;
+  }
+  const double sum = g->example_steps_sum;
+  const double runs = (double)g->example_runs;
+  // A sum of whole step counts, each at least the shortest one.
+  const bool stats_ok = g->example_runs == 0 ? is_zero(sum) && g->best_example_steps == 0
+                                             : isfinite(sum) && !(sum > floor(sum)) &&
+                                                   sum >= (double)g->best_example_steps * runs &&
+                                                   sum <= runs * (double)INT32_MAX;
+  if (!stats_ok) {
+    fmt(why, cap, "phase-one statistics inconsistent (%d successful runs, %.17g steps in total, shortest %d)",
+        (int)g->example_runs, sum, (int)g->best_example_steps);
+    return -1;
+  }
+  if (run_id_plus_1 < g->training_runs) {
+    fmt(why, cap, "run id %d below the %d training runs", (int)run_id_plus_1 - 1, (int)g->training_runs);
+    return -1;
+  }
+  p.run_id = run_id_plus_1 - 1;
+  *out = p;
+  return 0;
+}

@@ -1,0 +1,143 @@
+// SPDX-License-Identifier: MIT
+// The checkpoint's controller section: exact round trips, the byte layout, and every field out
+// of its documented range refused with the field named.
+#include "fw/config.h"
+#include "fw/progress.h"
+
+#include <math.h>
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <string.h>
+
+#include <cmocka.h>
+
+static fw_progress_t sample(void) {
+  fw_progress_t p;
+  memset(&p, 0, sizeof p);
+  p.task = FW_TASK_OBSTACLES;
+  p.state_dim = 4;
+  p.schedule.phase = 2;
+  p.schedule.training_runs = 42;
+  p.schedule.phase_one_runs = 30;
+  p.schedule.phase_two_runs = 12;
+  p.schedule.eval_blocks = 9;
+  p.schedule.example_runs = 27;
+  p.schedule.example_steps_sum = 27.0 * 130.0 + 17.0;
+  p.schedule.best_example_steps = 126;
+  p.run_id = 130;
+  return p;
+}
+
+static void put_u32(uint8_t* b, size_t off, uint32_t v) {
+  for (int i = 0; i < 4; ++i) {
+    b[off + (size_t)i] = (uint8_t)(v >> (8 * i));
+  }
+}
+
+// Encodes p, applies the edit (offset, 32-bit value), decodes: expects a refusal naming `what`.
+static void expect_refused(const fw_progress_t* p, size_t off, uint32_t v, const char* what) {
+  uint8_t b[FW_PROGRESS_BYTES];
+  (void)fw_progress_encode(p, b);
+  put_u32(b, off, v);
+  fw_progress_t out = sample();
+  out.run_id = -77;
+  char why[FW_PROGRESS_WHY_MAX];
+  assert_int_equal(fw_progress_decode(b, sizeof b, &out, why, sizeof why), -1);
+  if (strstr(why, what) == NULL) {
+    fail_msg("offset %zu value %u: reason '%s' does not name '%s'", off, (unsigned)v, why, what);
+  }
+  assert_int_equal(out.run_id, -77);  // untouched on failure
+}
+
+// Encode then decode gives the same values; the layout matches the header's table; a fresh
+// schedule (no run yet: run id -1) round-trips too.
+static void test_progress_round_trip_and_layout(void** state) {
+  (void)state;
+  const fw_progress_t p = sample();
+  uint8_t b[FW_PROGRESS_BYTES];
+  assert_int_equal(fw_progress_encode(&p, b), FW_PROGRESS_BYTES);
+  assert_memory_equal(b, "FWMETA01", 8);
+  assert_int_equal(b[8], 1);    // task
+  assert_int_equal(b[12], 4);   // state dimension
+  assert_int_equal(b[16], 2);   // phase
+  assert_int_equal(b[20], 42);  // training runs
+  assert_int_equal(b[52], 131); // run id + 1
+  for (size_t i = 56; i < FW_PROGRESS_BYTES; ++i) {
+    assert_int_equal(b[i], 0);
+  }
+  fw_progress_t q;
+  assert_int_equal(fw_progress_decode(b, sizeof b, &q, NULL, 0), 0);
+  assert_memory_equal(&q, &p, sizeof p);
+  fw_progress_t fresh;
+  memset(&fresh, 0, sizeof fresh);
+  fresh.task = FW_TASK_CORRIDOR;
+  fresh.state_dim = 3;
+  fresh.schedule.phase = 1;
+  fresh.run_id = -1;
+  (void)fw_progress_encode(&fresh, b);
+  assert_int_equal(fw_progress_decode(b, sizeof b, &q, NULL, 0), 0);
+  assert_memory_equal(&q, &fresh, sizeof fresh);
+}
+
+// Every field outside its documented range is refused, with the field in the reason.
+static void test_progress_out_of_range_refused(void** state) {
+  (void)state;
+  const fw_progress_t p = sample();
+  expect_refused(&p, 8, 2, "task 2");
+  expect_refused(&p, 12, 0, "state dimension 0");
+  expect_refused(&p, 12, 9, "state dimension 9");
+  expect_refused(&p, 16, 0, "phase 0");
+  expect_refused(&p, 16, 3, "phase 3");
+  expect_refused(&p, 20, 0x80000000U, "training runs 2147483648");
+  expect_refused(&p, 20, 41, "training runs 41 != phase-one runs 30 + phase-two runs 12");
+  expect_refused(&p, 32, 0xFFFFFFFFU, "evaluation blocks");
+  expect_refused(&p, 36, 31, "successful phase-one runs 31 > phase-one runs 30");
+  expect_refused(&p, 48, 200, "phase-one statistics");  // shortest × runs > sum
+  expect_refused(&p, 52, 41, "run id 40 below the 42 training runs");
+  fw_progress_t q = p;
+  q.schedule.phase = 1;
+  expect_refused(&q, 16, 1, "phase 1 with 12 phase-two runs");
+  q = p;
+  q.schedule.example_steps_sum = 3527.5;
+  expect_refused(&q, 8, 1, "phase-one statistics");
+  q.schedule.example_steps_sum = NAN;
+  expect_refused(&q, 8, 1, "phase-one statistics");
+  q.schedule.example_steps_sum = INFINITY;
+  expect_refused(&q, 8, 1, "phase-one statistics");
+  q.schedule.example_steps_sum = -1.0;
+  expect_refused(&q, 8, 1, "phase-one statistics");
+  q = p;
+  q.schedule.example_runs = 0;
+  expect_refused(&q, 8, 1, "phase-one statistics");  // no successful run but a sum and a shortest
+  // Reserved bytes, size and magic.
+  uint8_t b[FW_PROGRESS_BYTES];
+  (void)fw_progress_encode(&p, b);
+  fw_progress_t out;
+  char why[FW_PROGRESS_WHY_MAX];
+  b[80] = 1;
+  assert_int_equal(fw_progress_decode(b, sizeof b, &out, why, sizeof why), -1);
+  assert_non_null(strstr(why, "reserved byte 80"));
+  (void)fw_progress_encode(&p, b);
+  assert_int_equal(fw_progress_decode(b, sizeof b - 1U, &out, why, sizeof why), -1);
+  assert_non_null(strstr(why, "unknown format (95 bytes"));
+  b[0] = 'X';
+  assert_int_equal(fw_progress_decode(b, sizeof b, &out, why, sizeof why), -1);
+  assert_non_null(strstr(why, "other magic"));
+  // The edges of the ranges are accepted.
+  q = p;
+  q.schedule.eval_blocks = INT32_MAX;
+  q.run_id = INT32_MAX - 1;
+  (void)fw_progress_encode(&q, b);
+  assert_int_equal(fw_progress_decode(b, sizeof b, &out, why, sizeof why), 0);
+  assert_int_equal(out.run_id, INT32_MAX - 1);
+}
+
+int main(void) {
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_progress_round_trip_and_layout),
+      cmocka_unit_test(test_progress_out_of_range_refused),
+  };
+  return cmocka_run_group_tests_name("firmware.progress", tests, NULL, NULL);
+}
