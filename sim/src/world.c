@@ -465,7 +465,7 @@ static int clip_slab(double o, double d, double lo, double hi, double* s_in, dou
 double sim_world_raycast(const sim_world_t* w, double x_m, double y_m, double dir_rad, double max_range_m) {
   const double dx = cos(dir_rad);
   const double dy = sin(dir_rad);
-  double best = INFINITY;
+  double best = HUGE_VAL;
   for (size_t i = 0; i < w->n_walls; ++i) {
     // The wall's rectangle in its own (unnormalised) frame: along the face f = p1 - p0 the
     // coordinate p.f runs over [0, |f|^2]; across it, p.(fy, -fx) (into the solid, to the
