@@ -9,10 +9,14 @@ example), and writes into OUTDIR:
                       (phase one and phase two marked), the "best example" line (shortest phase-one
                       training run) and the "optimal" line (the hand-tuned reference controller),
                       as the paper's Fig. 4; successes out of 10 below
-  summary.json        every number of the plot, machine-readable
-  summary.txt         the same for people
+  summary.json        every number of the plot, the claims and who drove every run, machine-readable
+  summary.txt         the same for people: each of the paper's claims with yes/no and its numbers
+Every comparison is paired over the evaluation poses (the same 10 poses for every policy, this
+seed); a run that does not reach the goal counts at the step limit; 95 % Student-t intervals.
+One seed shows one session: the claims over 10 seeds are in docs/RESULTS.md.
 Usage:
-  b21r_learning_report.py --log LEARN.lcmlog [--optimal OPT.lcmlog] [--example EX.lcmlog] --out OUTDIR
+  b21r_learning_report.py --log LEARN.lcmlog [--optimal OPT.lcmlog] [--example EX.lcmlog]
+                          [--example-gain GAIN=EX.lcmlog ...] [--corridor-length M] --out OUTDIR
 """
 import b21r_bootstrap  # noqa: E402 (first: runs the tool in the project's venv)
 
@@ -30,6 +34,70 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from b21r_log import read_log, runs_from_experiences  # noqa: E402
+
+# Student-t quantiles for 9 degrees of freedom (10 poses): 0.95 one-sided, 0.975 two-sided.
+T95_ONE_SIDED_DF9 = 1.833
+T975_DF9 = 2.262
+SOURCE_NAMES = {0: "example", 1: "joystick", 2: "greedy", 3: "exploration", 4: "advisor"}  # experience_t.SOURCE_*
+LEARNER_SOURCES = ("greedy", "exploration")
+
+
+def paired(a, b):
+    """Paired over poses: mean of a - b, its 95 % half-width and t (df = n - 1, meant for n = 10)."""
+    d = [x - y for x, y in zip(a, b)]
+    n = len(d)
+    m = sum(d) / n
+    sd = math.sqrt(sum((x - m) ** 2 for x in d) / (n - 1)) if n > 1 else 0.0
+    se = sd / math.sqrt(n) if n > 0 else 0.0
+    t = m / se if se > 0 else (math.inf if m > 0 else (-math.inf if m < 0 else 0.0))
+    return m, T975_DF9 * se, t
+
+
+def mean_all(block):
+    """Mean steps over every pose, failures at the step limit."""
+    n = block["n_starts"]
+    return sum(block["steps"][:n]) / n
+
+
+def claims(blocks, optimal, examples, train):
+    """The paper's claims for one session, each (claim, holds, numbers). examples: {gain: block}."""
+    out = []
+    p1 = [b for b in blocks if b["phase"] == 1]
+    p2 = [b for b in blocks if b["phase"] == 2]
+    final = blocks[-1]
+    if p1 and len(blocks) > 1:
+        m, h, t = paired(p1[-1]["steps"], blocks[0]["steps"])
+        out.append(("the curve falls: after phase one significantly better than the first block",
+                    t < -T95_ONE_SIDED_DF9, "%+.1f ± %.1f steps (t = %.2f)" % (m, h, t)))
+    if examples and p1:
+        best_gain = min(examples, key=lambda g: mean_all(examples[g]))
+        best = examples[best_gain]
+        m, h, t = paired(p1[-1]["steps"], best["steps"])
+        out.append(("after phase one, at least as good as the example policy at its best gain (%s, %.1f steps), "
+                    "same poses: not significantly worse" % (best_gain, mean_all(best)),
+                    t <= T95_ONE_SIDED_DF9, "%+.1f ± %.1f steps (t = %.2f)" % (m, h, t)))
+        out.append(("after phase one, significantly better than the example policy at its best gain",
+                    t < -T95_ONE_SIDED_DF9, "%+.1f ± %.1f steps (t = %.2f)" % (m, h, t)))
+    if optimal is not None and p2:
+        m, h, t = paired(final["steps"], optimal["steps"])
+        out.append(("after phase two, not significantly worse than the optimal controller (%.1f steps)" %
+                    mean_all(optimal), t <= T95_ONE_SIDED_DF9, "%+.1f ± %.1f steps (t = %.2f)" % (m, h, t)))
+    if p1 and p2:
+        m, h, t = paired(final["steps"], p1[-1]["steps"])
+        out.append(("phase two keeps the policy: final block not significantly worse than after phase one",
+                    t <= T95_ONE_SIDED_DF9, "%+.1f ± %.1f steps (t = %.2f)" % (m, h, t)))
+    if p2:
+        reached = sum(1 for b in p2 if b["successes"] == b["n_starts"])
+        out.append(("every pose reached in every phase-two block", reached == len(p2),
+                    "%d of %d blocks" % (reached, len(p2))))
+    p2_runs = [r for r in train if r["phase"] == 2]
+    if p2_runs:
+        total = sum(sum(r["sources"].values()) for r in p2_runs)
+        learner = sum(r["sources"].get(s, 0) for r in p2_runs for s in LEARNER_SOURCES)
+        share = 100.0 * learner / total if total else 0.0
+        out.append(("phase two is driven by the learned policy: at least 95 % of its training steps greedy or "
+                    "exploration", share >= 95.0, "%.1f %% of %d steps" % (share, total)))
+    return out
 
 
 def eval_blocks(path):
@@ -49,6 +117,10 @@ def main():
     ap.add_argument("--log", required=True, help="event log of the learning run")
     ap.add_argument("--optimal", help="event log of the optimal controller's evaluation")
     ap.add_argument("--example", help="event log of the example policy's evaluation (nominal gain)")
+    ap.add_argument("--example-gain", action="append", default=[], metavar="GAIN=LOG",
+                    help="event log of the example policy evaluated at this gain (evaluate_example_gain)")
+    ap.add_argument("--corridor-length", type=float, default=10.0,
+                    help="corridor length [m], for the kinematic bound on the optimal controller")
     ap.add_argument("--out", required=True)
     ap.add_argument("--title", default="Corridor following, emulated B21r")
     args = ap.parse_args()
@@ -59,6 +131,8 @@ def main():
         sys.exit("b21r_learning_report: no B21R_EVAL in %s" % args.log)
     exps = [m for _, _, m in read_log(args.log, {"B21R_EXPERIENCE"})]
     runs = runs_from_experiences(exps)
+    for r in runs:
+        r["sources"] = {SOURCE_NAMES.get(k, str(k)): n for k, n in r["sources"].items()}
     train = [r for r in runs if not r["evaluating"]]
     p1 = [r for r in train if r["phase"] == 1]
     p1_goal = [r["steps"] for r in p1 if r["goal"]]
@@ -75,6 +149,26 @@ def main():
 
     optimal = ref(args.optimal)
     example = ref(args.example)
+    examples = {}
+    for item in args.example_gain:
+        gain, _, path = item.partition("=")
+        if not path:
+            sys.exit("b21r_learning_report: --example-gain wants GAIN=LOG, got %r" % item)
+        b = ref(path)
+        if b is not None:
+            examples[gain] = b
+    if example is not None:
+        examples.setdefault("nominal", example)
+    bound = None
+    try:
+        import b21r_learn
+        bound = list(b21r_learn.corridor_steps_lower_bound(args.corridor_length))
+    except ImportError:
+        pass
+    verdicts = claims(blocks, optimal, examples, train)
+    # Who drove each training run (the controller's experience sources).
+    drivers = [{"run_id": r["run_id"], "phase": r["phase"], "steps": r["steps"], "goal": r["goal"],
+                "sources": r["sources"]} for r in train]
     switch_after = next((b["training_runs"] for b in blocks if b["phase"] == 2), None)
     p2_blocks = [b for b in blocks if b["phase"] == 2]
     summary = {
@@ -91,6 +185,10 @@ def main():
         "experience_seq_gaps": gaps,
         "final_block": blocks[-1],
         "phase_two_all_starts_reached": bool(p2_blocks) and all(b["successes"] == b["n_starts"] for b in p2_blocks),
+        "examples_by_gain": examples,
+        "kinematic_bound_steps": bound,
+        "claims": [{"claim": c, "holds": bool(ok), "numbers": n} for c, ok, n in verdicts],
+        "training_runs_by_driver": drivers,
     }
     with open(os.path.join(args.out, "summary.json"), "w") as f:
         json.dump(summary, f, indent=2)
@@ -131,16 +229,31 @@ def main():
     if optimal is not None:
         lines.append("optimal controller: %d/%d reached, %.1f +- %.1f steps" %
                      (optimal["successes"], optimal["n_starts"], optimal["mean_steps"], optimal["ci95_halfwidth"]))
-    if example is not None:
-        lines.append("example policy (nominal gain): %d/%d reached, %.1f +- %.1f steps" %
-                     (example["successes"], example["n_starts"], example["mean_steps"], example["ci95_halfwidth"]))
-    lines.append("evaluation blocks (learning off, %d fixed start poses):" % blocks[0]["n_starts"])
+    if bound is not None and optimal is not None:
+        mb = sum(bound) / len(bound)
+        lines.append("  kinematic lower bound from the same poses: %.1f steps; the optimal controller is %.1f steps "
+                     "(%.1f %%) above it" % (mb, mean_all(optimal) - mb, 100.0 * (mean_all(optimal) / mb - 1.0)))
+    for gain, b in sorted(examples.items()):
+        lines.append("example policy (gain %s): %d/%d reached, %.1f steps (failures at the limit)" %
+                     (gain, b["successes"], b["n_starts"], mean_all(b)))
+    lines.append("evaluation blocks (learning off, %d fixed start poses; greedy policy only):" % blocks[0]["n_starts"])
     for b in blocks:
-        lines.append("  block %2d after %3d training runs, phase %d: %2d/%d reached, mean %s steps" %
-                     (b["block"], b["training_runs"], b["phase"], b["successes"], b["n_starts"],
+        lines.append("  block %2d after %3d training runs, phase %d: %2d/%d reached, %.1f steps counting failures "
+                     "at the limit, %s over reached" %
+                     (b["block"], b["training_runs"], b["phase"], b["successes"], b["n_starts"], mean_all(b),
                       "%.1f +- %.1f" % (b["mean_steps"], b["ci95_halfwidth"]) if b["successes"] else "-"))
-    lines.append("phase two reached the goal from every start in every block: %s" %
-                 ("yes" if summary["phase_two_all_starts_reached"] else "no"))
+    by_phase = {}
+    for r in train:
+        agg = by_phase.setdefault(r["phase"], {})
+        for src, n in r["sources"].items():
+            agg[src] = agg.get(src, 0) + n
+    for phase, agg in sorted(by_phase.items()):
+        tot = sum(agg.values())
+        lines.append("phase %d training steps by driver: %s" % (phase, ", ".join(
+            "%s %d (%.1f %%)" % (src, n, 100.0 * n / tot) for src, n in sorted(agg.items()))))
+    lines.append("claims (paired over the same poses, 95 %; this seed only, see docs/RESULTS.md for 10 seeds):")
+    for c, ok, n in verdicts:
+        lines.append("  %-3s %s: %s" % ("yes" if ok else "NO", c, n))
     with open(os.path.join(args.out, "summary.txt"), "w") as f:
         f.write("\n".join(lines) + "\n")
     print("\n".join(lines))

@@ -3,13 +3,15 @@
 # tools/main-job.sh — the emulated B21r learns the corridor task (README, first command).
 #
 # 1. configures and builds the release preset (only the programs this job needs);
-# 2. evaluates the two reference controllers from the 10 evaluation poses (the "optimal"
-#    hand-tuned one and the example policy at its nominal gain), each against its own emulator;
+# 2. evaluates the reference controllers from the 10 evaluation poses (the "optimal" hand-tuned
+#    one, the example policy at its nominal gain and at the gains 0.5, 1, 1.5, 2 its runs draw
+#    from), each against its own emulator;
 # 3. runs the two-phase learning with the paper's settings (30 example runs, 35 learned runs,
 #    an evaluation block of 10 fixed poses every 5 training runs, alpha 0.2, gamma 0.99) against
 #    the ODE emulator in lockstep over pseudo-terminals, printing progress as it goes;
-# 4. writes the learning curve (PNG), a summary (text and JSON), the LCM logs, the checkpoint
-#    and an overhead picture of every run into the output folder it names at the end.
+# 4. writes the learning curve (PNG), a summary (text and JSON: each of the paper's claims with
+#    yes/no and its numbers, paired over the poses, and who drove every run), the LCM logs, the
+#    checkpoint and an overhead picture of every run into the output folder it names at the end.
 # Environment: B21R_OUT (output folder, default build/main-job/<time>), B21R_SEED (default 1),
 # B21R_BASE (rflex | canopen, default rflex), B21R_JOBS (build parallelism, default 2).
 set -euo pipefail
@@ -78,15 +80,29 @@ stop_sim() {
 
 common=(--set lockstep=true --set lcm_url=none --set "seed=$seed")
 
-for policy in optimal example; do
-  say "reference: evaluating the $policy controller from the 10 evaluation poses"
-  start_sim "$policy"
-  "$controller" --endpoints "$out/$policy.endpoints" "${common[@]}" --set mode=evaluate \
-    --set "evaluate_policy=$policy" --log "$out/$policy.lcmlog" --set progress=true \
-    >"$out/$policy.progress.txt" 2>"$out/$policy.controller.log" ||
-    { cat "$out/$policy.controller.log" >&2; say "error: reference evaluation failed"; exit 1; }
-  grep EVAL "$out/$policy.progress.txt" | sed "s/^/main-job:   /"
+# reference NAME POLICY [--set ...]: one evaluation block of a reference policy, own emulator.
+reference() {
+  local name="$1" policy="$2"
+  shift 2
+  start_sim "$name"
+  "$controller" --endpoints "$out/$name.endpoints" "${common[@]}" --set mode=evaluate \
+    --set "evaluate_policy=$policy" "$@" --log "$out/$name.lcmlog" --set progress=true \
+    >"$out/$name.progress.txt" 2>"$out/$name.controller.log" ||
+    { cat "$out/$name.controller.log" >&2; say "error: reference evaluation $name failed"; exit 1; }
+  grep EVAL "$out/$name.progress.txt" | sed "s/^/main-job:   /"
   stop_sim
+}
+
+say "reference: the optimal controller from the 10 evaluation poses"
+reference optimal optimal
+say "reference: the example policy at its nominal gain (the middle of its training range)"
+reference example example
+# The examples' gains are drawn from [0.5, 2] per run: their best gain is the fair bar to beat.
+gain_args=()
+for gain in 0.5 1.0 1.5 2.0; do
+  say "reference: the example policy at gain $gain"
+  reference "example-gain-$gain" example --set "evaluate_example_gain=$gain"
+  gain_args+=(--example-gain "$gain=$out/example-gain-$gain.lcmlog")
 done
 
 say "learning: 30 example runs, then 35 runs driven by the learned policy (progress below)"
@@ -106,7 +122,7 @@ fi
 
 say "writing the learning curve and the summary"
 "$python" "$repo/tools/b21r_learning_report.py" --log "$out/learning.lcmlog" \
-  --optimal "$out/optimal.lcmlog" --example "$out/example.lcmlog" --out "$out" \
+  --optimal "$out/optimal.lcmlog" --example "$out/example.lcmlog" "${gain_args[@]}" --out "$out" \
   --title "Corridor following, emulated B21r ($base base, seed $seed)" >/dev/null
 cat "$out/summary.txt"
 say "finished in $(( $(date +%s) - start )) s"

@@ -48,7 +48,6 @@ void fuzz_loop_config(fw_config_t* cfg, bool canopen) {
   fw_config_defaults(cfg);
   cfg->lockstep = true;
   cfg->lockstep_timeout_s = 1.0;
-  cfg->lockstep_grace_s = 0.05;
   cfg->reposition = FW_REPOSITION_EMULATOR;
   strcpy(cfg->emulator_control, "fake");
   strcpy(cfg->lcm_url, "none");

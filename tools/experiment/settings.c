@@ -137,8 +137,8 @@ static int set_refs(exp_settings_t* s, const char* value, char* why, size_t cap)
     char tok[16];
     bool too_long = false;
     p = next_token(p, ',', tok, sizeof tok, &too_long);
-    if (too_long || (strcmp(tok, "optimal") != 0 && strcmp(tok, "example") != 0)) {
-      fmt(why, cap, "a comma-separated list of optimal, example (values of evaluate_policy)");
+    if (too_long || (strcmp(tok, "optimal") != 0 && strcmp(tok, "example") != 0 && strcmp(tok, "human") != 0)) {
+      fmt(why, cap, "a comma-separated list of optimal, example, human (values of evaluate_policy)");
       return -1;
     }
     if (t.n_references == EXP_MAX_REFERENCES) {
@@ -228,7 +228,7 @@ static void describe(const xkey_t* k, char* out, size_t cap) {
       snprintf(out, cap, "true or false");
       break;
     case X_REFS:
-      snprintf(out, cap, "a comma-separated list of optimal, example, or empty");
+      snprintf(out, cap, "a comma-separated list of optimal, example, human, or empty");
       break;
     case X_VARY:
       snprintf(out, cap, "KEY=V1|V2|... or empty");

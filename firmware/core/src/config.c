@@ -41,7 +41,8 @@ _Static_assert(offsetof(fw_config_t, hedger_input_scale_n) ==
 static const choice_t k_task[] = {{"corridor", FW_TASK_CORRIDOR}, {"obstacles", FW_TASK_OBSTACLES}, {NULL, 0}};
 static const choice_t k_mode[] = {{"learn", FW_MODE_LEARN}, {"evaluate", FW_MODE_EVALUATE}, {NULL, 0}};
 static const choice_t k_eval_policy[] = {
-    {"learned", FW_EVAL_LEARNED}, {"example", FW_EVAL_EXAMPLE}, {"optimal", FW_EVAL_OPTIMAL}, {NULL, 0}};
+    {"learned", FW_EVAL_LEARNED}, {"example", FW_EVAL_EXAMPLE}, {"optimal", FW_EVAL_OPTIMAL},
+    {"human", FW_EVAL_HUMAN},   {NULL, 0}};
 static const choice_t k_baud_laser[] = {
     {"9600", 9600}, {"19200", 19200}, {"38400", 38400}, {"500000", 500000}, {NULL, 0}};
 static const choice_t k_fov[] = {{"180", 180}, {"100", 100}, {NULL, 0}};
@@ -65,7 +66,8 @@ static const key_desc_t k_keys[] = {
   {NULL, "mode", KIND_ENUM, OFF(mode), 0, 0, false, false, k_mode, "learn",
    "learn: the two-phase schedule; evaluate: one evaluation block of evaluate_policy, then exit"},
   {NULL, "evaluate_policy", KIND_ENUM, OFF(evaluate_policy), 0, 0, false, false, k_eval_policy, "learned",
-   "policy evaluated when mode = evaluate (optimal = the hand-tuned reference controller)"},
+   "policy evaluated when mode = evaluate (optimal = the hand-tuned reference controller; human = the "
+   "simulated human driver)"},
   {NULL, "evaluate_example_gain", KIND_DOUBLE, OFF(evaluate_example_gain), 0, 100, false, false, NULL, "0",
    "evaluate_policy = example: the example policy's gain [1/s] (0 = the middle of its training range)"},
   {NULL, "seed", KIND_U64, OFF(seed), 0, 9.2e18, false, false, NULL, "1",
@@ -78,9 +80,9 @@ static const key_desc_t k_keys[] = {
    "control rate; absolute deadlines on the monotonic clock"},
   {NULL, "lockstep", KIND_BOOL, OFF(lockstep), 0, 0, false, false, NULL, "false",
    "tick when the emulator's data for the next period has arrived instead of on the clock"},
-  {NULL, "lockstep_timeout_s", KIND_DOUBLE, OFF(lockstep_timeout_s), 0.01, 60, false, false, NULL, "5",
+  {NULL, "lockstep_timeout_s", KIND_DOUBLE, OFF(lockstep_timeout_s), 0.01, 600, false, false, NULL, "30",
    "lockstep: a device silent this long (wall clock) ends the loop with status 5; the tick never runs without "
-   "the period's data"},
+   "the period's data (generous: a loaded machine may stall the emulator for seconds)"},
 
   {"Devices", "laser_device", KIND_STRING, OFF(laser_device), 0, 0, false, false, NULL, "/dev/ttyUSB0",
    "serial device of the SICK LMS200"},

@@ -30,9 +30,16 @@ bool fw_run_observe(fw_loop_t* L) {
 static const char* run_kind_name(const fw_loop_t* L) {
   if (L->plan.kind == FW_RUN_EVAL) {
     if (L->cfg.mode == FW_MODE_EVALUATE) {
-      return L->cfg.evaluate_policy == FW_EVAL_OPTIMAL ? "eval(optimal)"
-                                                         : (L->cfg.evaluate_policy == FW_EVAL_EXAMPLE ? "eval(example)"
-                                                                                                      : "eval(learned)");
+      switch (L->cfg.evaluate_policy) {
+        case FW_EVAL_OPTIMAL:
+          return "eval(optimal)";
+        case FW_EVAL_EXAMPLE:
+          return "eval(example)";
+        case FW_EVAL_HUMAN:
+          return "eval(human)";
+        default:
+          return "eval(learned)";
+      }
     }
     return "eval";
   }
@@ -57,6 +64,8 @@ static void begin_run(fw_loop_t* L) {
   tasks_driver_kind_t kind = TASKS_DRIVER_PROPORTIONAL;
   if (L->cfg.mode == FW_MODE_EVALUATE && L->cfg.evaluate_policy == FW_EVAL_OPTIMAL) {
     kind = TASKS_DRIVER_OPTIMAL;
+  } else if (L->cfg.mode == FW_MODE_EVALUATE && L->cfg.evaluate_policy == FW_EVAL_HUMAN) {
+    kind = TASKS_DRIVER_HUMAN;
   } else if (L->cfg.phase_driver == FW_DRIVER_HUMAN && L->plan.kind == FW_RUN_TRAINING && L->plan.phase == 1) {
     kind = TASKS_DRIVER_HUMAN;
   }

@@ -53,6 +53,24 @@ features_pose_t tasks_corridor_eval_start(const tasks_corridor_spec_t* spec, uin
   return spec->eval_starts[index % TASKS_N_EVAL_STARTS];
 }
 
+uint32_t tasks_corridor_steps_lower_bound(const tasks_corridor_spec_t* spec, features_pose_t start) {
+  const double goal_x = spec->length_m - spec->goal_distance_m;
+  const double turn = spec->omega_max_radps * spec->dt_s;
+  const double advance = spec->v_centre_mps * spec->dt_s;
+  double x = start.x_m;
+  double heading = fabs(features_angle_wrap(start.theta_rad));
+  uint32_t steps = 0U;
+  // |heading| cannot fall faster than omega_max: cos of the turned heading bounds each step's
+  // progress along the axis. advance > 0 (a valid spec), so the loop ends; 1 µm absorbs the
+  // rounding of the summed advances.
+  while (x < goal_x - 1e-6 && advance > 0.0) {
+    heading = heading > turn ? heading - turn : 0.0;
+    x += advance * cos(heading);
+    ++steps;
+  }
+  return steps;
+}
+
 // Offset of a jittered pose from its base, normalised by the jitter box (max norm).
 static double jitter_norm(double dx, double dy, double dth, double jx, double jy, double jth) {
   double n = 0.0;

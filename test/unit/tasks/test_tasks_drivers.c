@@ -74,6 +74,10 @@ static void run_batch(tasks_task_t task, tasks_driver_kind_t kind, int seeds,
                r.reason, r.steps, r.final_x_m, r.final_y_m);
       }
       assert_int_equal(r.reason, TASKS_END_GOAL);
+      if (task == TASKS_TASK_CORRIDOR) {
+        // No driver beats the kinematic bound from its pose (tasks_corridor_steps_lower_bound).
+        assert_true(r.steps >= tasks_corridor_steps_lower_bound(&cs, tasks_corridor_eval_start(&cs, i)));
+      }
       assert_true(r.steps <= (task == TASKS_TASK_CORRIDOR ? cs.step_limit : os.step_limit));
       assert_true(r.return_sum == (task == TASKS_TASK_CORRIDOR ? cs.goal_reward : os.goal_reward));
       assert_true(b->n < MAX_RUNS);

@@ -263,6 +263,27 @@ static void test_specs_speed_policies_follow_documented_curve(void** state) {
 }
 
 // Everything here is allocation-free.
+// The corridor's kinematic bound by hand: straight on the axis from x = 0, 9 m at 0.06 m per step
+// is 150 steps; a heading of 0.5 rad costs more, whatever its sign; at the goal it is 0.
+static void test_specs_corridor_lower_bound_by_hand(void** state) {
+  (void)state;
+  tasks_corridor_spec_t cs;
+  tasks_corridor_spec_default(&cs);
+  const features_pose_t straight = {0.0, 0.0, 0.0};
+  assert_int_equal(tasks_corridor_steps_lower_bound(&cs, straight), 150U);
+  const features_pose_t left = {0.0, 0.3, 0.5}, right = {0.0, -0.3, -0.5};
+  const uint32_t bl = tasks_corridor_steps_lower_bound(&cs, left);
+  assert_true(bl > 150U && bl < 155U);
+  assert_int_equal(tasks_corridor_steps_lower_bound(&cs, right), bl);
+  const features_pose_t at_goal = {cs.length_m - cs.goal_distance_m, 0.0, 1.0};
+  assert_int_equal(tasks_corridor_steps_lower_bound(&cs, at_goal), 0U);
+  for (uint32_t i = 0U; i < TASKS_N_EVAL_STARTS; ++i) {
+    const features_pose_t p = tasks_corridor_eval_start(&cs, i);
+    assert_true(tasks_corridor_steps_lower_bound(&cs, p) <=
+                (uint32_t)ceil((cs.length_m - cs.goal_distance_m - p.x_m) / (cs.v_centre_mps * cs.dt_s)) + 1U);
+  }
+}
+
 static void test_specs_no_allocation(void** state) {
   (void)state;
   tasks_corridor_spec_t c;
@@ -288,6 +309,7 @@ int main(void) {
       cmocka_unit_test(test_specs_corridor_outcome_hand_built),
       cmocka_unit_test(test_specs_obstacles_outcome_hand_built),
       cmocka_unit_test(test_specs_speed_policies_follow_documented_curve),
+      cmocka_unit_test(test_specs_corridor_lower_bound_by_hand),
       cmocka_unit_test(test_specs_no_allocation),
   };
   return cmocka_run_group_tests_name("tasks.specs", tests, NULL, NULL);

@@ -30,6 +30,7 @@ from ._core import (  # noqa: E402  (after the package path is complete)
     HedgerError,
     Prediction,
     controller_learner_config,
+    corridor_steps_lower_bound,
     mean_ci95,
     read_checkpoint,
 )
@@ -46,6 +47,7 @@ __all__ = [
     "POINT_PROTECTED",
     "Prediction",
     "controller_learner_config",
+    "corridor_steps_lower_bound",
     "mean_ci95",
     "read_checkpoint",
     "register_envs",

@@ -651,6 +651,19 @@ nb::dict controller_learner_config(const std::string& task, const nb::dict& sett
 }
 
 // Mean and 95 % half-width (Student t) of a sample, as the controller's evaluation blocks report.
+// The corridor's kinematic lower bound on the steps to the goal from each evaluation pose, for a
+// corridor of length_m (the other settings at their defaults, as the controller uses them).
+std::vector<uint32_t> corridor_steps_lower_bound(double length_m) {
+  tasks_corridor_spec_t spec;
+  tasks_corridor_spec_default(&spec);
+  spec.length_m = length_m;
+  std::vector<uint32_t> out;
+  for (uint32_t i = 0; i < TASKS_N_EVAL_STARTS; ++i) {
+    out.push_back(tasks_corridor_steps_lower_bound(&spec, tasks_corridor_eval_start(&spec, i)));
+  }
+  return out;
+}
+
 nb::tuple mean_ci95(const std::vector<double>& values) {
   double mean = 0.0, half = 0.0;
   fw_mean_ci95(values.data(), static_cast<int32_t>(values.size()), &mean, &half);
@@ -725,5 +738,8 @@ NB_MODULE(_core, m) {
   m.def("read_checkpoint", &read_checkpoint, "path"_a);
   m.def("mean_ci95", &mean_ci95, "values"_a,
         "(mean, 95 % half-width) with Student's t, as the controller's evaluation blocks report them.");
+  m.def("corridor_steps_lower_bound", &corridor_steps_lower_bound, "length_m"_a = 10.0,
+        "Per evaluation pose: fewest steps any policy can need to reach the corridor's goal, from "
+        "kinematics (tasks_corridor_steps_lower_bound).");
   m.def("controller_learner_config", &controller_learner_config, "task"_a, "settings"_a = nb::dict());
 }

@@ -72,6 +72,7 @@ typedef enum fw_eval_policy {
   FW_EVAL_LEARNED = 0,   ///< HEDGER greedy (from the checkpoint)
   FW_EVAL_EXAMPLE = 1,   ///< the example policy at its nominal gain
   FW_EVAL_OPTIMAL = 2,   ///< the hand-tuned reference controller (the paper's "optimal" line)
+  FW_EVAL_HUMAN = 3,     ///< the simulated sloppy human driver (phase_one_driver = human's examples)
 } fw_eval_policy_t;
 
 /// Where each key was last set, for error messages: not a setting (fw_config_print() ignores it,

@@ -107,6 +107,15 @@ void tasks_corridor_features_config(const tasks_corridor_spec_t* spec,
 /// Evaluation start pose `index` (0..TASKS_N_EVAL_STARTS-1; other values are taken modulo 10).
 features_pose_t tasks_corridor_eval_start(const tasks_corridor_spec_t* spec, uint32_t index);
 
+/// Lower bound on the steps any policy needs from `start` to the goal (end_distance_m <=
+/// goal_distance_m), from kinematics alone: the robot runs at v_centre_mps from the first step
+/// (no acceleration limit, no slow-down near a wall) and turns toward the corridor's axis at
+/// omega_max_radps, each step advancing as if its heading were already the turned one. Every
+/// constraint is relaxed, so no policy on the emulated or the real base does better (sensing
+/// noise aside: the goal is declared from laser features). Used to check the "optimal"
+/// reference controller. Returns 0 when start is already at the goal. O(returned steps).
+uint32_t tasks_corridor_steps_lower_bound(const tasks_corridor_spec_t* spec, features_pose_t start);
+
 /// A training start pose: evaluation pose k (uniform) plus a uniform offset in the jitter box,
 /// redrawn until its normalised size max(|dx|/jx, |dy|/jy, |dth|/jth) is >= 0.25 (never the
 /// evaluation pose itself) and the robot stays at least robot_radius + 0.1 m from the walls.
