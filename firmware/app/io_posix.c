@@ -182,6 +182,14 @@ int io_posix_open(io_posix_t* io, const fw_config_t* cfg, char* err, size_t err_
   lc.width_deg = (uint16_t)cfg->laser_fov_deg;
   lc.res_cdeg = (uint16_t)cfg->laser_resolution_cdeg;
   lc.unit = LMS_UNIT_MM;
+  if (cfg->lockstep) {
+    // In lockstep a quiet stream means the emulator has not been scheduled (a loaded machine can
+    // stall it for seconds), not a lost scanner: restarting the stream mid-period desynchronises
+    // the lockstep. The loop decides silence there (lockstep_timeout_s ends it, naming the
+    // device), so the driver's own stream timeout waits a second longer.
+    const double s_us = (cfg->lockstep_timeout_s + 1.0) * 1e6;
+    lc.stream_timeout_us = s_us < 4.0e9 ? (uint32_t)s_us : 4000000000U;
+  }
   if (drv_lms_init(&io->lms, &io->laser_port, &lc) != 0) {
     snprintf(err, err_cap, "laser: invalid driver settings (baud %d, %d deg, %d cdeg)", (int)cfg->laser_baud,
              (int)cfg->laser_fov_deg, (int)cfg->laser_resolution_cdeg);

@@ -2,27 +2,54 @@
 # SPDX-License-Identifier: MIT
 """firmware.determinism_<base>: the same run twice (fresh emulator, same seeds, lockstep) gives
 bit-identical experience streams: the controller's --experience-log files are byte-identical
-(SHA-256), and a different controller seed gives a different stream.
+(SHA-256), and a different controller seed gives a different stream. A third run of the same
+seed has its emulator frozen (SIGSTOP) for 2.5 s twice, as a loaded machine may stall it: lockstep
+does not depend on wall time, so the stream is identical again and the laser was never restarted.
 usage: test_determinism.py CONTROLLER SIM WORLD rflex|canopen"""
 import hashlib
 import os
+import signal
 import sys
+import threading
+import time
 
 import fwtest
 from b21r_log import experience_gaps, read_log
 
 
-def one_run(controller, sim_exe, world, base, d, name, seed):
+def freeze(proc, stop, times, at_s=1.0, for_s=2.5):
+    """Freezes the emulator process `times` times for for_s seconds each, at_s apart."""
+    for _ in range(times):
+        if stop.wait(at_s):
+            return
+        proc.send_signal(signal.SIGSTOP)
+        time.sleep(for_s)
+        proc.send_signal(signal.SIGCONT)
+
+
+def one_run(controller, sim_exe, world, base, d, name, seed, stalls=0):
     sim = fwtest.Sim(sim_exe, world, d, name, base=base, seed=1)
+    stop = threading.Event()
+    staller = threading.Thread(target=freeze, args=(sim.proc, stop, stalls)) if stalls else None
     try:
+        if staller is not None:
+            staller.start()
         exp = os.path.join(d, name + ".experiences.lcmlog")
         settings = {"phase_one_runs": 3, "phase_two_runs": 2, "eval_every_runs": 5, "eval_starts": 2,
                     "seed": seed, "experience_log_file": exp}
-        rc, err, _ = fwtest.run_controller(controller, sim, d, name, settings, timeout=300)
+        rc, err, log = fwtest.run_controller(controller, sim, d, name, settings, timeout=300)
         if rc != 0:
             fwtest.fail("%s: controller exit status %d:\n%s" % (name, rc, err))
     finally:
+        stop.set()
+        if staller is not None:
+            staller.join()
+            sim.proc.send_signal(signal.SIGCONT)
         sim.close()
+    status = [m for _, _, m in read_log(log, {"B21R_STATUS"})]
+    if not status or status[-1].laser_restarts != 0:
+        fwtest.fail("%s: the laser stream was restarted (%s times)" % (
+            name, status[-1].laser_restarts if status else "no STATUS:"))
     with open(exp, "rb") as f:
         digest = hashlib.sha256(f.read()).hexdigest()
     exps = [m for _, _, m in read_log(exp)]
@@ -40,8 +67,11 @@ def main():
         a = one_run(controller, sim_exe, world, base, d, "first", 7)
         b = one_run(controller, sim_exe, world, base, d, "second", 7)
         c = one_run(controller, sim_exe, world, base, d, "other-seed", 8)
+        frozen = one_run(controller, sim_exe, world, base, d, "emulator-frozen", 7, stalls=2)
         if a != b:
             fwtest.fail("the same run twice gave different experience streams")
+        if frozen != a:
+            fwtest.fail("freezing the emulator changed the experience stream")
         if a == c:
             fwtest.fail("a different seed gave the same stream (the seed is not used?)")
         ok = True
