@@ -4,13 +4,17 @@
 --experience-log files) into Python objects, and check an experience stream for gaps.
 
 Library use:
-    from b21r_log import read_log, experience_gaps, runs_from_experiences
+    from b21r_log import read_log, experience_gaps, runs_from_experiences, runs_from_records, read_config
     events = read_log("run.lcmlog")            # [(timestamp_us, channel, decoded message), ...]
 Command line:
-    b21r_log.py FILE [--channel B21R_EVAL] [--gaps] [--runs]
+    b21r_log.py FILE [--channel B21R_EVAL] [--gaps] [--runs] [--config]
       --gaps   count the experiences and list the sequence gaps (exit status 1 when any)
-      --runs   one line per run from B21R_EXPERIENCE; when experiences are missing a warning
-               comes first and the runs it touches are marked (their numbers are lower bounds)
+      --runs   one line per run: from its B21R_RUN end record when the log has them (end reason,
+               steps by driver, return), else from B21R_EXPERIENCE; when experiences are missing
+               a warning comes first and the runs it touches are marked
+      --config print the controller's effective configuration (B21R_CONFIG) and its limits
+The controller's --log file stamps events with the wall clock (the controller's own time, which
+is simulated in lockstep, is each message's utime); its --experience-log file with utime.
 Messages are decoded by their LCM type fingerprint, so every type of the project is read
 whatever the channel is called. A controller restart inside one recording (seq starting again
 at 0) begins a new segment and is not counted as a gap.
@@ -22,6 +26,7 @@ import b21r_bootstrap  # noqa: E402 (first: runs the tool in the project's venv)
 b21r_bootstrap.ensure()
 
 import argparse
+import bisect
 import signal
 import sys
 
@@ -115,6 +120,59 @@ def runs_from_experiences(experiences):
     return runs
 
 
+END_NAMES = {0: "goal", 1: "collision", 2: "step limit", 3: "stopped", 4: "shutdown"}
+SOURCE_NAMES = ("example", "joystick", "greedy", "exploration", "advisor")
+
+
+def runs_from_records(records, experiences=()):
+    """One dict per B21R_RUN end record, in order: run_id, phase, evaluating, steps, end (END_NAMES),
+    detail, return, sources ({source name: steps}), start (x, y, theta), experiences (as the
+    controller produced them), received (experiences of the run present in `experiences`) and
+    complete: False when fewer were received than produced (only judged when experiences are
+    given). A controller restart (seq of 0 again) starts a new segment of run ids."""
+    present = {}
+    segment = 0
+    prev = None
+    for e in experiences:
+        if prev is not None and e.seq == 0 and prev.seq > 0:
+            segment += 1
+        # Experiences of a run lie in [first_seq, first_seq + experiences): count by seq range.
+        present.setdefault(segment, []).append(e.seq)
+        prev = e
+    seqs = {k: sorted(set(v)) for k, v in present.items()}
+    runs = []
+    segment = 0
+    prev_id = None
+    for r in records:
+        if prev_id is not None and r.first_seq == 0 and r.run_id <= prev_id:
+            segment += 1
+        prev_id = r.run_id
+        received = None
+        if experiences:
+            s = seqs.get(segment, [])
+            received = bisect.bisect_left(s, r.first_seq + r.experiences) - bisect.bisect_left(s, r.first_seq)
+        runs.append({"run_id": r.run_id, "phase": r.phase, "evaluating": r.kind == 1, "steps": r.steps,
+                     "end": END_NAMES.get(r.end_reason, str(r.end_reason)), "detail": r.detail,
+                     "return": r.total_reward,
+                     "sources": {SOURCE_NAMES[i]: n for i, n in enumerate(r.steps_by_source) if n},
+                     "start": (r.start_x_m, r.start_y_m, r.start_theta_rad), "experiences": r.experiences,
+                     "received": received, "complete": received is None or received == r.experiences})
+    return runs
+
+
+def read_config(path):
+    """The controller's B21R_CONFIG of the log (the first one) as (settings dict, message), or
+    (None, None) when the log has none."""
+    for _, _, m in read_log(path, {"B21R_CONFIG"}):
+        settings = {}
+        for line in m.text.splitlines():
+            key, sep, value = line.partition(" = ")
+            if sep:
+                settings[key] = value.strip('"')
+        return settings, m
+    return None, None
+
+
 def missing_runs(experiences):
     """Run ids of which no experience at all is present (run ids count every run, training and
     evaluation, from 0 per controller process or from the checkpoint's count)."""
@@ -133,15 +191,31 @@ def main():
     ap.add_argument("log")
     ap.add_argument("--channel", action="append", help="only this channel (repeatable)")
     ap.add_argument("--gaps", action="store_true", help="check B21R_EXPERIENCE for sequence gaps")
-    ap.add_argument("--runs", action="store_true", help="one line per run from B21R_EXPERIENCE")
+    ap.add_argument("--runs", action="store_true",
+                    help="one line per run (from B21R_RUN when present, else from B21R_EXPERIENCE)")
+    ap.add_argument("--config", action="store_true", help="print the controller's configuration (B21R_CONFIG)")
     args = ap.parse_args()
     try:
-        if args.gaps or args.runs:
-            exps = [m for _, _, m in read_log(args.log, {"B21R_EXPERIENCE"})]
+        if args.config:
+            settings, msg = read_config(args.log)
+        elif args.gaps or args.runs:
+            events = read_log(args.log, {"B21R_EXPERIENCE", "B21R_RUN"})
+            exps = [m for _, ch, m in events if isinstance(m, b21r.experience_t)]
+            records = [m for _, ch, m in events if isinstance(m, b21r.run_t)]
         else:
             events = read_log(args.log, set(args.channel) if args.channel else None)
     except IOError as exc:
         sys.exit("b21r_log: cannot read %s: %s" % (args.log, exc))
+    if args.config:
+        if msg is None:
+            sys.exit("b21r_log: %s has no B21R_CONFIG (recorded by controllers that publish it at start)" % args.log)
+        print("# limits: translation %g m/s (%g m/s^2), rotation %g rad/s (%g rad/s^2), teleop timeout %g s, "
+              "%g Hz, step limit %d%s" % (msg.max_translation_mps, msg.max_translation_accel_mps2,
+                                          msg.max_rotation_radps, msg.max_rotation_accel_radps2,
+                                          msg.teleop_timeout_s, msg.tick_rate_hz, msg.step_limit,
+                                          ", lockstep" if msg.lockstep else ""))
+        sys.stdout.write(msg.text)
+        return 0
     if not (args.gaps or args.runs):
         for t, ch, m in events:
             fields = {k: getattr(m, k) for k in m.__slots__}
@@ -151,7 +225,20 @@ def main():
     if args.gaps:
         print("%d experiences, %d gaps, %d missing%s" % (len(exps), len(gaps), missing_count(gaps),
                                                         (": %s" % gaps[:10]) if gaps else ""))
-    if args.runs:
+    if args.runs and records:
+        runs = runs_from_records(records, exps)
+        incomplete = [r for r in runs if not r["complete"]]
+        if gaps or incomplete:
+            print("warning: this log is missing %d experiences in %d gaps; %d run(s) marked * lack experiences "
+                  "(their end records are complete)" % (missing_count(gaps), len(gaps), len(incomplete)),
+                  file=sys.stderr)
+            sys.stderr.flush()
+        for r in runs:
+            print("run %4d phase %d %-5s %4d steps %-10s return %8.2f  %s%s" % (
+                r["run_id"], r["phase"], "eval" if r["evaluating"] else "train", r["steps"], r["end"], r["return"],
+                " ".join("%s %d" % kv for kv in r["sources"].items()),
+                "" if r["complete"] else "  * %d of %d experiences present" % (r["received"], r["experiences"])))
+    elif args.runs:
         runs = runs_from_experiences(exps)
         incomplete = [r for r in runs if not r["complete"]]
         lost_runs = missing_runs(exps)

@@ -39,6 +39,9 @@ from matplotlib.lines import Line2D  # noqa: E402
 from b21r import experience_t  # noqa: E402
 from b21r_log import read_log  # noqa: E402
 
+# B21R_RUN end_reason -> the names below ("stopped": a safety stop or pause, "shutdown").
+RUN_END_NAMES = {0: "goal", 1: "collision", 2: "limit", 3: "stopped", 4: "shutdown"}
+
 # The corridor task's defaults (lib/tasks tasks_corridor_spec_default, features/corridor.h).
 CORRIDOR = {"length_m": 10.0, "width_m": 2.0, "goal_distance_m": 1.0, "lookahead_m": 2.0}
 COLOUR_SPAN = 0.9  # use viridis[0, 0.9]: its last tenth is too pale on white
@@ -57,7 +60,7 @@ class Run:
         self.evaluating = None
         self.first_state = None
         self.task = None
-        self.end = None       # "goal", "collision", "limit" (ended otherwise) or None (no experience)
+        self.end = None       # "goal", "collision", "limit", "stopped", "shutdown" or None (unknown)
         self.block = None
 
     def path(self, frame):
@@ -94,7 +97,8 @@ def load(path):
     runs = {}
     order = []
     evals = []
-    for _, ch, m in read_log(path, {"B21R_POSE", "B21R_EXPERIENCE", "B21R_EVAL"}):
+    records = {}
+    for _, ch, m in read_log(path, {"B21R_POSE", "B21R_EXPERIENCE", "B21R_EVAL", "B21R_RUN"}):
         if ch == "B21R_EVAL":
             evals.append(m)
             continue
@@ -106,6 +110,8 @@ def load(path):
             order.append(m.run_id)
         if ch == "B21R_POSE":
             r.poses.append((m.step_id, m.x_m, m.y_m, m.theta_rad))
+        elif ch == "B21R_RUN":
+            records[m.run_id] = m
         else:
             if r.phase is None:
                 r.phase, r.evaluating, r.task = m.phase, bool(m.evaluating), m.task
@@ -115,6 +121,12 @@ def load(path):
                 r.end = "goal" if m.reward > 0 else "collision"
             elif r.end is None:
                 r.end = "limit"
+    # The controller's end records (B21R_RUN), where the log has them, are the authority: they also
+    # describe runs that ended without a terminal state or whose experiences are missing.
+    for run_id, m in records.items():
+        r = runs[run_id]
+        r.phase, r.evaluating, r.task = m.phase, m.kind == 1, m.task
+        r.end = RUN_END_NAMES.get(m.end_reason, "limit")
     out = [runs[i] for i in order if runs[i].poses]
     for r in out:
         r.poses.sort()

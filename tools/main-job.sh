@@ -12,8 +12,14 @@
 # 4. writes the learning curve (PNG), a summary (text and JSON: each of the paper's claims with
 #    yes/no and its numbers, paired over the poses, and who drove every run), the LCM logs, the
 #    checkpoint and an overhead picture of every run into the output folder it names at the end.
+# The controllers publish on LCM on this host only (udpm with ttl=0), so the run can be watched
+# with lcm-spy (tools/b21r-lcm-spy) or recorded with lcm-logger while it learns; without a
+# multicast route the job says so and runs with LCM off.
 # Environment: B21R_OUT (output folder, default build/main-job/<time>), B21R_SEED (default 1),
-# B21R_BASE (rflex | canopen, default rflex), B21R_JOBS (build parallelism, default 2).
+# B21R_BASE (rflex | canopen, default rflex), B21R_JOBS (build parallelism, default 2),
+# B21R_LCM_URL (default udpm://239.255.76.67:7667?ttl=0; "none" = LCM off),
+# B21R_REALTIME_FACTOR (lockstep pace cap, default 0 = as fast as possible; e.g. 20 lets
+# lcm-logger over UDP keep up).
 set -euo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$repo"
@@ -78,7 +84,15 @@ stop_sim() {
   sim_pid=""
 }
 
-common=(--set lockstep=true --set lcm_url=none --set "seed=$seed")
+lcm_url="${B21R_LCM_URL:-udpm://239.255.76.67:7667?ttl=0}"
+if [[ "$lcm_url" != none ]] && ! "$python" -c 'import sys, lcm; lcm.LCM(sys.argv[1])' "$lcm_url" 2>/dev/null; then
+  say "note: LCM cannot open $lcm_url (no multicast route? e.g. ip route add 224.0.0.0/4 dev lo);"
+  say "      running with LCM off (the --log files still record everything)"
+  lcm_url=none
+fi
+[[ "$lcm_url" != none ]] && say "live: lcm-spy or lcm-logger on $lcm_url (LCM_DEFAULT_URL='$lcm_url')"
+common=(--set lockstep=true --set "lcm_url=$lcm_url" --set "seed=$seed"
+        --set "lockstep_realtime_factor=${B21R_REALTIME_FACTOR:-0}")
 
 # reference NAME POLICY [--set ...]: one evaluation block of a reference policy, own emulator.
 reference() {

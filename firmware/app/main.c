@@ -48,15 +48,17 @@ static void usage(FILE* f) {
           "                          can=... control=...') or a file holding it; sets the device\n"
           "                          paths, reposition = emulator and base_write_gap_us = 0\n"
           "  --checkpoint FILE       same as --set checkpoint_file=FILE\n"
-          "  --log FILE              same as --set log_file=FILE (LCM event log, every channel)\n"
+          "  --log FILE              same as --set log_file=FILE (LCM event log of every channel, the\n"
+          "                          operator's TELEOP/COMMAND and B21R_CONFIG; wall-clock timestamps)\n"
           "  --experience-log FILE   same as --set experience_log_file=FILE\n"
           "  --print-config          print the effective settings and exit\n"
           "  --print-reference-config  print every key, its allowed values and its default\n"
           "  --help                  this text\n"
           "\n"
-          "LCM channels: publishes B21R_EXPERIENCE, B21R_STATUS, B21R_POSE, B21R_EVAL (B21R_SCAN with\n"
-          "publish_scan = true); listens to B21R_TELEOP (joystick with deadman) and B21R_COMMAND\n"
-          "(START_PHASE_TWO, CONFIRM_START_POSE, PAUSE, RESUME, SHUTDOWN).\n"
+          "LCM channels: publishes B21R_CONFIG (once), B21R_EXPERIENCE, B21R_RUN (one per run end),\n"
+          "B21R_STATUS, B21R_POSE, B21R_EVAL (B21R_SCAN with publish_scan = true); listens to\n"
+          "B21R_TELEOP (joystick with deadman) and B21R_COMMAND (START_PHASE_TWO, CONFIRM_START_POSE,\n"
+          "PAUSE, RESUME, SHUTDOWN).\n"
           "Exit status: 0 schedule done or SHUTDOWN; 2 usage or configuration error; 3 checkpoint\n"
           "refused; 4 a device did not start; 128+N after signal N (the base is stopped and braked\n"
           "and the learned state saved first).\n");
@@ -67,20 +69,23 @@ static void usage(FILE* f) {
 typedef struct receiver {
   lcm_t* lcm;
   fw_loop_t* loop;
+  fw_publisher_t* pub;  // records what the operator sent in the --log file
+  b21r_teleop_t_subscription_t* teleop_sub;
+  b21r_command_t_subscription_t* command_sub;
   atomic_bool stop;
   pthread_t thread;
 } receiver_t;
 
 static void on_teleop(const lcm_recv_buf_t* rbuf, const char* channel, const b21r_teleop_t* msg, void* user) {
-  (void)rbuf;
-  (void)channel;
-  fw_loop_post_teleop(((receiver_t*)user)->loop, msg, io_posix_now_us());
+  receiver_t* r = (receiver_t*)user;
+  fw_loop_post_teleop(r->loop, msg, io_posix_now_us());
+  fw_publisher_record(r->pub, channel, rbuf->data, rbuf->data_size);
 }
 
 static void on_command(const lcm_recv_buf_t* rbuf, const char* channel, const b21r_command_t* msg, void* user) {
-  (void)rbuf;
-  (void)channel;
-  fw_loop_post_command(((receiver_t*)user)->loop, msg, io_posix_now_us());
+  receiver_t* r = (receiver_t*)user;
+  fw_loop_post_command(r->loop, msg, io_posix_now_us());
+  fw_publisher_record(r->pub, channel, rbuf->data, rbuf->data_size);
 }
 
 static void* receiver_main(void* arg) {
@@ -157,7 +162,7 @@ int main(int argc, char** argv) {
       return EXIT_USAGE;
     }
   }
-  if (fw_config_validate(&cfg, err, sizeof err) != 0) {
+  if (fw_config_validate_program(&cfg, err, sizeof err) != 0) {
     fprintf(stderr, "b21r-controller: %s\n", err);
     return EXIT_USAGE;
   }
@@ -201,7 +206,8 @@ int main(int argc, char** argv) {
     return EXIT_DEVICE;
   }
   const fw_io_t binding = io_posix_binding(&io);
-  const fw_loop_outputs_t out = {.queue = q, .notify = publisher_notify, .notify_user = pub, .checkpoints = NULL};
+  const fw_loop_outputs_t out = {
+      .queue = q, .notify = publisher_notify, .notify_user = pub, .checkpoints = NULL, .publisher = pub};
   fw_loop_t* loop = fw_loop_create(&cfg, &binding, &out, err, sizeof err);
   if (loop == NULL) {
     fprintf(stderr, "b21r-controller: %s\n", err);
@@ -236,12 +242,12 @@ int main(int argc, char** argv) {
     fprintf(stderr, "b21r-controller: warning: checkpoint_file is not set: learned data is lost at exit\n");
   }
 
-  receiver_t rx = {.lcm = lcm, .loop = loop};
+  receiver_t rx = {.lcm = lcm, .loop = loop, .pub = pub};
   atomic_init(&rx.stop, false);
   bool rx_running = false;
   if (status == 0 && lcm != NULL) {
-    b21r_teleop_t_subscribe(lcm, "B21R_TELEOP", on_teleop, &rx);
-    b21r_command_t_subscribe(lcm, "B21R_COMMAND", on_command, &rx);
+    rx.teleop_sub = b21r_teleop_t_subscribe(lcm, "B21R_TELEOP", on_teleop, &rx);
+    rx.command_sub = b21r_command_t_subscribe(lcm, "B21R_COMMAND", on_command, &rx);
     rx_running = pthread_create(&rx.thread, NULL, receiver_main, &rx) == 0;
   }
 
@@ -268,6 +274,12 @@ int main(int argc, char** argv) {
   if (rx_running) {
     atomic_store(&rx.stop, true);
     pthread_join(rx.thread, NULL);
+  }
+  if (rx.teleop_sub != NULL) {
+    b21r_teleop_t_unsubscribe(lcm, rx.teleop_sub);
+  }
+  if (rx.command_sub != NULL) {
+    b21r_command_t_unsubscribe(lcm, rx.command_sub);
   }
   g_loop = NULL;
   fw_publisher_flush(pub);

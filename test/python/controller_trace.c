@@ -132,7 +132,7 @@ int main(int argc, char** argv) {
   g.vt.request_start_pose = record_start;
   const fw_io_t io = {&g.vt, g.inner.user};
   fw_pubq_t* q = fw_pubq_create(4096);
-  fw_loop_t* loop = q != NULL ? fw_loop_create(&c, &io, &(fw_loop_outputs_t){q, NULL, NULL, NULL}, err, sizeof err)
+  fw_loop_t* loop = q != NULL ? fw_loop_create(&c, &io, &(fw_loop_outputs_t){.queue = q}, err, sizeof err)
                               : NULL;
   if (loop == NULL) {
     fprintf(stderr, "controller_trace: %s\n", err);

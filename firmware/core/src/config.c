@@ -83,6 +83,10 @@ static const key_desc_t k_keys[] = {
   {NULL, "lockstep_timeout_s", KIND_DOUBLE, OFF(lockstep_timeout_s), 0.01, 600, false, false, NULL, "30",
    "lockstep: a device silent this long (wall clock) ends the loop with status 5; the tick never runs without "
    "the period's data (generous: a loaded machine may stall the emulator for seconds)"},
+  {NULL, "lockstep_realtime_factor", KIND_DOUBLE, OFF(lockstep_realtime_factor), 0, 10000, false, false, NULL, "0",
+   "lockstep: at most this many times real time (1 = real time, 20 = 20 ticks of 0.1 s per second), so that "
+   "lcm-spy and lcm-logger over UDP keep up; 0 = as fast as the emulator answers. The experiences do not "
+   "depend on it"},
 
   {"Devices", "laser_device", KIND_STRING, OFF(laser_device), 0, 0, false, false, NULL, "/dev/ttyUSB0",
    "serial device of the SICK LMS200"},
@@ -225,7 +229,8 @@ static const key_desc_t k_keys[] = {
    "learned state, written atomically after every run and at shutdown; loaded at start-up "
    "(\"\" = no checkpoints: learned data is lost at exit)"},
   {NULL, "log_file", KIND_STRING, OFF(log_file), 0, 0, false, false, NULL, "",
-   "LCM event log of every published message (\"\" = none)"},
+   "LCM event log of every published message, the received B21R_TELEOP / B21R_COMMAND and B21R_CONFIG "
+   "(\"\" = none); event timestamps are wall clock, the controller's time is each message's utime"},
   {NULL, "experience_log_file", KIND_STRING, OFF(experience_log_file), 0, 0, false, false, NULL, "",
    "LCM event log of B21R_EXPERIENCE only (\"\" = none); bit-identical for identical runs in lockstep"},
   {NULL, "progress", KIND_BOOL, OFF(progress), 0, 0, false, false, NULL, "false",
@@ -785,6 +790,32 @@ static origin_buf_t origin_of(const fw_config_t* cfg, const char* key) {
   origin_buf_t o;
   fw_config_origin(cfg, key, o.text, sizeof o.text);
   return o;
+}
+
+int fw_config_validate_program(const fw_config_t* cfg, char* err, size_t err_cap) {
+  if (fw_config_validate(cfg, err, err_cap) != 0) {
+    return -1;
+  }
+  if (cfg->mode != FW_MODE_LEARN || cfg->phase_driver != FW_DRIVER_JOYSTICK) {
+    return 0;
+  }
+  if (cfg->lockstep) {
+    fmt(err, err_cap,
+        "%s: phase_one_driver = joystick needs real time, but lockstep = true (set at %s): the emulator's time "
+        "only advances with the loop, so no operator can drive it; set lockstep = false (and run b21r-sim "
+        "without --lockstep) or phase_one_driver = example",
+        origin_of(cfg, "phase_one_driver").text, origin_of(cfg, "lockstep").text);
+    return -1;
+  }
+  if (strcmp(cfg->lcm_url, "none") == 0) {
+    fmt(err, err_cap,
+        "%s: phase_one_driver = joystick needs B21R_TELEOP over LCM, but lcm_url = none (set at %s); set lcm_url "
+        "(\"\" = LCM's default, e.g. udpm://239.255.76.67:7667?ttl=0 for this host only) or "
+        "phase_one_driver = example",
+        origin_of(cfg, "phase_one_driver").text, origin_of(cfg, "lcm_url").text);
+    return -1;
+  }
+  return 0;
 }
 
 int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {

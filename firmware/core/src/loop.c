@@ -130,6 +130,19 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
   }
   L->hedger_save_max = hedger_serialized_max_size(&hc);
   L->save_handle = -1;
+  // The effective configuration as text, once, for B21R_CONFIG.
+  size_t text_len = 0;
+  FILE* text = open_memstream(&L->config_text, &text_len);
+  if (text != NULL) {
+    fw_config_print(cfg, text);
+    fclose(text);
+  }
+  if (L->config_text == NULL) {
+    snprintf(err, err_cap, "loop: out of memory");
+    free(L->hedger_storage);
+    free(L);
+    return NULL;
+  }
 
   rflex_b21r_params_default(&L->rflex);
   L->rflex.trans_counts_per_m = cfg->distance_counts_per_m;
@@ -178,6 +191,7 @@ void fw_loop_destroy(fw_loop_t* L) {
     return;
   }
   pthread_mutex_destroy(&L->mbox_mu);
+  free(L->config_text);
   free(L->hedger_storage);
   free(L);
 }
@@ -285,6 +299,8 @@ static fw_safety_event_t supervise(fw_loop_t* L, const sensed_t* in, int64_t now
                         (in->run_starting && L->cfg.mode == FW_MODE_LEARN && L->cfg.phase_driver == FW_DRIVER_JOYSTICK &&
                          L->plan.kind == FW_RUN_TRAINING && L->plan.phase == 1);
   si.deadman_fresh = L->teleop_deadman && now_us - L->teleop_last_us <= (int64_t)(L->cfg.teleop_timeout_s * 1e6);
+  si.teleop_out_of_range = L->teleop_range_newest;
+  si.teleop_range_detail = L->teleop_range_detail;
   si.signal_number = atomic_load(&L->signal_number);
   si.operator_pause = L->paused;
   si.operator_resume = L->resume_now;
@@ -298,7 +314,7 @@ static fw_safety_event_t supervise(fw_loop_t* L, const sensed_t* in, int64_t now
         // A bump ends the run as a collision: its last transition is learned, then the stop.
         fw_run_step(L, 1, &cmd->v_mps, &cmd->w_radps);
       } else {
-        fw_run_abort(L, fw_stop_reason_name(L->safety.reason));
+        fw_run_abort(L, B21R_RUN_T_END_SAFETY_STOP, L->safety.reason, fw_stop_reason_name(L->safety.reason));
       }
     }
     L->mode = B21R_STATUS_T_MODE_STOPPED;
@@ -320,7 +336,7 @@ static fw_safety_event_t supervise(fw_loop_t* L, const sensed_t* in, int64_t now
   }
   if (L->shutdown_requested && !L->done) {
     fw_loop_log(L, 2, "b21r-controller: operator SHUTDOWN");
-    fw_run_abort(L, "shutdown");
+    fw_run_abort(L, B21R_RUN_T_END_SHUTDOWN, 0, "operator shutdown");
     L->mode = B21R_STATUS_T_MODE_DONE;
     L->done = true;
     L->exit_status = 0;
@@ -367,6 +383,9 @@ static void act(fw_loop_t* L, command_t* cmd) {
       L->prev_v = cmd->v_mps;
       L->have_prev = true;
       L->actions_taken++;
+      if (L->prev_source >= 0 && L->prev_source < 5) {
+        L->run_steps_by_source[L->prev_source]++;
+      }
     }
   }
   fw_base_command(L, cmd->v_mps, cmd->w_radps, cmd->stopping);
@@ -375,6 +394,7 @@ static void act(fw_loop_t* L, command_t* cmd) {
 }
 
 static void publish(fw_loop_t* L) {
+  fw_out_run_end(L);
   fw_out_pose(L);
   if (L->scan_new) {
     fw_out_scan(L);
@@ -413,6 +433,29 @@ bool fw_loop_tick(fw_loop_t* L, int64_t now_us) {
 
 // ---- pacing ---------------------------------------------------------------------------------
 
+// lockstep_realtime_factor: holds the tick (its data has arrived; the emulator waits for the
+// command) until tick k is due at k × period / factor after the first paced tick, so recorders
+// over UDP keep up. The inputs are the same, only later: the experiences do not change. A slow
+// tick is not caught up by bursts (the origin moves), so the rate never exceeds the cap.
+static int64_t pace_lockstep(fw_loop_t* L, int64_t now) {
+  const double factor = L->cfg.lockstep_realtime_factor;
+  if (!(factor > 0.0) || L->lockstep_lost) {
+    return now;
+  }
+  const int64_t step_us = (int64_t)((double)L->period_us / factor);
+  if (L->pace_ticks == 0 || now > L->pace_origin_us + (L->pace_ticks + 1) * step_us) {
+    L->pace_origin_us = now;  // first tick, or behind by more than a tick: restart the schedule
+    L->pace_ticks = 0;
+  }
+  const int64_t due = L->pace_origin_us + L->pace_ticks * step_us;
+  while (now < due) {
+    (void)L->io.vt->wait(L->io.user, due);  // wakes early on input: wait again until due
+    now = io_now(L);
+  }
+  L->pace_ticks++;
+  return now;
+}
+
 int64_t fw_loop_wait(fw_loop_t* L) {
   int64_t now = io_now(L);
   if (L->cfg.lockstep) {
@@ -438,6 +481,7 @@ int64_t fw_loop_wait(fw_loop_t* L) {
       (void)L->io.vt->wait(L->io.user, deadline);
       now = io_now(L);
     }
+    now = pace_lockstep(L, now);
     L->tick_deadline_us = now;
     return now;
   }
@@ -474,6 +518,7 @@ int fw_loop_run(fw_loop_t* L) {
 // ---- start-up and shutdown ------------------------------------------------------------------
 
 int fw_loop_start(fw_loop_t* L, char* err, size_t err_cap) {
+  fw_out_config(L);  // first in every log, even when a device does not start
   if (fw_base_start(L, err, err_cap) != 0) {
     return -1;
   }
@@ -515,13 +560,14 @@ int fw_loop_start(fw_loop_t* L, char* err, size_t err_cap) {
 
 int fw_loop_shutdown(fw_loop_t* L) {
   fw_loop_log(L, 2, "b21r-controller: shutting down: zero command, brake set, devices off, final checkpoint");
-  fw_run_abort(L, "shutdown");
+  fw_run_abort(L, B21R_RUN_T_END_SHUTDOWN, 0, "shutdown");
   fw_base_shutdown(L);
   if (L->io.vt->laser_stop != NULL) {
     L->io.vt->laser_stop(L->io.user);
   }
   // The learned state as it is now: nothing learned is lost, even mid-run.
   fw_learning_finish_now(L);
+  fw_out_run_end(L);
   fw_learning_checkpoint_now(L);
   L->mode = B21R_STATUS_T_MODE_DONE;
   L->status_now = true;

@@ -151,6 +151,9 @@ struct fw_loop {
   int64_t teleop_rejected_range;
   int64_t teleop_rejected_seq;
   int64_t teleop_rejected_stale;
+  bool teleop_range_newest;    // the newest TELEOP (deadman held) was refused for exceeding the limits
+  bool teleop_range_logged;    // the current burst of such refusals has been reported on stderr
+  char teleop_range_detail[FW_SAFETY_DETAIL_MAX];
   bool cmd_have_seq;
   int64_t cmd_last_seq;
   int64_t commands_accepted;
@@ -192,6 +195,10 @@ struct fw_loop {
   int8_t prev_source;
   double s[FW_MAX_STATE];
   double run_return;
+  int64_t run_first_seq;       // exp_seq when the run began
+  int32_t run_steps_by_source[5]; // actions of the run by B21R_EXPERIENCE_T_SOURCE_*
+  b21r_run_t run_end;          // the end record of the run that ended, published after its last experience
+  bool run_end_ready;
 
   // Command.
   double cmd_v;
@@ -225,6 +232,9 @@ struct fw_loop {
   bool lines_holding;
   uint64_t lines_release_at;   // writer's written + failed + superseded that releases them (0: not yet known)
   bool end_run_pending;        // a training run ended: its replay starts after the pending step
+  char* config_text;           // the effective configuration (fw_config_print), for B21R_CONFIG
+  int64_t pace_origin_us;      // lockstep_realtime_factor: monotonic time of pacing tick 0
+  int64_t pace_ticks;
 };
 
 // ---- base.c: protocol adapters ----
@@ -246,6 +256,10 @@ void fw_out_pose(fw_loop_t* L);
 void fw_out_scan(fw_loop_t* L);
 void fw_out_eval(fw_loop_t* L, const fw_eval_block_t* block);
 void fw_out_status(fw_loop_t* L);
+/// B21R_CONFIG (once, at start-up).
+void fw_out_config(fw_loop_t* L);
+/// B21R_RUN of the run that ended, if one is waiting (after its last experience went out).
+void fw_out_run_end(fw_loop_t* L);
 void fw_out_notify(fw_loop_t* L);
 int8_t fw_out_status_mode(const fw_loop_t* L);
 
@@ -266,7 +280,9 @@ void fw_run_begin_repositioning(fw_loop_t* L);
 bool fw_run_reposition(fw_loop_t* L, bool state_ok, double* v, double* w);
 /// One step of a running run (a new, usable state this tick); contact = the bumper fired.
 void fw_run_step(fw_loop_t* L, uint8_t contact, double* v, double* w);
-void fw_run_abort(fw_loop_t* L, const char* why);
+/// Ends a running run that has no terminal state: end_reason B21R_RUN_T_END_*, stop_reason the
+/// fw_stop_reason_t of a safety stop (else 0), why a static string (kept by B21R_RUN).
+void fw_run_abort(fw_loop_t* L, int8_t end_reason, int32_t stop_reason, const char* why);
 /// While stopped for a bump in the emulator: asks for the next start pose once.
 void fw_run_request_pose_while_stopped(fw_loop_t* L);
 

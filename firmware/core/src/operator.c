@@ -5,20 +5,42 @@
 #include "loop_internal.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <string.h>
 
+// A request over the limits is refused (the tool must clamp), and reported as what it is: a
+// counter, one stderr line per burst of refusals, and, while the joystick drives with the deadman
+// held, the stop reason STOP_TELEOP_RANGE instead of a released deadman.
+static void refuse_range(fw_loop_t* L, const b21r_teleop_t* m) {
+  L->teleop_rejected_range++;
+  L->teleop_range_newest = m->deadman != 0;
+  const bool rot = fabs(m->rotation_radps) > L->cfg.max_rotation_radps;
+  (void)snprintf(L->teleop_range_detail, sizeof L->teleop_range_detail,
+                 "B21R_TELEOP %s %.3f %s over the limit %.3f (%s)", rot ? "rotation" : "translation",
+                 rot ? m->rotation_radps : m->translation_mps, rot ? "rad/s" : "m/s",
+                 rot ? L->cfg.max_rotation_radps : L->cfg.max_translation_mps,
+                 rot ? "max_rotation_radps" : "max_translation_mps");
+  if (!L->teleop_range_logged) {
+    L->teleop_range_logged = true;
+    fw_loop_log(L, 2, "b21r-controller: %s: refused (the teleop tool must clamp to the limits)",
+                L->teleop_range_detail);
+  }
+}
+
 static void take_teleop(fw_loop_t* L, const b21r_teleop_t* m, int64_t arrival_us, int64_t now_us) {
+  L->teleop_range_newest = false;  // the newest message decides (refuse_range sets it again)
   if (!isfinite(m->rotation_radps) || !isfinite(m->translation_mps)) {
     L->teleop_rejected_nan++;
   } else if (fabs(m->rotation_radps) > L->cfg.max_rotation_radps ||
              fabs(m->translation_mps) > L->cfg.max_translation_mps) {
-    L->teleop_rejected_range++;
+    refuse_range(L, m);
   } else if (L->teleop_have_seq && m->seq <= L->teleop_last_seq) {
     L->teleop_rejected_seq++;
   } else if (now_us - arrival_us > (int64_t)(L->cfg.teleop_timeout_s * 1e6)) {
     L->teleop_rejected_stale++;
   } else {
     L->teleop_accepted++;
+    L->teleop_range_logged = false;
     L->teleop_have_seq = true;
     L->teleop_last_seq = m->seq;
     L->teleop_deadman = m->deadman != 0;

@@ -247,5 +247,52 @@ void fw_out_status(fw_loop_t* L) {
   s->experiences_dropped = L->exp_dropped;
   s->tick_max_ever_us = t.max_ever_us;
   s->battery_v = L->base.battery_v;
+  const fw_publisher_counters_t pc = fw_publisher_counters(L->out.publisher);
+  s->messages_published = (int64_t)pc.published;
+  s->lcm_publish_errors = (int64_t)pc.lcm_errors;
+  s->log_write_errors = (int64_t)pc.log_errors;
+  s->operator_inputs_logged = (int64_t)pc.recorded;
   fw_pubq_commit(L->out.queue);
+}
+
+void fw_out_config(fw_loop_t* L) {
+  if (L->out.queue == NULL) {
+    return;
+  }
+  fw_msg_t* m = fw_pubq_reserve(L->out.queue, FW_MSG_CONFIG);
+  if (m == NULL) {
+    return;
+  }
+  b21r_config_t* c = &m->u.config;
+  memset(c, 0, sizeof *c);
+  c->utime = L->utime;
+  c->text = L->config_text != NULL ? L->config_text : (char*)(uintptr_t)"";
+  c->max_translation_mps = L->limits.max_translation_mps;
+  c->max_rotation_radps = L->limits.max_rotation_radps;
+  c->max_translation_accel_mps2 = L->limits.max_translation_accel_mps2;
+  c->max_rotation_accel_radps2 = L->limits.max_rotation_accel_radps2;
+  c->teleop_timeout_s = L->cfg.teleop_timeout_s;
+  c->tick_rate_hz = L->cfg.tick_rate_hz;
+  c->step_limit = (int32_t)fw_run_step_limit(L);
+  c->task = (int8_t)L->cfg.task;
+  c->lockstep = L->cfg.lockstep ? 1 : 0;
+  fw_pubq_commit(L->out.queue);
+  fw_out_notify(L);
+}
+
+void fw_out_run_end(fw_loop_t* L) {
+  if (!L->run_end_ready) {
+    return;
+  }
+  L->run_end_ready = false;
+  // Every experience of the run has been produced by now (the last one right after the command).
+  L->run_end.experiences = (int32_t)(L->exp_seq - L->run_end.first_seq);
+  if (L->out.queue == NULL) {
+    return;
+  }
+  fw_msg_t* m = fw_pubq_reserve(L->out.queue, FW_MSG_RUN);
+  if (m != NULL) {
+    m->u.run = L->run_end;
+    fw_pubq_commit(L->out.queue);
+  }
 }

@@ -21,13 +21,30 @@ struct fw_publisher {
   lcm_eventlog_t* exp_log;
   sem_t wake;
   atomic_bool stop;
-  pthread_mutex_t mu;  // guards counters and the idle flag for flush
+  pthread_mutex_t mu;  // guards the idle flag for flush
   pthread_cond_t cv;
   bool idle;
-  fw_publisher_counters_t counters;
+  pthread_mutex_t log_mu;  // the publisher thread and fw_publisher_record() both write the log
+  // Counters: written by one thread each, read from any (relaxed atomics: no lock on the tick).
+  atomic_uint_fast64_t published;
+  atomic_uint_fast64_t lcm_errors;
+  atomic_uint_fast64_t log_errors;
+  atomic_uint_fast64_t recorded;
   pthread_t thread;
-  uint8_t buf[16384];
+  uint8_t buf[65536];  // B21R_CONFIG (every key's line) is the largest message
 };
+
+int64_t fw_publisher_wall_us(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return (int64_t)ts.tv_sec * 1000000 + ts.tv_nsec / 1000;
+}
+
+static void count(atomic_uint_fast64_t* c, uint64_t n) {
+  if (n > 0) {
+    atomic_fetch_add_explicit(c, n, memory_order_relaxed);
+  }
+}
 
 static void fmt(char* err, size_t cap, const char* format, ...) __attribute__((format(printf, 3, 4)));
 static void fmt(char* err, size_t cap, const char* format, ...) {
@@ -61,6 +78,12 @@ static int encode(const fw_msg_t* m, uint8_t* buf, int cap, int64_t* utime) {
     case FW_MSG_SCAN:
       *utime = m->u.scan.utime;
       return b21r_scan_t_encode(buf, 0, cap, &m->u.scan);
+    case FW_MSG_CONFIG:
+      *utime = m->u.config.utime;
+      return b21r_config_t_encode(buf, 0, cap, &m->u.config);
+    case FW_MSG_RUN:
+      *utime = m->u.run.utime;
+      return b21r_run_t_encode(buf, 0, cap, &m->u.run);
     default:
       return -1;
   }
@@ -85,9 +108,7 @@ static void drain(fw_publisher_t* p) {
       fprintf(f, "%s\n", m->u.text.line);
       fflush(f);
       fw_pubq_pop(p->q);
-      pthread_mutex_lock(&p->mu);
-      p->counters.published++;
-      pthread_mutex_unlock(&p->mu);
+      count(&p->published, 1);
       continue;
     }
     int64_t utime = 0;
@@ -99,23 +120,38 @@ static void drain(fw_publisher_t* p) {
       if (p->lcm != NULL && lcm_publish(p->lcm, channel, p->buf, (unsigned)size) != 0) {
         lcm_err++;
       }
-      if (p->log != NULL && log_event(p->log, channel, utime, p->buf, size) != 0) {
-        log_err++;
-      }
-      if (p->exp_log != NULL && m->kind == FW_MSG_EXPERIENCE &&
-          log_event(p->exp_log, channel, utime, p->buf, size) != 0) {
-        log_err++;
+      if (p->log != NULL || p->exp_log != NULL) {
+        pthread_mutex_lock(&p->log_mu);
+        // The full log is stamped with the wall clock (the message keeps the controller's time
+        // in utime); the experience log with utime, so that identical lockstep runs give
+        // byte-identical experience logs.
+        if (p->log != NULL && log_event(p->log, channel, fw_publisher_wall_us(), p->buf, size) != 0) {
+          log_err++;
+        }
+        if (p->exp_log != NULL && m->kind == FW_MSG_EXPERIENCE &&
+            log_event(p->exp_log, channel, utime, p->buf, size) != 0) {
+          log_err++;
+        }
+        pthread_mutex_unlock(&p->log_mu);
       }
     } else {
       lcm_err++;
     }
     fw_pubq_pop(p->q);
-    pthread_mutex_lock(&p->mu);
-    p->counters.published++;
-    p->counters.lcm_errors += lcm_err;
-    p->counters.log_errors += log_err;
-    pthread_mutex_unlock(&p->mu);
+    count(&p->published, 1);
+    count(&p->lcm_errors, lcm_err);
+    count(&p->log_errors, log_err);
   }
+}
+
+void fw_publisher_record(fw_publisher_t* p, const char* channel, const void* data, size_t size) {
+  if (p == NULL || p->log == NULL || size > INT32_MAX) {
+    return;
+  }
+  pthread_mutex_lock(&p->log_mu);
+  const int rc = log_event(p->log, channel, fw_publisher_wall_us(), (uint8_t*)(uintptr_t)data, (int)size);
+  pthread_mutex_unlock(&p->log_mu);
+  count(rc == 0 ? &p->recorded : &p->log_errors, 1);
 }
 
 static void* publisher_main(void* arg) {
@@ -135,12 +171,14 @@ static void* publisher_main(void* arg) {
     p->idle = false;
     pthread_mutex_unlock(&p->mu);
     drain(p);
+    pthread_mutex_lock(&p->log_mu);
     if (p->log != NULL) {
       fflush(p->log->f);
     }
     if (p->exp_log != NULL) {
       fflush(p->exp_log->f);
     }
+    pthread_mutex_unlock(&p->log_mu);
     pthread_mutex_lock(&p->mu);
     p->idle = fw_pubq_peek(p->q) == NULL;
     pthread_cond_broadcast(&p->cv);
@@ -182,7 +220,12 @@ fw_publisher_t* fw_publisher_create(fw_pubq_t* q, const fw_publisher_config_t* c
   sem_init(&p->wake, 0, 0);
   atomic_init(&p->stop, false);
   pthread_mutex_init(&p->mu, NULL);
+  pthread_mutex_init(&p->log_mu, NULL);
   pthread_cond_init(&p->cv, NULL);
+  atomic_init(&p->published, 0);
+  atomic_init(&p->lcm_errors, 0);
+  atomic_init(&p->log_errors, 0);
+  atomic_init(&p->recorded, 0);
   p->idle = true;
   if (pthread_create(&p->thread, NULL, publisher_main, p) != 0) {
     fmt(err, err_cap, "publisher: cannot start thread");
@@ -225,10 +268,15 @@ void fw_publisher_flush(fw_publisher_t* p) {
   }
 }
 
-fw_publisher_counters_t fw_publisher_counters(fw_publisher_t* p) {
-  pthread_mutex_lock(&p->mu);
-  const fw_publisher_counters_t c = p->counters;
-  pthread_mutex_unlock(&p->mu);
+fw_publisher_counters_t fw_publisher_counters(const fw_publisher_t* p) {
+  fw_publisher_counters_t c;
+  memset(&c, 0, sizeof c);
+  if (p != NULL) {
+    c.published = atomic_load_explicit(&p->published, memory_order_relaxed);
+    c.lcm_errors = atomic_load_explicit(&p->lcm_errors, memory_order_relaxed);
+    c.log_errors = atomic_load_explicit(&p->log_errors, memory_order_relaxed);
+    c.recorded = atomic_load_explicit(&p->recorded, memory_order_relaxed);
+  }
   return c;
 }
 
@@ -247,6 +295,7 @@ void fw_publisher_destroy(fw_publisher_t* p) {
   }
   sem_destroy(&p->wake);
   pthread_mutex_destroy(&p->mu);
+  pthread_mutex_destroy(&p->log_mu);
   pthread_cond_destroy(&p->cv);
   free(p);
 }

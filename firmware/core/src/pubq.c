@@ -16,7 +16,8 @@ struct fw_pubq {
 };
 
 static const char* const k_channels[FW_MSG_KIND_COUNT] = {"B21R_EXPERIENCE", "B21R_STATUS", "B21R_POSE",
-                                                          "B21R_EVAL", "B21R_SCAN", ""};
+                                                          "B21R_EVAL", "B21R_SCAN", "",
+                                                          "B21R_CONFIG", "B21R_RUN"};
 
 const char* fw_msg_channel(int32_t kind) {
   return (kind >= 0 && kind < FW_MSG_KIND_COUNT) ? k_channels[kind] : "";

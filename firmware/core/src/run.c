@@ -57,6 +57,8 @@ static void begin_run(fw_loop_t* L) {
   L->actions_taken = 0;
   L->have_prev = false;
   L->run_return = 0.0;
+  L->run_first_seq = L->exp_seq;
+  memset(L->run_steps_by_source, 0, sizeof L->run_steps_by_source);
   // The driver of this run: the example policy in phase one, the advisor in phase two, or the
   // evaluated reference. Its stream is seeded per run, so a run does not depend on earlier ones.
   uint64_t st = L->driver_seed_base ^ ((uint64_t)(uint32_t)L->run_id * 0x9E3779B97F4A7C15ULL);
@@ -109,9 +111,40 @@ void fw_run_begin_repositioning(fw_loop_t* L) {
   }
 }
 
-static void finish_run(fw_loop_t* L, bool reached_goal, bool aborted, const char* why) {
+// The run's end record; published by fw_out_run_end once the run's last experience is out.
+static void record_run_end(fw_loop_t* L, int8_t end_reason, int32_t stop_reason, const char* why) {
+  fw_out_run_end(L);  // one still waiting (never expected: at most one run ends per tick)
+  b21r_run_t* r = &L->run_end;
+  memset(r, 0, sizeof *r);
+  const bool eval = L->plan.kind == FW_RUN_EVAL;
+  r->utime = L->utime;
+  r->run_id = L->run_id;
+  r->kind = eval ? B21R_RUN_T_KIND_EVALUATION : B21R_RUN_T_KIND_TRAINING;
+  r->phase = (int8_t)L->plan.phase;
+  r->task = (int8_t)L->cfg.task;
+  r->training_index = eval ? -1 : L->plan.training_index;
+  r->eval_block = eval ? L->sched.p.eval_blocks : -1;  // blocks finished so far = this block's number
+  r->eval_index = eval ? L->plan.eval_index : -1;
+  r->start_x_m = L->start_pose.x_m;
+  r->start_y_m = L->start_pose.y_m;
+  r->start_theta_rad = L->start_pose.theta_rad;
+  r->end_reason = end_reason;
+  r->stop_reason = (int8_t)stop_reason;
+  r->detail = (char*)(uintptr_t)why;
+  r->steps = L->actions_taken;
+  r->total_reward = L->run_return;
+  r->first_seq = L->run_first_seq;
+  for (int i = 0; i < 5; ++i) {
+    r->steps_by_source[i] = L->run_steps_by_source[i];
+  }
+  L->run_end_ready = true;
+}
+
+static void finish_run(fw_loop_t* L, bool reached_goal, int8_t end_reason, int32_t stop_reason, const char* why) {
+  const bool aborted = end_reason == B21R_RUN_T_END_SAFETY_STOP || end_reason == B21R_RUN_T_END_SHUTDOWN;
   const bool training = L->plan.kind == FW_RUN_TRAINING && L->cfg.mode == FW_MODE_LEARN;
   const int32_t steps = reached_goal ? L->actions_taken : (int32_t)fw_run_step_limit(L);
+  record_run_end(L, end_reason, stop_reason, why);
   fw_eval_block_t block;
   const bool block_done = fw_schedule_finish_run(&L->sched, steps, reached_goal, aborted, &block);
   if (aborted) {
@@ -146,9 +179,9 @@ static void finish_run(fw_loop_t* L, bool reached_goal, bool aborted, const char
   fw_run_begin_repositioning(L);
 }
 
-void fw_run_abort(fw_loop_t* L, const char* why) {
+void fw_run_abort(fw_loop_t* L, int8_t end_reason, int32_t stop_reason, const char* why) {
   if (fw_run_running(L)) {
-    finish_run(L, false, true, why);
+    finish_run(L, false, end_reason, stop_reason, why);
   }
 }
 
@@ -263,7 +296,10 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
       *v_cmd = 0.0;
       *w_cmd = 0.0;
       const bool goal = o.reason == TASKS_END_GOAL;
-      finish_run(L, goal, false, goal ? "goal" : (o.reason == TASKS_END_COLLISION ? "collision" : "step limit"));
+      const bool collision = o.reason == TASKS_END_COLLISION;
+      finish_run(L, goal,
+                 goal ? B21R_RUN_T_END_GOAL : (collision ? B21R_RUN_T_END_COLLISION : B21R_RUN_T_END_STEP_LIMIT), 0,
+                 goal ? "goal" : (collision ? "collision" : "step limit"));
       return;
     }
   }

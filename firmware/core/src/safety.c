@@ -7,7 +7,7 @@
 
 static const char* const k_names[FW_STOP_REASON_COUNT] = {
     "", "laser silent", "base silent", "base fault", "bumper", "non-finite value", "deadman released",
-    "signal", "operator pause", "device lost"};
+    "signal", "operator pause", "device lost", "teleop out of range"};
 
 const char* fw_stop_reason_name(int32_t reason) {
   return (reason >= 0 && reason < FW_STOP_REASON_COUNT) ? k_names[reason] : "";
@@ -39,6 +39,7 @@ static int rank(int32_t reason) {
     case FW_STOP_BASE_SILENT:
       return 3;
     case FW_STOP_DEADMAN:
+    case FW_STOP_TELEOP_RANGE:
       return 2;
     case FW_STOP_OPERATOR:
       return 1;
@@ -101,6 +102,12 @@ static int32_t current_cause(const fw_safety_t* s, const fw_safety_inputs_t* in,
     return FW_STOP_BASE_SILENT;
   }
   if (in->deadman_required && !in->deadman_fresh) {
+    if (in->teleop_out_of_range) {
+      // The operator holds the deadman but asks for more than allowed: say so, not "released".
+      snprintf(detail, cap, "%s (refused)",
+               in->teleop_range_detail != NULL ? in->teleop_range_detail : "B21R_TELEOP outside the limits");
+      return FW_STOP_TELEOP_RANGE;
+    }
     snprintf(detail, cap, "no fresh B21R_TELEOP with the deadman held");
     return FW_STOP_DEADMAN;
   }

@@ -99,6 +99,7 @@ typedef struct fw_config {
   double tick_rate_hz;             ///< control rate [1, 100], default 10
   bool lockstep;                   ///< tick when the emulator's data for t_k has arrived
   double lockstep_timeout_s;       ///< lockstep: a device silent this long ends the loop (exit 5)
+  double lockstep_realtime_factor; ///< lockstep: pace ticks to at most this × real time; 0 = unpaced
 
   // Devices.
   char laser_device[FW_CONFIG_STR_MAX];  ///< serial device of the LMS200
@@ -224,6 +225,13 @@ int fw_config_load_file_with(fw_config_t* cfg, const char* path, fw_config_extra
 /// starts with the origin of the offending key ("robot.conf:12: ", "--set: ", "default: ") and
 /// names the origin of every other key involved.
 int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap);
+
+/// fw_config_validate, plus the checks of the b21r-controller program, where operator input
+/// arrives over LCM from a person in real time: phase_one_driver = joystick is refused with
+/// lockstep = true (the emulator's time only moves with the loop) and with lcm_url = none (no
+/// B21R_TELEOP can arrive). The message names both keys and where they were set. (In-process
+/// tools and tests that post B21R_TELEOP themselves use fw_config_validate.)
+int fw_config_validate_program(const fw_config_t* cfg, char* err, size_t err_cap);
 
 /// Writes where key was last set into out: "file:line", "--set", "default", ... (cap bytes,
 /// NUL-terminated; "unknown key" for a name that is not a key). O(number of keys).

@@ -39,6 +39,7 @@
 #include "fw/checkpoint.h"
 #include "fw/config.h"
 #include "fw/io.h"
+#include "fw/publisher.h"
 #include "fw/pubq.h"
 #include "fw/safety.h"
 #include "fw/schedule.h"
@@ -64,6 +65,7 @@ typedef struct fw_loop_outputs {
   void (*notify)(void* user);      ///< called after messages were committed (never blocks)
   void* notify_user;
   fw_ckpt_writer_t* checkpoints;   ///< background checkpoint writer (cfg.checkpoint_file)
+  const fw_publisher_t* publisher; ///< its counters go on STATUS (lock-free reads)
 } fw_loop_outputs_t;
 
 /// Exit status of fw_loop_run() when, in lockstep, a device sent nothing for lockstep_timeout_s

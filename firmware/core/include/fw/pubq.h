@@ -13,9 +13,11 @@
 #ifndef FW_PUBQ_H
 #define FW_PUBQ_H
 
+#include <b21r/b21r_config_t.h>
 #include <b21r/b21r_eval_t.h>
 #include <b21r/b21r_experience_t.h>
 #include <b21r/b21r_pose_t.h>
+#include <b21r/b21r_run_t.h>
 #include <b21r/b21r_scan_t.h>
 #include <b21r/b21r_status_t.h>
 
@@ -34,7 +36,9 @@ typedef enum fw_msg_kind {
   FW_MSG_EVAL = 3,        ///< B21R_EVAL
   FW_MSG_SCAN = 4,        ///< B21R_SCAN
   FW_MSG_TEXT = 5,        ///< a line for stdout (progress) or stderr (log); not on LCM
-  FW_MSG_KIND_COUNT = 6
+  FW_MSG_CONFIG = 6,      ///< B21R_CONFIG (its text points at storage that outlives the queue)
+  FW_MSG_RUN = 7,         ///< B21R_RUN (its detail points at a static string)
+  FW_MSG_KIND_COUNT = 8
 } fw_msg_kind_t;
 
 /// Capacity of STATUS's stop_detail text carried in a slot, including the NUL.
@@ -54,6 +58,8 @@ typedef struct fw_msg {
     b21r_pose_t pose;
     b21r_eval_t eval;
     b21r_scan_t scan;
+    b21r_config_t config;
+    b21r_run_t run;
     struct {
       int32_t stream;  ///< 1 = stdout, 2 = stderr
       char line[FW_TEXT_MAX];  ///< without the trailing newline

@@ -35,7 +35,8 @@ typedef enum fw_stop_reason {
   FW_STOP_SIGNAL = 7,
   FW_STOP_OPERATOR = 8,
   FW_STOP_DEVICE_LOST = 9,
-  FW_STOP_REASON_COUNT = 10
+  FW_STOP_TELEOP_RANGE = 10,  ///< the joystick drives, but its requests exceed the limits (refused)
+  FW_STOP_REASON_COUNT = 11
 } fw_stop_reason_t;
 
 /// Capacity of the detail text, including the NUL.
@@ -68,6 +69,8 @@ typedef struct fw_safety_inputs {
   const char* non_finite_where;
   bool deadman_required;       ///< the joystick drives now
   bool deadman_fresh;          ///< a valid TELEOP with deadman held arrived within the timeout
+  bool teleop_out_of_range;    ///< the newest TELEOP was refused for exceeding the limits
+  const char* teleop_range_detail; ///< e.g. "B21R_TELEOP rotation 2.00 rad/s over the limit 1.00 rad/s"
   int signal_number;           ///< SIGINT/SIGTERM seen (0 = none)
   bool operator_pause;         ///< B21R_COMMAND PAUSE in force
   bool operator_resume;        ///< B21R_COMMAND RESUME arrived this tick

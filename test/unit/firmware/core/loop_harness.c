@@ -85,6 +85,21 @@ void harness_drain(harness_t* h) {
           h->stop_reasons_seen |= 1U << m->u.status.msg.stop_reason;
         }
         break;
+      case FW_MSG_CONFIG:
+        if (h->configs++ == 0) {
+          h->config_before_exp = h->exp_count;
+        }
+        h->config = m->u.config;
+        (void)snprintf(h->config_text, sizeof h->config_text, "%s", m->u.config.text);
+        h->config.text = h->config_text;
+        break;
+      case FW_MSG_RUN:
+        if (h->runs < 64) {
+          h->run[h->runs] = m->u.run;
+          h->run_exp_next_seq[h->runs] = h->exp_next_seq;
+        }
+        h->runs++;
+        break;
       case FW_MSG_TEXT:
         if (h->print_text) {
           printf("%s\n", m->u.text.line);

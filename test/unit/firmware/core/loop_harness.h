@@ -33,6 +33,13 @@ typedef struct harness {
   int8_t max_stop_reason_seen;
   uint32_t stop_reasons_seen;  // bit per STOP_* seen on STATUS
   bool print_text;
+  int configs;              // B21R_CONFIG messages seen
+  b21r_config_t config;     // the last one (text copied below)
+  char config_text[16384];
+  int64_t config_before_exp; // experiences seen before the first B21R_CONFIG (must be 0)
+  int runs;                 // B21R_RUN messages seen
+  b21r_run_t run[64];       // the first 64 (detail points at a static string)
+  int64_t run_exp_next_seq[64]; // exp_next_seq when each arrived (its experiences came first)
 } harness_t;
 
 /// Test defaults: lockstep, short corridor schedule, no LCM, fake robot (rFLEX unless canopen).

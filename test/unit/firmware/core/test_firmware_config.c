@@ -297,6 +297,39 @@ static void test_config_validate_cross_key_rules(void** state) {
   assert_non_null(strstr(err, "power of two"));
 }
 
+// The program refuses joystick driving where no operator can drive: in lockstep, and with LCM
+// off; the message names both keys and where they were set. In-process users (fw_config_validate)
+// may still combine them (their tests post B21R_TELEOP themselves).
+static void test_config_program_refuses_joystick_without_operator(void** state) {
+  (void)state;
+  fw_config_t c;
+  char err[FW_CONFIG_ERR_MAX];
+  fw_config_defaults(&c);
+  assert_int_equal(fw_config_set(&c, "phase_one_driver", "joystick", "robot.conf:7", err, sizeof err), 0);
+  assert_int_equal(fw_config_set_arg(&c, "lockstep=true", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
+  assert_int_equal(fw_config_validate_program(&c, err, sizeof err), -1);
+  assert_non_null(strstr(err, "robot.conf:7: phase_one_driver = joystick"));
+  assert_non_null(strstr(err, "lockstep = true (set at --set)"));
+  c.lockstep = false;
+  assert_int_equal(fw_config_validate_program(&c, err, sizeof err), 0);
+  assert_int_equal(fw_config_set_arg(&c, "lcm_url=none", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate_program(&c, err, sizeof err), -1);
+  assert_non_null(strstr(err, "phase_one_driver = joystick"));
+  assert_non_null(strstr(err, "lcm_url = none (set at --set)"));
+  // Without the joystick, both are fine; evaluation never drives by joystick.
+  c.phase_driver = FW_DRIVER_EXAMPLE;
+  c.lockstep = true;
+  assert_int_equal(fw_config_validate_program(&c, err, sizeof err), 0);
+  c.phase_driver = FW_DRIVER_JOYSTICK;
+  c.mode = FW_MODE_EVALUATE;
+  assert_int_equal(fw_config_validate_program(&c, err, sizeof err), 0);
+  // The ordinary checks come first.
+  c.queue_capacity = 1000;
+  assert_int_equal(fw_config_validate_program(&c, err, sizeof err), -1);
+  assert_non_null(strstr(err, "power of two"));
+}
+
 // Every cross-key error starts with the file and line (or option) of the offending key and
 // names where the other key involved was set, whichever source set it.
 static void test_config_validate_errors_carry_file_and_line(void** state) {
@@ -481,6 +514,7 @@ int main(int argc, char** argv) {
       cmocka_unit_test(test_config_reference_file_matches_defaults),
       cmocka_unit_test(test_config_extra_keys_go_to_the_handler),
       cmocka_unit_test(test_config_set_allocates_nothing),
+      cmocka_unit_test(test_config_program_refuses_joystick_without_operator),
   };
   return cmocka_run_group_tests_name("firmware.config", tests, setup, teardown);
 }

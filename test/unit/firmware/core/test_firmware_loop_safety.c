@@ -33,6 +33,14 @@ static void open_running(bool canopen, void (*tweak)(fw_config_t*)) {
   harness_run(&g_h, 40);  // a run is under way, the robot moves
 }
 
+static int run_source_sum(const b21r_run_t* r) {
+  int n = 0;
+  for (int k = 0; k < 5; ++k) {
+    n += r->steps_by_source[k];
+  }
+  return n;
+}
+
 // Silence and corrupt data are faults of time: they are tested in real time (in lockstep a tick
 // never runs without the period's data, see test_loop_lockstep_silence_ends_loop).
 static void real_time(fw_config_t* c) { c->lockstep = false; }
@@ -167,8 +175,14 @@ static void test_loop_drive_fault_stops_and_recovers(void** state) {
 static void test_loop_signal_stops_and_ends(void** state) {
   (void)state;
   open_running(false, NULL);
+  const int runs_before = g_h.runs;
   fw_loop_signal(g_h.loop, SIGTERM);
   expect_stop_within(FW_STOP_SIGNAL, 1);
+  // The run cut short has its end record: a safety stop, reason signal.
+  assert_int_equal(g_h.runs, runs_before + 1);
+  assert_int_equal(g_h.run[runs_before].end_reason, B21R_RUN_T_END_SAFETY_STOP);
+  assert_int_equal(g_h.run[runs_before].stop_reason, B21R_STATUS_T_STOP_SIGNAL);
+  assert_int_equal(run_source_sum(&g_h.run[runs_before]), g_h.run[runs_before].steps);
   fw_loop_stats_t st;
   fw_loop_get_stats(g_h.loop, &st);
   assert_true(st.done);
@@ -243,6 +257,102 @@ static void test_loop_teleop_deadman_and_validation(void** state) {
   harness_close(&g_h);
 }
 
+// A teleop request over the rotation limit, deadman held, is refused and reported as what it
+// is: STOP_TELEOP_RANGE with the value and the limit, a counter and one stderr line, not as a
+// released deadman. The aborted run's end record names the stop.
+static void test_loop_teleop_out_of_range_reported(void** state) {
+  (void)state;
+  fw_config_t c;
+  harness_config(&c);
+  joystick(&c);
+  c.phase_one_runs = 50;
+  c.eval_every_runs = 50;
+  assert_int_equal(harness_open(&g_h, &c, false, 4), 0);
+  int64_t seq = 1;
+  fw_loop_stats_t st;
+  for (int i = 0; i < 60; ++i) {
+    fw_loop_post_teleop(g_h.loop, &(b21r_teleop_t){.seq = seq++, .deadman = 1, .rotation_radps = 0.25},
+                        g_h.fake.clock_us);
+    harness_run(&g_h, 1);
+  }
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.mode, B21R_STATUS_T_MODE_RUNNING);
+  const int runs_before = g_h.runs;
+  int i = 0;
+  for (; i < 10 && st.stop_reason == FW_STOP_NONE; ++i) {
+    const b21r_teleop_t over = teleop(seq++, 2.0 * c.max_rotation_radps);
+    fw_loop_post_teleop(g_h.loop, &over, g_h.fake.clock_us);
+    harness_run(&g_h, 1);
+    fw_loop_get_stats(g_h.loop, &st);
+  }
+  assert_int_equal(st.stop_reason, FW_STOP_TELEOP_RANGE);
+  assert_true(fabs(g_h.fake.w_cmd) < 1e-9);
+  assert_non_null(strstr(g_h.last_status_detail, "rotation"));
+  assert_non_null(strstr(g_h.last_status_detail, "max_rotation_radps"));
+  assert_int_equal(g_h.last_status.stop_reason, B21R_STATUS_T_STOP_TELEOP_RANGE);
+  assert_int_equal(g_h.last_status.teleop_rejected_range, i);
+  assert_int_equal(g_h.runs, runs_before + 1);
+  const b21r_run_t* r = &g_h.run[runs_before];
+  assert_int_equal(r->end_reason, B21R_RUN_T_END_SAFETY_STOP);
+  assert_int_equal(r->stop_reason, FW_STOP_TELEOP_RANGE);
+  assert_int_equal(r->steps_by_source[B21R_EXPERIENCE_T_SOURCE_JOYSTICK], r->steps);
+  harness_close(&g_h);
+}
+
+// B21R_CONFIG comes first, with the limits and every key; every run, also one that ends without
+// a terminal state (step limit, safety stop, shutdown), has a B21R_RUN end record after its last
+// experience, with its steps by driver and its experiences' seq range.
+static void step_limit_40(fw_config_t* c) { c->max_steps_per_run = 40; }
+
+static void test_loop_config_and_run_records(void** state) {
+  (void)state;
+  open_running(false, step_limit_40);
+  assert_int_equal(g_h.configs, 1);
+  assert_int_equal(g_h.config_before_exp, 0);
+  assert_true(g_h.config.max_rotation_radps == g_h.cfg.max_rotation_radps);
+  assert_true(g_h.config.max_translation_mps == g_h.cfg.max_translation_mps);
+  assert_true(g_h.config.teleop_timeout_s == g_h.cfg.teleop_timeout_s);
+  assert_int_equal(g_h.config.step_limit, 40);
+  assert_true(g_h.config.lockstep);
+  assert_non_null(strstr(g_h.config_text, "max_steps_per_run = 40\n"));
+  assert_non_null(strstr(g_h.config_text, "lockstep_realtime_factor = 0\n"));
+  harness_run(&g_h, 400);
+  assert_true(g_h.runs >= 3);
+  int64_t next_first = 0;
+  for (int k = 0; k < g_h.runs && k < 64; ++k) {
+    const b21r_run_t* r = &g_h.run[k];
+    assert_int_equal(r->run_id, k);
+    assert_int_equal(r->end_reason, B21R_RUN_T_END_STEP_LIMIT);  // the corridor is longer than 40 steps
+    assert_string_equal(r->detail, "step limit");
+    assert_int_equal(r->steps, 40);
+    assert_int_equal(run_source_sum(r), r->steps);
+    assert_int_equal(r->kind, B21R_RUN_T_KIND_TRAINING);
+    assert_int_equal(r->training_index, k);
+    assert_int_equal(r->first_seq, next_first);
+    assert_int_equal(r->experiences, r->steps);
+    assert_int_equal(g_h.run_exp_next_seq[k], r->first_seq + r->experiences);  // after its last experience
+    assert_true(r->total_reward != 0.0);
+    next_first = r->first_seq + r->experiences;
+  }
+  // Shutdown mid-run: an end record with END_SHUTDOWN and the steps taken so far.
+  const int before = g_h.runs;
+  harness_run(&g_h, 5);
+  b21r_command_t cmd = {.seq = 1, .command = B21R_COMMAND_T_SHUTDOWN};
+  fw_loop_post_command(g_h.loop, &cmd, 0);
+  harness_run(&g_h, 2);
+  harness_drain(&g_h);
+  assert_int_equal(g_h.runs, before + 1);
+  const b21r_run_t* r = &g_h.run[before];
+  assert_int_equal(r->end_reason, B21R_RUN_T_END_SHUTDOWN);
+  assert_true(r->steps > 0 && r->steps < 40);
+  assert_int_equal(run_source_sum(r), r->steps);
+  assert_int_equal(g_h.run_exp_next_seq[before], r->first_seq + r->experiences);
+  assert_int_equal(fw_loop_shutdown(g_h.loop), 0);
+  harness_drain(&g_h);
+  assert_int_equal(g_h.runs, before + 1);  // no second record for the same run
+  harness_close(&g_h);
+}
+
 // Operator commands: PAUSE stops (reported as paused) until RESUME; repeated or unknown commands
 // are rejected; START_PHASE_TWO switches after the current run; SHUTDOWN ends the loop.
 static void test_loop_operator_commands(void** state) {
@@ -310,6 +420,8 @@ int main(void) {
       cmocka_unit_test(test_loop_drive_fault_stops_and_recovers),
       cmocka_unit_test(test_loop_signal_stops_and_ends),
       cmocka_unit_test(test_loop_teleop_deadman_and_validation),
+      cmocka_unit_test(test_loop_teleop_out_of_range_reported),
+      cmocka_unit_test(test_loop_config_and_run_records),
       cmocka_unit_test(test_loop_operator_commands),
       cmocka_unit_test(test_loop_corrupt_bytes_counted),
   };
