@@ -18,6 +18,174 @@ int64_t io_posix_now_us(void) {
   return (int64_t)ts.tv_sec * 1000000 + ts.tv_nsec / 1000;
 }
 
+// ---- device loss and reopening ---------------------------------------------------------------
+
+// Errors that mean the device itself is gone (unplugged adapter, closed pseudo-terminal, the bus
+// server exited), as opposed to a transient failure.
+static bool is_loss(int neg_errno) {
+  switch (-neg_errno) {
+    case EPIPE:
+    case EIO:
+    case ENODEV:
+    case ENXIO:
+    case EBADF:
+    case ECONNRESET:
+    case ENOTCONN:
+      return true;
+    default:
+      return false;
+  }
+}
+
+static const char* cause_name(int neg_errno) {
+  switch (-neg_errno) {
+    case EPIPE:
+      return "hang-up";
+    case EIO:
+      return "EIO";
+    case ENODEV:
+      return "ENODEV";
+    case ENXIO:
+      return "ENXIO";
+    case EBADF:
+      return "EBADF";
+    case ECONNRESET:
+      return "connection reset";
+    case ENOTCONN:
+      return "not connected";
+    default:
+      return "error";
+  }
+}
+
+static int64_t backoff_initial_us(const io_posix_t* io) { return (int64_t)(io->cfg->device_reopen_backoff_s * 1e6); }
+
+// Closes the device's descriptor and schedules the first reopen attempt.
+static void lose(io_posix_t* io, io_posix_device_t* d, const char* cause, int64_t now_us) {
+  if (d->lost) {
+    return;
+  }
+  if (d == &io->laser) {
+    drv_serial_close(&io->laser_port);
+  } else if (io->use_can) {
+    drv_can_close(&io->can);
+    io->can_out_n = 0;
+  } else {
+    drv_serial_close(&io->base_port);
+  }
+  d->lost = true;
+  d->losses++;
+  snprintf(d->cause, sizeof d->cause, "%s", cause);
+  d->backoff_us = backoff_initial_us(io);
+  d->retry_at_us = now_us + d->backoff_us;
+}
+
+static int open_laser(io_posix_t* io, char* err, size_t err_cap) {
+  if (drv_serial_open(&io->laser_port, io->cfg->laser_device, (uint32_t)io->cfg->laser_start_baud, err, err_cap) != 0) {
+    return -1;
+  }
+  // A new link: the driver finds the LMS200's rate and starts its stream from the beginning.
+  if (drv_lms_init(&io->lms, &io->laser_port, &io->lms_config) != 0) {
+    snprintf(err, err_cap, "invalid driver settings (baud %d, %d deg, %d cdeg)", (int)io->cfg->laser_baud,
+             (int)io->cfg->laser_fov_deg, (int)io->cfg->laser_resolution_cdeg);
+    drv_serial_close(&io->laser_port);
+    return -1;
+  }
+  return 0;
+}
+
+static int open_base(io_posix_t* io, char* err, size_t err_cap) {
+  const fw_config_t* cfg = io->cfg;
+  if (io->use_can) {
+    return (cfg->can_socket[0] != '\0' ? drv_can_open_seqpacket(&io->can, cfg->can_socket, err, err_cap)
+                                       : drv_can_open_socketcan(&io->can, cfg->can_interface, err, err_cap)) == 0
+               ? 0
+               : -1;
+  }
+  if (drv_serial_open(&io->base_port, cfg->base_device, (uint32_t)cfg->base_baud, err, err_cap) != 0) {
+    return -1;
+  }
+  // The rFLEX loses bytes when fed too fast: a pause after each packet (protocols.md A.1).
+  drv_serial_set_pacing(&io->base_port, 0, (uint32_t)cfg->base_write_gap_us, 0);
+  return 0;
+}
+
+// One reopen attempt when its time has come; the back-off doubles after each failure.
+static void try_reopen(io_posix_t* io, io_posix_device_t* d, int64_t now_us) {
+  if (!d->lost || now_us < d->retry_at_us) {
+    return;
+  }
+  char e[256];
+  const int rc = d == &io->laser ? open_laser(io, e, sizeof e) : open_base(io, e, sizeof e);
+  if (rc != 0) {
+    const int64_t max_us = (int64_t)(io->cfg->device_reopen_backoff_max_s * 1e6);
+    d->backoff_us = d->backoff_us * 2 < max_us ? d->backoff_us * 2 : max_us;
+    d->retry_at_us = now_us + d->backoff_us;
+    return;
+  }
+  d->lost = false;
+  d->reopened = true;
+  d->reopens++;
+}
+
+static void check_result(io_posix_t* io, io_posix_device_t* d, int rc) {
+  if (rc < 0 && is_loss(rc)) {
+    lose(io, d, cause_name(rc), io_posix_now_us());
+  }
+}
+
+static void v_health(void* user, int64_t now_us, bool reopen, fw_io_health_t* out) {
+  io_posix_t* io = (io_posix_t*)user;
+  memset(out, 0, sizeof *out);
+  io_posix_device_t* devs[2] = {&io->laser, &io->base};
+  const uint32_t bits[2] = {FW_IO_DEVICE_LASER, FW_IO_DEVICE_BASE};
+  for (int i = 0; i < 2; ++i) {
+    if (reopen) {
+      try_reopen(io, devs[i], now_us);
+    }
+    if (devs[i]->reopened) {
+      devs[i]->reopened = false;
+      out->reopened |= bits[i];
+    }
+    if (devs[i]->lost) {
+      if (out->lost == 0U) {
+        snprintf(out->detail, sizeof out->detail, "%s %s lost: %s (%s)", devs[i]->what,
+                 devs[i] == &io->base && io->use_can ? "bus" : "device", devs[i]->path, devs[i]->cause);
+      }
+      out->lost |= bits[i];
+    }
+  }
+  out->output_overflows = (uint32_t)(io->overflows - io->overflows_reported);
+  io->overflows_reported = io->overflows;
+}
+
+// ---- base output queues ------------------------------------------------------------------------
+
+static void can_flush(io_posix_t* io) {
+  while (io->can_out_n > 0U && io->can.fd >= 0) {
+    const int rc = drv_can_send(&io->can, &io->can_out[io->can_out_head]);
+    if (rc == -EAGAIN) {
+      return;
+    }
+    // Sent, or refused for good (an invalid frame cannot become valid): either way it leaves.
+    io->can_out_head = (io->can_out_head + 1U) % IO_POSIX_CAN_OUT;
+    io->can_out_n--;
+    if (rc < 0) {
+      check_result(io, &io->base, rc);
+    }
+  }
+}
+
+static void flush_output(io_posix_t* io, int64_t now_us) {
+  if (io->use_can) {
+    can_flush(io);
+  } else if (drv_serial_out_pending(&io->base_port)) {
+    check_result(io, &io->base, drv_serial_flush(&io->base_port, (uint64_t)now_us));
+  }
+}
+
+// ---- the binding -------------------------------------------------------------------------------
+
 static int64_t v_now(void* user) {
   (void)user;
   return io_posix_now_us();
@@ -25,27 +193,54 @@ static int64_t v_now(void* user) {
 
 static int v_wait(void* user, int64_t deadline_us) {
   io_posix_t* io = (io_posix_t*)user;
-  struct pollfd fds[2];
-  nfds_t n = 0;
-  fds[n++] = (struct pollfd){.fd = io->laser_port.fd, .events = POLLIN};
-  fds[n++] = (struct pollfd){.fd = io->use_can ? io->can.fd : io->base_port.fd, .events = POLLIN};
-  const int64_t left_us = deadline_us - io_posix_now_us();
+  int64_t now = io_posix_now_us();
+  flush_output(io, now);
+  int64_t wake_us = deadline_us;
+  const int base_fd = io->use_can ? io->can.fd : io->base_port.fd;
+  short base_events = POLLIN;
+  if (io->use_can ? io->can_out_n > 0U : drv_serial_out_pending(&io->base_port)) {
+    const int64_t ready = io->use_can ? now : (int64_t)io->base_port.out.quiet_until_us;
+    if (ready <= now) {
+      base_events |= POLLOUT;
+    } else if (ready < wake_us) {
+      wake_us = ready;  // the chunk gap ends before the deadline: wake up to write the next packet
+    }
+  }
+  // A lost device has fd -1, which poll() ignores: nothing spins on a closed line.
+  struct pollfd fds[2] = {{.fd = io->laser_port.fd, .events = POLLIN}, {.fd = base_fd, .events = base_events}};
+  const int64_t left_us = wake_us - now;
   if (left_us <= 0) {
     return 0;
   }
   // Round up so that a wait never returns just before its deadline and spins.
   const int timeout_ms = (int)((left_us + 999) / 1000);
-  const int r = poll(fds, n, timeout_ms);
+  const int r = poll(fds, 2, timeout_ms);
   if (r < 0) {
     return errno == EINTR ? 1 : -errno;
+  }
+  now = io_posix_now_us();
+  // A hang-up or error stays set on the descriptor: close it now, or every later poll() returns
+  // at once. (Readable data still pending before a hang-up is lost with the device.)
+  if (fds[0].fd >= 0 && (fds[0].revents & (POLLHUP | POLLERR | POLLNVAL)) != 0) {
+    lose(io, &io->laser, (fds[0].revents & POLLHUP) != 0 ? "hang-up" : "poll error", now);
+  }
+  if (fds[1].fd >= 0 && (fds[1].revents & (POLLHUP | POLLERR | POLLNVAL)) != 0) {
+    lose(io, &io->base, (fds[1].revents & POLLHUP) != 0 ? "hang-up" : "poll error", now);
+  } else if ((fds[1].revents & POLLOUT) != 0) {
+    flush_output(io, now);
   }
   return r > 0 ? 1 : 0;
 }
 
 static int v_laser_poll(void* user, int64_t now_us, lms_scan_t* out) {
   io_posix_t* io = (io_posix_t*)user;
+  if (io->laser.lost) {
+    return 0;
+  }
   bool got = false;
+  io->laser_port.last_error = 0;
   (void)drv_lms_step(&io->lms, (uint64_t)now_us, out, &got);
+  check_result(io, &io->laser, io->laser_port.last_error);
   return got ? 1 : 0;
 }
 
@@ -58,88 +253,69 @@ static void v_laser_stats(void* user, fw_laser_stats_t* out) {
 
 static void v_laser_stop(void* user) {
   io_posix_t* io = (io_posix_t*)user;
-  (void)drv_lms_stop_stream(&io->lms);
+  if (!io->laser.lost) {
+    (void)drv_lms_stop_stream(&io->lms);
+  }
 }
 
 static ssize_t v_base_read(void* user, uint8_t* buf, size_t cap) {
   io_posix_t* io = (io_posix_t*)user;
+  if (io->base.lost) {
+    return 0;
+  }
   const ssize_t n = drv_serial_read(&io->base_port, buf, cap);
+  check_result(io, &io->base, (int)n);
   return n;
 }
 
 static int v_base_write(void* user, const uint8_t* buf, size_t n) {
   io_posix_t* io = (io_posix_t*)user;
-  return drv_serial_write(&io->base_port, buf, n, 100);
+  if (io->base.lost) {
+    return -ENODEV;
+  }
+  const int rc = drv_serial_queue(&io->base_port, buf, n, (uint64_t)io_posix_now_us());
+  if (rc == -ENOBUFS) {
+    io->overflows++;
+  }
+  check_result(io, &io->base, rc);
+  return rc;
 }
 
 static int v_can_read(void* user, canopen_frame_t* frame) {
   io_posix_t* io = (io_posix_t*)user;
-  return drv_can_recv(&io->can, frame);
+  if (io->base.lost) {
+    return 0;
+  }
+  const int rc = drv_can_recv(&io->can, frame);
+  check_result(io, &io->base, rc);
+  return rc;
 }
 
 static int v_can_write(void* user, const canopen_frame_t* frame) {
   io_posix_t* io = (io_posix_t*)user;
-  return drv_can_send(&io->can, frame);
+  if (io->base.lost) {
+    return -ENODEV;
+  }
+  can_flush(io);  // order: older frames first
+  if (io->can_out_n == 0U) {
+    const int rc = drv_can_send(&io->can, frame);
+    if (rc != -EAGAIN) {
+      check_result(io, &io->base, rc);
+      return rc;
+    }
+  }
+  if (io->can_out_n == IO_POSIX_CAN_OUT) {
+    io->overflows++;
+    return -ENOBUFS;
+  }
+  io->can_out[(io->can_out_head + io->can_out_n) % IO_POSIX_CAN_OUT] = *frame;
+  io->can_out_n++;
+  return 0;
 }
 
-// Emulator binding of "place the robot": `reset x y theta` on the control socket.
-static int v_request_start_pose(void* user, double x_m, double y_m, double theta_rad) {
-  io_posix_t* io = (io_posix_t*)user;
-  if (io->control_fd < 0) {
-    return 0;  // a person places the robot and confirms over B21R_COMMAND
-  }
-  char line[128];
-  // 17 significant digits: the emulator parses back the exact double, so the pty path and the
-  // in-process path place the robot at bit-identical poses.
-  const int n = snprintf(line, sizeof line, "reset %.17g %.17g %.17g", x_m, y_m, theta_rad);
-  if (send(io->control_fd, line, (size_t)n, MSG_NOSIGNAL) != n) {
-    return -1;
-  }
-  struct pollfd pfd = {.fd = io->control_fd, .events = POLLIN};
-  if (poll(&pfd, 1, io->reset_timeout_ms) <= 0) {
-    return -2;
-  }
-  char reply[256];
-  const ssize_t r = recv(io->control_fd, reply, sizeof reply - 1, 0);
-  if (r <= 0) {
-    return -3;
-  }
-  reply[r] = '\0';
-  return strncmp(reply, "ok", 2) == 0 ? 1 : -4;
-}
+// ---- the emulator's control socket -----------------------------------------------------------
 
-static const fw_io_vtable_t k_vt_rflex = {
-    .now_us = v_now,
-    .wait = v_wait,
-    .laser_poll = v_laser_poll,
-    .laser_stats = v_laser_stats,
-    .laser_stop = v_laser_stop,
-    .base_read = v_base_read,
-    .base_write = v_base_write,
-    .can_read = NULL,
-    .can_write = NULL,
-    .request_start_pose = v_request_start_pose,
-};
-
-static const fw_io_vtable_t k_vt_can = {
-    .now_us = v_now,
-    .wait = v_wait,
-    .laser_poll = v_laser_poll,
-    .laser_stats = v_laser_stats,
-    .laser_stop = v_laser_stop,
-    .base_read = NULL,
-    .base_write = NULL,
-    .can_read = v_can_read,
-    .can_write = v_can_write,
-    .request_start_pose = v_request_start_pose,
-};
-
-fw_io_t io_posix_binding(io_posix_t* io) {
-  const fw_io_t b = {io->use_can ? &k_vt_can : &k_vt_rflex, io};
-  return b;
-}
-
-static int open_control(io_posix_t* io, const char* path, char* err, size_t err_cap) {
+static int connect_control(const char* path, char* err, size_t err_cap) {
   const int fd = socket(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0);
   if (fd < 0) {
     snprintf(err, err_cap, "emulator_control %s: socket: %s", path, strerror(errno));
@@ -160,73 +336,191 @@ static int open_control(io_posix_t* io, const char* path, char* err, size_t err_
     close(fd);
     return -1;
   }
-  io->control_fd = fd;
-  return 0;
+  return fd;
 }
 
-int io_posix_open(io_posix_t* io, const fw_config_t* cfg, char* err, size_t err_cap) {
+static void drop_control(io_posix_t* io) {
+  if (io->control_fd >= 0) {
+    close(io->control_fd);
+  }
+  io->control_fd = -1;
+  io->request_pending = false;
+  io->stale_replies = 0;
+}
+
+// Reads one answer if there is one (timeout_ms 0: never waits). 1 "ok", 0 none yet, < 0 error.
+static int read_reply(io_posix_t* io, int timeout_ms) {
+  for (;;) {
+    struct pollfd pfd = {.fd = io->control_fd, .events = POLLIN};
+    const int pr = poll(&pfd, 1, timeout_ms);
+    if (pr == 0) {
+      return 0;
+    }
+    char reply[256];
+    const ssize_t r = pr < 0 ? -1 : recv(io->control_fd, reply, sizeof reply - 1, MSG_DONTWAIT);
+    if (r < 0 && (errno == EAGAIN || errno == EINTR)) {
+      return 0;
+    }
+    if (r <= 0) {
+      drop_control(io);  // the emulator went away: reconnect with the next request
+      return -3;
+    }
+    if (io->stale_replies > 0U) {
+      io->stale_replies--;  // the answer to a request that already timed out
+      continue;
+    }
+    reply[r] = '\0';
+    return strncmp(reply, "ok", 2) == 0 ? 1 : -4;
+  }
+}
+
+// Emulator binding of "place the robot": `reset x y theta` on the control socket. Real time: the
+// request is sent in one tick and its answer read in a later one (2 meanwhile). Lockstep: the
+// answer is awaited at once, as the tick waits for the emulator's data anyway.
+static int v_request_start_pose(void* user, double x_m, double y_m, double theta_rad) {
+  io_posix_t* io = (io_posix_t*)user;
+  const fw_config_t* cfg = io->cfg;
+  if (cfg->reposition != FW_REPOSITION_EMULATOR) {
+    return 0;  // a person places the robot and confirms over B21R_COMMAND
+  }
+  const int64_t now = io_posix_now_us();
+  const int64_t timeout_us = (int64_t)(cfg->emulator_reply_timeout_s * 1e6);
+  if (io->control_fd < 0) {
+    char e[256];
+    io->control_fd = connect_control(cfg->emulator_control, e, sizeof e);
+    if (io->control_fd < 0) {
+      return -5;
+    }
+  }
+  const double pose[3] = {x_m, y_m, theta_rad};
+  if (io->request_pending && memcmp(pose, io->request_pose, sizeof pose) != 0) {
+    io->stale_replies++;  // a different pose is wanted now: forget the old request
+    io->request_pending = false;
+  }
+  if (!io->request_pending) {
+    char line[128];
+    // 17 significant digits: the emulator parses back the exact double, so the pty path and the
+    // in-process path place the robot at bit-identical poses.
+    const int n = snprintf(line, sizeof line, "reset %.17g %.17g %.17g", x_m, y_m, theta_rad);
+    if (send(io->control_fd, line, (size_t)n, MSG_NOSIGNAL | MSG_DONTWAIT) != n) {
+      drop_control(io);
+      return -1;
+    }
+    io->request_pending = true;
+    memcpy(io->request_pose, pose, sizeof pose);
+    io->request_sent_us = now;
+  }
+  const int r = read_reply(io, cfg->lockstep ? (int)((timeout_us + 999) / 1000) : 0);
+  if (r != 0) {
+    io->request_pending = false;
+    return r;
+  }
+  if (now - io->request_sent_us >= timeout_us || cfg->lockstep) {
+    io->request_pending = false;
+    io->stale_replies++;
+    return -2;
+  }
+  return 2;
+}
+
+static const fw_io_vtable_t k_vt_rflex = {
+    .now_us = v_now,
+    .wait = v_wait,
+    .laser_poll = v_laser_poll,
+    .laser_stats = v_laser_stats,
+    .laser_stop = v_laser_stop,
+    .base_read = v_base_read,
+    .base_write = v_base_write,
+    .can_read = NULL,
+    .can_write = NULL,
+    .request_start_pose = v_request_start_pose,
+    .health = v_health,
+};
+
+static const fw_io_vtable_t k_vt_can = {
+    .now_us = v_now,
+    .wait = v_wait,
+    .laser_poll = v_laser_poll,
+    .laser_stats = v_laser_stats,
+    .laser_stop = v_laser_stop,
+    .base_read = NULL,
+    .base_write = NULL,
+    .can_read = v_can_read,
+    .can_write = v_can_write,
+    .request_start_pose = v_request_start_pose,
+    .health = v_health,
+};
+
+fw_io_t io_posix_binding(io_posix_t* io) {
+  const fw_io_t b = {io->use_can ? &k_vt_can : &k_vt_rflex, io};
+  return b;
+}
+
+void io_posix_init(io_posix_t* io, const fw_config_t* cfg) {
   memset(io, 0, sizeof *io);
+  io->cfg = cfg;
   io->laser_port.fd = -1;
   io->base_port.fd = -1;
   io->can.fd = -1;
   io->control_fd = -1;
-  io->reset_timeout_ms = 5000;
-  char e[256];
-  if (drv_serial_open(&io->laser_port, cfg->laser_device, (uint32_t)cfg->laser_start_baud, e, sizeof e) != 0) {
-    snprintf(err, err_cap, "laser: %s", e);
-    return -1;
-  }
-  drv_lms_config_t lc;
-  drv_lms_config_default(&lc);
-  lc.target_baud = (uint32_t)cfg->laser_baud;
-  lc.width_deg = (uint16_t)cfg->laser_fov_deg;
-  lc.res_cdeg = (uint16_t)cfg->laser_resolution_cdeg;
-  lc.unit = LMS_UNIT_MM;
+  io->use_can = cfg->base_protocol != FW_BASE_RFLEX;
+  io->laser = (io_posix_device_t){.what = "laser", .path = cfg->laser_device};
+  io->base = (io_posix_device_t){.what = io->use_can ? "CAN" : "base",
+                                 .path = io->use_can ? (cfg->can_socket[0] != '\0' ? cfg->can_socket : cfg->can_interface)
+                                                     : cfg->base_device};
+  drv_lms_config_default(&io->lms_config);
+  io->lms_config.target_baud = (uint32_t)cfg->laser_baud;
+  io->lms_config.width_deg = (uint16_t)cfg->laser_fov_deg;
+  io->lms_config.res_cdeg = (uint16_t)cfg->laser_resolution_cdeg;
+  io->lms_config.unit = LMS_UNIT_MM;
   if (cfg->lockstep) {
     // In lockstep a quiet stream means the emulator has not been scheduled (a loaded machine can
     // stall it for seconds), not a lost scanner: restarting the stream mid-period desynchronises
     // the lockstep. The loop decides silence there (lockstep_timeout_s ends it, naming the
     // device), so the driver's own stream timeout waits a second longer.
     const double s_us = (cfg->lockstep_timeout_s + 1.0) * 1e6;
-    lc.stream_timeout_us = s_us < 4.0e9 ? (uint32_t)s_us : 4000000000U;
+    io->lms_config.stream_timeout_us = s_us < 4.0e9 ? (uint32_t)s_us : 4000000000U;
   }
-  if (drv_lms_init(&io->lms, &io->laser_port, &lc) != 0) {
-    snprintf(err, err_cap, "laser: invalid driver settings (baud %d, %d deg, %d cdeg)", (int)cfg->laser_baud,
-             (int)cfg->laser_fov_deg, (int)cfg->laser_resolution_cdeg);
+}
+
+int io_posix_open(io_posix_t* io, char* err, size_t err_cap) {
+  const fw_config_t* cfg = io->cfg;
+  char e[256];
+  if (open_laser(io, e, sizeof e) != 0) {
+    snprintf(err, err_cap, "laser: %s", e);
+    return -1;
+  }
+  if (open_base(io, e, sizeof e) != 0) {
+    snprintf(err, err_cap, "%s: %s", io->use_can ? "CAN" : "base", e);
     io_posix_close(io);
     return -1;
   }
-  if (cfg->base_protocol == FW_BASE_RFLEX) {
-    if (drv_serial_open(&io->base_port, cfg->base_device, (uint32_t)cfg->base_baud, e, sizeof e) != 0) {
-      snprintf(err, err_cap, "base: %s", e);
+  if (cfg->reposition == FW_REPOSITION_EMULATOR) {
+    io->control_fd = connect_control(cfg->emulator_control, err, err_cap);
+    if (io->control_fd < 0) {
       io_posix_close(io);
       return -1;
     }
-    // The rFLEX loses bytes when fed too fast: a pause after each packet (protocols.md A.1).
-    drv_serial_set_pacing(&io->base_port, 0, (uint32_t)cfg->base_write_gap_us, 0);
-  } else {
-    io->use_can = true;
-    const int r = cfg->can_socket[0] != '\0' ? drv_can_open_seqpacket(&io->can, cfg->can_socket, e, sizeof e)
-                                             : drv_can_open_socketcan(&io->can, cfg->can_interface, e, sizeof e);
-    if (r != 0) {
-      snprintf(err, err_cap, "CAN: %s", e);
-      io_posix_close(io);
-      return -1;
-    }
-  }
-  if (cfg->reposition == FW_REPOSITION_EMULATOR && open_control(io, cfg->emulator_control, err, err_cap) != 0) {
-    io_posix_close(io);
-    return -1;
   }
   return 0;
 }
 
+// Shutdown only (not a tick): the last commands (zero velocity, brake) leave before the line closes.
+static void drain_output(io_posix_t* io, int timeout_ms) {
+  const int64_t end = io_posix_now_us() + (int64_t)timeout_ms * 1000;
+  while (!io->base.lost && (io->use_can ? io->can_out_n > 0U : drv_serial_out_pending(&io->base_port))) {
+    const int64_t now = io_posix_now_us();
+    if (now >= end || v_wait(io, end) < 0) {
+      return;
+    }
+    flush_output(io, io_posix_now_us());
+  }
+}
+
 void io_posix_close(io_posix_t* io) {
+  drain_output(io, 500);
   drv_serial_close(&io->laser_port);
   drv_serial_close(&io->base_port);
   drv_can_close(&io->can);
-  if (io->control_fd >= 0) {
-    close(io->control_fd);
-    io->control_fd = -1;
-  }
+  drop_control(io);
 }

@@ -3,6 +3,13 @@
 /// line, the rFLEX serial line or the CAN bus (SocketCAN or the emulator's seqpacket bus), the
 /// emulator's control socket for repositioning, poll() for waiting and CLOCK_MONOTONIC.
 /// The same binding drives the real robot and the emulated one (other device paths).
+///
+/// Nothing here waits inside a tick: base output goes through bounded queues (the serial port's,
+/// a frame ring for CAN) drained when poll() reports POLLOUT; a start-pose request is sent and its
+/// answer collected in later ticks (lockstep excepted: there the tick waits for the emulator
+/// anyway). A device that reports end of file, EIO, ENODEV or a hang-up is lost: its descriptor
+/// is closed at once (so poll() never spins on it), the loss is reported through `health`, and
+/// the device is reopened after a back-off that doubles up to a limit.
 #ifndef B21R_APP_IO_POSIX_H
 #define B21R_APP_IO_POSIX_H
 
@@ -17,20 +24,50 @@
 #include <stddef.h>
 #include <stdint.h>
 
+/// Frames waiting for room in the CAN socket (about 5 ticks of the cyclic traffic).
+#define IO_POSIX_CAN_OUT 32U
+
+/// Loss and reopening of one device.
+typedef struct io_posix_device {
+  const char* what;               ///< "laser", "base", "CAN bus"
+  const char* path;               ///< in the configuration (borrowed)
+  bool lost;
+  bool reopened;                  ///< since the last health report
+  int64_t retry_at_us;            ///< next reopen attempt
+  int64_t backoff_us;             ///< wait after the next failed attempt
+  uint64_t losses;
+  uint64_t reopens;
+  char cause[64];                 ///< of the loss ("hang-up", "EIO", ...)
+} io_posix_device_t;
+
 typedef struct io_posix {
+  const fw_config_t* cfg;         ///< borrowed; outlives the binding
   drv_serial_t laser_port;
+  drv_lms_config_t lms_config;
   drv_lms_t lms;
   drv_serial_t base_port;
   drv_can_t can;
   bool use_can;
+  io_posix_device_t laser;
+  io_posix_device_t base;
+  canopen_frame_t can_out[IO_POSIX_CAN_OUT];  ///< frames the socket did not take yet (ring)
+  uint32_t can_out_head;
+  uint32_t can_out_n;
+  uint64_t overflows;             ///< packets or frames the full output queues refused
+  uint64_t overflows_reported;
   int control_fd;                 ///< emulator control socket, -1 when none
-  int reset_timeout_ms;
-  char control_path[FW_CONFIG_STR_MAX];
+  bool request_pending;           ///< a `reset` was sent, its answer not yet read
+  double request_pose[3];
+  int64_t request_sent_us;
+  uint32_t stale_replies;         ///< answers of timed-out requests still to be discarded
 } io_posix_t;
 
-/// Opens every device named by cfg. Returns 0, or -1 with a message naming the device and the
-/// cause (and, for CAN on a kernel without it, the emulated-bus alternative).
-int io_posix_open(io_posix_t* io, const fw_config_t* cfg, char* err, size_t err_cap);
+/// Prepares the binding for cfg (borrowed: it must outlive io) without touching any device.
+void io_posix_init(io_posix_t* io, const fw_config_t* cfg);
+
+/// Opens every device named by the configuration. Returns 0, or -1 with a message naming the
+/// device and the cause (and, for CAN on a kernel without it, the emulated-bus alternative).
+int io_posix_open(io_posix_t* io, char* err, size_t err_cap);
 
 /// The binding for fw_loop_create.
 fw_io_t io_posix_binding(io_posix_t* io);

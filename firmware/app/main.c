@@ -60,8 +60,10 @@ static void usage(FILE* f) {
           "B21R_TELEOP (joystick with deadman) and B21R_COMMAND (START_PHASE_TWO, CONFIRM_START_POSE,\n"
           "PAUSE, RESUME, SHUTDOWN).\n"
           "Exit status: 0 schedule done or SHUTDOWN; 2 usage or configuration error; 3 checkpoint\n"
-          "refused; 4 a device did not start; 128+N after signal N (the base is stopped and braked\n"
-          "and the learned state saved first).\n");
+          "refused (before any device is opened); 4 a device did not start; 5 lockstep: a device sent\n"
+          "nothing for lockstep_timeout_s; 6 a device was lost (end of file, EIO, ENODEV, hang-up) with\n"
+          "device_lost_action = exit, or in lockstep; 128+N after signal N (the base is stopped and\n"
+          "braked and the learned state saved first).\n");
 }
 
 // ---- LCM receive thread --------------------------------------------------------------------
@@ -199,19 +201,15 @@ int main(int argc, char** argv) {
     return EXIT_DEVICE;
   }
 
+  // The loop and the checkpoint first: a bad checkpoint is refused before any device is touched.
   io_posix_t io;
-  if (io_posix_open(&io, &cfg, err, sizeof err) != 0) {
-    fprintf(stderr, "b21r-controller: %s\n", err);
-    fw_publisher_destroy(pub);
-    return EXIT_DEVICE;
-  }
+  io_posix_init(&io, &cfg);
   const fw_io_t binding = io_posix_binding(&io);
   const fw_loop_outputs_t out = {
       .queue = q, .notify = publisher_notify, .notify_user = pub, .checkpoints = NULL, .publisher = pub};
   fw_loop_t* loop = fw_loop_create(&cfg, &binding, &out, err, sizeof err);
   if (loop == NULL) {
     fprintf(stderr, "b21r-controller: %s\n", err);
-    io_posix_close(&io);
     fw_publisher_destroy(pub);
     return EXIT_USAGE;
   }
@@ -240,6 +238,10 @@ int main(int argc, char** argv) {
     }
   } else {
     fprintf(stderr, "b21r-controller: warning: checkpoint_file is not set: learned data is lost at exit\n");
+  }
+  if (status == 0 && io_posix_open(&io, err, sizeof err) != 0) {
+    fprintf(stderr, "b21r-controller: %s\n", err);
+    status = EXIT_DEVICE;
   }
 
   receiver_t rx = {.lcm = lcm, .loop = loop, .pub = pub};

@@ -162,6 +162,15 @@ void fw_base_clear_flags(fw_loop_t* L) {
 void fw_base_evaluate_faults(fw_loop_t* L, int64_t now_us) {
   L->base_fault = false;
   L->base_fault_detail[0] = '\0';
+  if (L->output_overflows > 0U) {
+    // The line does not take the commands as fast as they are sent: what the base executes is
+    // no longer what the loop decided.
+    L->base_fault = true;
+    snprintf(L->base_fault_detail, sizeof L->base_fault_detail,
+             "command output buffer full: %u packets refused (%lld in all); the base does not take commands",
+             (unsigned)L->output_overflows, (long long)L->output_overflows_total);
+    return;
+  }
   if (is_rflex(L)) {
     // The rFLEX reports no faults; an engaged brake we did not ask for means its watchdog or an
     // emergency stop took the motors away.
@@ -221,33 +230,70 @@ uint64_t fw_base_checksum_errors(const fw_loop_t* L) {
 
 static int64_t now(const fw_loop_t* L) { return L->io.vt->now_us(L->io.user); }
 
+// protocols.md A.7, recommended sequence: odometry on, DIO on, defaults, brake release, status.
+// Zero velocities follow with every tick. Report period = the tick period [µs], nudged by 1 µs
+// if a byte would be 0x1B. Only queues packets: never waits.
+static int rflex_start_sequence(fw_loop_t* L) {
+  rflex_packet_t p;
+  uint32_t period = (uint32_t)L->period_us;
+  while (rflex_make_odometry_request(&p, period, 3U) != PROTO_OK) {
+    period++;
+  }
+  int rc = rflex_send(L, &p);
+  uint32_t dio_period = 100000U;
+  while (rflex_make_dio_request(&p, dio_period) != PROTO_OK) {
+    dio_period++;
+  }
+  rc |= rflex_send(L, &p);
+  rflex_make_set_defaults(&p);
+  rc |= rflex_send(L, &p);
+  rflex_make_brake_release(&p);
+  rc |= rflex_send(L, &p);
+  rflex_make_sys_status_request(&p);
+  rc |= rflex_send(L, &p);
+  return rc;
+}
+
+static void can_nmt_start(fw_loop_t* L, int* failed_node) {
+  for (int i = 0; i < 2; ++i) {
+    canopen_frame_t f;
+    (void)canopen_encode_nmt(&f, CANOPEN_NMT_START, L->drive[i].node);
+    if (L->io.vt->can_write(L->io.user, &f) != 0 && failed_node != NULL && *failed_node < 0) {
+      *failed_node = L->drive[i].node;
+    }
+  }
+}
+
+void fw_base_restart(fw_loop_t* L) {
+  // The device's counters start again from its own zero: the pose stays, the baseline is new.
+  L->base.odometry.have_trans = false;
+  L->base.odometry.have_rot = false;
+  L->base.odometry.baseline = false;
+  if (is_rflex(L)) {
+    (void)rflex_start_sequence(L);
+    L->brake_expected_released = true;
+    L->sys_status_countdown = SYS_STATUS_PERIOD_TICKS;
+    return;
+  }
+  L->can_start_us = now(L);
+  for (int i = 0; i < 2; ++i) {
+    cia402_master_init(&L->drive[i].master);
+    L->drive[i].emcy_seen = false;
+    L->drive[i].sw_seen = false;
+    L->drive[i].statusword = 0;
+    const double hb_s = L->cfg.can_heartbeat_timeout_s > 0.0 ? L->cfg.can_heartbeat_timeout_s : 1.0;
+    (void)canopen_hb_init(&L->drive[i].hb, L->drive[i].node, (uint32_t)(hb_s * 1e6));
+  }
+  can_nmt_start(L, NULL);
+}
+
 int fw_base_start(fw_loop_t* L, char* err, size_t err_cap) {
   if (is_rflex(L)) {
     if (L->io.vt->base_read == NULL || L->io.vt->base_write == NULL) {
       snprintf(err, err_cap, "base_protocol = rflex but the I/O binding has no serial base");
       return -1;
     }
-    // protocols.md A.7, recommended sequence: odometry on, DIO on, defaults, brake release,
-    // status. Zero velocities follow with every tick. Report period = the tick period [µs],
-    // nudged by 1 µs if a byte would be 0x1B.
-    rflex_packet_t p;
-    uint32_t period = (uint32_t)L->period_us;
-    while (rflex_make_odometry_request(&p, period, 3U) != PROTO_OK) {
-      period++;
-    }
-    int rc = rflex_send(L, &p);
-    uint32_t dio_period = 100000U;
-    while (rflex_make_dio_request(&p, dio_period) != PROTO_OK) {
-      dio_period++;
-    }
-    rc |= rflex_send(L, &p);
-    rflex_make_set_defaults(&p);
-    rc |= rflex_send(L, &p);
-    rflex_make_brake_release(&p);
-    rc |= rflex_send(L, &p);
-    rflex_make_sys_status_request(&p);
-    rc |= rflex_send(L, &p);
-    if (rc != 0) {
+    if (rflex_start_sequence(L) != 0) {
       snprintf(err, err_cap, "rFLEX base: cannot write the start-up packets to %s", L->cfg.base_device);
       return -1;
     }
@@ -260,13 +306,11 @@ int fw_base_start(fw_loop_t* L, char* err, size_t err_cap) {
     return -1;
   }
   L->can_start_us = now(L);
-  for (int i = 0; i < 2; ++i) {
-    canopen_frame_t f;
-    (void)canopen_encode_nmt(&f, CANOPEN_NMT_START, L->drive[i].node);
-    if (L->io.vt->can_write(L->io.user, &f) != 0) {
-      snprintf(err, err_cap, "CANopen: cannot send NMT start to node %u", (unsigned)L->drive[i].node);
-      return -1;
-    }
+  int failed_node = -1;
+  can_nmt_start(L, &failed_node);
+  if (failed_node >= 0) {
+    snprintf(err, err_cap, "CANopen: cannot send NMT start to node %d", failed_node);
+    return -1;
   }
   // Walk both drives to OPERATION ENABLED: one controlword step per SYNC cycle.
   for (int cycle = 0; cycle < 40; ++cycle) {

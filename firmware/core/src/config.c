@@ -52,6 +52,8 @@ static const choice_t k_baud_base[] = {
     {"9600", 9600}, {"19200", 19200}, {"38400", 38400}, {"57600", 57600}, {"115200", 115200}, {NULL, 0}};
 static const choice_t k_reposition[] = {
     {"operator", FW_REPOSITION_OPERATOR}, {"emulator", FW_REPOSITION_EMULATOR}, {NULL, 0}};
+static const choice_t k_device_lost[] = {
+    {"reopen", FW_DEVICE_LOST_REOPEN}, {"exit", FW_DEVICE_LOST_EXIT}, {NULL, 0}};
 static const choice_t k_driver[] = {
     {"example", FW_DRIVER_EXAMPLE}, {"joystick", FW_DRIVER_JOYSTICK}, {"human", FW_DRIVER_HUMAN}, {NULL, 0}};
 static const choice_t k_greedy[] = {
@@ -125,6 +127,9 @@ static const key_desc_t k_keys[] = {
    "between runs: operator places the robot and sends CONFIRM_START_POSE, or the emulator resets it"},
   {NULL, "emulator_control", KIND_STRING, OFF(emulator_control), 0, 0, false, false, NULL, "",
    "control socket of the emulator (needed by reposition = emulator)"},
+  {NULL, "emulator_reply_timeout_s", KIND_DOUBLE, OFF(emulator_reply_timeout_s), 0.01, 60, false, false, NULL, "5",
+   "reposition = emulator: a start-pose request unanswered this long fails (and is retried); the tick never "
+   "waits for the answer"},
 
   {"Command limits", "max_translation_mps", KIND_DOUBLE, OFF(max_translation_mps), 0, 2, false, false, NULL, "0.8",
    "translation speed limit [m/s]"},
@@ -145,6 +150,13 @@ static const key_desc_t k_keys[] = {
    "after a safety stop whose cause has cleared, start a new run without an operator RESUME"},
   {NULL, "safety_clear_ticks", KIND_INT, OFF(safety_clear_ticks), 1, 10000, false, false, NULL, "10",
    "ticks the cause must stay absent before resuming"},
+  {NULL, "device_lost_action", KIND_ENUM, OFF(device_lost_action), 0, 0, false, false, k_device_lost, "reopen",
+   "a device gone (end of file, EIO, ENODEV, hang-up): stop and reopen it with back-off until it is back, "
+   "or stop and exit with status 6"},
+  {NULL, "device_reopen_backoff_s", KIND_DOUBLE, OFF(device_reopen_backoff_s), 0.01, 60, false, false, NULL, "0.5",
+   "first wait before reopening a lost device; doubles after each failed attempt"},
+  {NULL, "device_reopen_backoff_max_s", KIND_DOUBLE, OFF(device_reopen_backoff_max_s), 0.01, 600, false, false, NULL,
+   "5", "longest wait between attempts to reopen a lost device"},
 
   {"Learning", "alpha", KIND_DOUBLE, OFF(alpha), 0, 1, true, false, NULL, "0.2",
    "learning rate (the paper: 0.2)"},
@@ -842,6 +854,12 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
   if (cfg->reposition == FW_REPOSITION_EMULATOR && cfg->emulator_control[0] == '\0') {
     fmt(err, err_cap, "%s: reposition = emulator needs emulator_control = <path of the emulator's control socket>",
         origin_of(cfg, "reposition").text);
+    return -1;
+  }
+  if (cfg->device_reopen_backoff_max_s < cfg->device_reopen_backoff_s) {
+    fmt(err, err_cap, "%s: device_reopen_backoff_max_s (%g) must not be below device_reopen_backoff_s (%g, set at %s)",
+        origin_of(cfg, "device_reopen_backoff_max_s").text, cfg->device_reopen_backoff_max_s,
+        cfg->device_reopen_backoff_s, origin_of(cfg, "device_reopen_backoff_s").text);
     return -1;
   }
   const int32_t q = cfg->queue_capacity;

@@ -247,10 +247,45 @@ typedef struct command {
   bool stopping;  ///< zero, decelerating at the configured limit
 } command_t;
 
+// The binding's view of the devices: losses (a stop), devices back (their start-up again), and
+// commands its output queue refused (a base fault).
+static void check_devices(fw_loop_t* L, int64_t now_us) {
+  L->output_overflows = 0;
+  if (L->io.vt->health == NULL) {
+    return;
+  }
+  fw_io_health_t h;
+  // Lockstep cannot resume a run whose emulator is gone: the loop ends instead (no reopening).
+  const bool reopen = L->cfg.device_lost_action == FW_DEVICE_LOST_REOPEN && !L->cfg.lockstep;
+  L->io.vt->health(L->io.user, now_us, reopen, &h);
+  if ((h.reopened & FW_IO_DEVICE_BASE) != 0U) {
+    fw_base_restart(L);
+  }
+  if (h.reopened != 0U) {
+    fw_loop_log(L, 2, "b21r-controller: %s%s%s reopened", (h.reopened & FW_IO_DEVICE_LASER) != 0U ? "laser" : "",
+                h.reopened == (FW_IO_DEVICE_LASER | FW_IO_DEVICE_BASE) ? " and " : "",
+                (h.reopened & FW_IO_DEVICE_BASE) != 0U ? "base" : "");
+  }
+  L->devices_lost = h.lost;
+  if (h.lost != 0U) {
+    memcpy(L->io_lost_detail, h.detail, sizeof L->io_lost_detail);
+  }
+  L->output_overflows = h.output_overflows + L->output_overflows_waiting;
+  L->output_overflows_waiting = 0;
+  L->output_overflows_total += L->output_overflows;
+}
+
 static sensed_t sense(fw_loop_t* L, int64_t now_us) {
   sensed_t in = {false, false, false, true};
+  check_devices(L, now_us);
   poll_inputs(L, now_us);
+  fw_laser_stats_t ls = {0, 0, 0};
+  if (L->io.vt->laser_stats != NULL) {
+    L->io.vt->laser_stats(L->io.user, &ls);
+  }
+  const uint64_t bad = ls.bytes_dropped + ls.crc_errors;
   if (L->scan_new) {
+    L->laser_bad_at_scan = bad;
     L->laser_silent_ticks = 0;
     L->last_scan_us = now_us;
   } else {
@@ -286,8 +321,13 @@ static fw_safety_event_t supervise(fw_loop_t* L, const sensed_t* in, int64_t now
   si.base_silent_ticks = L->base_silent_ticks;
   si.laser_age_us = now_us - L->last_scan_us;
   si.base_age_us = now_us - L->last_base_us;
-  si.device_lost = L->lockstep_lost;
-  si.device_lost_detail = L->device_lost_detail;
+  if (L->io.vt->laser_stats != NULL) {
+    fw_laser_stats_t ls;
+    L->io.vt->laser_stats(L->io.user, &ls);
+    si.laser_bad_since_scan = ls.bytes_dropped + ls.crc_errors - L->laser_bad_at_scan;
+  }
+  si.device_lost = L->lockstep_lost || L->devices_lost != 0U;
+  si.device_lost_detail = L->devices_lost != 0U ? L->io_lost_detail : L->device_lost_detail;
   si.base_fault = L->base_fault;
   si.base_fault_detail = L->base_fault_detail;
   si.bumper_mask = L->bumper_mask;
@@ -322,6 +362,12 @@ static fw_safety_event_t supervise(fw_loop_t* L, const sensed_t* in, int64_t now
     if (L->safety.reason == FW_STOP_SIGNAL) {
       L->done = true;
       L->exit_status = 128 + si.signal_number;
+    } else if (L->safety.reason == FW_STOP_DEVICE_LOST && L->devices_lost != 0U &&
+               (L->cfg.lockstep || L->cfg.device_lost_action == FW_DEVICE_LOST_EXIT)) {
+      fw_loop_log(L, 2, "b21r-controller: exiting with status %d (device_lost_action = %s)", FW_EXIT_DEVICE_LOST,
+                  L->cfg.lockstep ? "exit in lockstep" : "exit");
+      L->done = true;
+      L->exit_status = FW_EXIT_DEVICE_LOST;
     } else if (L->lockstep_lost) {
       // In lockstep the loop cannot go on without the period's data.
       L->done = true;
@@ -467,6 +513,15 @@ int64_t fw_loop_wait(fw_loop_t* L) {
       poll_inputs(L, now);
       if (L->scan_new && fw_base_all_reports(L)) {
         break;
+      }
+      if (L->io.vt->health != NULL) {
+        // A device that is gone will not deliver: the tick reports it at once.
+        fw_io_health_t h;
+        L->io.vt->health(L->io.user, now, false, &h);
+        L->output_overflows_waiting += h.output_overflows;
+        if (h.lost != 0U) {
+          break;
+        }
       }
       if (now >= deadline) {
         fw_loop_log(L, 2, "b21r-controller: lockstep: no %s data within %.1f s (%s); the emulator stopped answering",

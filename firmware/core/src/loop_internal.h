@@ -110,8 +110,14 @@ struct fw_loop {
   int32_t laser_silent_ticks;
   int64_t laser_scans;
   bool laser_error_logged;
+  uint64_t laser_bad_at_scan;  // laser bytes dropped + CRC errors when the last scan arrived
   bool lockstep_lost;          // lockstep: a device delivered nothing for lockstep_timeout_s
   char device_lost_detail[FW_SAFETY_DETAIL_MAX];
+  uint32_t devices_lost;       // FW_IO_DEVICE_* gone now (the binding reopens them with back-off)
+  char io_lost_detail[FW_IO_DETAIL_MAX];
+  uint32_t output_overflows;   // base commands refused by the binding's full output queue this tick
+  uint32_t output_overflows_waiting; // reported while the lockstep wait looked for lost devices
+  int64_t output_overflows_total;
 
   // Base (both protocols integrate odometry with the rFLEX rule, in base.odometry).
   rflex_host_t base;           // rFLEX: decoder, odometry, report flags, bumpers, brake, battery
@@ -185,6 +191,7 @@ struct fw_loop {
   int32_t settle_ticks;
   int32_t retry_countdown;
   bool stopped_pose_requested; // a start pose was requested while stopped (bumper case)
+  bool stopped_pose_pending;   // that request is under way (the binding answered 2)
   features_pose_t start_pose;
   int32_t run_id;
   int32_t actions_taken;       // actions executed in the current run
@@ -246,6 +253,10 @@ void fw_base_clear_flags(fw_loop_t* L);
 void fw_base_evaluate_faults(fw_loop_t* L, int64_t now_us);
 void fw_base_command(fw_loop_t* L, double v_mps, double w_radps, bool stopping);
 void fw_base_shutdown(fw_loop_t* L);
+/// The base's device came back (reopened after a loss): repeat its start-up without waiting
+/// (rFLEX start packets; CANopen NMT start, the drives are enabled again tick by tick) and take
+/// the next odometry as a new baseline.
+void fw_base_restart(fw_loop_t* L);
 uint64_t fw_base_bytes_dropped(const fw_loop_t* L);
 uint64_t fw_base_checksum_errors(const fw_loop_t* L);
 

@@ -92,6 +92,7 @@ void fw_run_begin_repositioning(fw_loop_t* L) {
   L->mode = B21R_STATUS_T_MODE_REPOSITIONING;
   L->pose_requested = L->stopped_pose_requested;
   L->stopped_pose_requested = false;
+  L->stopped_pose_pending = false;
   L->awaiting_confirm = false;
   L->confirm_pending = false;
   L->settle_ticks = L->pose_requested ? (L->cfg.lockstep ? 0 : 3) : 0;
@@ -200,6 +201,8 @@ bool fw_run_reposition(fw_loop_t* L, bool state_ok, double* v, double* w) {
       // Lockstep: the data of the next period is already taken at the new pose. Real time: let a
       // few scans pass that may predate the reset.
       L->settle_ticks = L->cfg.lockstep ? 0 : 3;
+    } else if (r == 2) {
+      // Under way: asked again (same pose) next tick; the tick does not wait for the answer.
     } else if (r == 0) {
       L->pose_requested = true;
       L->awaiting_confirm = true;
@@ -234,13 +237,17 @@ void fw_run_request_pose_while_stopped(fw_loop_t* L) {
       L->cfg.reposition != FW_REPOSITION_EMULATOR) {
     return;
   }
-  const fw_run_plan_t plan = fw_schedule_next(&L->sched);
-  if (plan.kind == FW_RUN_NONE) {
-    return;
+  if (!L->stopped_pose_pending) {
+    const fw_run_plan_t plan = fw_schedule_next(&L->sched);
+    if (plan.kind == FW_RUN_NONE) {
+      return;
+    }
+    L->start_pose = next_start_pose(L, &plan);
   }
-  L->start_pose = next_start_pose(L, &plan);
-  L->stopped_pose_requested =
-      L->io.vt->request_start_pose(L->io.user, L->start_pose.x_m, L->start_pose.y_m, L->start_pose.theta_rad) == 1;
+  const int r =
+      L->io.vt->request_start_pose(L->io.user, L->start_pose.x_m, L->start_pose.y_m, L->start_pose.theta_rad);
+  L->stopped_pose_pending = r == 2;
+  L->stopped_pose_requested = r == 1;
 }
 
 // Exploration of a training step: with explore_probability per step a segment starts that adds

@@ -82,7 +82,16 @@ static int32_t current_cause(const fw_safety_t* s, const fw_safety_inputs_t* in,
     return FW_STOP_NON_FINITE;
   }
   if (c->lockstep ? in->laser_silent_ticks >= c->laser_limit_ticks : in->laser_age_us >= c->laser_limit_us) {
-    if (c->lockstep) {
+    if (in->laser_bad_since_scan > 0U && c->lockstep) {
+      // Bytes arrive, but nothing in them is a valid telegram: baud rate, cable or noise.
+      snprintf(detail, cap, "laser stream corrupt: no valid telegram for %d ticks, %llu bad bytes or telegrams",
+               (int)in->laser_silent_ticks, (unsigned long long)in->laser_bad_since_scan);
+    } else if (in->laser_bad_since_scan > 0U) {
+      snprintf(detail, cap,
+               "laser stream corrupt: no valid telegram for %lld ms, %llu bad bytes or telegrams (check the baud "
+               "rate and the cable)",
+               (long long)(in->laser_age_us / 1000), (unsigned long long)in->laser_bad_since_scan);
+    } else if (c->lockstep) {
       snprintf(detail, cap, "laser silent for %d ticks (limit %d)", (int)in->laser_silent_ticks,
                (int)c->laser_limit_ticks);
     } else {

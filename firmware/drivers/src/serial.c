@@ -189,6 +189,7 @@ ssize_t drv_serial_read(drv_serial_t* port, uint8_t* buf, size_t cap) {
       struct pollfd pfd = {.fd = port->fd, .events = POLLIN, .revents = 0};
       if (poll(&pfd, 1, 0) > 0 && (pfd.revents & POLLHUP) != 0) {
         port->counters.read_errors++;
+        port->last_error = -EPIPE;
         return -EPIPE;
       }
       return 0;
@@ -201,6 +202,7 @@ ssize_t drv_serial_read(drv_serial_t* port, uint8_t* buf, size_t cap) {
     }
     const int e = errno;
     port->counters.read_errors++;
+    port->last_error = -e;
     return -e;
   }
 }
@@ -221,6 +223,7 @@ static int write_some(drv_serial_t* port, const uint8_t* data, size_t n, const s
     if (w < 0 && errno != EAGAIN && errno != EWOULDBLOCK) {
       const int e = errno;
       port->counters.write_errors++;
+      port->last_error = -e;
       return -e;
     }
     struct timespec now;
@@ -275,6 +278,70 @@ int drv_serial_write(drv_serial_t* port, const uint8_t* data, size_t n, int time
   return 0;
 }
 
+int drv_serial_queue(drv_serial_t* port, const uint8_t* data, size_t n, uint64_t now_us) {
+  if (port == NULL || port->fd < 0 || (data == NULL && n > 0U) || n > UINT16_MAX) {
+    return -EINVAL;
+  }
+  drv_serial_out_t* q = &port->out;
+  if (n == 0U) {
+    return 0;
+  }
+  if (n > DRV_SERIAL_OUT_BYTES - q->len || q->packets == DRV_SERIAL_OUT_PACKETS) {
+    port->counters.out_overflows++;
+    return -ENOBUFS;
+  }
+  const uint32_t tail = (q->head + q->len) % DRV_SERIAL_OUT_BYTES;
+  const size_t first = n < (size_t)(DRV_SERIAL_OUT_BYTES - tail) ? n : (size_t)(DRV_SERIAL_OUT_BYTES - tail);
+  memcpy(q->bytes + tail, data, first);
+  memcpy(q->bytes, data + first, n - first);
+  q->len += (uint32_t)n;
+  q->packet_len[(q->packet_head + q->packets) % DRV_SERIAL_OUT_PACKETS] = (uint16_t)n;
+  q->packets++;
+  return drv_serial_flush(port, now_us);
+}
+
+int drv_serial_flush(drv_serial_t* port, uint64_t now_us) {
+  if (port == NULL || port->fd < 0) {
+    return -EINVAL;
+  }
+  drv_serial_out_t* q = &port->out;
+  while (q->packets > 0U && now_us >= q->quiet_until_us) {
+    const uint32_t left = (uint32_t)q->packet_len[q->packet_head] - q->first_done;
+    const uint32_t contiguous = DRV_SERIAL_OUT_BYTES - q->head;
+    const size_t k = left < contiguous ? left : contiguous;
+    const ssize_t w = write(port->fd, q->bytes + q->head, k);
+    if (w < 0) {
+      if (errno == EINTR) {
+        continue;
+      }
+      if (errno == EAGAIN || errno == EWOULDBLOCK) {
+        return 0;  // the line is busy: the rest goes when the descriptor polls writable
+      }
+      const int e = errno;
+      port->counters.write_errors++;
+      port->last_error = -e;
+      return -e;
+    }
+    port->counters.bytes_written += (uint64_t)w;
+    q->head = (q->head + (uint32_t)w) % DRV_SERIAL_OUT_BYTES;
+    q->len -= (uint32_t)w;
+    q->first_done += (uint32_t)w;
+    if (q->first_done == q->packet_len[q->packet_head]) {
+      q->packet_head = (q->packet_head + 1U) % DRV_SERIAL_OUT_PACKETS;
+      q->packets--;
+      q->first_done = 0;
+      // The device's pause after each packet: the next one goes once the gap has passed.
+      q->quiet_until_us = now_us + port->chunk_gap_us;
+      if (port->chunk_gap_us > 0U) {
+        return 0;
+      }
+    }
+  }
+  return 0;
+}
+
+bool drv_serial_out_pending(const drv_serial_t* port) { return port != NULL && port->out.packets > 0U; }
+
 int drv_serial_wait_readable(drv_serial_t* port, int timeout_ms) {
   if (port == NULL || port->fd < 0) {
     return -EINVAL;
@@ -298,4 +365,5 @@ void drv_serial_close(drv_serial_t* port) {
   }
   port->fd = -1;
   port->owns_fd = false;
+  memset(&port->out, 0, sizeof port->out);
 }

@@ -62,6 +62,11 @@ typedef enum fw_reposition {
   FW_REPOSITION_OPERATOR = 0,  ///< status REPOSITIONING until B21R_COMMAND CONFIRM_START_POSE
   FW_REPOSITION_EMULATOR = 1,  ///< the emulator's control socket `reset x y theta`
 } fw_reposition_t;
+/// What the controller does when a device is gone (end of file, EIO, ENODEV, hang-up).
+typedef enum fw_device_lost_action {
+  FW_DEVICE_LOST_REOPEN = 0,   ///< stop, close it, reopen with back-off, resume when it is back
+  FW_DEVICE_LOST_EXIT = 1,     ///< stop, then exit with FW_EXIT_DEVICE_LOST (a supervisor restarts us)
+} fw_device_lost_action_t;
 /// What the process does.
 typedef enum fw_mode {
   FW_MODE_LEARN = 0,     ///< the two-phase learning schedule
@@ -120,6 +125,7 @@ typedef struct fw_config {
   double angle_counts_per_rad;     ///< base conversion K_a (rFLEX: 35000)
   int32_t reposition;              ///< fw_reposition_t
   char emulator_control[FW_CONFIG_STR_MAX]; ///< emulator control socket (reposition = emulator)
+  double emulator_reply_timeout_s; ///< an unanswered start-pose request fails after this long [s]
 
   // Command limits.
   double max_translation_mps;      ///< |v| limit
@@ -133,6 +139,9 @@ typedef struct fw_config {
   double teleop_timeout_s;         ///< no fresh deadman message for this long → stop
   bool safety_auto_resume;         ///< resume (with a new run) once the cause has cleared
   int32_t safety_clear_ticks;      ///< ticks without the cause before resuming
+  int32_t device_lost_action;      ///< fw_device_lost_action_t
+  double device_reopen_backoff_s;  ///< first wait before reopening a lost device [s]
+  double device_reopen_backoff_max_s; ///< longest wait between reopen attempts [s]
 
   // Learning.
   double alpha;                    ///< learning rate (paper: 0.2)

@@ -19,6 +19,7 @@
 #include <proto/canopen.h>
 #include <proto/lms200.h>
 
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 #include <sys/types.h>
@@ -33,6 +34,21 @@ typedef struct fw_laser_stats {
   uint64_t crc_errors;      ///< telegrams refused for a CRC mismatch
   uint64_t restarts;        ///< driver start-overs (timeouts, silence)
 } fw_laser_stats_t;
+
+/// Devices of fw_io_health_t (bit mask).
+#define FW_IO_DEVICE_LASER 1U
+#define FW_IO_DEVICE_BASE 2U
+
+/// Capacity of a device-loss message, including the NUL.
+#define FW_IO_DETAIL_MAX 160U
+
+/// Health of the devices, reported once per tick.
+typedef struct fw_io_health {
+  uint32_t lost;           ///< FW_IO_DEVICE_* bits of the devices that are gone now
+  uint32_t reopened;       ///< devices that came back since the last call: the core repeats their start-up
+  uint32_t output_overflows; ///< commands the base's bounded output buffer refused since the last call
+  char detail[FW_IO_DETAIL_MAX]; ///< when lost != 0: the first lost device, e.g. "laser device lost: /dev/ttyUSB0 (hang-up)"
+} fw_io_health_t;
 
 typedef struct fw_io_vtable {
   /// Monotonic clock [µs]. The core reads it at tick boundaries only and passes the value down.
@@ -56,20 +72,29 @@ typedef struct fw_io_vtable {
   /// NULL when the base speaks CANopen.
   ssize_t (*base_read)(void* user, uint8_t* buf, size_t cap);
 
-  /// rFLEX: writes n bytes to the base (complete, paced as the device needs): 0 or < 0.
+  /// rFLEX: sends n bytes (one packet) to the base, paced as the device needs, without waiting:
+  /// the binding queues what the line does not take at once. 0, or < 0 (-ENOBUFS: the bounded
+  /// queue is full, counted in fw_io_health_t.output_overflows).
   int (*base_write)(void* user, const uint8_t* buf, size_t n);
 
   /// CANopen: receives one frame: 1 (frame), 0 (none pending), < 0 (error). NULL for rFLEX.
   int (*can_read)(void* user, canopen_frame_t* frame);
 
-  /// CANopen: sends one frame: 0 or < 0.
+  /// CANopen: sends one frame without waiting (queued when the bus is busy): 0, or < 0 (-ENOBUFS:
+  /// the bounded queue is full, counted in fw_io_health_t.output_overflows).
   int (*can_write)(void* user, const canopen_frame_t* frame);
 
   /// Asks for the robot to be placed at a start pose (task frame: metres, radians).
   /// Returns 1 when the pose is in effect now (emulator `reset`), 0 when a person must place the
-  /// robot and confirm with B21R_COMMAND CONFIRM_START_POSE, < 0 on error (retried later).
-  /// May be NULL (= always 0, the operator places the robot).
+  /// robot and confirm with B21R_COMMAND CONFIRM_START_POSE, 2 when the request is under way (the
+  /// caller asks again, with the same pose, in later ticks until it gets 1 or an error), < 0 on
+  /// error (retried later). May be NULL (= always 0, the operator places the robot).
   int (*request_start_pose)(void* user, double x_m, double y_m, double theta_rad);
+
+  /// Device health at now_us, once per tick: lost devices (their descriptors closed, never polled
+  /// again), devices reopened, output overflows. The binding reopens lost devices itself, with
+  /// back-off, when `reopen` is true. May be NULL (devices are never lost).
+  void (*health)(void* user, int64_t now_us, bool reopen, fw_io_health_t* out);
 } fw_io_vtable_t;
 
 /// A binding: the table and its context.

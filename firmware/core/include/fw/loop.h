@@ -72,6 +72,10 @@ typedef struct fw_loop_outputs {
 /// (the emulator died or hung): the loop cannot go on without the period's data.
 #define FW_EXIT_LOCKSTEP_TIMEOUT 5
 
+/// Exit status of fw_loop_run() when a device was lost (end of file, EIO, ENODEV, hang-up) and
+/// device_lost_action = exit: the base was stopped first, the learned state is saved on shutdown.
+#define FW_EXIT_DEVICE_LOST 6
+
 /// Capacity of the loop's error messages, including the NUL.
 #define FW_LOOP_ERR_MAX 512U
 

@@ -10,6 +10,13 @@
 /// between bytes (drv_serial_set_pacing(p, 0, 0, 55)). Pacing sleeps, so drv_serial_write()
 /// blocks for about n × byte_gap_us + chunk_gap_us.
 ///
+/// Output that must never wait (the base's commands inside a control tick) goes through the
+/// port's bounded output queue instead: drv_serial_queue() appends one packet (a pacing chunk)
+/// and writes what the line takes at once; drv_serial_flush() writes more when the descriptor
+/// polls writable (POLLOUT) and the chunk gap has passed. A packet that does not fit is refused
+/// whole and counted (out_overflows): the caller treats it as a fault of the device. The queue
+/// honours chunk_gap_us (after each packet), not byte_gap_us.
+///
 /// Not thread-safe. No allocation. Errors are returned as negative errno values, with a
 /// human-readable message in the caller's buffer where a function takes one.
 #ifndef DRIVERS_SERIAL_H
@@ -39,7 +46,24 @@ typedef struct drv_serial_counters {
   uint64_t read_errors;    ///< read() failures other than EAGAIN/EINTR.
   uint64_t write_errors;   ///< write() failures other than EAGAIN/EINTR, and write timeouts.
   uint64_t baud_changes;
+  uint64_t out_overflows;  ///< packets refused by a full output queue.
 } drv_serial_counters_t;
+
+/// Capacity of the output queue [bytes] (about 170 ms of output at 115200 Bd) and [packets].
+#define DRV_SERIAL_OUT_BYTES 2048U
+#define DRV_SERIAL_OUT_PACKETS 64U
+
+/// Bounded output queue: a byte ring and the lengths of its packets (the pacing chunks).
+typedef struct drv_serial_out {
+  uint8_t bytes[DRV_SERIAL_OUT_BYTES];
+  uint32_t head;           ///< first unwritten byte
+  uint32_t len;            ///< unwritten bytes
+  uint16_t packet_len[DRV_SERIAL_OUT_PACKETS];
+  uint32_t packet_head;    ///< first queued packet
+  uint32_t packets;        ///< queued packets (the first may be partly written)
+  uint32_t first_done;     ///< bytes of the first packet already written
+  uint64_t quiet_until_us; ///< chunk gap: no byte before this time (monotonic clock)
+} drv_serial_out_t;
 
 /// An open serial port. Fields are read-only for callers.
 typedef struct drv_serial {
@@ -49,7 +73,9 @@ typedef struct drv_serial {
   uint32_t chunk_bytes;    ///< Pacing: bytes per chunk (0 = whole write is one chunk).
   uint32_t chunk_gap_us;   ///< Pacing: sleep after each chunk.
   uint32_t byte_gap_us;    ///< Pacing: minimum spacing between bytes (0 = none).
+  int last_error;          ///< negative errno of the last failed read or write (0 = none).
   drv_serial_counters_t counters;
+  drv_serial_out_t out;
 } drv_serial_t;
 
 /// True for the rates listed above. O(1).
@@ -82,6 +108,19 @@ ssize_t drv_serial_read(drv_serial_t* port, uint8_t* buf, size_t cap);
 /// timeout_ms in total. @return 0, -ETIMEDOUT, or another negative errno.
 int drv_serial_write(drv_serial_t* port, const uint8_t* data, size_t n, int timeout_ms);
 
+/// Appends one packet to the output queue and writes what the line takes now; never waits.
+/// now_us is CLOCK_MONOTONIC [µs]. @return 0, -ENOBUFS when the packet does not fit (nothing
+/// queued, counted in out_overflows), -EINVAL, or a negative errno of the write (the device is gone
+/// for EIO, EPIPE, ENODEV, ENXIO).
+int drv_serial_queue(drv_serial_t* port, const uint8_t* data, size_t n, uint64_t now_us);
+
+/// Writes queued output as far as the line and the chunk gap allow; never waits. Call when the
+/// descriptor polls writable or the gap has passed. @return 0 or a negative errno of the write.
+int drv_serial_flush(drv_serial_t* port, uint64_t now_us);
+
+/// True while queued output remains. O(1).
+bool drv_serial_out_pending(const drv_serial_t* port);
+
 /// Waits until bytes are readable or timeout_ms passes (-1 = forever). @return 1 readable,
 /// 0 timeout, negative errno.
 int drv_serial_wait_readable(drv_serial_t* port, int timeout_ms);
@@ -89,7 +128,8 @@ int drv_serial_wait_readable(drv_serial_t* port, int timeout_ms);
 /// Discards unread input (tcflush TCIFLUSH). @return 0 or a negative errno.
 int drv_serial_flush_input(drv_serial_t* port);
 
-/// Closes the descriptor if owned; the struct may be reopened afterwards. Idempotent.
+/// Closes the descriptor if owned and discards queued output; the struct may be reopened
+/// afterwards. Idempotent.
 void drv_serial_close(drv_serial_t* port);
 
 #ifdef __cplusplus

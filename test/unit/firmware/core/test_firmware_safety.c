@@ -42,6 +42,32 @@ static void test_safety_quiet_tick_ok(void** state) {
   assert_string_equal(s.detail, "");
 }
 
+// A laser that sends bytes but no valid telegram is reported as a corrupt stream, not as silent;
+// without bad bytes the same silence is "laser silent".
+static void test_safety_corrupt_laser_stream_has_own_detail(void** state) {
+  (void)state;
+  for (int lockstep = 0; lockstep < 2; ++lockstep) {
+    for (int corrupt = 0; corrupt < 2; ++corrupt) {
+      fw_safety_t s;
+      fw_safety_config_t c = lockstep_cfg(true);
+      c.lockstep = lockstep != 0;
+      fw_safety_init(&s, &c);
+      fw_safety_inputs_t in = quiet();
+      in.laser_silent_ticks = 4;
+      in.laser_age_us = 400000;
+      in.laser_bad_since_scan = corrupt ? 812U : 0U;
+      assert_int_equal(fw_safety_update(&s, &in), FW_SAFETY_STOP_BEGAN);
+      assert_int_equal(s.reason, FW_STOP_LASER_SILENT);
+      if (corrupt) {
+        assert_non_null(strstr(s.detail, "laser stream corrupt"));
+        assert_non_null(strstr(s.detail, "812 bad bytes"));
+      } else {
+        assert_non_null(strstr(s.detail, "laser silent for"));
+      }
+    }
+  }
+}
+
 // Every cause on its own stops in the same tick with its reason and a detail naming it.
 static void test_safety_each_cause_stops_with_reason(void** state) {
   (void)state;
@@ -220,6 +246,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_safety_quiet_tick_ok),
       cmocka_unit_test(test_safety_each_cause_stops_with_reason),
+      cmocka_unit_test(test_safety_corrupt_laser_stream_has_own_detail),
       cmocka_unit_test(test_safety_realtime_uses_ages),
       cmocka_unit_test(test_safety_priority_order),
       cmocka_unit_test(test_safety_auto_resume_after_clear_ticks),
