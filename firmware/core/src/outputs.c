@@ -247,5 +247,11 @@ void fw_out_status(fw_loop_t* L) {
   s->experiences_dropped = L->exp_dropped;
   s->tick_max_ever_us = t.max_ever_us;
   s->battery_v = L->base.battery_v;
+  s->late_p99_us = t.late_p99_us;
+  s->late_max_us = t.late_max_us;
+  s->late_max_ever_us = t.late_max_ever_us;
+  s->late_starts = t.late_starts;
+  s->missed_periods = t.missed_periods;
+  s->gap_max_ever_us = t.gap_max_ever_us;
   fw_pubq_commit(L->out.queue);
 }
