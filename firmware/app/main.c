@@ -8,6 +8,7 @@
 #include "fw/publisher.h"
 #include "fw/pubq.h"
 #include "io_posix.h"
+#include "realtime.h"
 
 #include <b21r/b21r_command_t.h>
 #include <b21r/b21r_teleop_t.h>
@@ -59,7 +60,8 @@ static void usage(FILE* f) {
           "B21R_STATUS, B21R_POSE, B21R_EVAL (B21R_SCAN with publish_scan = true); listens to\n"
           "B21R_TELEOP (joystick with deadman) and B21R_COMMAND (START_PHASE_TWO, CONFIRM_START_POSE,\n"
           "PAUSE, RESUME, SHUTDOWN).\n"
-          "Exit status: 0 schedule done or SHUTDOWN; 2 usage or configuration error; 3 checkpoint\n"
+          "Exit status: 0 schedule done or SHUTDOWN; 2 usage or configuration error (including rt_*\n"
+          "settings the process lacks the privilege for); 3 checkpoint\n"
           "refused (before any device is opened); 4 a device did not start; 5 lockstep: a device sent\n"
           "nothing for lockstep_timeout_s; 6 a device was lost (end of file, EIO, ENODEV, hang-up) with\n"
           "device_lost_action = exit, or in lockstep; 128+N after signal N (the base is stopped and\n"
@@ -96,6 +98,23 @@ static void* receiver_main(void* arg) {
     (void)lcm_handle_timeout(r->lcm, 100);
   }
   return NULL;
+}
+
+// rt_* settings, then pre-faulting (after mlockall, so that the touched pages stay locked).
+static int apply_realtime(const fw_config_t* cfg, fw_loop_t* loop, char* err, size_t err_cap) {
+  if (rt_apply(cfg, err, err_cap) != 0) {
+    return -1;
+  }
+  if (cfg->rt_prefault) {
+    fw_loop_prefault(loop);
+  }
+  if (cfg->rt_scheduler != FW_RT_OTHER || cfg->rt_cpus != 0 || cfg->rt_lock_memory || cfg->rt_prefault) {
+    char rt[160];
+    rt_describe(rt, sizeof rt);
+    fprintf(stderr, "b21r-controller: real time: %s%s%s\n", rt, cfg->rt_lock_memory ? ", memory locked" : "",
+            cfg->rt_prefault ? ", buffers pre-faulted" : "");
+  }
+  return 0;
 }
 
 static void publisher_notify(void* user) { fw_publisher_notify((fw_publisher_t*)user); }
@@ -260,7 +279,12 @@ int main(int argc, char** argv) {
             cfg.base_protocol == FW_BASE_RFLEX ? cfg.base_device
                                                 : (cfg.can_socket[0] != '\0' ? cfg.can_socket : cfg.can_interface),
             cfg.lockstep ? ", lockstep" : "");
-    if (fw_loop_start(loop, err, sizeof err) != 0) {
+    // Real-time provisions of the tick thread (this one), after the helper threads exist.
+    if (apply_realtime(&cfg, loop, err, sizeof err) != 0) {
+      fprintf(stderr, "b21r-controller: %s\n", err);
+      status = EXIT_USAGE;
+      fw_loop_signal(loop, 0);
+    } else if (fw_loop_start(loop, err, sizeof err) != 0) {
       fprintf(stderr, "b21r-controller: %s\n", err);
       status = EXIT_DEVICE;
       fw_loop_signal(loop, 0);

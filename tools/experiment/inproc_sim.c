@@ -118,10 +118,21 @@ static int v_request_start_pose(void* user, double x_m, double y_m, double theta
   return 1;
 }
 
-static const fw_io_vtable_t k_rflex = {v_now,        v_wait,      v_laser_poll, v_laser_stats, NULL, v_base_read,
-                                       v_base_write, NULL,        NULL,         v_request_start_pose};
-static const fw_io_vtable_t k_can = {v_now, v_wait,     v_laser_poll, v_laser_stats, NULL, NULL,
-                                     NULL,  v_can_read, v_can_write,  v_request_start_pose};
+// In one process no device can be lost: no health hook.
+static const fw_io_vtable_t k_rflex = {.now_us = v_now,
+                                       .wait = v_wait,
+                                       .laser_poll = v_laser_poll,
+                                       .laser_stats = v_laser_stats,
+                                       .base_read = v_base_read,
+                                       .base_write = v_base_write,
+                                       .request_start_pose = v_request_start_pose};
+static const fw_io_vtable_t k_can = {.now_us = v_now,
+                                     .wait = v_wait,
+                                     .laser_poll = v_laser_poll,
+                                     .laser_stats = v_laser_stats,
+                                     .can_read = v_can_read,
+                                     .can_write = v_can_write,
+                                     .request_start_pose = v_request_start_pose};
 
 fw_io_t inproc_sim_io(inproc_sim_t* s) {
   const fw_io_t io = {s->opt.canopen ? &k_can : &k_rflex, s};

@@ -2,6 +2,8 @@
 // Checkpoint files (write temp, fsync, rename, fsync directory) and the background writer.
 #define _POSIX_C_SOURCE 200809L
 #include "fw/checkpoint.h"
+
+#include "fw/prefault.h"
 #include "le_bytes.h"
 
 #include <errno.h>
@@ -454,6 +456,12 @@ fw_ckpt_counters_t fw_ckpt_writer_counters(fw_ckpt_writer_t* w) {
   const fw_ckpt_counters_t c = w->counters;
   pthread_mutex_unlock(&w->mu);
   return c;
+}
+
+void fw_ckpt_writer_prefault(fw_ckpt_writer_t* w) {
+  for (int i = 0; i < 2; ++i) {
+    fw_prefault(w->buf[i], w->meta_cap + w->payload_cap + 1U);
+  }
 }
 
 void fw_ckpt_writer_destroy(fw_ckpt_writer_t* w) {

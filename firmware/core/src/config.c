@@ -11,7 +11,16 @@
 #include <stdlib.h>
 #include <string.h>
 
-typedef enum key_kind { KIND_BOOL, KIND_INT, KIND_U64, KIND_DOUBLE, KIND_STRING, KIND_ENUM, KIND_DLIST } key_kind_t;
+typedef enum key_kind {
+  KIND_BOOL,
+  KIND_INT,
+  KIND_U64,
+  KIND_DOUBLE,
+  KIND_STRING,
+  KIND_ENUM,
+  KIND_DLIST,
+  KIND_CPUS,  // CPU list "0,2-3" stored as a uint64_t mask
+} key_kind_t;
 
 typedef struct choice {
   const char* name;
@@ -58,6 +67,8 @@ static const choice_t k_driver[] = {
     {"example", FW_DRIVER_EXAMPLE}, {"joystick", FW_DRIVER_JOYSTICK}, {"human", FW_DRIVER_HUMAN}, {NULL, 0}};
 static const choice_t k_greedy[] = {
     {"per_action", HEDGER_GREEDY_PER_ACTION}, {"state_model", HEDGER_GREEDY_STATE_MODEL}, {NULL, 0}};
+static const choice_t k_rt_scheduler[] = {
+    {"other", FW_RT_OTHER}, {"fifo", FW_RT_FIFO}, {"rr", FW_RT_RR}, {NULL, 0}};
 static const choice_t k_switch[] = {
     {"runs", FW_SWITCH_RUNS}, {"operator", FW_SWITCH_OPERATOR}, {"auto", FW_SWITCH_AUTO}, {NULL, 0}};
 
@@ -89,6 +100,25 @@ static const key_desc_t k_keys[] = {
    "lockstep: at most this many times real time (1 = real time, 20 = 20 ticks of 0.1 s per second), so that "
    "lcm-spy and lcm-logger over UDP keep up; 0 = as fast as the emulator answers. The experiences do not "
    "depend on it"},
+  {NULL, "late_start_threshold_s", KIND_DOUBLE, OFF(late_start_threshold_s), 0, 10, false, false, NULL, "0.01",
+   "real time: a tick that starts more than this after its scheduled time counts as a late start (STATUS "
+   "late_starts; a start a whole period late is a missed period)"},
+
+  {"Real time (applied at start-up; see README, Real-time operation)", "rt_scheduler", KIND_ENUM,
+   OFF(rt_scheduler), 0, 0, false, false, k_rt_scheduler, "other",
+   "scheduling policy: other (time-sharing), fifo or rr (real-time; needs CAP_SYS_NICE or an RLIMIT_RTPRIO of "
+   "at least rt_priority)"},
+  {NULL, "rt_priority", KIND_INT, OFF(rt_priority), 1, 99, false, false, NULL, "50",
+   "priority with rt_scheduler = fifo or rr (ignored with other); the kernel's interrupt threads run at 50"},
+  {NULL, "rt_cpus", KIND_CPUS, OFF(rt_cpus), 0, 0, false, false, NULL, "",
+   "CPUs the controller may run on, e.g. \"1\" or \"0,2-3\" (\"\" = any); pinning to a CPU kept free of "
+   "other work (isolcpus) shortens wake-up latency"},
+  {NULL, "rt_lock_memory", KIND_BOOL, OFF(rt_lock_memory), 0, 0, false, false, NULL, "false",
+   "lock all memory in RAM (mlockall): no page is ever swapped out or faulted in during a tick; needs "
+   "CAP_IPC_LOCK or an RLIMIT_MEMLOCK above the controller's size"},
+  {NULL, "rt_prefault", KIND_BOOL, OFF(rt_prefault), 0, 0, false, false, NULL, "false",
+   "touch every buffer (the learner's store, queues, checkpoint buffers, the stack) at start-up, so that no "
+   "page fault happens in a tick while the store fills"},
 
   {"Devices", "laser_device", KIND_STRING, OFF(laser_device), 0, 0, false, false, NULL, "/dev/ttyUSB0",
    "serial device of the SICK LMS200"},
@@ -435,6 +465,10 @@ static void describe_allowed(const key_desc_t* k, char* out, size_t cap) {
     case KIND_DLIST:
       snprintf(out, cap, "empty, or 1 to %d comma-separated numbers in (%g, %g]", FW_CONFIG_MAX_SCALES, k->min, k->max);
       break;
+    case KIND_CPUS:
+      snprintf(out, cap, "empty (any CPU), or comma-separated CPU numbers and ranges in [0, %d], e.g. 1 or 0,2-3",
+               FW_CONFIG_MAX_CPUS - 1);
+      break;
     case KIND_ENUM: {
       size_t used = (size_t)snprintf(out, cap, "one of");
       for (const choice_t* c = k->choices; c->name != NULL && used < cap; ++c) {
@@ -483,6 +517,92 @@ static bool in_range(const key_desc_t* k, double d) {
   const bool lo = k->min_open ? d > k->min : d >= k->min;
   const bool hi = k->max_open ? d < k->max : d <= k->max;
   return lo && hi;
+}
+
+// A CPU number in [0, FW_CONFIG_MAX_CPUS) at *p (digits only); advances *p.
+static bool parse_cpu(const char** p, int* cpu) {
+  const char* s = *p;
+  int n = 0;
+  if (*s < '0' || *s > '9') {
+    return false;
+  }
+  while (*s >= '0' && *s <= '9') {
+    n = n * 10 + (*s - '0');
+    if (n >= FW_CONFIG_MAX_CPUS) {
+      return false;
+    }
+    ++s;
+  }
+  *p = s;
+  *cpu = n;
+  return true;
+}
+
+// "" or "a,b-c,..." (blanks around items allowed) → mask. A range must not run backwards.
+static bool parse_cpus(const char* v, uint64_t* out) {
+  uint64_t mask = 0;
+  const char* p = v;
+  while (*p == ' ') {
+    ++p;
+  }
+  if (*p == '\0') {
+    *out = 0;
+    return true;
+  }
+  for (;;) {
+    while (*p == ' ') {
+      ++p;
+    }
+    int lo = 0;
+    if (!parse_cpu(&p, &lo)) {
+      return false;
+    }
+    int hi = lo;
+    if (*p == '-') {
+      ++p;
+      if (!parse_cpu(&p, &hi) || hi < lo) {
+        return false;
+      }
+    }
+    for (int c = lo; c <= hi; ++c) {
+      mask |= UINT64_C(1) << c;
+    }
+    while (*p == ' ') {
+      ++p;
+    }
+    if (*p == '\0') {
+      break;
+    }
+    if (*p != ',') {
+      return false;
+    }
+    ++p;
+  }
+  *out = mask;
+  return true;
+}
+
+void fw_config_format_cpus(uint64_t mask, char* out, size_t cap) {
+  if (cap == 0) {
+    return;
+  }
+  out[0] = '\0';
+  size_t used = 0;
+  for (int c = 0; c < FW_CONFIG_MAX_CPUS && used < cap;) {
+    if ((mask >> c & 1U) == 0U) {
+      ++c;
+      continue;
+    }
+    int end = c;
+    while (end + 1 < FW_CONFIG_MAX_CPUS && (mask >> (end + 1) & 1U) != 0U) {
+      ++end;
+    }
+    const char* sep = used == 0 ? "" : ",";
+    const int w = end == c ? snprintf(out + used, cap - used, "%s%d", sep, c)
+                           : snprintf(out + used, cap - used, "%s%d-%d", sep, c, end);
+    used += w > 0 ? (size_t)w : 0U;
+    c = end + 1;
+  }
 }
 
 // Parses value into k's field. Returns 0, or -1 (the field is then unchanged).
@@ -584,6 +704,14 @@ static int set_value(fw_config_t* cfg, const key_desc_t* k, const char* value) {
       memset(dst, 0, FW_CONFIG_MAX_SCALES * sizeof(double));
       memcpy(dst, vals, (size_t)n * sizeof(double));
       memcpy(field + FW_CONFIG_MAX_SCALES * sizeof(double), &n, sizeof n);
+      return 0;
+    }
+    case KIND_CPUS: {
+      uint64_t mask = 0;
+      if (!parse_cpus(value, &mask)) {
+        break;
+      }
+      memcpy(field, &mask, sizeof mask);
       return 0;
     }
     case KIND_ENUM:
@@ -924,6 +1052,14 @@ static void print_value(const key_desc_t* k, const fw_config_t* cfg, FILE* out) 
       fputc('"', out);
       break;
     }
+    case KIND_CPUS: {
+      uint64_t mask = 0;
+      memcpy(&mask, field, sizeof mask);
+      char list[4 * FW_CONFIG_MAX_CPUS];
+      fw_config_format_cpus(mask, list, sizeof list);
+      fprintf(out, "\"%s\"", list);
+      break;
+    }
     case KIND_ENUM: {
       int32_t v = 0;
       memcpy(&v, field, sizeof v);
@@ -947,7 +1083,7 @@ void fw_config_print_reference(FILE* out) {
     char allowed[256];
     describe_allowed(k, allowed, sizeof allowed);
     fprintf(out, "# %s\n#   allowed: %s\n", k->doc, allowed);
-    if (k->kind == KIND_STRING || k->kind == KIND_DLIST) {
+    if (k->kind == KIND_STRING || k->kind == KIND_DLIST || k->kind == KIND_CPUS) {
       fprintf(out, "%s = \"%s\"\n", k->name, k->def);
     } else {
       fprintf(out, "%s = %s\n", k->name, k->def);

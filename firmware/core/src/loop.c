@@ -8,6 +8,8 @@
 #define _POSIX_C_SOURCE 200809L
 #include "loop_internal.h"
 
+#include "fw/prefault.h"
+
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -119,8 +121,8 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
     return NULL;
   }
   const size_t bytes = hedger_storage_size(&hc);
-  L->hedger_storage =
-      aligned_alloc(HEDGER_STORAGE_ALIGN, (bytes + HEDGER_STORAGE_ALIGN - 1) & ~(size_t)(HEDGER_STORAGE_ALIGN - 1));
+  L->hedger_storage_bytes = (bytes + HEDGER_STORAGE_ALIGN - 1) & ~(size_t)(HEDGER_STORAGE_ALIGN - 1);
+  L->hedger_storage = aligned_alloc(HEDGER_STORAGE_ALIGN, L->hedger_storage_bytes);
   if (L->hedger_storage == NULL || hedger_init(&L->hedger, L->hedger_storage, bytes, &hc) != HEDGER_OK) {
     snprintf(err, err_cap, "loop: cannot set up the learner (%zu bytes for %d samples)", bytes,
              (int)cfg->hedger_capacity);
@@ -168,7 +170,7 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
                                  .clear_ticks = cfg->safety_clear_ticks,
                                  .auto_resume = cfg->safety_auto_resume};
   fw_safety_init(&L->safety, &sc);
-  fw_timing_init(&L->timing);
+  fw_timing_init(&L->timing, L->period_us, (int64_t)llround(cfg->late_start_threshold_s * 1e6));
   const fw_schedule_config_t schc = {.eval_every = cfg->eval_every_runs,
                                      .eval_starts = cfg->eval_starts,
                                      .eval_at_start = cfg->eval_at_start,
@@ -184,6 +186,29 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
   L->last_block.block = -1;
   L->status_countdown = 0;
   return L;
+}
+
+// Stack the tick may use (features, HEDGER's solver, message encoding), with a margin.
+#define PREFAULT_STACK_BYTES (256U * 1024U)
+
+// Writes the stack below the caller's frame; noinline, so that the array is below it.
+static __attribute__((noinline)) void prefault_stack(void) {
+  volatile uint8_t stack[PREFAULT_STACK_BYTES];
+  for (size_t i = 0; i < sizeof stack; i += FW_PREFAULT_PAGE_BYTES) {
+    stack[i] = 0;
+  }
+}
+
+void fw_loop_prefault(fw_loop_t* L) {
+  fw_prefault(L, sizeof *L);
+  fw_prefault(L->hedger_storage, L->hedger_storage_bytes);
+  if (L->out.queue != NULL) {
+    fw_pubq_prefault(L->out.queue);
+  }
+  if (L->out.checkpoints != NULL) {
+    fw_ckpt_writer_prefault(L->out.checkpoints);
+  }
+  prefault_stack();
 }
 
 void fw_loop_destroy(fw_loop_t* L) {
@@ -456,6 +481,14 @@ static void publish(fw_loop_t* L) {
 
 bool fw_loop_tick(fw_loop_t* L, int64_t now_us) {
   L->tick_count++;
+  if (!L->cfg.lockstep && L->tick_deadline_us > 0) {
+    // Scheduled starts that passed before this tick started get no tick of their own: they are
+    // the missed periods fw_timing_record_start counts, and the schedule skips them.
+    fw_timing_record_start(&L->timing, L->tick_deadline_us, now_us);
+    if (now_us >= L->next_deadline_us) {
+      L->next_deadline_us += ((now_us - L->next_deadline_us) / L->period_us + 1) * L->period_us;
+    }
+  }
   // In lockstep, time is the emulator's: tick × period, so identical runs log identical times.
   L->utime = L->cfg.lockstep ? L->tick_count * L->period_us : now_us;
 
@@ -471,6 +504,7 @@ bool fw_loop_tick(fw_loop_t* L, int64_t now_us) {
   fw_base_clear_flags(L);
   L->confirm_pending = false;
   const int64_t end_us = io_now(L);
+  // Overrun: the tick ended after the next scheduled start (lockstep: it took longer than a period).
   const bool overrun = L->cfg.lockstep ? (end_us - now_us > L->period_us)
                                        : (L->tick_deadline_us > 0 && end_us > L->tick_deadline_us + L->period_us);
   fw_timing_record(&L->timing, end_us - now_us, overrun);
@@ -548,15 +582,9 @@ int64_t fw_loop_wait(fw_loop_t* L) {
     now = io_now(L);
     poll_inputs(L, now);
   }
-  const int64_t tick = L->next_deadline_us;
-  L->tick_deadline_us = tick;
-  // Absolute deadlines; deadlines missed by a long tick are skipped (counted as overruns).
+  // The tick serves the oldest scheduled start (it skips those that pass before it starts).
+  L->tick_deadline_us = L->next_deadline_us;
   L->next_deadline_us += L->period_us;
-  if (now >= L->next_deadline_us) {
-    const int64_t missed = (now - L->next_deadline_us) / L->period_us + 1;
-    L->next_deadline_us += missed * L->period_us;
-    L->timing.overruns += missed;
-  }
   return now;
 }
 
@@ -671,5 +699,12 @@ void fw_loop_get_stats(const fw_loop_t* L, fw_loop_stats_t* out) {
   out->last_run_goal = L->last_run_goal;
   out->learn_ticks = L->learn_ticks;
   out->checkpoints_submitted = L->checkpoints_submitted;
+  const fw_timing_t* t = &L->timing;
+  out->tick_max_ever_us = t->max_ever_us;
+  out->tick_overruns = t->overruns;
+  out->late_max_ever_us = t->late_max_ever_us;
+  out->late_starts = t->late_starts;
+  out->missed_periods = t->missed_periods;
+  out->gap_max_ever_us = t->gap_max_ever_us;
   out->exit_status = L->exit_status;
 }

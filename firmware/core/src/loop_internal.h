@@ -89,6 +89,7 @@ struct fw_loop {
 
   // Learner.
   void* hedger_storage;
+  size_t hedger_storage_bytes;  // allocated size of hedger_storage
   hedger_t* hedger;
   size_t hedger_save_max;
   fw_pending_step_t pending;

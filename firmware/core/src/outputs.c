@@ -252,6 +252,12 @@ void fw_out_status(fw_loop_t* L) {
   s->lcm_publish_errors = (int64_t)pc.lcm_errors;
   s->log_write_errors = (int64_t)pc.log_errors;
   s->operator_inputs_logged = (int64_t)pc.recorded;
+  s->late_p99_us = t.late_p99_us;
+  s->late_max_us = t.late_max_us;
+  s->late_max_ever_us = t.late_max_ever_us;
+  s->late_starts = t.late_starts;
+  s->missed_periods = t.missed_periods;
+  s->gap_max_ever_us = t.gap_max_ever_us;
   fw_pubq_commit(L->out.queue);
 }
 

@@ -2,6 +2,8 @@
 // Lock-free SPSC ring: head written by the producer only, tail by the consumer only.
 #include "fw/pubq.h"
 
+#include "fw/prefault.h"
+
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
@@ -46,6 +48,8 @@ fw_pubq_t* fw_pubq_create(uint32_t capacity) {
   }
   return q;
 }
+
+void fw_pubq_prefault(fw_pubq_t* q) { fw_prefault(q->slots, (size_t)q->capacity * sizeof(fw_msg_t)); }
 
 void fw_pubq_destroy(fw_pubq_t* q) {
   if (q != NULL) {

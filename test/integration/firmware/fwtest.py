@@ -25,16 +25,16 @@ def note(msg):
 
 class Sim:
     """b21r-sim (lockstep unless told otherwise) with a control socket; endpoints read from its
-    ready file."""
+    ready file. prefix: a command that runs it (e.g. chrt)."""
 
-    def __init__(self, exe, world, workdir, name, base="rflex", seed=1, extra=(), lockstep=True):
+    def __init__(self, exe, world, workdir, name, base="rflex", seed=1, extra=(), lockstep=True, prefix=()):
         self.ctl = os.path.join(workdir, name + ".ctl")
         self.endpoints = os.path.join(workdir, name + ".endpoints")
         self.log = open(os.path.join(workdir, name + ".sim.log"), "w")
         for p in (self.ctl, self.endpoints):
             if os.path.exists(p):
                 os.unlink(p)
-        self.proc = subprocess.Popen([exe, "--world", world, *(["--lockstep"] if lockstep else []), "--base", base,
+        self.proc = subprocess.Popen([*prefix, exe, "--world", world, *(["--lockstep"] if lockstep else []), "--base", base,
                                       "--seed", str(seed), "--control", self.ctl, "--endpoints", self.endpoints,
                                       *extra],
                                      stdout=self.log, stderr=subprocess.STDOUT)

@@ -92,6 +92,9 @@ def main():
                     open(os.path.join(d, "joy.progress.txt"), "w") as out:
                 joy = subprocess.Popen(fwtest.controller_cmd(controller, sim, d, "joy",
                                                              {"lockstep": "false", "phase_one_driver": "joystick",
+                                                              # joystick driving needs LCM (no teleop
+                                                              # ever arrives over memq://)
+                                                              "lcm_url": "memq://",
                                                               "checkpoint_file": ckpt, "phase_one_runs": 1000}),
                                    stdout=out, stderr=err)
             wait_for(os.path.join(d, "joy.controller.log"), "resumed from", 0, 30, joy)

@@ -114,8 +114,10 @@ def main():
             command(b21r.command_t.RESUME)
             n = len(w.runs)
             pump_until(lc, lambda: len(w.runs) > n, 60, "a run after RESUME", proc)
+            # A run that has not ended yet (a STATUS of the run whose record just came is stale).
+            ended = w.runs[-1].run_id
             pump_until(lc, lambda: w.status is not None and w.status.mode == b21r.status_t.MODE_RUNNING
-                       and w.status.step_id >= 2, 30, "a run under way", proc)
+                       and w.status.run_id > ended and w.status.step_id >= 2, 30, "a run under way", proc)
             command(b21r.command_t.SHUTDOWN)
             rc = proc.wait(60)
         finally:

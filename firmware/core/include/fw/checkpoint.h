@@ -100,6 +100,9 @@ fw_ckpt_counters_t fw_ckpt_writer_counters(fw_ckpt_writer_t* w);
 /// Flushes, stops the thread and frees the buffers. NULL is ignored.
 void fw_ckpt_writer_destroy(fw_ckpt_writer_t* w);
 
+/// Maps every page of both buffers now (fw/prefault.h). Start-up only, before the first acquire.
+void fw_ckpt_writer_prefault(fw_ckpt_writer_t* w);
+
 #ifdef __cplusplus
 }
 #endif

@@ -33,6 +33,8 @@ extern "C" {
 #define FW_CONFIG_STR_MAX 256U
 /// Largest number of values of a list key (hedger_input_scale: state dimensions + action).
 #define FW_CONFIG_MAX_SCALES 9
+/// CPUs a CPU list key (rt_cpus) can name: 0 to FW_CONFIG_MAX_CPUS - 1.
+#define FW_CONFIG_MAX_CPUS 64
 /// Capacity of an error message produced by the parser, including the NUL.
 #define FW_CONFIG_ERR_MAX 512U
 /// Ceiling of the number of keys (the table in config.c has fewer; checked at compile time).
@@ -80,6 +82,13 @@ typedef enum fw_eval_policy {
   FW_EVAL_HUMAN = 3,     ///< the simulated sloppy human driver (phase_one_driver = human's examples)
 } fw_eval_policy_t;
 
+/// Scheduling policy of the process (config rt_scheduler; POSIX sched_setscheduler).
+typedef enum fw_rt_scheduler {
+  FW_RT_OTHER = 0,  ///< SCHED_OTHER: the normal time-sharing scheduler
+  FW_RT_FIFO = 1,   ///< SCHED_FIFO at rt_priority
+  FW_RT_RR = 2,     ///< SCHED_RR at rt_priority
+} fw_rt_scheduler_t;
+
 /// Where each key was last set, for error messages: not a setting (fw_config_print() ignores it,
 /// and two configs with equal settings may differ here). Filled by fw_config_set() and its
 /// callers; a field assigned directly keeps the origin of its last fw_config_set().
@@ -105,6 +114,14 @@ typedef struct fw_config {
   bool lockstep;                   ///< tick when the emulator's data for t_k has arrived
   double lockstep_timeout_s;       ///< lockstep: a device silent this long ends the loop (exit 5)
   double lockstep_realtime_factor; ///< lockstep: pace ticks to at most this × real time; 0 = unpaced
+  double late_start_threshold_s;   ///< real time: a tick starting later than this is a late start
+
+  // Real time (applied by the onboard program before the loop starts; firmware/app/realtime.h).
+  int32_t rt_scheduler;            ///< fw_rt_scheduler_t
+  int32_t rt_priority;             ///< SCHED_FIFO / SCHED_RR priority [1, 99]
+  uint64_t rt_cpus;                ///< CPU affinity: bit i = CPU i; 0 = any CPU
+  bool rt_lock_memory;             ///< mlockall(MCL_CURRENT | MCL_FUTURE)
+  bool rt_prefault;                ///< touch every buffer at start-up (fw/prefault.h)
 
   // Devices.
   char laser_device[FW_CONFIG_STR_MAX];  ///< serial device of the LMS200
@@ -252,6 +269,10 @@ void fw_config_print_reference(FILE* out);
 
 /// Writes the current value of every key to out in the config file format.
 void fw_config_print(const fw_config_t* cfg, FILE* out);
+
+/// Writes a CPU mask as the list syntax of rt_cpus ("0,2-3"; "" for 0) into out (cap bytes,
+/// NUL-terminated, truncated if too small). O(FW_CONFIG_MAX_CPUS).
+void fw_config_format_cpus(uint64_t mask, char* out, size_t cap);
 
 /// Tick period [µs] derived from tick_rate_hz (rounded to the nearest µs).
 int64_t fw_config_period_us(const fw_config_t* cfg);

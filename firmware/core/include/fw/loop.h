@@ -108,6 +108,13 @@ typedef struct fw_loop_stats {
   bool last_run_goal;
   int64_t learn_ticks;           ///< ticks that did between-run learning work (replay, checkpoint)
   int64_t checkpoints_submitted; ///< checkpoints handed to the writer (between runs and at shutdown)
+  // Deadline accounting (fw/timing.h; real time only, except the compute time).
+  int32_t tick_max_ever_us;      ///< longest tick compute time since start [µs]
+  int64_t tick_overruns;         ///< ticks that ended after the next scheduled start
+  int32_t late_max_ever_us;      ///< largest wake-up lateness (actual − scheduled start) [µs]
+  int64_t late_starts;           ///< ticks started later than late_start_threshold_s
+  int64_t missed_periods;        ///< scheduled starts that passed without a tick of their own
+  int32_t gap_max_ever_us;       ///< longest interval between consecutive tick starts [µs]
   int exit_status;               ///< what fw_loop_run returns once done
 } fw_loop_stats_t;
 
@@ -157,6 +164,13 @@ int fw_loop_run(fw_loop_t* loop);
 /// stop (CANopen), laser stream stopped, final checkpoint written and flushed. Safe to call once
 /// after fw_loop_run. Returns 0, or -1 when the final checkpoint could not be written.
 int fw_loop_shutdown(fw_loop_t* loop);
+
+/// Maps every page of the loop's memory now (config rt_prefault, fw/prefault.h): the loop
+/// itself, the learner's whole store, the publisher queue and the checkpoint writer's buffers of
+/// the outputs, and 256 KiB of the calling thread's stack (call it from the tick thread, after
+/// fw_loop_attach_checkpoints). Then no page fault happens in a tick while the store fills.
+/// O(memory / 4 KiB); start-up only.
+void fw_loop_prefault(fw_loop_t* loop);
 
 /// Frees everything. NULL is ignored.
 void fw_loop_destroy(fw_loop_t* loop);

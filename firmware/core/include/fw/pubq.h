@@ -77,6 +77,9 @@ typedef struct fw_pubq fw_pubq_t;
 fw_pubq_t* fw_pubq_create(uint32_t capacity);
 void fw_pubq_destroy(fw_pubq_t* q);
 
+/// Maps every page of the slots now (fw/prefault.h). Start-up only, before the threads use q.
+void fw_pubq_prefault(fw_pubq_t* q);
+
 /// Producer: a free slot to fill in place, or NULL when the queue is full (the drop is counted
 /// under kind). The slot's `kind` is set. O(1), wait-free, no allocation.
 fw_msg_t* fw_pubq_reserve(fw_pubq_t* q, fw_msg_kind_t kind);

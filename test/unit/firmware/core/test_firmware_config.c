@@ -163,6 +163,68 @@ static void test_config_bad_values_refused_with_choices(void** state) {
   assert_true(c.seed == 123456789012ULL);
 }
 
+// The real-time keys: scheduler choices, priority range, CPU lists (numbers, ranges, blanks)
+// to a mask and back to the canonical list, refusals that keep the old value and say the syntax.
+static void test_config_realtime_keys_parse_and_print(void** state) {
+  (void)state;
+  fw_config_t c;
+  fw_config_defaults(&c);
+  assert_int_equal(c.rt_scheduler, FW_RT_OTHER);
+  assert_int_equal(c.rt_priority, 50);
+  assert_true(c.rt_cpus == 0);
+  assert_false(c.rt_lock_memory);
+  assert_false(c.rt_prefault);
+  assert_true(c.late_start_threshold_s == 0.01);
+  char err[FW_CONFIG_ERR_MAX];
+  assert_int_equal(fw_config_set(&c, "rt_scheduler", "fifo", "s", err, sizeof err), 0);
+  assert_int_equal(c.rt_scheduler, FW_RT_FIFO);
+  assert_int_equal(fw_config_set(&c, "rt_scheduler", "rr", "s", err, sizeof err), 0);
+  assert_int_equal(c.rt_scheduler, FW_RT_RR);
+  assert_int_equal(fw_config_set(&c, "rt_scheduler", "deadline", "s", err, sizeof err), -1);
+  assert_non_null(strstr(err, "one of other, fifo, rr"));
+  assert_int_equal(fw_config_set(&c, "rt_priority", "0", "s", err, sizeof err), -1);
+  assert_non_null(strstr(err, "[1, 99]"));
+  assert_int_equal(fw_config_set(&c, "rt_priority", "100", "s", err, sizeof err), -1);
+  assert_int_equal(fw_config_set(&c, "rt_priority", "80", "s", err, sizeof err), 0);
+  assert_int_equal(c.rt_priority, 80);
+
+  assert_int_equal(fw_config_set(&c, "rt_cpus", "1", "s", err, sizeof err), 0);
+  assert_true(c.rt_cpus == 0x2U);
+  assert_int_equal(fw_config_set(&c, "rt_cpus", " 0, 2-4 ,7,63 ", "s", err, sizeof err), 0);
+  assert_true(c.rt_cpus == (0x1U | 0x1CU | 0x80U | (UINT64_C(1) << 63)));
+  char list[256];
+  fw_config_format_cpus(c.rt_cpus, list, sizeof list);
+  assert_string_equal(list, "0,2-4,7,63");
+  fw_config_format_cpus(0, list, sizeof list);
+  assert_string_equal(list, "");
+  const char* bad[] = {"64", "-1", "1-", "3-1", "1,,2", "1,", "a", "1 2", "0x1", "1-2-3"};
+  for (size_t i = 0; i < sizeof bad / sizeof bad[0]; ++i) {
+    err[0] = '\0';
+    assert_int_equal(fw_config_set(&c, "rt_cpus", bad[i], "robot.conf:9", err, sizeof err), -1);
+    assert_non_null(strstr(err, "robot.conf:9"));
+    assert_non_null(strstr(err, "'rt_cpus'"));
+    assert_non_null(strstr(err, "CPU numbers and ranges in [0, 63]"));
+  }
+  assert_true(c.rt_cpus == (0x1U | 0x1CU | 0x80U | (UINT64_C(1) << 63)));  // unchanged
+  assert_int_equal(fw_config_set(&c, "rt_cpus", "", "s", err, sizeof err), 0);
+  assert_true(c.rt_cpus == 0);
+
+  // Printed and loaded back: the same settings.
+  assert_int_equal(fw_config_set(&c, "rt_cpus", "1,3-5", "s", err, sizeof err), 0);
+  assert_int_equal(fw_config_set(&c, "rt_lock_memory", "true", "s", err, sizeof err), 0);
+  assert_int_equal(fw_config_set(&c, "rt_prefault", "true", "s", err, sizeof err), 0);
+  const char* p = write_tmp("rt.conf", "");
+  FILE* f = fopen(p, "w");
+  assert_non_null(f);
+  fw_config_print(&c, f);
+  fclose(f);
+  fw_config_t back;
+  fw_config_defaults(&back);
+  assert_int_equal(fw_config_load_file(&back, p, err, sizeof err), 0);
+  assert_memory_equal(&back, &c, offsetof(fw_config_t, origins));
+  assert_int_equal(fw_config_validate(&back, err, sizeof err), 0);
+}
+
 // A boolean is exactly what its error message says: true or false, nothing else.
 static void test_config_bool_accepts_exactly_true_or_false(void** state) {
   (void)state;
@@ -505,6 +567,7 @@ int main(int argc, char** argv) {
       cmocka_unit_test(test_config_out_of_range_names_allowed_range),
       cmocka_unit_test(test_config_bad_values_refused_with_choices),
       cmocka_unit_test(test_config_bool_accepts_exactly_true_or_false),
+      cmocka_unit_test(test_config_realtime_keys_parse_and_print),
       cmocka_unit_test(test_config_syntax_errors_name_line),
       cmocka_unit_test(test_config_comments_quotes_and_crlf_parse),
       cmocka_unit_test(test_config_set_arg_overrides_and_errors),

@@ -1,0 +1,106 @@
+#!/usr/bin/env python3
+# SPDX-License-Identifier: MIT
+"""firmware.deadlines (label rt): real-time operation against the emulator under stress-ng load on
+every core, the controller with its real-time options (SCHED_FIFO, memory locked, buffers
+pre-faulted, pinned to the last CPU). Claim checked: no scheduled tick is missed (STATUS
+missed_periods = 0) and no false safety stop happens (laser/base silence, base fault or device
+loss, none of which is injected). Prints the wake-up lateness, compute time, late starts, the
+longest gap between ticks and the resident memory before and after the learner's store filled.
+The emulator stands in for devices that do not share the CPU: it runs under SCHED_FIFO too, below
+the controller. Needs CAP_SYS_NICE or RLIMIT_RTPRIO >= 60 (and CAP_IPC_LOCK or a large enough
+RLIMIT_MEMLOCK unless B21R_RT_LOCK_MEMORY=false).
+Environment: B21R_RT_SECONDS (default 600) the length of the run; B21R_RT_LOCK_MEMORY
+(default true).
+usage: test_deadlines.py CONTROLLER SIM WORLD"""
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import fwtest
+import rtload
+from b21r import status_t
+
+PRIORITY = 60
+FALSE_STOPS = {status_t.STOP_LASER_SILENT: "laser silent", status_t.STOP_BASE_SILENT: "base silent",
+               status_t.STOP_BASE_FAULT: "base fault", status_t.STOP_DEVICE_LOST: "device lost"}
+
+
+def main():
+    controller, sim_exe, world = sys.argv[1:4]
+    seconds = int(os.environ.get("B21R_RT_SECONDS", "600"))
+    lock = os.environ.get("B21R_RT_LOCK_MEMORY", "true")
+    if not rtload.may_use_realtime(PRIORITY):
+        fwtest.fail("real-time scheduling is not permitted: run as root, with CAP_SYS_NICE, or with "
+                    "RLIMIT_RTPRIO >= %d (e.g. prlimit --rtprio=%d --pid $$)" % (PRIORITY, PRIORITY))
+    d = fwtest.workdir("deadlines")
+    ok = False
+    cpu = max(os.sched_getaffinity(0))
+    stress = rtload.start_stress(seconds + 60, os.path.join(d, "stress.log"))
+    sim = fwtest.Sim(sim_exe, world, d, "rt", seed=1, lockstep=False, prefix=["chrt", "-f", str(PRIORITY - 10)])
+    try:
+        settings = {"lockstep": "false", "phase_one_runs": 100000, "phase_two_runs": 100000, "seed": 3,
+                    "rt_scheduler": "fifo", "rt_priority": PRIORITY, "rt_cpus": str(cpu), "rt_lock_memory": lock,
+                    "rt_prefault": "true"}
+        cmd = fwtest.controller_cmd(controller, sim, d, "rt", settings)
+        err_path = os.path.join(d, "rt.controller.log")
+        with open(err_path, "w") as err, open(os.path.join(d, "rt.progress.txt"), "w") as out:
+            p = subprocess.Popen(cmd, stdout=out, stderr=err)
+            time.sleep(min(10, seconds / 4))
+            rss_start = rtload.rss_kib(p.pid)
+            deadline = time.time() + seconds - min(10, seconds / 4)
+            while time.time() < deadline and p.poll() is None:
+                time.sleep(1)
+            rss_end = rtload.rss_kib(p.pid)
+            if p.poll() is not None:
+                with open(err_path) as f:
+                    fwtest.fail("the controller ended early (status %d):\n%s" % (p.returncode, f.read()[-3000:]))
+            p.send_signal(signal.SIGTERM)
+            rc = p.wait(60)
+        with open(err_path) as f:
+            err_text = f.read()
+        if rc != 128 + signal.SIGTERM:
+            fwtest.fail("controller exit status %d:\n%s" % (rc, err_text[-3000:]))
+    finally:
+        sim.close()
+        rtload.stop(stress)
+
+    statuses = [m for _, _, m in fwtest.read_log(os.path.join(d, "rt.lcmlog"), {"B21R_STATUS"})]
+    running = [s for s in statuses if s.mode != status_t.MODE_DONE]
+    if not running:
+        fwtest.fail("no STATUS in the log")
+    last = running[-1]
+    false_stops = {}
+    prev = 0
+    for s in statuses:
+        if s.stop_reason != prev and s.stop_reason in FALSE_STOPS:
+            false_stops[FALSE_STOPS[s.stop_reason]] = false_stops.get(FALSE_STOPS[s.stop_reason], 0) + 1
+        prev = s.stop_reason
+    first_fill = next((s.store_fill for s in running if s.utime > running[0].utime + 9e6), running[0].store_fill)
+    fwtest.note("real time %d s at 10 Hz under stress-ng (--cpu %d --io 1 --vm 1 --vm-bytes 256M); controller "
+                "SCHED_FIFO %d on CPU %d, rt_lock_memory=%s, rt_prefault=true" %
+                (seconds, os.cpu_count(), PRIORITY, cpu, lock))
+    fwtest.note("  ticks %d, missed periods %d, late starts (> 10 ms) %d, overruns %d" %
+                (last.ticks, last.missed_periods, last.late_starts, last.tick_overruns))
+    fwtest.note("  wake-up lateness: max %d us (p99 of the last %d ticks %d us); longest gap between tick "
+                "starts %d us (period 100000 us)" %
+                (last.late_max_ever_us, min(last.ticks, 1024), last.late_p99_us, last.gap_max_ever_us))
+    fwtest.note("  tick compute: max %d us, p99 %d us, p50 %d us" %
+                (last.tick_max_ever_us, last.tick_p99_us, last.tick_p50_us))
+    fwtest.note("  safety stops %d (false: %s); store %d -> %d samples; RSS %d KiB -> %d KiB" %
+                (last.safety_stops, false_stops or "none", first_fill, last.store_fill, rss_start, rss_end))
+    if last.ticks < 0.95 * seconds * 10 - 100:
+        fwtest.fail("only %d ticks in %d s" % (last.ticks, seconds))
+    if last.missed_periods != 0:
+        fwtest.fail("%d missed periods" % last.missed_periods)
+    if false_stops:
+        fwtest.fail("false safety stops: %s" % false_stops)
+    ok = True
+    fwtest.cleanup(d, ok)
+    print("PASS")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
