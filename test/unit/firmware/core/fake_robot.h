@@ -78,7 +78,7 @@ typedef struct fake_robot {
   int64_t start_pose_requests;
   int64_t commands;
   int64_t laser_telegrams;
-  int64_t busy_ns;      ///< wall time spent simulating (advance), to subtract in benchmarks
+  int64_t busy_ns;      ///< CPU time of the calling thread spent simulating (advance), to subtract in benchmarks
 } fake_robot_t;
 
 /// Builds the paper's 10 m × 2 m corridor with the LMS200 180°/1° laser (noise 1 cm, seeded),

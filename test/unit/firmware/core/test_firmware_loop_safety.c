@@ -75,7 +75,7 @@ static int expect_stop_within(int reason, int max_ticks) {
 
 // Between runs the learner replays the aborted run in slices before the next run starts: up to
 // replay_passes x the run's steps / learn_updates_per_tick ticks (runs here are under 100 steps).
-#define REPLAY_TICKS (20 * 100 / 8)
+#define REPLAY_TICKS (20 * 100 / 4)
 
 static void expect_resume(int max_ticks) {
   fw_loop_stats_t st;
