@@ -66,9 +66,14 @@ def claims(blocks, optimal, examples, train):
     p2 = [b for b in blocks if b["phase"] == 2]
     final = blocks[-1]
     if p1 and len(blocks) > 1:
-        m, h, t = paired(p1[-1]["steps"], blocks[0]["steps"])
-        out.append(("the curve falls: after phase one significantly better than the first block",
-                    t < -T95_ONE_SIDED_DF9, "%+.1f ± %.1f steps (t = %.2f)" % (m, h, t)))
+        # Descriptive for one session: a single failed pose (at the step limit) in the first block
+        # makes any paired test over poses meaningless; the 10-seed test is in docs/RESULTS.md.
+        a, b = mean_all(blocks[0]), mean_all(p1[-1])
+        out.append(("the curve falls: after phase one fewer steps (failures at the limit) and no fewer poses reached "
+                    "than in the first block (descriptive)",
+                    b < a and p1[-1]["successes"] >= blocks[0]["successes"],
+                    "%.1f steps (%d/%d reached) -> %.1f steps (%d/%d)" % (
+                        a, blocks[0]["successes"], blocks[0]["n_starts"], b, p1[-1]["successes"], p1[-1]["n_starts"])))
     if examples and p1:
         best_gain = min(examples, key=lambda g: mean_all(examples[g]))
         best = examples[best_gain]
