@@ -110,25 +110,10 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
   tasks_rng_seed(&L->explore_rng, seeds.explore);
   L->driver_seed_base = seeds.driver;
 
-  hedger_config_t hc;
-  fw_learning_config(L, &hc);
-  hc.seed = seeds.hedger;
-  if (hedger_config_validate(&hc) != HEDGER_OK) {
-    snprintf(err, err_cap, "loop: the learner's configuration is invalid (check the hedger_* keys)");
+  if (fw_learner_init(L, seeds.hedger, err, err_cap) != 0) {
     free(L);
     return NULL;
   }
-  const size_t bytes = hedger_storage_size(&hc);
-  L->hedger_storage =
-      aligned_alloc(HEDGER_STORAGE_ALIGN, (bytes + HEDGER_STORAGE_ALIGN - 1) & ~(size_t)(HEDGER_STORAGE_ALIGN - 1));
-  if (L->hedger_storage == NULL || hedger_init(&L->hedger, L->hedger_storage, bytes, &hc) != HEDGER_OK) {
-    snprintf(err, err_cap, "loop: cannot set up the learner (%zu bytes for %d samples)", bytes,
-             (int)cfg->hedger_capacity);
-    free(L->hedger_storage);
-    free(L);
-    return NULL;
-  }
-  L->hedger_save_max = hedger_serialized_max_size(&hc);
   L->save_handle = -1;
 
   rflex_b21r_params_default(&L->rflex);
@@ -178,7 +163,7 @@ void fw_loop_destroy(fw_loop_t* L) {
     return;
   }
   pthread_mutex_destroy(&L->mbox_mu);
-  free(L->hedger_storage);
+  fw_learner_free(&L->learner);
   free(L);
 }
 
@@ -560,7 +545,7 @@ void fw_loop_get_stats(const fw_loop_t* L, fw_loop_stats_t* out) {
   out->teleop_rejected = L->teleop_rejected;
   out->commands_accepted = L->commands_accepted;
   out->commands_rejected = L->commands_rejected;
-  out->store_fill = hedger_counters(L->hedger)->store_fill;
+  out->store_fill = fw_learner_stats(&L->learner).fill;
   out->done = L->done;
   out->last_block = L->last_block;
   out->best_example_steps = L->sched.p.best_example_steps;
