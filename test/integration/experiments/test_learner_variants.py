@@ -3,8 +3,9 @@
 """experiments.learner_variants: the learner ablation's three learners run end to end on a short
 schedule of its experiment file, and see the same data.
 - `--variant learner=hedger|lwa|tabular` each finish with a complete result that records the learner;
-- phase one is the same for every learner (the learner does not act in phase one): equal
-  phase_one_data_digest over the same number of transitions;
+- phase one is the same for every learner (the learner does not act in phase-one training runs;
+  the short schedule has no evaluation block in phase one, whose learner-driven runs would leave
+  the emulator in different states): equal phase_one_data_digest over the same transitions;
 - phase two differs (the learners choose the actions), and the tabular learner stores visited cells.
 usage: test_learner_variants.py B21R_EXPERIMENT ABLATION_LEARNER_CONF"""
 import json
