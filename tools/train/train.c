@@ -64,6 +64,11 @@ trainer_t* trainer_create(const fw_config_t* cfg, const train_options_t* opt, ch
   if (!(t->opt.progress_period_s > 0.0)) {
     t->opt.progress_period_s = 1.0;
   }
+  if (cfg->learner == FW_LEARNER_TABULAR) {
+    fmt(err, err_cap, "learner = tabular: the offline trainer trains HEDGER only (learner = hedger or lwa)");
+    free(t);
+    return NULL;
+  }
   fw_loop_learner_config(cfg, &t->hc);
   const hedger_status_t hs = hedger_create(&t->hedger, &t->hc);
   if (hs != HEDGER_OK) {

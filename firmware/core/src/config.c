@@ -69,6 +69,8 @@ static const choice_t k_greedy[] = {
     {"per_action", HEDGER_GREEDY_PER_ACTION}, {"state_model", HEDGER_GREEDY_STATE_MODEL}, {NULL, 0}};
 static const choice_t k_rt_scheduler[] = {
     {"other", FW_RT_OTHER}, {"fifo", FW_RT_FIFO}, {"rr", FW_RT_RR}, {NULL, 0}};
+static const choice_t k_learner[] = {
+    {"hedger", FW_LEARNER_HEDGER}, {"lwa", FW_LEARNER_LWA}, {"tabular", FW_LEARNER_TABULAR}, {NULL, 0}};
 static const choice_t k_switch[] = {
     {"runs", FW_SWITCH_RUNS}, {"operator", FW_SWITCH_OPERATOR}, {"auto", FW_SWITCH_AUTO}, {NULL, 0}};
 
@@ -192,6 +194,14 @@ static const key_desc_t k_keys[] = {
    "learning rate (the paper: 0.2)"},
   {NULL, "gamma", KIND_DOUBLE, OFF(gamma), 0, 1, false, true, NULL, "0",
    "discount factor; 0 = the task's (the paper: corridor 0.99, obstacles 0.9)"},
+  {NULL, "learner", KIND_ENUM, OFF(learner), 0, 0, false, false, k_learner, "hedger",
+   "value function: hedger (the paper's); lwa = HEDGER with locally weighted averaging only; tabular = "
+   "Q-learning on a table of tabular_bins per state dimension x tabular_actions (no checkpoints)"},
+  {NULL, "tabular_bins", KIND_INT, OFF(tabular_bins), 1, 64, false, false, NULL, "10",
+   "learner = tabular: equal bins per state dimension over the task's state range (table = bins^dims x "
+   "actions cells, 12 bytes each)"},
+  {NULL, "tabular_actions", KIND_INT, OFF(tabular_actions), 2, 64, false, false, NULL, "9",
+   "learner = tabular: evenly spaced rotation velocities over [-max_rotation_radps, max_rotation_radps]"},
   {NULL, "hedger_capacity", KIND_INT, OFF(hedger_capacity), 64, 1000000, false, false, NULL, "20000",
    "stored samples of the value function (fixed memory)"},
   {NULL, "hedger_k_min", KIND_INT, OFF(hedger_k_min), 1, 64, false, false, NULL, "6",
@@ -978,6 +988,13 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
         "%s: hedger_input_scale has %d values; task %s (set at %s) needs %d (state dimensions, then the action)",
         origin_of(cfg, "hedger_input_scale").text, (int)cfg->hedger_input_scale_n,
         cfg->task == FW_TASK_CORRIDOR ? "corridor" : "obstacles", origin_of(cfg, "task").text, (int)dims);
+    return -1;
+  }
+  if (cfg->learner == FW_LEARNER_TABULAR && cfg->checkpoint_file[0] != '\0') {
+    fmt(err, err_cap,
+        "%s: learner = tabular cannot checkpoint (checkpoint_file set at %s); set checkpoint_file = \"\" or use "
+        "learner = hedger",
+        origin_of(cfg, "learner").text, origin_of(cfg, "checkpoint_file").text);
     return -1;
   }
   if (cfg->reposition == FW_REPOSITION_EMULATOR && cfg->emulator_control[0] == '\0') {

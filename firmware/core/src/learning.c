@@ -61,6 +61,7 @@ void fw_learning_config(const fw_loop_t* L, hedger_config_t* hc) {
   hc->greedy_method = (uint32_t)L->cfg.hedger_greedy_method;
   hc->greedy_pessimism = L->cfg.hedger_greedy_pessimism;
   hc->greedy_reach = L->cfg.hedger_greedy_reach;
+  hc->local_model = L->cfg.learner == FW_LEARNER_LWA ? HEDGER_LOCAL_LWA : HEDGER_LOCAL_LWR;
 }
 
 // ---- checkpoints --------------------------------------------------------------------------
@@ -97,7 +98,7 @@ static void checkpoint_submit(fw_loop_t* L, size_t payload_size) {
 }
 
 void fw_learning_checkpoint_now(fw_loop_t* L) {
-  if (L->out.checkpoints == NULL) {
+  if (L->out.checkpoints == NULL || L->learner.hedger == NULL) {
     return;
   }
   void* payload = NULL;
@@ -106,7 +107,7 @@ void fw_learning_checkpoint_now(fw_loop_t* L) {
     return;
   }
   size_t written = 0;
-  if (hedger_save(L->hedger, payload, payload_cap, &written) != HEDGER_OK) {
+  if (hedger_save(L->learner.hedger, payload, payload_cap, &written) != HEDGER_OK) {
     written = 0;  // never happens: the buffer is sized by hedger_serialized_max_size
   }
   checkpoint_submit(L, written);
@@ -114,7 +115,7 @@ void fw_learning_checkpoint_now(fw_loop_t* L) {
 
 void fw_loop_checkpoint_capacity(const fw_loop_t* L, size_t* meta_bytes, size_t* payload_bytes) {
   *meta_bytes = FW_PROGRESS_BYTES;
-  *payload_bytes = L->hedger_save_max;
+  *payload_bytes = L->learner.save_max;
 }
 
 void fw_loop_attach_checkpoints(fw_loop_t* L, fw_ckpt_writer_t* writer) { L->out.checkpoints = writer; }
@@ -123,6 +124,10 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
   const char* path = L->cfg.checkpoint_file;
   if (path[0] == '\0') {
     return 0;
+  }
+  if (L->learner.hedger == NULL) {
+    snprintf(err, err_cap, "checkpoint %s: learner = tabular keeps no checkpoints; set checkpoint_file = \"\"", path);
+    return -1;
   }
   size_t meta_size = 0;
   size_t payload_size = 0;
@@ -133,7 +138,7 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
   uint8_t meta[FW_PROGRESS_BYTES];
   // At most the largest learned state this configuration can hold, whatever the header claims:
   // fw_checkpoint_read refuses a larger (or corrupt) size with a message instead.
-  const size_t payload_cap = payload_size < L->hedger_save_max ? payload_size : L->hedger_save_max;
+  const size_t payload_cap = payload_size < L->learner.save_max ? payload_size : L->learner.save_max;
   void* payload = malloc(payload_cap + 1U);
   if (payload == NULL) {
     snprintf(err, err_cap, "checkpoint %s: cannot allocate %zu bytes", path, payload_cap);
@@ -161,7 +166,7 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
              path, g.task == FW_TASK_CORRIDOR ? "corridor" : "obstacles", path, path);
     return -1;
   }
-  const hedger_status_t hs = hedger_load(L->hedger, payload, payload_size);
+  const hedger_status_t hs = hedger_load(L->learner.hedger, payload, payload_size);
   free(payload);
   if (hs != HEDGER_OK) {
     snprintf(err, err_cap,
@@ -189,8 +194,8 @@ bool fw_learning_idle(const fw_loop_t* L) {
   return !L->pending.active && !L->end_run_pending && L->learn_stage == FW_LEARN_IDLE;
 }
 
-// The pending transition: its HEDGER update (training) or the prediction of its Q (for the
-// message), then the experience message. Bounded: at most one greedy search and one update.
+// The pending transition: its update (training) or the prediction of its Q (for the message),
+// then the experience message. Bounded: at most one greedy search and one update.
 static void learn_pending(fw_loop_t* L) {
   fw_pending_step_t* p = &L->pending;
   double q = 0.0;
@@ -199,22 +204,18 @@ static void learn_pending(fw_loop_t* L) {
     double q_next = 0.0;
     if (!p->terminal) {
       if (p->need_greedy) {
-        (void)hedger_greedy(L->hedger, p->s_next, NULL, &q_next, NULL);
+        (void)fw_learner_greedy(&L->learner, p->s_next, NULL, &q_next);
       } else {
         q_next = p->q_next;
       }
     }
-    hedger_update_info_t info;
-    if (hedger_learn(L->hedger, p->s, p->a, p->reward, p->s_next, p->terminal ? 1 : 0, q_next, &info) == HEDGER_OK) {
-      q = info.q_old;
-      kind = info.kind;
+    if (!fw_learner_learn(&L->learner, p->s, p->a, p->reward, p->s_next, p->terminal, q_next, &q, &kind)) {
+      q = 0.0;
+      kind = HEDGER_KIND_UNKNOWN;
     }
-  } else {
-    hedger_prediction_t pr;
-    if (hedger_predict(L->hedger, p->s, p->a, &pr) == HEDGER_OK) {
-      q = pr.value;
-      kind = pr.kind;
-    }
+  } else if (!fw_learner_predict(&L->learner, p->s, p->a, &q, &kind)) {
+    q = 0.0;
+    kind = HEDGER_KIND_UNKNOWN;
   }
   fw_out_experience(L, p, q, kind);
   p->active = false;
@@ -224,19 +225,19 @@ static void learn_pending(fw_loop_t* L) {
 // same slices pass without writing, so that a lockstep run spends the same ticks between runs
 // with and without checkpoints (its experience stream does not depend on them).
 static void save_slice(fw_loop_t* L) {
-  const uint32_t fill = hedger_size(L->hedger);
+  const uint32_t fill = fw_learner_stats(&L->learner).fill;
   const uint32_t per_tick = (uint32_t)L->cfg.checkpoint_points_per_tick;
-  if (L->save_handle < 0 && L->save_points_done == 0 && L->out.checkpoints != NULL) {
+  if (L->save_handle < 0 && L->save_points_done == 0 && L->out.checkpoints != NULL && L->learner.hedger != NULL) {
     if (checkpoint_acquire(L, &L->save_payload, &L->save_payload_cap) &&
-        hedger_save_begin(L->hedger, L->save_payload, L->save_payload_cap, &L->save_cursor) != HEDGER_OK) {
+        hedger_save_begin(L->learner.hedger, L->save_payload, L->save_payload_cap, &L->save_cursor) != HEDGER_OK) {
       L->save_handle = -1;  // never happens: the buffer is sized by hedger_serialized_max_size
     }
   }
   if (L->save_handle >= 0) {
     size_t written = 0;
-    if (hedger_save_step(L->hedger, &L->save_cursor, per_tick, &written) != HEDGER_OK) {
+    if (hedger_save_step(L->learner.hedger, &L->save_cursor, per_tick, &written) != HEDGER_OK) {
       // Nothing changes the learner between runs; should it happen, the save starts over.
-      (void)hedger_save_begin(L->hedger, L->save_payload, L->save_payload_cap, &L->save_cursor);
+      (void)hedger_save_begin(L->learner.hedger, L->save_payload, L->save_payload_cap, &L->save_cursor);
       L->save_points_done = 0;
       return;
     }
@@ -256,7 +257,7 @@ static void save_slice(fw_loop_t* L) {
 static void between_runs_slice(fw_loop_t* L) {
   if (L->end_run_pending) {
     L->end_run_pending = false;
-    (void)hedger_end_run_begin(L->hedger, NULL);
+    fw_learner_end_run_begin(&L->learner);
     L->learn_stage = FW_LEARN_REPLAY;
     L->save_points_done = 0;
     L->save_handle = -1;
@@ -266,9 +267,7 @@ static void between_runs_slice(fw_loop_t* L) {
   }
   L->learn_ticks++;
   if (L->learn_stage == FW_LEARN_REPLAY) {
-    uint32_t remaining = 0;
-    (void)hedger_end_run_step(L->hedger, (uint32_t)L->cfg.learn_updates_per_tick, &remaining);
-    if (remaining > 0) {
+    if (fw_learner_end_run_step(&L->learner, (uint32_t)L->cfg.learn_updates_per_tick) > 0) {
       return;
     }
     L->learn_stage = FW_LEARN_SAVE;
@@ -292,13 +291,13 @@ void fw_learning_finish_now(fw_loop_t* L) {
   }
   if (L->end_run_pending) {
     L->end_run_pending = false;
-    (void)hedger_end_run_begin(L->hedger, NULL);
+    fw_learner_end_run_begin(&L->learner);
   }
-  (void)hedger_end_run_step(L->hedger, UINT32_MAX, NULL);
+  (void)fw_learner_end_run_step(&L->learner, UINT32_MAX);
   if (L->learn_stage == FW_LEARN_SAVE && L->save_handle >= 0) {
     // A slice-wise save was under way: finish it at once.
     size_t written = 0;
-    if (hedger_save_step(L->hedger, &L->save_cursor, UINT32_MAX, &written) == HEDGER_OK && L->save_cursor.done) {
+    if (hedger_save_step(L->learner.hedger, &L->save_cursor, UINT32_MAX, &written) == HEDGER_OK && L->save_cursor.done) {
       checkpoint_submit(L, written);
     }
   }

@@ -112,25 +112,10 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
   tasks_rng_seed(&L->explore_rng, seeds.explore);
   L->driver_seed_base = seeds.driver;
 
-  hedger_config_t hc;
-  fw_learning_config(L, &hc);
-  hc.seed = seeds.hedger;
-  if (hedger_config_validate(&hc) != HEDGER_OK) {
-    snprintf(err, err_cap, "loop: the learner's configuration is invalid (check the hedger_* keys)");
+  if (fw_learner_init(L, seeds.hedger, err, err_cap) != 0) {
     free(L);
     return NULL;
   }
-  const size_t bytes = hedger_storage_size(&hc);
-  L->hedger_storage_bytes = (bytes + HEDGER_STORAGE_ALIGN - 1) & ~(size_t)(HEDGER_STORAGE_ALIGN - 1);
-  L->hedger_storage = aligned_alloc(HEDGER_STORAGE_ALIGN, L->hedger_storage_bytes);
-  if (L->hedger_storage == NULL || hedger_init(&L->hedger, L->hedger_storage, bytes, &hc) != HEDGER_OK) {
-    snprintf(err, err_cap, "loop: cannot set up the learner (%zu bytes for %d samples)", bytes,
-             (int)cfg->hedger_capacity);
-    free(L->hedger_storage);
-    free(L);
-    return NULL;
-  }
-  L->hedger_save_max = hedger_serialized_max_size(&hc);
   L->save_handle = -1;
   // The effective configuration as text, once, for B21R_CONFIG.
   size_t text_len = 0;
@@ -141,7 +126,7 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
   }
   if (L->config_text == NULL) {
     snprintf(err, err_cap, "loop: out of memory");
-    free(L->hedger_storage);
+    fw_learner_free(&L->learner);
     free(L);
     return NULL;
   }
@@ -201,7 +186,7 @@ static __attribute__((noinline)) void prefault_stack(void) {
 
 void fw_loop_prefault(fw_loop_t* L) {
   fw_prefault(L, sizeof *L);
-  fw_prefault(L->hedger_storage, L->hedger_storage_bytes);
+  fw_prefault(L->learner.storage, L->learner.storage_bytes);
   if (L->out.queue != NULL) {
     fw_pubq_prefault(L->out.queue);
   }
@@ -217,7 +202,7 @@ void fw_loop_destroy(fw_loop_t* L) {
   }
   pthread_mutex_destroy(&L->mbox_mu);
   free(L->config_text);
-  free(L->hedger_storage);
+  fw_learner_free(&L->learner);
   free(L);
 }
 
@@ -689,7 +674,7 @@ void fw_loop_get_stats(const fw_loop_t* L, fw_loop_stats_t* out) {
   out->teleop_rejected = L->teleop_rejected;
   out->commands_accepted = L->commands_accepted;
   out->commands_rejected = L->commands_rejected;
-  out->store_fill = hedger_counters(L->hedger)->store_fill;
+  out->store_fill = fw_learner_stats(&L->learner).fill;
   out->done = L->done;
   out->last_block = L->last_block;
   out->best_example_steps = L->sched.p.best_example_steps;

@@ -3,7 +3,8 @@
 //   loop.c      the tick (sense → safety → decide → act → learn → publish), pacing, start-up,
 //               shutdown;
 //   run.c       the run lifecycle (repositioning, runs, the schedule) and the action of a step;
-//   learning.c  the learner: its configuration, the per-step update after the command, the
+//   learner.c   the value-function learner behind one interface (HEDGER, LWA only, tabular);
+//   learning.c  the learner's use: its configuration, the per-step update after the command, the
 //               between-run work (backward replay, checkpoint) in bounded slices, checkpoints;
 //   outputs.c   the messages (experience, pose, scan, eval, status, text lines);
 //   operator.c  B21R_TELEOP / B21R_COMMAND mailboxes and their validation;
@@ -20,6 +21,7 @@
 #include <proto/canopen.h>
 #include <proto/lms200.h>
 #include <proto/rflex.h>
+#include <tabq/tabq.h>
 #include <tasks/episode.h>
 #include <tasks/tasks.h>
 
@@ -42,6 +44,27 @@ typedef struct fw_drive {
   uint16_t emcy_code;
   bool emcy_seen;   // an EMCY with a non-zero code arrived and no good statusword since
 } fw_drive_t;
+
+/// The value-function learner (learner.c): exactly one of hedger (learner hedger, lwa) and tabq.
+typedef struct fw_learner {
+  int32_t kind;         ///< fw_learner_kind_t
+  void* storage;        ///< the learner's one block (owned)
+  size_t storage_bytes; ///< its allocated size (pre-faulted with rt_prefault)
+  hedger_t* hedger;
+  tabq_t* tabq;
+  size_t save_max;      ///< HEDGER: largest checkpoint payload; 0 for the tabular learner
+} fw_learner_t;
+
+/// Gauges and counters of the learner for the status message and the progress lines.
+typedef struct fw_learner_stats {
+  uint32_t fill;                 ///< HEDGER: stored points; tabular: visited cells
+  uint32_t capacity;             ///< HEDGER: store capacity; tabular: cells
+  uint64_t predictions_lwr;
+  uint64_t predictions_lwa;      ///< tabular: predictions of a visited cell
+  uint64_t predictions_unknown;
+  uint64_t evictions;
+  uint64_t rebuilds;
+} fw_learner_stats_t;
 
 /// The learner's work after a step or between runs (learning.c).
 typedef enum fw_learn_stage {
@@ -88,10 +111,7 @@ struct fw_loop {
   double gamma;
 
   // Learner.
-  void* hedger_storage;
-  size_t hedger_storage_bytes;  // allocated size of hedger_storage
-  hedger_t* hedger;
-  size_t hedger_save_max;
+  fw_learner_t learner;
   fw_pending_step_t pending;
   fw_learn_stage_t learn_stage;
   hedger_save_cursor_t save_cursor;
@@ -297,6 +317,22 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v, double* w);
 void fw_run_abort(fw_loop_t* L, int8_t end_reason, int32_t stop_reason, const char* why);
 /// While stopped for a bump in the emulator: asks for the next start pose once.
 void fw_run_request_pose_while_stopped(fw_loop_t* L);
+
+// ---- learner.c ----
+/// Sets up the configured learner (cfg.learner) in memory allocated once; -1 with a message.
+int fw_learner_init(fw_loop_t* L, uint64_t seed, char* err, size_t err_cap);
+void fw_learner_free(fw_learner_t* lr);
+/// Greedy action and its value at s; false when no action is known there (value = 0, the default).
+bool fw_learner_greedy(fw_learner_t* lr, const double* s, double* action, double* value);
+/// One update of (s, a, r, s', terminal) with q' given; *q_old / *kind: Q(s, a) before it.
+bool fw_learner_learn(fw_learner_t* lr, const double* s, double a, double r, const double* s_next, bool terminal,
+                      double q_next, double* q_old, hedger_kind_t* kind);
+/// Q(s, a) and how it was obtained (tabular: LWA = a visited cell).
+bool fw_learner_predict(fw_learner_t* lr, const double* s, double a, double* q, hedger_kind_t* kind);
+/// The finished run's backward replay: begin, then steps of at most max_updates (returns those left).
+void fw_learner_end_run_begin(fw_learner_t* lr);
+uint32_t fw_learner_end_run_step(fw_learner_t* lr, uint32_t max_updates);
+fw_learner_stats_t fw_learner_stats(const fw_learner_t* lr);
 
 // ---- learning.c ----
 void fw_learning_config(const fw_loop_t* L, hedger_config_t* out);

@@ -161,9 +161,9 @@ static void finish_run(fw_loop_t* L, bool reached_goal, int8_t end_reason, int32
     fw_learning_run_ended(L);
   }
   if (L->cfg.progress) {
-    fw_loop_log(L, 1, "run %4d  phase %d  %-13s %-9s %4d steps  (%s)  store %u/%d", L->run_id, L->plan.phase,
+    fw_loop_log(L, 1, "run %4d  phase %d  %-13s %-9s %4d steps  (%s)  store %u/%u", L->run_id, L->plan.phase,
                 run_kind_name(L), aborted ? "ABORTED" : (reached_goal ? "goal" : "no goal"), L->actions_taken, why,
-                hedger_counters(L->hedger)->store_fill, L->cfg.hedger_capacity);
+                fw_learner_stats(&L->learner).fill, fw_learner_stats(&L->learner).capacity);
   }
   if (block_done) {
     L->last_block = block;
@@ -311,15 +311,15 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
     }
   }
   // The greedy search at s chooses the learned policy's action; its value is also the q' of the
-  // transition into s (hedger_learn after the command), so it runs once.
+  // transition into s (learned after the command), so it runs once.
   bool greedy_known = false;
   double greedy_action = 0.0;
   if (learned_policy) {
     double value = 0.0;
-    greedy_known = hedger_greedy(L->hedger, L->s, &greedy_action, &value, NULL) == HEDGER_OK;
+    greedy_known = fw_learner_greedy(&L->learner, L->s, &greedy_action, &value);
     if (L->pending.active) {
       L->pending.need_greedy = false;
-      L->pending.q_next = value;  // the default value when no action is known, as hedger_update
+      L->pending.q_next = value;  // the default value (0) when no action is known
     }
   }
   // The driver runs every step (even when it only advises) so its state follows the run.
@@ -345,7 +345,7 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
       source = B21R_EXPERIENCE_T_SOURCE_EXPLORATION;
     }
   } else if (!evaluating && L->cfg.advisor) {
-    a = advice;  // HEDGER knows no action here: the example policy advises
+    a = advice;  // the learner knows no action here: the example policy advises
     source = B21R_EXPERIENCE_T_SOURCE_ADVISOR;
   } else {
     a = 0.0;  // nothing known: hold course (evaluations measure the learned policy alone)

@@ -295,6 +295,12 @@ void predict_from(hedger& h, const double* x, const Neigh& nb, hedger_prediction
     if (unweighted_ivh) xtx.noalias() += r * r.transpose();
   }
   const double lwa = swq / sw;
+  if (h.cfg.local_model == static_cast<uint32_t>(HEDGER_LOCAL_LWA)) {
+    p.kind = HEDGER_KIND_LWA;
+    p.value = lwa;
+    ++h.counters.predictions_lwa;
+    return;
+  }
 
   hedger_fallback_t fb = HEDGER_FALLBACK_NONE;
   double lwr = 0.0;
@@ -659,7 +665,8 @@ GreedyResult greedy_at(hedger& h, const double* state) noexcept {
   x[D - 1] = 0.0;
   ++h.counters.greedy_calls;
   GreedyResult g;
-  if (h.cfg.greedy_method == static_cast<uint32_t>(HEDGER_GREEDY_STATE_MODEL)) {
+  if (h.cfg.greedy_method == static_cast<uint32_t>(HEDGER_GREEDY_STATE_MODEL) &&
+      h.cfg.local_model == static_cast<uint32_t>(HEDGER_LOCAL_LWR)) {
     if (greedy_state_model<D>(h, x, 1.0, g)) {
       ++h.counters.greedy_state_model;
       return g;

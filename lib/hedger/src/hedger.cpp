@@ -54,6 +54,9 @@ bool valid_config(const hedger_config_t* c) {
       c->greedy_method != static_cast<uint32_t>(HEDGER_GREEDY_STATE_MODEL)) {
     return false;
   }
+  if (c->local_model != static_cast<uint32_t>(HEDGER_LOCAL_LWR) && c->local_model != static_cast<uint32_t>(HEDGER_LOCAL_LWA)) {
+    return false;
+  }
   if (!std::isfinite(c->greedy_pessimism) || !(c->greedy_pessimism >= 0.0)) return false;
   if (!std::isfinite(c->greedy_reach) || !(c->greedy_reach >= 1.0) || c->greedy_reach > 100.0) return false;
   return true;
@@ -265,6 +268,7 @@ hedger_config_t hedger_config_default(void) HEDGER_NOEXCEPT {
   c.greedy_method = static_cast<uint32_t>(HEDGER_GREEDY_PER_ACTION);
   c.greedy_pessimism = 0.0;
   c.greedy_reach = 1.0;
+  c.local_model = static_cast<uint32_t>(HEDGER_LOCAL_LWR);
   return c;
 }
 

@@ -52,10 +52,20 @@ def main():
             fail("unexpected plan: %s" % plan)
         learner = os.path.join(configs, "ablation_learner.conf")
         plan = json.loads(run(exe, "--config", learner, "--plan").stdout)
-        p = run(exe, "--config", learner, "--seed", "1", "--out", os.path.join(d, "x.json"))
         if "unavailable" in plan:
+            p = run(exe, "--config", learner, "--seed", "1", "--out", os.path.join(d, "x.json"))
             if p.returncode != 3 or "learner" not in p.stderr:
                 fail("an unavailable experiment was not refused with exit 3 (%d): %s" % (p.returncode, p.stderr))
+        elif plan["variants"] != ["learner=hedger", "learner=lwa", "learner=tabular"]:
+            fail("unexpected ablation_learner plan: %s" % plan)
+        # (experiments.learner_variants runs the available learners end to end.)
+        with open(bad, "w") as f:
+            f.write("experiment.requires = no_such_key\ntask = corridor\nexperiment.seeds = 2\n")
+        missing = json.loads(run(exe, "--config", bad, "--plan").stdout)
+        p = run(exe, "--config", bad, "--seed", "1", "--out", os.path.join(d, "x.json"))
+        if "no_such_key" not in missing.get("unavailable", "") or p.returncode != 3 or "no_such_key" not in p.stderr:
+            fail("an experiment needing a missing key was not refused with exit 3 (%d): %s %s" % (
+                p.returncode, missing, p.stderr))
         print("ablation_learner: %s" % plan.get("unavailable", "available"))
 
         goal = os.path.join(configs, "table1_explore_goal.conf")

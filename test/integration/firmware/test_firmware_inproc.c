@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 // firmware.inproc_alloc: the loop core against the ODE emulator linked in-process (rFLEX and
-// CANopen): thousands of lockstep ticks through runs, run ends, evaluation blocks and the phase
-// switch perform no heap allocation in the controller (the emulator's own are counted apart).
+// CANopen, every learner): thousands of lockstep ticks through runs, run ends, evaluation blocks
+// and the phase switch perform no heap allocation in the controller (the emulator's own are
+// counted apart).
 #define _POSIX_C_SOURCE 200809L
 #include "fw/loop.h"
 #include "fw/pubq.h"
@@ -31,7 +32,7 @@ static void drain(fw_pubq_t* q, int* evals, int* successes) {
   }
 }
 
-static void run_case(bool canopen) {
+static void run_case(bool canopen, fw_learner_kind_t learner) {
   static inproc_sim_t sim;
   static sim_world_t world;
   char err[FW_LOOP_ERR_MAX];
@@ -53,6 +54,7 @@ static void run_case(bool canopen) {
   c.eval_every_runs = 3;
   c.eval_starts = 3;
   c.progress = true;
+  c.learner = learner;
   fw_pubq_t* q = fw_pubq_create(4096);
   assert_non_null(q);
   const fw_io_t io = inproc_sim_io(&sim);
@@ -75,8 +77,8 @@ static void run_case(bool canopen) {
   const uint64_t total = alloc_counter_end();
   fw_loop_stats_t st;
   fw_loop_get_stats(loop, &st);
-  print_message("%s: %lld ticks, %d runs, %d blocks: %llu allocations in the controller, %llu inside the emulator\n",
-                canopen ? "canopen" : "rflex", (long long)ticks, st.runs_finished, evals,
+  print_message("%s, learner %d: %lld ticks, %d runs, %d blocks: %llu allocations in the controller, %llu inside the emulator\n",
+                canopen ? "canopen" : "rflex", (int)learner, (long long)ticks, st.runs_finished, evals,
                 (unsigned long long)(total - sim.sim_allocs), (unsigned long long)sim.sim_allocs);
   assert_true(st.done);
   assert_int_equal(evals, 2);
@@ -90,13 +92,20 @@ static void run_case(bool canopen) {
 // rFLEX base: zero allocations in the tick path over a whole short schedule.
 static void test_inproc_rflex_tick_allocates_nothing(void** state) {
   (void)state;
-  run_case(false);
+  run_case(false, FW_LEARNER_HEDGER);
 }
 
 // CANopen base: the same.
 static void test_inproc_canopen_tick_allocates_nothing(void** state) {
   (void)state;
-  run_case(true);
+  run_case(true, FW_LEARNER_HEDGER);
+}
+
+// The other learners of the ablation (HEDGER with LWA only, tabular Q-learning): the same.
+static void test_inproc_other_learners_tick_allocates_nothing(void** state) {
+  (void)state;
+  run_case(false, FW_LEARNER_LWA);
+  run_case(false, FW_LEARNER_TABULAR);
 }
 
 int main(int argc, char** argv) {
@@ -108,6 +117,7 @@ int main(int argc, char** argv) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_inproc_rflex_tick_allocates_nothing),
       cmocka_unit_test(test_inproc_canopen_tick_allocates_nothing),
+      cmocka_unit_test(test_inproc_other_learners_tick_allocates_nothing),
   };
   return cmocka_run_group_tests_name("firmware.inproc_alloc", tests, NULL, NULL);
 }

@@ -334,6 +334,53 @@ static void test_predict_rank_deficient_random_singular(void** state) {
   }
 }
 
+// HEDGER_LOCAL_LWA: every known prediction is the kernel-weighted average of the neighbours it
+// reports (no regression, so near the data's edge it is biased toward the interior where LWR is
+// exact); the greedy search ignores the state model; an unknown local model is refused.
+static void test_predict_lwa_only_mode(void** state) {
+  (void)state;
+  hedger_config_t c = lin_config();
+  c.local_model = HEDGER_LOCAL_LWA;
+  c.greedy_method = HEDGER_GREEDY_STATE_MODEL;
+  hedger_t* h = ht_create(&c);
+  for (int i = 0; i <= 10; ++i) {
+    for (int j = 0; j <= 10; ++j) {
+      for (int k = 0; k <= 8; ++k) {
+        const double s[2] = {0.1 * i, 0.1 * j};
+        const double a = -1.0 + 0.25 * k;
+        assert_int_equal(hedger_insert(h, s, a, lin(s, a), 0, NULL), HEDGER_OK);
+      }
+    }
+  }
+  const double s[2] = {0.02, 0.97};
+  const double a = 0.9;
+  hedger_prediction_t p;
+  uint32_t slots[32];
+  double w[32];
+  assert_int_equal(hedger_predict_ex(h, s, a, &p, slots, w, 32), HEDGER_OK);
+  assert_int_equal(p.kind, HEDGER_KIND_LWA);
+  assert_int_equal(p.fallback, HEDGER_FALLBACK_NONE);
+  assert_true(p.n_neighbours >= 4);
+  double sw = 0.0, swq = 0.0;
+  for (uint32_t i = 0; i < p.n_neighbours; ++i) {
+    hedger_point_t pt;
+    assert_int_equal(hedger_get_point(h, slots[i], &pt), HEDGER_OK);
+    sw += w[i];
+    swq += w[i] * pt.value;
+  }
+  assert_true(fabs(p.value - swq / sw) <= 1e-12 * fabs(swq / sw));
+  assert_true(fabs(p.value - lin(s, a)) > 0.05);
+  const hedger_counters_t* k = hedger_counters(h);
+  assert_int_equal(k->predictions_lwr, 0);
+  double ga = 0.0;
+  assert_int_equal(hedger_greedy(h, s, &ga, NULL, NULL), HEDGER_OK);
+  assert_int_equal(k->greedy_state_model, 0);
+  assert_int_equal(k->predictions_lwr, 0);
+  hedger_destroy(h);
+  c.local_model = 2;
+  assert_int_equal(hedger_config_validate(&c), HEDGER_ERR_INVALID_ARG);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_predict_linear_data_lwr_exact),
@@ -345,6 +392,7 @@ int main(void) {
       cmocka_unit_test(test_predict_weighted_ivh_mode_works),
       cmocka_unit_test(test_predict_rank_deficient_reproducer_singular),
       cmocka_unit_test(test_predict_rank_deficient_random_singular),
+      cmocka_unit_test(test_predict_lwa_only_mode),
   };
   return cmocka_run_group_tests_name("hedger.predict", tests, NULL, NULL);
 }

@@ -74,6 +74,12 @@ typedef enum fw_mode {
   FW_MODE_LEARN = 0,     ///< the two-phase learning schedule
   FW_MODE_EVALUATE = 1,  ///< one evaluation block of evaluate_policy, learning off, then exit
 } fw_mode_t;
+/// The value-function learner (the learner ablation of issue 12 compares them on the same data).
+typedef enum fw_learner_kind {
+  FW_LEARNER_HEDGER = 0,   ///< HEDGER: LWR guarded by the hull and plausibility tests, LWA fallback
+  FW_LEARNER_LWA = 1,      ///< HEDGER with every prediction by locally weighted averaging
+  FW_LEARNER_TABULAR = 2,  ///< tabular Q-learning on a discretised state and action (lib/tabq)
+} fw_learner_kind_t;
 /// Policy evaluated in FW_MODE_EVALUATE.
 typedef enum fw_eval_policy {
   FW_EVAL_LEARNED = 0,   ///< HEDGER greedy (from the checkpoint)
@@ -163,6 +169,9 @@ typedef struct fw_config {
   // Learning.
   double alpha;                    ///< learning rate (paper: 0.2)
   double gamma;                    ///< discount; 0 = the task's (paper: corridor 0.99, obstacles 0.9)
+  int32_t learner;                 ///< fw_learner_kind_t
+  int32_t tabular_bins;            ///< tabular: bins per state dimension over the task's state range
+  int32_t tabular_actions;         ///< tabular: evenly spaced actions over [-omega_max, omega_max]
   int32_t hedger_capacity;         ///< stored samples (fixed memory)
   int32_t hedger_k_min;            ///< fewer neighbours → unknown
   int32_t hedger_k_max;            ///< neighbourhood size

@@ -128,7 +128,8 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
 
 /// The learner's configuration the loop derives from cfg (state dimension, action bounds, input
 /// scales, capacity, ...), for offline tools that build compatible HEDGER states or read
-/// checkpoints. O(1).
+/// checkpoints (learner = lwa: local_model = HEDGER_LOCAL_LWA; learner = tabular uses no HEDGER,
+/// and this is the configuration HEDGER would have). O(1).
 void fw_loop_learner_config(const fw_config_t* cfg, hedger_config_t* out);
 
 /// Capacities a checkpoint writer needs for this loop (meta section, learner's payload at a full

@@ -163,7 +163,7 @@ typedef enum hedger_kind {
 
 /// Why LWR fell back to LWA (HEDGER_FALLBACK_NONE for LWR and for unknown).
 typedef enum hedger_fallback {
-  HEDGER_FALLBACK_NONE = 0,
+  HEDGER_FALLBACK_NONE = 0,        ///< LWR, unknown, or LWA by configuration (HEDGER_LOCAL_LWA)
   HEDGER_FALLBACK_HULL = 1,        ///< query outside the independent-variable hull
   HEDGER_FALLBACK_IMPLAUSIBLE = 2, ///< LWR value outside [Q_min, Q_max]
   /// The local regression is singular: the usable neighbours do not span every input dimension
@@ -196,6 +196,16 @@ typedef enum hedger_greedy_method {
   /// where the model cannot be formed (see hedger_counters_t::greedy_state_model).
   HEDGER_GREEDY_STATE_MODEL = 1,
 } hedger_greedy_method_t;
+
+/// Local model of a prediction (hedger_config_t::local_model).
+typedef enum hedger_local_model {
+  /// LWR guarded by the hull and plausibility tests, falling back to LWA (hedger.md steps 4–7).
+  HEDGER_LOCAL_LWR = 0,
+  /// Every known prediction is the locally weighted average Σ w_i q_i / Σ w_i (kind LWA,
+  /// fallback NONE): the averager alone (Gordon), the learner ablation's "LWA only". The greedy
+  /// search is then per action whatever greedy_method says (the state model is a regression).
+  HEDGER_LOCAL_LWA = 1,
+} hedger_local_model_t;
 
 /// What the store did with the new point of an update / insert.
 typedef enum hedger_store_op {
@@ -263,6 +273,8 @@ typedef struct hedger_config {
                          ///< neighbours within the kernel's radius, the model is formed once more
                          ///< with bandwidth and radius × greedy_reach (its value is then the
                          ///< neighbours' average, kind LWA); 1 = no second attempt. Default 1.
+  uint32_t local_model;  ///< a hedger_local_model_t value. Not part of a save (values stay valid
+                         ///< under either model). Default HEDGER_LOCAL_LWR.
 } hedger_config_t;
 
 /// One prediction.

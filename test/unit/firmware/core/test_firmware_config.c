@@ -558,6 +558,35 @@ static void test_config_set_allocates_nothing(void** state) {
   assert_int_equal(alloc_counter_end(), 0);
 }
 
+// learner: hedger by default; lwa and tabular accepted, anything else refused with the choices;
+// the tabular learner's table keys have ranges; tabular with a checkpoint file is refused by
+// validation, naming both keys and the fix.
+static void test_config_learner_key(void** state) {
+  (void)state;
+  fw_config_t c;
+  char err[512];
+  fw_config_defaults(&c);
+  assert_int_equal(c.learner, FW_LEARNER_HEDGER);
+  assert_int_equal(c.tabular_bins, 10);
+  assert_int_equal(c.tabular_actions, 9);
+  assert_int_equal(fw_config_set(&c, "learner", "lwa", "s", err, sizeof err), 0);
+  assert_int_equal(c.learner, FW_LEARNER_LWA);
+  assert_int_equal(fw_config_set(&c, "learner", "tabular", "s", err, sizeof err), 0);
+  assert_int_equal(c.learner, FW_LEARNER_TABULAR);
+  assert_int_equal(fw_config_set(&c, "learner", "lwr", "x.conf:2", err, sizeof err), -1);
+  assert_non_null(strstr(err, "x.conf:2"));
+  assert_non_null(strstr(err, "tabular"));
+  assert_int_equal(fw_config_set(&c, "tabular_bins", "0", "s", err, sizeof err), -1);
+  assert_int_equal(fw_config_set(&c, "tabular_actions", "1", "s", err, sizeof err), -1);
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
+  assert_int_equal(fw_config_set(&c, "checkpoint_file", "/tmp/q.ckpt", "b.conf:7", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), -1);
+  assert_non_null(strstr(err, "learner = tabular cannot checkpoint"));
+  assert_non_null(strstr(err, "b.conf:7"));
+  assert_int_equal(fw_config_set(&c, "learner", "lwa", "s", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
+}
+
 int main(int argc, char** argv) {
   g_reference_path = argc > 1 ? argv[1] : NULL;
   const struct CMUnitTest tests[] = {
@@ -578,6 +607,7 @@ int main(int argc, char** argv) {
       cmocka_unit_test(test_config_extra_keys_go_to_the_handler),
       cmocka_unit_test(test_config_set_allocates_nothing),
       cmocka_unit_test(test_config_program_refuses_joystick_without_operator),
+      cmocka_unit_test(test_config_learner_key),
   };
   return cmocka_run_group_tests_name("firmware.config", tests, setup, teardown);
 }
