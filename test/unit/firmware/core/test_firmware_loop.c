@@ -96,6 +96,7 @@ static void test_loop_tick_allocates_nothing(void** state) {
   c.eval_every_runs = 3;
   c.eval_starts = 4;
   c.progress = true;
+  c.hedger_replay_passes = 4;  // shorter between-run slices: more runs and blocks in 3000 ticks
   assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
   harness_run(&g_h, 5);
   alloc_counter_begin();

@@ -316,7 +316,7 @@ static void test_loop_config_and_run_records(void** state) {
   assert_true(g_h.config.lockstep);
   assert_non_null(strstr(g_h.config_text, "max_steps_per_run = 40\n"));
   assert_non_null(strstr(g_h.config_text, "lockstep_realtime_factor = 0\n"));
-  harness_run(&g_h, 400);
+  harness_run(&g_h, 1000);  // a 40-step run and its replay between runs: about 250 ticks
   assert_true(g_h.runs >= 3);
   int64_t next_first = 0;
   for (int k = 0; k < g_h.runs && k < 64; ++k) {
@@ -335,6 +335,15 @@ static void test_loop_config_and_run_records(void** state) {
     next_first = r->first_seq + r->experiences;
   }
   // Shutdown mid-run: an end record with END_SHUTDOWN and the steps taken so far.
+  fw_loop_stats_t st;
+  for (int i = 0; i < 1000; ++i) {  // past the between-run slices, into the next run
+    fw_loop_get_stats(g_h.loop, &st);
+    if (st.mode == B21R_STATUS_T_MODE_RUNNING) {
+      break;
+    }
+    harness_run(&g_h, 1);
+  }
+  assert_int_equal(st.mode, B21R_STATUS_T_MODE_RUNNING);
   const int before = g_h.runs;
   harness_run(&g_h, 5);
   b21r_command_t cmd = {.seq = 1, .command = B21R_COMMAND_T_SHUTDOWN};
