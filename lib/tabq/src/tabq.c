@@ -178,7 +178,7 @@ typedef struct greedy_result {
 static greedy_result_t greedy_at(tabq_t* t, const double* s) {
   const uint32_t base = state_base(t, s);
   greedy_result_t g = {false, 0, 0.0};
-  double best_abs = INFINITY;
+  double best_abs = HUGE_VAL;
   t->counters.greedy_calls++;
   for (uint32_t j = 0; j < t->cfg.n_actions; ++j) {
     const double a = fabs(tabq_action(t, j));
