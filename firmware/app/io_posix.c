@@ -232,6 +232,16 @@ static int v_wait(void* user, int64_t deadline_us) {
   return r > 0 ? 1 : 0;
 }
 
+// In lockstep, once scans flow, a quiet stream means the emulator has not been scheduled (a
+// loaded machine can stall it for seconds), not a lost scanner: restarting the stream mid-period
+// desynchronises the lockstep. The loop decides silence there (lockstep_timeout_s ends it, naming
+// the device), so from the first scan on the driver's own stream timeout waits a second longer.
+// Before it, the driver's short timeout stays: a restart is how a start-up recovers.
+static void lockstep_stream_patience(io_posix_t* io) {
+  const double s_us = (io->cfg->lockstep_timeout_s + 1.0) * 1e6;
+  io->lms.config.stream_timeout_us = s_us < 4.0e9 ? (uint32_t)s_us : 4000000000U;
+}
+
 static int v_laser_poll(void* user, int64_t now_us, lms_scan_t* out) {
   io_posix_t* io = (io_posix_t*)user;
   if (io->laser.lost) {
@@ -241,6 +251,9 @@ static int v_laser_poll(void* user, int64_t now_us, lms_scan_t* out) {
   io->laser_port.last_error = 0;
   (void)drv_lms_step(&io->lms, (uint64_t)now_us, out, &got);
   check_result(io, &io->laser, io->laser_port.last_error);
+  if (got && io->cfg->lockstep && io->lms.config.stream_timeout_us == io->lms_config.stream_timeout_us) {
+    lockstep_stream_patience(io);
+  }
   return got ? 1 : 0;
 }
 
@@ -473,15 +486,8 @@ void io_posix_init(io_posix_t* io, const fw_config_t* cfg) {
   io->lms_config.width_deg = (uint16_t)cfg->laser_fov_deg;
   io->lms_config.res_cdeg = (uint16_t)cfg->laser_resolution_cdeg;
   io->lms_config.unit = LMS_UNIT_MM;
-  if (cfg->lockstep) {
-    // In lockstep a quiet stream means the emulator has not been scheduled (a loaded machine can
-    // stall it for seconds), not a lost scanner: restarting the stream mid-period desynchronises
-    // the lockstep. The loop decides silence there (lockstep_timeout_s ends it, naming the
-    // device), so the driver's own stream timeout waits a second longer.
-    const double s_us = (cfg->lockstep_timeout_s + 1.0) * 1e6;
-    io->lms_config.stream_timeout_us = s_us < 4.0e9 ? (uint32_t)s_us : 4000000000U;
-  }
 }
+
 
 int io_posix_open(io_posix_t* io, char* err, size_t err_cap) {
   const fw_config_t* cfg = io->cfg;
