@@ -30,7 +30,8 @@ static void check_print_round_trip(const fw_config_t* c) {
     fprintf(stderr, "fuzz: printed config does not load: %s\n", err);
     abort();
   }
-  FUZZ_CHECK(memcmp(&back, c, sizeof back) == 0);
+  // The settings byte for byte; where each key came from (origins) names the printed file now.
+  FUZZ_CHECK(memcmp(&back, c, offsetof(fw_config_t, origins)) == 0);
 }
 
 int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -17,6 +17,7 @@ static void mask(fw_config_t* c, const fw_config_t* defaults) {
   c->base_protocol = defaults->base_protocol;
   c->reposition = defaults->reposition;
   c->base_write_gap_us = defaults->base_write_gap_us;
+  c->origins = defaults->origins;  // where a key came from is not a setting
 }
 
 int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
@@ -51,7 +52,7 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   }
   if (memchr(data, '\n', size) == NULL && memchr(data, '\0', size) == NULL && size > 0 && size <= FW_ENDPOINTS_LINE_MAX) {
     FUZZ_CHECK(ra == rb);
-    FUZZ_CHECK(memcmp(&a, &b, sizeof a) == 0);
+    FUZZ_CHECK(memcmp(&a, &b, offsetof(fw_config_t, origins)) == 0);  // settings; origins name the source
   }
   return 0;
 }

@@ -135,7 +135,7 @@ bool fuzz_loop_tick(fuzz_loop_t* fl) {
   check_commands(fl);
   fw_loop_stats_t st;
   fw_loop_get_stats(fl->loop, &st);
-  FUZZ_CHECK(st.stop_reason >= 0 && st.stop_reason <= 8 && st.mode >= 0 && st.mode <= 6);
+  FUZZ_CHECK(st.stop_reason >= 0 && st.stop_reason < FW_STOP_REASON_COUNT && st.mode >= 0 && st.mode <= 6);
   FUZZ_CHECK(st.phase == 1 || st.phase == 2);
   return !fl->done;
 }
