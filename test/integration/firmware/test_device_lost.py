@@ -9,6 +9,9 @@ Checks, per base:
   one core (measured from /proc/<pid>/stat);
 - a new emulator behind the same device paths (stable links, as udev's /dev/serial/by-id gives a
   real robot) is reopened, the stop clears and runs go on;
+- like udev, the links go away with the device (they dangle until the new emulator is up): a
+  pseudo-terminal number the kernel hands to another program meanwhile is never opened (other
+  tests running in parallel would lose their data to this controller);
 - with device_lost_action = exit the controller exits with status 6 after the loss.
 Usage: test_device_lost.py <b21r-controller> <b21r-sim> <world> <rflex|canopen>
 """
@@ -45,6 +48,12 @@ def cpu_seconds(pid):
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def unplug(d, *links):
+    """What udev does when a USB adapter goes: the stable links stop resolving."""
+    for path in links:
+        link(os.path.join(d, "unplugged"), path)
+
+
 def start_sim(sim_exe, world, d, base, laser_link, base_link):
     sim = fwtest.Sim(sim_exe, world, d, "sim", base=base, seed=3, lockstep=False)
     ep = endpoints(sim)
@@ -72,6 +81,7 @@ def main():
             proc = subprocess.Popen(fwtest.controller_cmd(controller, sim, d, "run", settings), stdout=out, stderr=err)
         off = wait_for(err_path, "starting devices", 0, 30, proc)
         time.sleep(2.0)  # runs under way
+        unplug(d, laser_link, base_link)
         sim.proc.kill()
         sim.proc.wait()
         t0 = time.time()
@@ -118,6 +128,7 @@ def main():
                                     stderr=err)
         wait_for(err2, "starting devices", 0, 30, proc)
         time.sleep(2.0)
+        unplug(d, laser_link, base_link)
         sim.proc.kill()
         sim.proc.wait()
         rc = proc.wait(30)
