@@ -6,9 +6,9 @@
 #include <cstdlib>
 #include <cstring>
 #include <new>
-#include <type_traits>
 
 #include "core.hpp"
+#include "dims.hpp"
 
 namespace {
 
@@ -95,27 +95,6 @@ Layout make_layout(const hedger_config_t& c) {
 
 bool live(const hedger_t* h) { return h != nullptr && h->magic == hg::kMagic; }
 
-template <class F>
-decltype(auto) with_dim(uint32_t d, F&& f) {
-  switch (d) {
-    case 2:
-      return f(std::integral_constant<int, 2>{});
-    case 3:
-      return f(std::integral_constant<int, 3>{});
-    case 4:
-      return f(std::integral_constant<int, 4>{});
-    case 5:
-      return f(std::integral_constant<int, 5>{});
-    case 6:
-      return f(std::integral_constant<int, 6>{});
-    case 7:
-      return f(std::integral_constant<int, 7>{});
-    case 8:
-      return f(std::integral_constant<int, 8>{});
-    default:
-      return f(std::integral_constant<int, 9>{});
-  }
-}
 
 /// After every call that may change the learned state: gauges, and the generation that
 /// hedger_save_step() checks.
@@ -218,22 +197,25 @@ hedger_status_t predict_impl(hedger_t* self, const double* state, double action,
                              uint32_t* slots, double* weights, uint32_t cap) noexcept {
   if (!live(self) || state == nullptr || out == nullptr) return HEDGER_ERR_INVALID_ARG;
   if (!finite_all(state, self->cfg.state_dim) || !std::isfinite(action)) return reject_non_finite(self);
-  with_dim(self->dim, [&](auto dc) {
-    constexpr int D = decltype(dc)::value;
-    double x[static_cast<size_t>(D)];
-    hg::scale_input<D>(*self, state, action, x);
-    hg::Neigh nb;
-    hg::predict_x<D>(*self, x, nb, *out);
-    const uint32_t n = nb.n < cap ? nb.n : cap;
-    for (uint32_t i = 0; i < n; ++i) {
-      if (slots != nullptr) slots[i] = nb.nb[i].id;
-      if (weights != nullptr) weights[i] = nb.w[i];
-    }
-  });
+  hg::dim_ops(self->dim).predict(*self, state, action, *out, slots, weights, cap);
   return HEDGER_OK;
 }
 
 }  // namespace
+
+namespace hg {
+
+extern const DimOps kDimOps2, kDimOps3, kDimOps4, kDimOps5, kDimOps6, kDimOps7, kDimOps8, kDimOps9;
+
+static_assert(HEDGER_MAX_INPUT_DIM == 9, "one DimOps table per input dimension 2..9");
+
+const DimOps& dim_ops(uint32_t d) noexcept {
+  static const DimOps* const kByDim[] = {&kDimOps2, &kDimOps3, &kDimOps4, &kDimOps5,
+                                         &kDimOps6, &kDimOps7, &kDimOps8, &kDimOps9};
+  return *kByDim[(d >= 2 && d <= 9 ? d : 9) - 2];
+}
+
+}  // namespace hg
 
 extern "C" {
 
@@ -368,8 +350,8 @@ hedger_status_t hedger_greedy(hedger_t* self, const double* state, double* actio
                               hedger_kind_t* kind) HEDGER_NOEXCEPT {
   if (!live(self) || state == nullptr) return HEDGER_ERR_INVALID_ARG;
   if (!finite_all(state, self->cfg.state_dim)) return reject_non_finite(self);
-  const hg::GreedyResult g =
-      with_dim(self->dim, [&](auto dc) { return hg::greedy_at<decltype(dc)::value>(*self, state); });
+  hg::GreedyResult g;
+  hg::dim_ops(self->dim).greedy(*self, state, g);
   if (action != nullptr) *action = g.action;
   if (value != nullptr) *value = g.value;
   if (kind != nullptr) *kind = g.kind;
@@ -386,9 +368,7 @@ hedger_status_t hedger_update(hedger_t* self, const double* state, double action
   }
   hedger_update_info_t local;
   hedger_update_info_t& inf = (info != nullptr) ? *info : local;
-  with_dim(self->dim, [&](auto dc) {
-    hg::update<decltype(dc)::value>(*self, state, action, reward, state_next, terminal ? 1 : 0, inf);
-  });
+  hg::dim_ops(self->dim).update(*self, state, action, reward, state_next, terminal ? 1 : 0, inf);
   refresh_gauges(self);
   return HEDGER_OK;
 }
@@ -404,9 +384,7 @@ hedger_status_t hedger_learn(hedger_t* self, const double* state, double action,
   hedger_update_info_t local;
   hedger_update_info_t& inf = (info != nullptr) ? *info : local;
   inf = hedger_update_info_t{};
-  with_dim(self->dim, [&](auto dc) {
-    hg::learn<decltype(dc)::value>(*self, state, action, reward, state_next, terminal ? 1 : 0, q_next, inf);
-  });
+  hg::dim_ops(self->dim).learn(*self, state, action, reward, state_next, terminal ? 1 : 0, q_next, inf);
   refresh_gauges(self);
   return HEDGER_OK;
 }
@@ -414,7 +392,7 @@ hedger_status_t hedger_learn(hedger_t* self, const double* state, double action,
 hedger_status_t hedger_end_run_begin(hedger_t* self, uint32_t* pending) HEDGER_NOEXCEPT {
   if (!live(self)) return HEDGER_ERR_INVALID_ARG;
   if (self->replay_pending) {
-    with_dim(self->dim, [&](auto dc) { hg::replay_step<decltype(dc)::value>(*self, 0xFFFFFFFFu); });
+    (void)hg::dim_ops(self->dim).replay_step(*self, 0xFFFFFFFFu);
   }
   const uint32_t n = hg::replay_begin(*self);
   refresh_gauges(self);
@@ -425,7 +403,7 @@ hedger_status_t hedger_end_run_begin(hedger_t* self, uint32_t* pending) HEDGER_N
 hedger_status_t hedger_end_run_step(hedger_t* self, uint32_t max_updates, uint32_t* remaining) HEDGER_NOEXCEPT {
   if (!live(self)) return HEDGER_ERR_INVALID_ARG;
   if (self->replay_pending && max_updates > 0) {
-    with_dim(self->dim, [&](auto dc) { hg::replay_step<decltype(dc)::value>(*self, max_updates); });
+    (void)hg::dim_ops(self->dim).replay_step(*self, max_updates);
   }
   refresh_gauges(self);
   if (remaining != nullptr) {
@@ -451,9 +429,7 @@ hedger_status_t hedger_insert(hedger_t* self, const double* state, double action
   if (!finite_all(state, self->cfg.state_dim) || !std::isfinite(action) || !std::isfinite(q)) {
     return reject_non_finite(self);
   }
-  const hedger_store_op_t r = with_dim(self->dim, [&](auto dc) {
-    return hg::insert<decltype(dc)::value>(*self, state, action, q, static_cast<uint8_t>(flags));
-  });
+  const hedger_store_op_t r = hg::dim_ops(self->dim).insert(*self, state, action, q, static_cast<uint8_t>(flags));
   refresh_gauges(self);
   if (op != nullptr) *op = r;
   return HEDGER_OK;
@@ -630,7 +606,7 @@ hedger_status_t hedger_load(hedger_t* self, const void* buf, size_t size) HEDGER
   self->counters.reward_min = rmin < 0.0 ? rmin : 0.0;
   self->counters.reward_max = rmax > 0.0 ? rmax : 0.0;
   self->rng = rng;
-  with_dim(self->dim, [&](auto dc) { hg::rebuild_now<decltype(dc)::value>(*self); });
+  hg::dim_ops(self->dim).rebuild(*self);
   ++self->counters.loads;
   refresh_gauges(self);
   return HEDGER_OK;
