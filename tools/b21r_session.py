@@ -7,7 +7,7 @@ first (it stops the base, sets the brake and saves the learned state), then the 
 viewer and the emulator, each waited for; when a required program ends by itself (the schedule
 is done, a crash) the others are stopped the same way.
 
-    b21r_session.py [--out DIR] [--world FILE] [--base rflex|canopen] [--lockstep]
+    b21r_session.py [--out DIR] [--world FILE] [--base rflex|canopen] [--lockstep [--pace X]]
                     [--lcm-url URL] [--spy | --no-spy] [--config FILE] [--set KEY=VALUE]...
                     [-- CONTROLLER_ARGS...]
 
@@ -18,9 +18,10 @@ controller.log, progress.txt, logger.log, spy.log) and, with --base canopen, the
 bus.log (candump -L). The controller's progress lines are shown as they come.
 LCM: a host-local URL (udpm with ttl=0: nothing leaves this machine) unless --lcm-url is given;
 B21R_TELEOP and B21R_COMMAND from tools/b21r_teleop.py with the same --lcm-url reach the controller.
---lockstep runs the emulator as fast as the controller goes (minutes instead of hours); lcm-logger
-and lcm-spy may then miss messages (b21r_log.py --gaps shows how many); the controller's own
-controller.lcmlog is always complete.
+--lockstep runs emulator and controller in lockstep, paced at --pace times real time (default 20:
+minutes instead of hours, and lcm-logger and lcm-spy keep up over UDP, so session.lcmlog holds
+every message); --pace 0 runs as fast as the controller goes, where lcm-logger may miss messages
+(b21r_log.py --gaps shows how many). The controller's own controller.lcmlog is always complete.
 Exit status: the controller's (0: schedule done; 130 after Ctrl-C, the learned state saved), or 1
 when a program could not be started.
 Runs from a plain shell after tools/setup.sh and a build (b21r_bootstrap finds the venv and the
@@ -40,6 +41,9 @@ import threading
 import time
 
 HOST_LOCAL_URL = "udpm://239.255.76.67:7667?ttl=0"
+# The lockstep pace at which lcm-logger over UDP records every message on a 2-core machine
+# (tools.session_lossless checks it on a whole session).
+DEFAULT_PACE = 20.0
 STOP_TIMEOUT_S = 20.0  # the controller writes its checkpoint before it exits
 
 
@@ -146,6 +150,8 @@ def main():
     ap.add_argument("--world", default=str(repo / "sim" / "worlds" / "corridor10.world"))
     ap.add_argument("--base", choices=("rflex", "canopen"), default="rflex")
     ap.add_argument("--lockstep", action="store_true", help="emulator and controller in lockstep (fast)")
+    ap.add_argument("--pace", type=float, default=DEFAULT_PACE, metavar="X",
+                    help="with --lockstep: at most X times real time (0: as fast as possible; default %(default)g)")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--lcm-url", default=HOST_LOCAL_URL, help="LCM provider (default: %(default)s)")
     spy = ap.add_mutually_exclusive_group()
@@ -155,6 +161,8 @@ def main():
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="controller setting (repeatable)")
     ap.add_argument("controller_args", nargs="*", help="more b21r-controller arguments (after --)")
     args = ap.parse_args()
+    if args.pace < 0:
+        ap.error("--pace must be 0 (as fast as possible) or a positive factor of real time")
 
     out = args.out or str(repo / "build" / "sessions" / time.strftime("%Y%m%d-%H%M%S"))
     os.makedirs(out, exist_ok=True)
@@ -201,6 +209,7 @@ def main():
             ccmd += ["--config", c]
         ccmd += ["--endpoints", endpoints, "--set", "lcm_url=" + args.lcm_url, "--set", "progress=true",
                  "--set", "lockstep=%s" % ("true" if args.lockstep else "false"),
+                 *(["--set", "lockstep_realtime_factor=%g" % args.pace] if args.lockstep else []),
                  "--checkpoint", os.path.join(out, "hedger.ckpt"), "--log", os.path.join(out, "controller.lcmlog")]
         for s in args.set:
             ccmd += ["--set", s]
