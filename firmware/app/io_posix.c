@@ -390,7 +390,7 @@ static int read_reply(io_posix_t* io, int timeout_ms) {
 // Emulator binding of "place the robot": `reset x y theta` on the control socket. Real time: the
 // request is sent in one tick and its answer read in a later one (2 meanwhile). Lockstep: the
 // answer is awaited at once, as the tick waits for the emulator's data anyway.
-static int v_request_start_pose(void* user, double x_m, double y_m, double theta_rad) {
+static int v_request_start_pose(void* user, double x_m, double y_m, double theta_rad, uint64_t run) {
   io_posix_t* io = (io_posix_t*)user;
   const fw_config_t* cfg = io->cfg;
   if (cfg->reposition != FW_REPOSITION_EMULATOR) {
@@ -414,7 +414,8 @@ static int v_request_start_pose(void* user, double x_m, double y_m, double theta
     char line[128];
     // 17 significant digits: the emulator parses back the exact double, so the pty path and the
     // in-process path place the robot at bit-identical poses.
-    const int n = snprintf(line, sizeof line, "reset %.17g %.17g %.17g", x_m, y_m, theta_rad);
+    const int n = snprintf(line, sizeof line, "reset %.17g %.17g %.17g %llu", x_m, y_m, theta_rad,
+                           (unsigned long long)run);
     if (send(io->control_fd, line, (size_t)n, MSG_NOSIGNAL | MSG_DONTWAIT) != n) {
       drop_control(io);
       return -1;

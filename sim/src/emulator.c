@@ -371,6 +371,12 @@ void sim_emu_reset(sim_emu_t* e, double x_m, double y_m, double theta_rad) {
   record(e);
 }
 
+void sim_emu_reset_run(sim_emu_t* e, double x_m, double y_m, double theta_rad, uint64_t run_stream) {
+  uint64_t st = e->cfg.laser.seed ^ (run_stream * 0x9E3779B97F4A7C15ULL + 0xD1B54A32D192ED03ULL);
+  sim_lms_reseed(e->laser, tasks_rng_splitmix64(&st));
+  sim_emu_reset(e, x_m, y_m, theta_rad);
+}
+
 double sim_emu_latency_s(const sim_emu_t* e) { return e->latency_s; }
 
 sim_lms_t* sim_emu_laser(sim_emu_t* e) { return e->laser; }
@@ -426,6 +432,21 @@ static bool number(const char* s, double* out) {
     return false;
   }
   *out = v;
+  return true;
+}
+
+// A decimal unsigned 64-bit integer, digits only.
+static bool unsigned_number(const char* s, uint64_t* out) {
+  if (*s < '0' || *s > '9') {
+    return false;
+  }
+  char* end = NULL;
+  errno = 0;
+  const unsigned long long v = strtoull(s, &end, 10);
+  if (*end != '\0' || errno == ERANGE) {
+    return false;
+  }
+  *out = (uint64_t)v;
   return true;
 }
 
@@ -521,15 +542,21 @@ sim_emu_ctrl_t sim_emu_control(sim_emu_t* e, const char* line, char* reply, size
   }
   if (strcmp(tok[0], "reset") == 0) {
     double x, y, th;
-    if (n != 4 || !number(tok[1], &x) || !number(tok[2], &y) || !number(tok[3], &th)) {
-      return reply_error(reply, cap, "usage: reset <x_m> <y_m> <theta_rad>");
+    uint64_t run_stream = 0;
+    if ((n != 4 && n != 5) || !number(tok[1], &x) || !number(tok[2], &y) || !number(tok[3], &th) ||
+        (n == 5 && !unsigned_number(tok[4], &run_stream))) {
+      return reply_error(reply, cap, "usage: reset <x_m> <y_m> <theta_rad> [<run>]");
     }
     // Within the coordinates a world may use: far beyond them ODE's numbers lose their meaning.
     if (!(fabs(x) <= SIM_WORLD_MAX_ABS && fabs(y) <= SIM_WORLD_MAX_ABS && fabs(th) <= SIM_WORLD_MAX_ABS)) {
       (void)snprintf(reply, cap, "error reset: x, y and theta must lie within +-%g (m, rad)", SIM_WORLD_MAX_ABS);
       return SIM_EMU_CTRL_ERROR;
     }
-    sim_emu_reset(e, x, y, th);
+    if (n == 5) {
+      sim_emu_reset_run(e, x, y, th, run_stream);
+    } else {
+      sim_emu_reset(e, x, y, th);
+    }
     return reply_ok(reply, cap);
   }
   if (strcmp(tok[0], "fault") == 0) {

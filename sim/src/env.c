@@ -32,6 +32,7 @@ struct sim_env {
   double dt_s;                 // control period
   // Episode.
   bool fresh;                  // no reset since the last seed: the robot was just powered up
+  uint64_t episodes;           // resets since the last seed: the episode's run id, as the controller numbers runs
   bool running;                // an episode is in progress (reset done, not ended)
   uint32_t steps;
   double cmd_v;                // the command in force (what the clamp compares with)
@@ -262,6 +263,7 @@ sim_env_status_t sim_env_seed(sim_env_t* env, uint64_t seed) {
   tasks_rng_seed(&env->start_rng, tasks_rng_splitmix64(&st));
   memset(&env->ep.start_cycle, 0, sizeof env->ep.start_cycle);  // training starts: a new cycle
   env->fresh = true;
+  env->episodes = 0;
   env->running = false;
   env->cmd_v = 0.0;
   env->cmd_w = 0.0;
@@ -304,7 +306,8 @@ sim_env_status_t sim_env_reset(sim_env_t* env, sim_env_start_t start, uint32_t e
     if (!env->fresh && !command_period(env, 0.0, 0.0)) {
       return SIM_ENV_ERR_DEVICE;
     }
-    sim_emu_reset(env->emu, p.x_m, p.y_m, p.theta_rad);
+    // The run id as the controller passes it: the episode's sensor noise is the controller's run's.
+    sim_emu_reset_run(env->emu, p.x_m, p.y_m, p.theta_rad, env->episodes);
     if (!command_period(env, 0.0, 0.0)) {
       return SIM_ENV_ERR_DEVICE;
     }
@@ -317,6 +320,7 @@ sim_env_status_t sim_env_reset(sim_env_t* env, sim_env_start_t start, uint32_t e
     ok = tasks_episode_observe_pose(&env->ep, p, env->state);
   }
   env->fresh = false;
+  env->episodes++;
   env->cmd_v = 0.0;
   env->cmd_w = 0.0;
   env->steps = 0U;

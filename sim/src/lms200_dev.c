@@ -82,6 +82,8 @@ sim_lms_t* sim_lms_create(const sim_lms_config_t* cfg, sim_lms_scan_fn scan_fn, 
 
 void sim_lms_destroy(sim_lms_t* d) { free(d); }
 
+void sim_lms_reseed(sim_lms_t* d, uint64_t seed) { tasks_rng_seed(&d->rng, seed); }
+
 static void queue(sim_lms_t* d, const uint8_t* bytes, size_t n, double t_s) {
   if (n == 0) {
     return;

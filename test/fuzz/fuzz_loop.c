@@ -32,8 +32,8 @@ static int w_can_read(void* u, canopen_frame_t* frame) {
 static int w_can_write(void* u, const canopen_frame_t* frame) {
   return fake_vt(self(u))->can_write(&self(u)->fake, frame);
 }
-static int w_start_pose(void* u, double x_m, double y_m, double theta_rad) {
-  return fake_vt(self(u))->request_start_pose(&self(u)->fake, x_m, y_m, theta_rad);
+static int w_start_pose(void* u, double x_m, double y_m, double theta_rad, uint64_t run) {
+  return fake_vt(self(u))->request_start_pose(&self(u)->fake, x_m, y_m, theta_rad, run);
 }
 
 ssize_t fuzz_loop_fake_base_read(fuzz_loop_t* fl, uint8_t* buf, size_t cap) {

@@ -47,7 +47,7 @@ typedef struct harness {
 static harness_t g;
 
 // Records every start pose the controller asks for, then lets the emulator place the robot.
-static int record_start(void* user, double x_m, double y_m, double theta_rad) {
+static int record_start(void* user, double x_m, double y_m, double theta_rad, uint64_t run) {
   (void)user;
   if (g.n_starts < 64) {
     g.starts[g.n_starts][0] = x_m;
@@ -55,7 +55,7 @@ static int record_start(void* user, double x_m, double y_m, double theta_rad) {
     g.starts[g.n_starts][2] = theta_rad;
     g.n_starts++;
   }
-  return g.inner.vt->request_start_pose(g.inner.user, x_m, y_m, theta_rad);
+  return g.inner.vt->request_start_pose(g.inner.user, x_m, y_m, theta_rad, run);
 }
 
 static double clamp1(double x) { return x < -1.0 ? -1.0 : (x > 1.0 ? 1.0 : x); }

@@ -34,7 +34,7 @@ WORK = None
 SCENARIOS = [
     ("corridor_goal", "corridor", "corridor10.world", 7, 4, 0),
     ("corridor_step_limit", "corridor", "corridor10.world", 11, 3, 40),
-    ("obstacles", "obstacles", "obstacle1.world", 6, 4, 0),
+    ("obstacles", "obstacles", "obstacle1.world", 4, 4, 0),
 ]
 
 

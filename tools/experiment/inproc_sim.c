@@ -112,9 +112,9 @@ static int v_can_write(void* user, const canopen_frame_t* frame) {
   return 0;
 }
 
-static int v_request_start_pose(void* user, double x_m, double y_m, double theta_rad) {
+static int v_request_start_pose(void* user, double x_m, double y_m, double theta_rad, uint64_t run) {
   inproc_sim_t* s = (inproc_sim_t*)user;
-  SIM_CALL(s, sim_emu_reset(s->emu, x_m, y_m, theta_rad));
+  SIM_CALL(s, sim_emu_reset_run(s->emu, x_m, y_m, theta_rad, run));
   return 1;
 }
 

@@ -51,6 +51,9 @@ static features_pose_t next_start_pose(fw_loop_t* L, const fw_run_plan_t* plan) 
                                    : tasks_episode_training_start(&L->ep, &L->pose_rng);
 }
 
+// The id begin_run gives the next run (B21R_RUN.run_id), as the start-pose request passes it on.
+static uint64_t next_run_id(const fw_loop_t* L) { return (uint64_t)(L->run_id + 1); }
+
 static void begin_run(fw_loop_t* L) {
   L->run_id++;
   L->explore_steps_left = 0;
@@ -192,10 +195,17 @@ bool fw_run_reposition(fw_loop_t* L, bool state_ok, double* v, double* w) {
       L->retry_countdown--;
       return false;
     }
+    // The emulator places the robot (and restarts the run's sensor noise) only once the learner
+    // has finished with the last run: the run then starts a fixed number of periods after the
+    // reset, so its scans do not depend on how long the learner took (other learners, other
+    // settings). A person is asked at once: they place the robot while the learner works.
+    if (L->cfg.reposition == FW_REPOSITION_EMULATOR && !fw_learning_idle(L)) {
+      return false;
+    }
     const int r = L->io.vt->request_start_pose == NULL
                       ? 0
                       : L->io.vt->request_start_pose(L->io.user, L->start_pose.x_m, L->start_pose.y_m,
-                                                     L->start_pose.theta_rad);
+                                                     L->start_pose.theta_rad, next_run_id(L));
     if (r == 1) {
       L->pose_requested = true;
       // Lockstep: the data of the next period is already taken at the new pose. Real time: let a
@@ -244,8 +254,8 @@ void fw_run_request_pose_while_stopped(fw_loop_t* L) {
     }
     L->start_pose = next_start_pose(L, &plan);
   }
-  const int r =
-      L->io.vt->request_start_pose(L->io.user, L->start_pose.x_m, L->start_pose.y_m, L->start_pose.theta_rad);
+  const int r = L->io.vt->request_start_pose(L->io.user, L->start_pose.x_m, L->start_pose.y_m,
+                                             L->start_pose.theta_rad, next_run_id(L));
   L->stopped_pose_pending = r == 2;
   L->stopped_pose_requested = r == 1;
 }

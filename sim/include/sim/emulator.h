@@ -154,8 +154,15 @@ bool sim_emu_streaming(const sim_emu_t* e);
 /// Ground truth. O(1).
 void sim_emu_state(const sim_emu_t* e, sim_plant_state_t* out);
 
-/// Places the robot (see `reset`). O(1).
+/// Places the robot (see `reset`); sensor noise goes on from where it was. O(1).
 void sim_emu_reset(sim_emu_t* e, double x_m, double y_m, double theta_rad);
+
+/// Places the robot for the run identified by run_stream (see `reset` with a fourth number): the
+/// sensor-noise stream restarts from (emulator seed, run_stream), so the run's scans do not depend
+/// on what earlier runs did or how long they took. The controller passes the id of the run about
+/// to start: variants of an experiment (other learners, settings) then see the same noise in the
+/// same run, and a paired comparison measures the variant, not the noise. O(1).
+void sim_emu_reset_run(sim_emu_t* e, double x_m, double y_m, double theta_rad, uint64_t run_stream);
 
 /// Executes one control command (see above); writes a NUL-terminated reply. O(1) except `svg`.
 sim_emu_ctrl_t sim_emu_control(sim_emu_t* e, const char* line, char* reply, size_t cap);

@@ -103,6 +103,10 @@ size_t sim_lms_beams(const sim_lms_t* d, double* angle_min_rad, double* incremen
 /// The device sends nothing and ignores requests until t_s (fault injection). 0 ends it.
 void sim_lms_set_silent_until(sim_lms_t* d, double t_s);
 
+/// Restarts the noise stream (range noise and error codes) from seed: every scan after it
+/// depends only on the seed and the scene, not on how many scans came before. O(1).
+void sim_lms_reseed(sim_lms_t* d, uint64_t seed);
+
 /// Counters.
 const sim_lms_counters_t* sim_lms_get_counters(const sim_lms_t* d);
 

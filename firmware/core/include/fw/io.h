@@ -89,7 +89,9 @@ typedef struct fw_io_vtable {
   /// robot and confirm with B21R_COMMAND CONFIRM_START_POSE, 2 when the request is under way (the
   /// caller asks again, with the same pose, in later ticks until it gets 1 or an error), < 0 on
   /// error (retried later). May be NULL (= always 0, the operator places the robot).
-  int (*request_start_pose)(void* user, double x_m, double y_m, double theta_rad);
+  /// run: the id of the run about to start (B21R_RUN.run_id); an emulator restarts its sensor
+  /// noise from it (see sim_emu_reset_run), a person placing the robot ignores it.
+  int (*request_start_pose)(void* user, double x_m, double y_m, double theta_rad, uint64_t run);
 
   /// Device health at now_us, once per tick: lost devices (their descriptors closed, never polled
   /// again), devices reopened, output overflows. The binding reopens lost devices itself, with

@@ -344,8 +344,9 @@ static int v_can_write(void* user, const canopen_frame_t* frame) {
   return 0;
 }
 
-static int v_request_start_pose(void* user, double x_m, double y_m, double theta_rad) {
+static int v_request_start_pose(void* user, double x_m, double y_m, double theta_rad, uint64_t run) {
   fake_robot_t* f = (fake_robot_t*)user;
+  f->start_pose_run = run;
   f->robot.x_m = x_m;
   f->robot.y_m = y_m;
   f->robot.theta_rad = theta_rad;

@@ -76,6 +76,7 @@ typedef struct fake_robot {
   bool nan_odometry;
   // Counters.
   int64_t start_pose_requests;
+  uint64_t start_pose_run;        ///< the run id given with the last start-pose request
   int64_t commands;
   int64_t laser_telegrams;
   int64_t busy_ns;      ///< CPU time of the calling thread spent simulating (advance), to subtract in benchmarks
