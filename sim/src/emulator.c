@@ -15,6 +15,7 @@ struct sim_emu {
   sim_lms_t* laser;
   sim_rflex_t* rflex;
   sim_cia402_t* cia402;
+  sim_cia401_t* bumpers;  // the CANopen base's bump-panel input node
   uint32_t substeps_per_period;
   uint64_t substeps_in_period;  // real time: substeps since the last trace point
   bool streaming;               // lockstep: time advances on cycle ends
@@ -38,6 +39,7 @@ void sim_emu_config_default(sim_emu_config_t* cfg) {
   sim_lms_config_default(&cfg->laser);
   sim_rflex_config_default(&cfg->rflex);
   sim_cia402_config_default(&cfg->cia402);
+  sim_cia401_config_default(&cfg->cia401);
   cfg->trace_capacity = 200000;
 }
 
@@ -82,11 +84,12 @@ sim_emu_t* sim_emu_create(const sim_world_t* world, const sim_emu_config_t* cfg)
     e->rflex = sim_rflex_create(&e->cfg.rflex);
   } else {
     e->cia402 = sim_cia402_create(&e->cfg.cia402);
+    e->bumpers = sim_cia401_create(&e->cfg.cia401);
   }
   if (cfg->trace_capacity > 0) {
     e->trace = calloc(cfg->trace_capacity, sizeof(*e->trace));
   }
-  if (e->plant == NULL || e->laser == NULL || (e->rflex == NULL && e->cia402 == NULL) ||
+  if (e->plant == NULL || e->laser == NULL || (e->rflex == NULL && (e->cia402 == NULL || e->bumpers == NULL)) ||
       (cfg->trace_capacity > 0 && e->trace == NULL)) {
     sim_emu_destroy(e);
     return NULL;
@@ -101,6 +104,7 @@ void sim_emu_destroy(sim_emu_t* e) {
   sim_lms_destroy(e->laser);
   sim_rflex_destroy(e->rflex);
   sim_cia402_destroy(e->cia402);
+  sim_cia401_destroy(e->bumpers);
   sim_plant_destroy(e->plant);
   free(e->trace);
   free(e);
@@ -130,6 +134,20 @@ static void apply_command(sim_emu_t* e, double t_s) {
   sim_plant_set_command(e->plant, v, w);
 }
 
+_Static_assert(SIM_RFLEX_PANELS == CIA401_BUMP_PANELS, "one panel numbering for both bases");
+
+// The 14 bump panels' segment bits, numbered as on the rFLEX base (0..5 upper enclosure, 6..13
+// base skirt): the plant's contact and the injected `fault bumper`. Both bases report these.
+static void bump_panels(const sim_emu_t* e, const sim_plant_state_t* s, uint8_t panels[SIM_RFLEX_PANELS]) {
+  memset(panels, 0, SIM_RFLEX_PANELS);
+  if (s->bumper_panel >= 0) {
+    panels[6 + s->bumper_panel] = s->bumper_bits;  // base skirt panels follow the 6 upper ones
+  }
+  if (e->forced_panel >= 0) {
+    panels[e->forced_panel] |= 0x0FU;
+  }
+}
+
 static void rflex_sample(const sim_emu_t* e, sim_rflex_sample_t* out) {
   sim_plant_state_t s;
   sim_plant_get_state(e->plant, &s);
@@ -138,12 +156,17 @@ static void rflex_sample(const sim_emu_t* e, sim_rflex_sample_t* out) {
   out->odo_rot_rad = s.odo_rot_rad;
   out->v_mps = s.v_mps;
   out->omega_radps = s.omega_radps;
-  if (s.bumper_panel >= 0) {
-    out->panels[6 + s.bumper_panel] = s.bumper_bits;  // base skirt panels follow the 6 upper ones
-  }
-  if (e->forced_panel >= 0) {
-    out->panels[e->forced_panel] |= 0x0FU;
-  }
+  bump_panels(e, &s, out->panels);
+}
+
+// CANopen: the bump-panel node sees the panels at t_s (it sends on change, by event timer and
+// its heartbeats).
+static void poll_bumpers(sim_emu_t* e, double t_s) {
+  sim_plant_state_t s;
+  sim_plant_get_state(e->plant, &s);
+  uint8_t panels[SIM_RFLEX_PANELS];
+  bump_panels(e, &s, panels);
+  sim_cia401_poll(e->bumpers, panels, t_s);
 }
 
 static void cia402_sample(const sim_emu_t* e, sim_cia402_sample_t* out) {
@@ -193,6 +216,9 @@ static void emit_period_data(sim_emu_t* e) {
     rflex_sample(e, &s);
     sim_rflex_emit_odometry(e->rflex, &s, t);
   } else {
+    // The period's bump-panel PDO is read before the drives' TPDOs (sim_emu_can_read drains the
+    // node first), so the tick that has the period's odometry also has its bumpers.
+    poll_bumpers(e, t);
     sim_cia402_sample_t s;
     cia402_sample(e, &s);
     sim_cia402_emit_tpdos(e->cia402, &s, t);
@@ -259,6 +285,10 @@ void sim_emu_can_write(sim_emu_t* e, const canopen_frame_t* f) {
     return;
   }
   const double t = now(e);
+  sim_cia401_feed(e->bumpers, f, t);
+  if (canopen_classify(f, NULL) == CANOPEN_KIND_NMT) {
+    poll_bumpers(e, t);  // a started node sends its inputs at once
+  }
   const sim_cia402_event_t ev = sim_cia402_feed(e->cia402, f, t);
   apply_command(e, t);
   if (e->cfg.mode != SIM_MODE_LOCKSTEP) {
@@ -283,6 +313,7 @@ void sim_emu_can_write(sim_emu_t* e, const canopen_frame_t* f) {
     record(e);
     emit_period_data(e);
   } else {
+    poll_bumpers(e, t);
     sim_cia402_sample_t s;
     cia402_sample(e, &s);
     sim_cia402_emit_tpdos(e->cia402, &s, t);
@@ -318,7 +349,8 @@ size_t sim_emu_base_read(sim_emu_t* e, uint8_t* out, size_t cap) {
 }
 
 int sim_emu_can_read(sim_emu_t* e, canopen_frame_t* f) {
-  if (e->cia402 == NULL || !sim_cia402_drain(e->cia402, f)) {
+  // The bump-panel node first: in lockstep its PDO of a period then precedes the drives' TPDOs.
+  if (e->cia402 == NULL || (!sim_cia401_drain(e->bumpers, f) && !sim_cia402_drain(e->cia402, f))) {
     return 0;
   }
   corrupt(e, f->data, f->dlc <= 8U ? f->dlc : 8U);
@@ -347,6 +379,7 @@ void sim_emu_run_until(sim_emu_t* e, double t_s) {
       sim_rflex_poll(e->rflex, &rs, t);
     } else {
       sim_cia402_poll(e->cia402, t);
+      poll_bumpers(e, t);
     }
     if (++e->substeps_in_period >= e->substeps_per_period) {
       e->substeps_in_period = 0;
@@ -382,6 +415,7 @@ double sim_emu_latency_s(const sim_emu_t* e) { return e->latency_s; }
 sim_lms_t* sim_emu_laser(sim_emu_t* e) { return e->laser; }
 sim_rflex_t* sim_emu_rflex(sim_emu_t* e) { return e->rflex; }
 sim_cia402_t* sim_emu_cia402(sim_emu_t* e) { return e->cia402; }
+sim_cia401_t* sim_emu_cia401(sim_emu_t* e) { return e->bumpers; }
 sim_plant_t* sim_emu_plant(sim_emu_t* e) { return e->plant; }
 
 const sim_trace_point_t* sim_emu_trace(const sim_emu_t* e, size_t* n_points) {
@@ -468,6 +502,7 @@ static sim_emu_ctrl_t control_fault(sim_emu_t* e, char tok[][SPLIT_TOKEN_CAP], s
       sim_rflex_set_silent_until(e->rflex, 0.0);
     } else {
       sim_cia402_set_silent_until(e->cia402, 0.0);
+      sim_cia401_set_silent_until(e->bumpers, 0.0);
     }
     e->corrupt_fraction = 0.0;
     e->latency_s = 0.0;
@@ -477,8 +512,8 @@ static sim_emu_ctrl_t control_fault(sim_emu_t* e, char tok[][SPLIT_TOKEN_CAP], s
   double v = 0.0;
   if (n != 3) {
     return reply_error(reply, cap,
-                       "usage: fault laser_drop|corrupt|base_silent|drive_fault|latency|bumper "
-                       "<value> | fault clear");
+                       "usage: fault laser_drop|corrupt|base_silent|drive_fault|latency|bumper|"
+                       "bumper_silent <value> | fault clear");
   }
   const char* kind = tok[1];
   if (strcmp(kind, "bumper") == 0) {
@@ -512,6 +547,11 @@ static sim_emu_ctrl_t control_fault(sim_emu_t* e, char tok[][SPLIT_TOKEN_CAP], s
     } else {
       sim_cia402_set_silent_until(e->cia402, t + v * 1e-3);
     }
+  } else if (strcmp(kind, "bumper_silent") == 0) {
+    if (e->bumpers == NULL) {
+      return reply_error(reply, cap, "bumper_silent needs the canopen base");
+    }
+    sim_cia401_set_silent_until(e->bumpers, t + v * 1e-3);
   } else if (strcmp(kind, "latency") == 0) {
     e->latency_s = v * 1e-3;
   } else if (strcmp(kind, "drive_fault") == 0) {

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
-// libFuzzer target: CANopen frame decoding and the CiA 402 state machines fed with arbitrary
-// frames (each 11 input bytes: id (2), dlc (1), data (8)).
+// libFuzzer target: CANopen frame decoding (drives and the CiA 401 bump-panel node) and the
+// CiA 402 state machines fed with arbitrary frames (each 11 input bytes: id (2), dlc (1),
+// data (8)).
 #include <proto/canopen.h>
 
 #include <stddef.h>
@@ -51,6 +52,21 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     if (canopen_decode_tpdo1(&f, &t1) == PROTO_OK) {
       (void)cia402_master_controlword(&master, t1.statusword, (cia402_request_t)(t1.statusword % 3U));
       (void)cia402_state_name(cia402_state_from_statusword(t1.statusword));
+    }
+    cia401_bumpers_t bump;
+    if (cia401_decode_bumpers(&f, &bump) == PROTO_OK) {
+      // Every decoded panel fits its 4 segments, the mask names exactly the pressed ones, and
+      // re-encoding gives the same 7 bytes.
+      check(kind == CANOPEN_KIND_TPDO1 && f.dlc >= CIA401_BUMP_TPDO1_DLC);
+      const uint32_t mask = cia401_bumper_mask(&bump);
+      for (unsigned p = 0; p < CIA401_BUMP_PANELS; ++p) {
+        check(bump.panels[p] <= CIA401_BUMP_SEGMENTS);
+        check(((mask >> p) & 1U) == (bump.panels[p] != 0U ? 1U : 0U));
+      }
+      check((mask >> CIA401_BUMP_PANELS) == 0U);
+      canopen_frame_t g;
+      check(cia401_encode_bumpers(&g, bump.node, bump.panels) == PROTO_OK);
+      check(g.id == f.id && memcmp(g.data, f.data, CIA401_BUMP_TPDO1_DLC) == 0);
     }
     (void)canopen_decode_tpdo2(&f, &t2);
     (void)canopen_decode_heartbeat(&f, &h);

@@ -92,6 +92,10 @@ def main() -> None:
         can(0x181, b"\x37\x02\x2c\xc9\x00\x00"), can(0x281, b"\x10\x27\x00\x00"),
         can(0x701, b"\x05"), can(0x081, b"\x10\x23\x03\x00\x00\x00\x00\x00"),
         can(0x201, b"\x80\x00\x00\x00\x00\x00"), can(0x182, b"\x18\x02\x00\x00\x00\x00")]))
+    # The CiA 401 bump-panel node (16): boot-up, NMT start, TPDO1 released / panels 3 and 6 / short.
+    write("canopen", "bump_panel_node", b"".join([
+        can(0x710, b"\x00"), can(0x000, b"\x01\x10"), can(0x190, bytes(7)),
+        can(0x190, b"\x00\xf0\x00\x02\x00\x00\x00"), can(0x710, b"\x05"), can(0x190, b"\xff" * 6)]))
 
 
 def can_record(can_id: int, data: bytes, dlc=None) -> bytes:
@@ -145,7 +149,7 @@ def more_seeds() -> None:
     # Emulator control commands (byte 0: bit 0 = CANopen emulator, bits 1..7 = reply capacity).
     cmds = b"pose\nstatus\nreset 1.5 0.2 0.3\nfault laser_drop 1500\nfault corrupt 0.1\n" \
            b"fault base_silent 200\nfault latency 200\nfault bumper 3\nfault bumper 0x4d\n" \
-           b"fault drive_fault 2\nfault clear\nreset nan 0 0\nfault\nquit\n"
+           b"fault drive_fault 2\nfault bumper_silent 500\nfault clear\nreset nan 0 0\nfault\nquit\n"
     write("emu_control", "rflex_commands", b"\x00" + cmds)
     write("emu_control", "canopen_commands", b"\x01" + cmds)
     write("emu_control", "short_replies", b"\x07" + cmds)
@@ -188,7 +192,8 @@ def more_seeds() -> None:
     write("base_dispatch", "rflex_injected", b"\x00" + genuine + bytes([0, len(pk)]) + pk + genuine + b"\x02" * 8
           + genuine)
     frames = b"".join(b"\x00" + struct.pack("<HB", i, d) + data.ljust(8, b"\x00") for i, d, data in [
-        (0x081, 8, b"\x10\x23\x03"), (0x181, 6, b"\x08\x02"), (0x701, 1, b"\x04"), (0x281, 4, b"\xff\xff\xff\x7f")])
+        (0x081, 8, b"\x10\x23\x03"), (0x181, 6, b"\x08\x02"), (0x701, 1, b"\x04"), (0x281, 4, b"\xff\xff\xff\x7f"),
+        (0x190, 7, b"\x00\x00\x00\x03"), (0x190, 6, b"\xff"), (0x710, 1, b"\x00"), (0x191, 7, b"\xff" * 7)])
     write("base_dispatch", "canopen_injected", b"\x01" + genuine + frames + genuine + b"\x02" * 8 + genuine)
 
 

@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
-// Base adapters of the loop core: rFLEX over bytes and CiA 402 drives over CANopen frames.
-// Both feed the same odometry integrator (rflex_odometry_t: heading first, then translation).
+// Base adapters of the loop core: rFLEX over bytes, and CiA 402 drives plus the CiA 401
+// bump-panel node over CANopen frames. Both feed the same odometry integrator
+// (rflex_odometry_t: heading first, then translation) and the same bumper mask (bit p = panel p,
+// the rFLEX DIO numbering).
 #include "loop_internal.h"
 
 #include <math.h>
@@ -40,9 +42,50 @@ static void rflex_poll(fw_loop_t* L) {
 
 static const char* drive_name(int i) { return i == 0 ? "translation" : "rotation"; }
 
+static void can_send_nmt(fw_loop_t* L, uint8_t command, uint8_t node, int* failed_node) {
+  canopen_frame_t f;
+  (void)canopen_encode_nmt(&f, command, node);
+  if (L->io.vt->can_write(L->io.user, &f) != 0 && failed_node != NULL && *failed_node < 0) {
+    *failed_node = node;
+  }
+}
+
+// Frames of the bump-panel node: its TPDO1 sets the bumper mask exactly as the rFLEX DIO reports
+// do; a boot-up means it restarted into pre-operational, where it sends no PDOs, so it is started
+// again (its silence until then is a base fault, see fw_base_evaluate_faults).
+static void bump_handle(fw_loop_t* L, const canopen_frame_t* f, canopen_kind_t kind, int64_t now_us) {
+  fw_bump_node_t* b = &L->bump;
+  b->frames++;
+  if (kind == CANOPEN_KIND_TPDO1) {
+    cia401_bumpers_t in;
+    if (cia401_decode_bumpers(f, &in) != PROTO_OK) {
+      b->bad_pdos++;  // says nothing about the panels: neither a contact nor a sign of life
+      return;
+    }
+    b->mask = cia401_bumper_mask(&in);
+    b->seen = true;
+    b->pdo_new = true;
+    b->last_us = now_us;
+    b->pdos++;
+    L->bumper_mask = b->mask;
+    return;
+  }
+  canopen_heartbeat_t hb;
+  if (kind == CANOPEN_KIND_HEARTBEAT && canopen_decode_heartbeat(f, &hb) == PROTO_OK &&
+      hb.nmt_state == CANOPEN_NMT_STATE_BOOTUP) {
+    b->bootups++;
+    can_send_nmt(L, CANOPEN_NMT_START, b->node, NULL);
+  }
+}
+
 static void can_handle(fw_loop_t* L, const canopen_frame_t* f, int64_t now_us) {
   uint8_t node = 0;
   const canopen_kind_t kind = canopen_classify(f, &node);
+  if (node != 0U && node == L->bump.node) {
+    L->base_packets++;
+    bump_handle(L, f, kind, now_us);
+    return;
+  }
   int i = -1;
   for (int k = 0; k < 2; ++k) {
     if (L->drive[k].node == node) {
@@ -157,9 +200,39 @@ void fw_base_clear_flags(fw_loop_t* L) {
     L->drive[i].tpdo1_new = false;
     L->drive[i].tpdo2_new = false;
   }
+  L->bump.pdo_new = false;
+}
+
+// The bump-panel node's silence: a base fault, not a bumper stop. A silent node means contacts can
+// no longer be seen (the base's safety chain is broken, like a drive whose heartbeat is lost), but
+// nothing was hit: a bumper stop would end the run as a collision and teach the learner one.
+// Lockstep counts ticks (the node's event timer runs on the emulator's time); real time, the
+// monotonic clock. Writes the detail and returns true when silent.
+static bool bump_silent(fw_loop_t* L, int64_t now_us, char* detail, size_t cap) {
+  const fw_bump_node_t* b = &L->bump;
+  const unsigned cob = CANOPEN_COB_TPDO1 + b->node;
+  if (L->cfg.lockstep) {
+    if (b->silent_ticks < L->bump_limit_ticks) {
+      return false;
+    }
+    snprintf(detail, cap, "bump-panel node %u (CiA 401): no TPDO1 0x%03x for %d ticks (limit %d); bumpers not watched",
+             (unsigned)b->node, cob, (int)b->silent_ticks, (int)L->bump_limit_ticks);
+    return true;
+  }
+  const int64_t age_us = now_us - (b->seen ? b->last_us : L->can_start_us);
+  const int64_t limit_us = (int64_t)(L->cfg.can_bumper_timeout_s * 1e6);
+  if (age_us < limit_us) {
+    return false;
+  }
+  snprintf(detail, cap, "bump-panel node %u (CiA 401): no TPDO1 0x%03x for %lld ms (limit %lld ms); bumpers not watched",
+           (unsigned)b->node, cob, (long long)(age_us / 1000), (long long)(limit_us / 1000));
+  return true;
 }
 
 void fw_base_evaluate_faults(fw_loop_t* L, int64_t now_us) {
+  if (!is_rflex(L)) {
+    L->bump.silent_ticks = L->bump.pdo_new ? 0 : L->bump.silent_ticks + 1;
+  }
   L->base_fault = false;
   L->base_fault_detail[0] = '\0';
   if (L->output_overflows > 0U) {
@@ -195,6 +268,9 @@ void fw_base_evaluate_faults(fw_loop_t* L, int64_t now_us) {
                drive_name(i), (unsigned)d->node, emcy, (unsigned)d->statusword,
                cia402_state_name(cia402_state_from_statusword(d->statusword)), hb_expired ? ", heartbeat lost" : "");
     }
+  }
+  if (!L->base_fault) {
+    L->base_fault = bump_silent(L, now_us, L->base_fault_detail, sizeof L->base_fault_detail);
   }
 }
 
@@ -254,14 +330,53 @@ static int rflex_start_sequence(fw_loop_t* L) {
   return rc;
 }
 
+// Starts the drives and the bump-panel node (each by its id: other nodes on the bus stay as they are).
 static void can_nmt_start(fw_loop_t* L, int* failed_node) {
   for (int i = 0; i < 2; ++i) {
-    canopen_frame_t f;
-    (void)canopen_encode_nmt(&f, CANOPEN_NMT_START, L->drive[i].node);
-    if (L->io.vt->can_write(L->io.user, &f) != 0 && failed_node != NULL && *failed_node < 0) {
-      *failed_node = L->drive[i].node;
+    can_send_nmt(L, CANOPEN_NMT_START, L->drive[i].node, failed_node);
+  }
+  can_send_nmt(L, CANOPEN_NMT_START, L->bump.node, failed_node);
+}
+
+static void bump_reset(fw_bump_node_t* b) {
+  b->seen = false;
+  b->pdo_new = false;
+  b->silent_ticks = 0;
+}
+
+// Waits (bounded) for the bump-panel node's first TPDO1: it sends one when started and then
+// every event timer, so a node that says nothing is missing, misconfigured or not powered.
+static int can_wait_bumpers(fw_loop_t* L, char* err, size_t err_cap) {
+  const double wait_s = L->cfg.can_bumper_timeout_s * 2.0 > 1.0 ? L->cfg.can_bumper_timeout_s * 2.0 : 1.0;
+  const int64_t deadline = now(L) + (int64_t)(wait_s * 1e6);
+  int64_t next_cycle = now(L) + L->period_us;
+  while (!L->bump.seen) {
+    const int64_t t = now(L);
+    if (t >= deadline) {
+      const fw_bump_node_t* b = &L->bump;
+      snprintf(err, err_cap,
+               "CANopen: bump-panel node %u (CiA 401 digital inputs, TPDO1 COB-ID 0x%03x) sent no inputs within "
+               "%.1f s of NMT start (%s); check can_node_bumpers, the node's power and its wiring: the robot does "
+               "not drive without its bumpers",
+               (unsigned)b->node, (unsigned)(CANOPEN_COB_TPDO1 + b->node), wait_s,
+               b->bad_pdos > 0U ? "its TPDO1 is shorter than 7 bytes"
+               : b->frames > 0U ? "its heartbeat arrives, no TPDO1"
+                                : "nothing at all from that id");
+      return -1;
+    }
+    if (!L->cfg.lockstep && t >= next_cycle) {
+      // Real time: keep the drives' RPDO watchdogs fed. In lockstep a SYNC would advance the
+      // emulator; its node answers the NMT start at once, so waiting is enough.
+      can_send_cycle(L, 0.0, 0.0, CIA402_REQ_ENABLE);
+      next_cycle = t + L->period_us;
+    }
+    can_poll(L, t);
+    if (!L->bump.seen) {
+      (void)L->io.vt->wait(L->io.user, next_cycle < deadline ? next_cycle : deadline);
     }
   }
+  fw_base_clear_flags(L);
+  return 0;
 }
 
 void fw_base_restart(fw_loop_t* L) {
@@ -276,6 +391,7 @@ void fw_base_restart(fw_loop_t* L) {
     return;
   }
   L->can_start_us = now(L);
+  bump_reset(&L->bump);
   for (int i = 0; i < 2; ++i) {
     cia402_master_init(&L->drive[i].master);
     L->drive[i].emcy_seen = false;
@@ -306,6 +422,7 @@ int fw_base_start(fw_loop_t* L, char* err, size_t err_cap) {
     return -1;
   }
   L->can_start_us = now(L);
+  bump_reset(&L->bump);
   int failed_node = -1;
   can_nmt_start(L, &failed_node);
   if (failed_node >= 0) {
@@ -326,7 +443,7 @@ int fw_base_start(fw_loop_t* L, char* err, size_t err_cap) {
     const bool ok = cia402_operation_enabled(L->drive[0].statusword) && cia402_operation_enabled(L->drive[1].statusword);
     fw_base_clear_flags(L);
     if (ok) {
-      return 0;
+      return can_wait_bumpers(L, err, err_cap);
     }
   }
   snprintf(err, err_cap,
@@ -361,8 +478,7 @@ void fw_base_shutdown(fw_loop_t* L) {
   can_send_cycle(L, 0.0, 0.0, CIA402_REQ_ENABLE);
   can_send_cycle(L, 0.0, 0.0, CIA402_REQ_DISABLE);
   for (int i = 0; i < 2; ++i) {
-    canopen_frame_t f;
-    (void)canopen_encode_nmt(&f, CANOPEN_NMT_STOP, L->drive[i].node);
-    (void)L->io.vt->can_write(L->io.user, &f);
+    can_send_nmt(L, CANOPEN_NMT_STOP, L->drive[i].node, NULL);
   }
+  can_send_nmt(L, CANOPEN_NMT_STOP, L->bump.node, NULL);
 }

@@ -151,6 +151,12 @@ static const key_desc_t k_keys[] = {
    "CANopen node id of the rotation (steering) drive"},
   {NULL, "can_heartbeat_timeout_s", KIND_DOUBLE, OFF(can_heartbeat_timeout_s), 0, 10, false, false, NULL, "0",
    "a drive heartbeat silent this long is a fault (0 = no heartbeat supervision)"},
+  {NULL, "can_node_bumpers", KIND_INT, OFF(can_node_bumpers), 1, 127, false, false, NULL, "16",
+   "CANopen node id of the CiA 401 digital-input node that reads the 14 bump panels (TPDO1 = COB-ID "
+   "0x180 + id); with base_protocol = canopen the controller does not start without it"},
+  {NULL, "can_bumper_timeout_s", KIND_DOUBLE, OFF(can_bumper_timeout_s), 0.05, 10, false, false, NULL, "0.35",
+   "no bump-panel TPDO1 for this long is a base fault, since the bumpers are no longer watched (the node "
+   "sends every 0.1 s; lockstep: rounded up to whole ticks)"},
   {NULL, "distance_counts_per_m", KIND_DOUBLE, OFF(distance_counts_per_m), 1, 1e7, false, false, NULL, "103000",
    "base translation conversion K_d (B21r rFLEX: 103000 counts/m)"},
   {NULL, "angle_counts_per_rad", KIND_DOUBLE, OFF(angle_counts_per_rad), 1, 1e7, false, false, NULL, "35000",
@@ -996,6 +1002,25 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
         "learner = hedger",
         origin_of(cfg, "learner").text, origin_of(cfg, "checkpoint_file").text);
     return -1;
+  }
+  if (cfg->base_protocol == FW_BASE_CANOPEN) {
+    // One node id per device: a shared id would mix a drive's TPDO1 with the bump panels'.
+    const struct {
+      const char* key;
+      int32_t node;
+    } nodes[3] = {{"can_node_translation", cfg->can_node_translation},
+                  {"can_node_rotation", cfg->can_node_rotation},
+                  {"can_node_bumpers", cfg->can_node_bumpers}};
+    for (int i = 0; i < 3; ++i) {
+      for (int j = i + 1; j < 3; ++j) {
+        if (nodes[i].node == nodes[j].node) {
+          fmt(err, err_cap, "%s: %s = %d is also %s (set at %s); every CANopen node needs its own id",
+              origin_of(cfg, nodes[j].key).text, nodes[j].key, (int)nodes[j].node, nodes[i].key,
+              origin_of(cfg, nodes[i].key).text);
+          return -1;
+        }
+      }
+    }
   }
   if (cfg->reposition == FW_REPOSITION_EMULATOR && cfg->emulator_control[0] == '\0') {
     fmt(err, err_cap, "%s: reposition = emulator needs emulator_control = <path of the emulator's control socket>",

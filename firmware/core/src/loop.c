@@ -143,6 +143,8 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
     const double hb_s = cfg->can_heartbeat_timeout_s > 0.0 ? cfg->can_heartbeat_timeout_s : 1.0;
     (void)canopen_hb_init(&L->drive[i].hb, L->drive[i].node, (uint32_t)(hb_s * 1e6));
   }
+  L->bump.node = (uint8_t)cfg->can_node_bumpers;
+  L->bump_limit_ticks = fw_config_ticks(cfg, cfg->can_bumper_timeout_s);
 
   pthread_mutex_init(&L->mbox_mu, NULL);
   atomic_init(&L->signal_number, 0);

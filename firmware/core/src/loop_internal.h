@@ -45,6 +45,21 @@ typedef struct fw_drive {
   bool emcy_seen;   // an EMCY with a non-zero code arrived and no good statusword since
 } fw_drive_t;
 
+/// The CiA 401 bump-panel node (CANopen base): its TPDO1 carries the 14 panels' contact bits,
+/// sent on change and every event timer, so a silent node is told from released panels.
+typedef struct fw_bump_node {
+  uint8_t node;
+  bool seen;            // a valid TPDO1 arrived since the (re)start
+  bool pdo_new;         // since the last tick
+  int32_t silent_ticks; // lockstep: ticks without a valid TPDO1
+  int64_t last_us;      // time of the last valid TPDO1 (real time)
+  uint32_t mask;        // bit p = panel p pressed (as rflex_host_t.bumper_mask)
+  uint64_t pdos;        // valid TPDO1 frames
+  uint64_t bad_pdos;    // its TPDO1 COB-ID with a DLC below 7 (ignored)
+  uint64_t bootups;     // boot-up messages: the node restarted (it is started again)
+  uint64_t frames;      // every frame from its id (tells a mute node from a PDO-less one)
+} fw_bump_node_t;
+
 /// The value-function learner (learner.c): exactly one of hedger (learner hedger, lwa) and tabq.
 typedef struct fw_learner {
   int32_t kind;         ///< fw_learner_kind_t
@@ -153,6 +168,8 @@ struct fw_loop {
   bool brake_expected_released;
   int32_t sys_status_countdown;
   fw_drive_t drive[2];
+  fw_bump_node_t bump;
+  int32_t bump_limit_ticks;    // lockstep: can_bumper_timeout_s in whole ticks
   int64_t can_start_us;
 
   // Mailboxes (filled by other threads).

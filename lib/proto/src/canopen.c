@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: MIT
-// CANopen frame codecs, the CiA 402 state machine (host sequencer and emulated drive) and the
-// heartbeat consumer.
+// CANopen frame codecs (CiA 402 drives, the CiA 401 bump-panel node), the CiA 402 state machine
+// (host sequencer and emulated drive) and the heartbeat consumer.
 #include <proto/canopen.h>
 
 #include "bytes.h"
@@ -211,6 +211,48 @@ proto_status_t canopen_decode_heartbeat(const canopen_frame_t* f, canopen_heartb
   out->node = node;
   out->nmt_state = (uint8_t)(f->data[0] & 0x7FU);
   return PROTO_OK;
+}
+
+proto_status_t cia401_encode_bumpers(canopen_frame_t* f, uint8_t node, const uint8_t panels[CIA401_BUMP_PANELS]) {
+  if (f == NULL || panels == NULL || !node_ok(node)) {
+    return PROTO_ERR_INVALID_ARG;
+  }
+  for (unsigned p = 0; p < CIA401_BUMP_PANELS; ++p) {
+    if (panels[p] > CIA401_BUMP_SEGMENTS) {
+      return PROTO_ERR_INVALID_ARG;
+    }
+  }
+  frame_start(f, CANOPEN_COB_TPDO1 + node, CIA401_BUMP_TPDO1_DLC);
+  // Input line 4p + s: two panels per 8-bit input group, the even panel in the low nibble.
+  for (unsigned p = 0; p < CIA401_BUMP_PANELS; ++p) {
+    f->data[p / 2U] |= (uint8_t)((unsigned)panels[p] << ((p % 2U) * 4U));
+  }
+  return PROTO_OK;
+}
+
+proto_status_t cia401_decode_bumpers(const canopen_frame_t* f, cia401_bumpers_t* out) {
+  uint8_t node = 0;
+  const proto_status_t st = check_frame(f, out, CANOPEN_KIND_TPDO1, CIA401_BUMP_TPDO1_DLC, &node);
+  if (st != PROTO_OK) {
+    return st;
+  }
+  out->node = node;
+  for (unsigned p = 0; p < CIA401_BUMP_PANELS; ++p) {
+    out->panels[p] = (uint8_t)(((unsigned)f->data[p / 2U] >> ((p % 2U) * 4U)) & CIA401_BUMP_SEGMENTS);
+  }
+  return PROTO_OK;
+}
+
+uint32_t cia401_bumper_mask(const cia401_bumpers_t* b) {
+  uint32_t mask = 0;
+  if (b != NULL) {
+    for (unsigned p = 0; p < CIA401_BUMP_PANELS; ++p) {
+      if (b->panels[p] != 0U) {
+        mask |= 1U << p;
+      }
+    }
+  }
+  return mask;
 }
 
 int32_t canopen_counts_from_si(double value, double counts_per_unit) {

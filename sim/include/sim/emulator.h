@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: MIT
-/// sim/emulator.h — The emulated B21r: ODE plant + LMS200 + base (rFLEX or two CiA 402 drives),
-/// in lockstep or real time, transport-agnostic (bytes and frames in memory). This header is the
+/// sim/emulator.h — The emulated B21r: ODE plant + LMS200 + base (rFLEX, or two CiA 402 drives
+/// and a CiA 401 bump-panel input node), in lockstep or real time, transport-agnostic (bytes and frames in memory). This header is the
 /// contract between the emulator (sim/) and the controller (firmware/).
 ///
 /// ## Transport
@@ -14,8 +14,10 @@
 /// - At sim time t_k the emulator has emitted exactly one LMS200 0xB0 scan telegram and one
 ///   MOT_SYSTEM_REPORT per axis (rFLEX) - or, on CANopen, the drives' TPDO1 + TPDO2 answering
 ///   the controller's SYNC - plus a DIO_REPORT for each bump panel whose state changed (rFLEX,
-///   when DIO reports are on). CANopen heartbeats follow simulated time (one per drive per
-///   heartbeat period), so in lockstep they appear only as time advances.
+///   when DIO reports are on) or the bump-panel node's TPDO1 (CANopen, node 16, while NMT
+///   operational: its event timer equals the period, so one per period, read before the drives'
+///   TPDOs). CANopen heartbeats follow simulated time (one per node per heartbeat period), so in
+///   lockstep they appear only as time advances.
 /// - The controller reads those, runs its tick and sends its command for the cycle: on rFLEX
 ///   the MOT_AXIS_SET_DIR pair (translation, then rotation); on CANopen RPDO1 of both drives
 ///   followed by SYNC. Receiving the rotation SET_DIR (rFLEX) or the SYNC (CANopen) advances the
@@ -50,12 +52,16 @@
 /// - `pose`: `ok <t_s> <x_m> <y_m> <theta_rad> <collided 0|1>` (ground truth; collided latches
 ///   from the first contact until the next reset).
 /// - `fault laser_drop <ms>` | `fault corrupt <fraction>` | `fault base_silent <ms>` |
-///   `fault drive_fault <node>` | `fault latency <ms>` | `fault bumper <panel>` | `fault clear`.
+///   `fault drive_fault <node>` | `fault latency <ms>` | `fault bumper <panel>` |
+///   `fault bumper_silent <ms>` | `fault clear`.
 ///   Durations are simulated time. corrupt: each byte read from a serial line (each data byte of
 ///   a CAN frame) is XORed with a random non-zero value with that probability. latency: stored
 ///   here, applied by the transport (b21r-sim holds every outgoing byte/frame that long in wall
 ///   time). bumper: panel 0..13 (or its DIO address 0x40..0x4D) reads pressed (bits 0x0F) until
-///   `fault clear`. drive_fault: CANopen base only.
+///   `fault clear`, on either base (rFLEX: DIO_REPORT; CANopen: the bump-panel node's TPDO1).
+///   base_silent: the rFLEX, or on CANopen the drives (the bump-panel node keeps sending).
+///   drive_fault: CANopen base only. bumper_silent: CANopen only; the bump-panel node sends
+///   nothing (no PDO, no heartbeat) for that long.
 /// - `status`: `ok t=<s> streaming=<0|1> scans=<n> base_reports=<n> contacts=<n>`.
 /// - `svg <path>`: writes the trace picture (sim/svg.h).
 /// - `quit`: reply `ok bye`; sim_emu_control returns SIM_EMU_CTRL_QUIT (the program exits).
@@ -74,6 +80,7 @@
 
 #include <proto/canopen.h>
 
+#include "sim/cia401_dev.h"
 #include "sim/cia402_dev.h"
 #include "sim/lms200_dev.h"
 #include "sim/plant.h"
@@ -106,6 +113,7 @@ typedef struct sim_emu_config {
   sim_lms_config_t laser;       ///< [sim_lms_config_default]
   sim_rflex_config_t rflex;     ///< [sim_rflex_config_default]
   sim_cia402_config_t cia402;   ///< [sim_cia402_config_default]
+  sim_cia401_config_t cia401;   ///< CANopen bump-panel node [sim_cia401_config_default]
   size_t trace_capacity;        ///< poses kept for the picture (one per period) [200000]
 } sim_emu_config_t;
 
@@ -137,7 +145,8 @@ void sim_emu_base_write(sim_emu_t* e, const uint8_t* bytes, size_t n);
 size_t sim_emu_base_read(sim_emu_t* e, uint8_t* out, size_t cap);
 
 /// CAN bus (base SIM_BASE_CANOPEN; ignored otherwise). In lockstep a SYNC advances one period
-/// inside this call. can_read returns 1 with the next drive frame, or 0.
+/// inside this call. can_read returns 1 with the next frame of a node (the bump-panel node's
+/// first, then the drives'), or 0.
 void sim_emu_can_write(sim_emu_t* e, const canopen_frame_t* f);
 int sim_emu_can_read(sim_emu_t* e, canopen_frame_t* f);
 
@@ -174,6 +183,7 @@ double sim_emu_latency_s(const sim_emu_t* e);
 sim_lms_t* sim_emu_laser(sim_emu_t* e);
 sim_rflex_t* sim_emu_rflex(sim_emu_t* e);
 sim_cia402_t* sim_emu_cia402(sim_emu_t* e);
+sim_cia401_t* sim_emu_cia401(sim_emu_t* e);
 sim_plant_t* sim_emu_plant(sim_emu_t* e);
 
 /// The recorded trace (one point per control period, runs separated by resets).

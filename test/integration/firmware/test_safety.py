@@ -6,7 +6,9 @@ never runs without the period's data), is observed in the log (stderr) and on B2
 with its reason and detail, and the controller recovers from the transient ones:
 - rflex: laser silence, base silence, bumper, operator deadman (joystick phase one without
   B21R_TELEOP), SIGTERM (zero, brake, checkpoint, exit 128+15; the checkpoint then loads);
-- canopen: laser silence, drive fault (EMCY + statusword), SIGTERM.
+- canopen: laser silence, drive fault (EMCY + statusword), bumper (the CiA 401 bump-panel node's
+  TPDO1, the same `fault bumper 3` as on rFLEX), the bump-panel node's silence (a base fault that
+  names the node), SIGTERM.
 usage: test_safety.py CONTROLLER SIM WORLD rflex|canopen"""
 import os
 import signal
@@ -56,7 +58,9 @@ def main():
             faults += [("fault base_silent 1500", "SAFETY STOP (base silent)", "fault clear"),
                        ("fault bumper 3", "SAFETY STOP (bumper)", "fault clear")]
         else:
-            faults += [("fault drive_fault 2", "SAFETY STOP (base fault)", "fault clear")]
+            faults += [("fault drive_fault 2", "SAFETY STOP (base fault)", "fault clear"),
+                       ("fault bumper 3", "SAFETY STOP (bumper)", "fault clear"),
+                       ("fault bumper_silent 1500", "SAFETY STOP (base fault): base fault: bump-panel node 16", None)]
         for inject, expect, clear in faults:
             t0 = time.time()
             sim.control(inject)
@@ -79,7 +83,7 @@ def main():
         for _, _, s in read_log(os.path.join(d, "run.lcmlog"), {"B21R_STATUS"}):
             if s.stop_reason != 0 and s.stop_reason not in seen:
                 seen[s.stop_reason] = s.stop_detail
-        want = [1, 7] + ([2, 4] if base == "rflex" else [3])
+        want = [1, 7] + ([2, 4] if base == "rflex" else [3, 4])
         for r in want:
             if r not in seen or not seen[r]:
                 fwtest.fail("B21R_STATUS never reported stop reason %d (%s); seen %s" % (r, STOP_NAMES[r], seen))

@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: MIT
-// CANopen codec: frame layouts, classification, the CiA 402 state machine on both sides, the
-// heartbeat consumer. With a directory argument it also writes the frames it encodes, with the
+// CANopen codec: frame layouts (CiA 402 drives, the CiA 401 bump-panel node), classification,
+// the CiA 402 state machine on both sides, the heartbeat consumer. With a directory argument it also writes the frames it encodes, with the
 // signal values they carry, for the DBC agreement test (test_proto_dbc.py).
 #include <proto/canopen.h>
 
@@ -140,6 +140,74 @@ static void test_canopen_decoders_round_trip(void** state) {
   f.dlc = 9;
   assert_int_equal(canopen_decode_nmt(&f, &nmt), PROTO_ERR_FORMAT);
   assert_int_equal(canopen_decode_nmt(NULL, &nmt), PROTO_ERR_INVALID_ARG);
+}
+
+// The bump-panel TPDO1 of the CiA 401 node: COB-ID 0x180 + node, 7 bytes, input line 4p + s
+// (panel p, segment s), i.e. the even panel in the low nibble of byte p / 2.
+static void test_cia401_bumpers_exact_layout(void** state) {
+  (void)state;
+  canopen_frame_t f;
+  uint8_t panels[CIA401_BUMP_PANELS] = {0};
+  assert_int_equal(cia401_encode_bumpers(&f, CANOPEN_NODE_BUMPERS_DEFAULT, panels), PROTO_OK);
+  expect_frame(&f, 0x190, "00 00 00 00 00 00 00");
+  panels[0] = 0x1;   // upper panel 0, segment 0: line 0
+  panels[3] = 0xF;   // upper panel 3, all segments: lines 12..15
+  panels[6] = 0x2;   // first skirt panel (rFLEX DIO 0x46), segment 1: line 25
+  panels[13] = 0x8;  // last skirt panel, segment 3: line 55
+  assert_int_equal(cia401_encode_bumpers(&f, 16, panels), PROTO_OK);
+  expect_frame(&f, 0x190, "01 f0 00 02 00 00 80");
+  assert_int_equal(cia401_encode_bumpers(&f, 127, panels), PROTO_OK);
+  assert_int_equal(f.id, 0x1FF);
+}
+
+// Values beyond a panel's four segments, node ids outside 1..127 and NULLs are refused.
+static void test_cia401_bumpers_invalid_refused(void** state) {
+  (void)state;
+  canopen_frame_t f;
+  uint8_t panels[CIA401_BUMP_PANELS] = {0};
+  assert_int_equal(cia401_encode_bumpers(&f, 0, panels), PROTO_ERR_INVALID_ARG);
+  assert_int_equal(cia401_encode_bumpers(&f, 128, panels), PROTO_ERR_INVALID_ARG);
+  assert_int_equal(cia401_encode_bumpers(NULL, 16, panels), PROTO_ERR_INVALID_ARG);
+  assert_int_equal(cia401_encode_bumpers(&f, 16, NULL), PROTO_ERR_INVALID_ARG);
+  panels[13] = 0x10;
+  assert_int_equal(cia401_encode_bumpers(&f, 16, panels), PROTO_ERR_INVALID_ARG);
+  cia401_bumpers_t b;
+  assert_int_equal(cia401_decode_bumpers(NULL, &b), PROTO_ERR_INVALID_ARG);
+  assert_int_equal(cia401_decode_bumpers(&f, NULL), PROTO_ERR_INVALID_ARG);
+}
+
+// Every panel value decodes back; the mask has bit p for each panel with any segment pressed;
+// short DLCs (a drive's 6-byte TPDO1) and other kinds are refused.
+static void test_cia401_bumpers_round_trip_and_mask(void** state) {
+  (void)state;
+  canopen_frame_t f;
+  cia401_bumpers_t b;
+  for (unsigned p = 0; p < CIA401_BUMP_PANELS; ++p) {
+    for (uint8_t v = 0; v <= CIA401_BUMP_SEGMENTS; ++v) {
+      uint8_t panels[CIA401_BUMP_PANELS] = {0};
+      panels[p] = v;
+      panels[(p + 5U) % CIA401_BUMP_PANELS] = 0x3;
+      assert_int_equal(cia401_encode_bumpers(&f, 16, panels), PROTO_OK);
+      memset(&b, 0xAA, sizeof b);
+      assert_int_equal(cia401_decode_bumpers(&f, &b), PROTO_OK);
+      assert_int_equal(b.node, 16);
+      assert_memory_equal(b.panels, panels, CIA401_BUMP_PANELS);
+      const uint32_t want = (v != 0U ? 1U << p : 0U) | 1U << ((p + 5U) % CIA401_BUMP_PANELS);
+      assert_int_equal(cia401_bumper_mask(&b), want);
+    }
+  }
+  assert_int_equal(cia401_bumper_mask(NULL), 0);
+  f.dlc = 8;  // longer DLCs are accepted
+  assert_int_equal(cia401_decode_bumpers(&f, &b), PROTO_OK);
+  f.dlc = 6;
+  assert_int_equal(cia401_decode_bumpers(&f, &b), PROTO_ERR_FORMAT);
+  (void)canopen_encode_tpdo1(&f, 16, 0x0237, 0);
+  assert_int_equal(cia401_decode_bumpers(&f, &b), PROTO_ERR_FORMAT);
+  (void)canopen_encode_heartbeat(&f, 16, CANOPEN_NMT_STATE_OPERATIONAL);
+  f.dlc = 7;
+  assert_int_equal(cia401_decode_bumpers(&f, &b), PROTO_ERR_FORMAT);
+  f.id = 0x210;  // RPDO1 of node 16
+  assert_int_equal(cia401_decode_bumpers(&f, &b), PROTO_ERR_FORMAT);
 }
 
 // SI <-> counts: rounding to nearest, saturation, non-finite input gives 0.
@@ -351,6 +419,27 @@ static void test_canopen_golden_frames_written(void** state) {
          "ErrorCode=0 ErrGeneric=0 ErrCurrent=0 ErrVoltage=1 ErrTemperature=0 ErrCommunication=0 "
          "ErrDeviceProfile=0 ErrReserved=0 ErrManufacturer=1 VendorData=0");
   }
+  // The bump-panel node: one frame per panel and segment value, plus mixed ones.
+  for (unsigned p = 0; p < CIA401_BUMP_PANELS; ++p) {
+    for (uint8_t v = 1; v <= CIA401_BUMP_SEGMENTS; v = (uint8_t)(v * 2U + (p % 2U))) {
+      uint8_t panels[CIA401_BUMP_PANELS] = {0};
+      panels[p] = v;
+      panels[CIA401_BUMP_PANELS - 1U - p] |= 0x1;
+      (void)cia401_encode_bumpers(&f, CANOPEN_NODE_BUMPERS_DEFAULT, panels);
+      char sig[CIA401_BUMP_PANELS * 16];
+      size_t used = 0;
+      for (unsigned q = 0; q < CIA401_BUMP_PANELS; ++q) {
+        used += (size_t)snprintf(sig + used, sizeof sig - used, "%sBumpPanel%02u=%u", q > 0 ? " " : "", q,
+                                 (unsigned)panels[q]);
+      }
+      EMIT("TPDO1_Bumpers", "%s", sig);
+    }
+  }
+  static const uint8_t bump_states[] = {0x00, 0x04, 0x05, 0x7F};
+  for (size_t i = 0; i < sizeof bump_states; ++i) {
+    (void)canopen_encode_heartbeat(&f, CANOPEN_NODE_BUMPERS_DEFAULT, bump_states[i]);
+    EMIT("Heartbeat_Bumpers", "NMTState=%u Toggle=0", (unsigned)bump_states[i]);
+  }
   static const uint8_t cmds[] = {0x01, 0x02, 0x80, 0x81, 0x82};
   for (size_t i = 0; i < sizeof cmds; ++i) {
     (void)canopen_encode_nmt(&f, cmds[i], (uint8_t)i);
@@ -377,6 +466,10 @@ static void test_canopen_no_allocation(void** state) {
     (void)canopen_encode_rpdo1(&f, 1, cw, i);
     (void)canopen_encode_tpdo1(&f, 1, cia402_drive_statusword(&d, false), i);
     (void)canopen_decode_tpdo1(&f, &t);
+    const uint8_t panels[CIA401_BUMP_PANELS] = {(uint8_t)(i & 0xF)};
+    cia401_bumpers_t b;
+    (void)cia401_encode_bumpers(&f, 16, panels);
+    (void)cia401_decode_bumpers(&f, &b);
   }
   assert_int_equal(alloc_counter_end(), 0);
 }
@@ -388,6 +481,9 @@ int main(int argc, char** argv) {
       cmocka_unit_test(test_canopen_encoders_invalid_refused),
       cmocka_unit_test(test_canopen_classify_kinds),
       cmocka_unit_test(test_canopen_decoders_round_trip),
+      cmocka_unit_test(test_cia401_bumpers_exact_layout),
+      cmocka_unit_test(test_cia401_bumpers_invalid_refused),
+      cmocka_unit_test(test_cia401_bumpers_round_trip_and_mask),
       cmocka_unit_test(test_canopen_counts_conversion),
       cmocka_unit_test(test_cia402_statusword_states),
       cmocka_unit_test(test_cia402_master_drive_enable_fault_quickstop),

@@ -3,7 +3,8 @@
 cantools to the signal values the C code put in (raw, the controlword and statusword as their
 CiA 402 bit fields), cantools re-encodes the same bytes, and every message of the DBC is
 exercised; velocities and positions carry SI units with the drives' scales, and the value tables
-name the CiA 402 states, the device control commands and the EMCY codes the drives send.
+name the CiA 402 states, the device control commands and the EMCY codes the drives send; the
+bump-panel node's TPDO1 carries the 14 panels in the rFLEX numbering.
 
 Usage: test_proto_dbc.py <b21r_canopen.dbc> <dir with canopen_frames.txt from proto.canopen>
 """
@@ -94,6 +95,28 @@ class DbcAgreesWithEncoder(unittest.TestCase):
         # The codes the emulated drives send.
         self.assertEqual(name("EMCY_Trans", "ErrorCode", 0x2310), "continuous_over_current")
         self.assertEqual(name("EMCY_Rot", "ErrorCode", 0x0000), "no_error_or_reset")
+
+    def test_bump_panel_node_has_one_mapping_for_both_bases(self):
+        # CiA 401 node 16: TPDO1 0x190 with 14 four-bit panels at bit 4p (panel p = rFLEX DIO
+        # 0x40 + p), its heartbeat 0x710, started by the controller's NMT like the drives.
+        msg = self.db.get_message_by_frame_id(0x190)
+        self.assertEqual((msg.name, msg.length, msg.senders), ("TPDO1_Bumpers", 7, ["BumpPanels"]))
+        self.assertEqual([s.name for s in msg.signals], ["BumpPanel%02d" % p for p in range(14)])
+        for p, s in enumerate(msg.signals):
+            with self.subTest(panel=p):
+                self.assertEqual((s.start, s.length, s.is_signed, s.byte_order), (4 * p, 4, False, "little_endian"))
+                self.assertEqual(s.choices[0], "released")
+                self.assertEqual(s.choices[15], "all_segments")
+                self.assertIn("DIO 0x%02X" % (0x40 + p), s.comment)
+                self.assertIn("upper enclosure" if p < 6 else "base skirt", s.comment)
+        self.assertIn("every 100 ms", msg.comment)
+        self.assertEqual(self.db.get_message_by_frame_id(0x710).name, "Heartbeat_Bumpers")
+        self.assertIn("BumpPanels", self.db.get_message_by_name("NMT").get_signal_by_name("NMT_Command").receivers)
+        # Panel 3 fully pressed, skirt panel 0 (panel 6) on segment 1.
+        d = self.db.decode_message(0x190, bytes.fromhex("00f00002000000"))
+        self.assertEqual(str(d["BumpPanel03"]), "all_segments")
+        self.assertEqual(str(d["BumpPanel06"]), "segment_1")
+        self.assertEqual(sum(1 for v in d.values() if str(v) == "released"), 12)
 
     def test_every_dbc_message_exercised(self):
         # No DBC message lacks a C encoder counterpart, and no C frame lacks a DBC message.

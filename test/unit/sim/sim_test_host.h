@@ -23,8 +23,10 @@ typedef struct host {
   rflex_odometry_t odo;
   uint64_t hash;  // FNV-1a over every byte/frame received, in order
   // Counts of the last host_read() call.
+  // tpdo1 / heartbeats: the drives'; bump_*: the CiA 401 bump-panel node's (node 16).
   int scans, acks, lms_replies, motor_reports, dio_reports, sys_status, tpdo1, tpdo2, heartbeats,
-      emcy, other;
+      emcy, bump_pdos, bump_heartbeats, other;
+  cia401_bumpers_t last_bump;
   lms_scan_t last_scan;
   rflex_dio_report_t last_dio;
   canopen_tpdo1_t last_tpdo1[2];
@@ -51,7 +53,7 @@ static inline void host_init(host_t* h, sim_emu_t* emu) {
 // Reads and decodes everything available; resets the per-call counts.
 static inline void host_read(host_t* h) {
   h->scans = h->acks = h->lms_replies = h->motor_reports = h->dio_reports = h->sys_status = 0;
-  h->tpdo1 = h->tpdo2 = h->heartbeats = h->emcy = h->other = 0;
+  h->tpdo1 = h->tpdo2 = h->heartbeats = h->emcy = h->bump_pdos = h->bump_heartbeats = h->other = 0;
   size_t n = sim_emu_laser_read(h->emu, h->buf, sizeof(h->buf));
   host_hash(h, h->buf, n);
   const uint8_t* p = h->buf;
@@ -102,7 +104,18 @@ static inline void host_read(host_t* h) {
     host_hash(h, &f.dlc, 1);
     host_hash(h, f.data, f.dlc);
     uint8_t node = 0;
-    switch (canopen_classify(&f, &node)) {
+    const canopen_kind_t kind = canopen_classify(&f, &node);
+    if (node == CANOPEN_NODE_BUMPERS_DEFAULT) {
+      if (kind == CANOPEN_KIND_TPDO1 && cia401_decode_bumpers(&f, &h->last_bump) == PROTO_OK) {
+        ++h->bump_pdos;
+      } else if (kind == CANOPEN_KIND_HEARTBEAT) {
+        ++h->bump_heartbeats;
+      } else {
+        ++h->other;
+      }
+      continue;
+    }
+    switch (kind) {
       case CANOPEN_KIND_TPDO1:
         if (node >= 1 && node <= 2) {
           (void)canopen_decode_tpdo1(&f, &h->last_tpdo1[node - 1]);

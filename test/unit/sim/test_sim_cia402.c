@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 // The two emulated CiA 402 drives: NMT, the controlword state machine, SYNC-triggered TPDOs,
-// heartbeat, EMCY on faults, RPDO watchdog (hand-built frames and lib/proto's encoders).
+// heartbeat, EMCY on faults, RPDO watchdog; and the CiA 401 bump-panel node: NMT, TPDO1 on start,
+// on change and by event timer, heartbeat, silence (hand-built frames and lib/proto's encoders).
 #include <math.h>
 #include <setjmp.h>
 #include <stdarg.h>
@@ -11,6 +12,7 @@
 #include <cmocka.h>
 #include <proto/canopen.h>
 
+#include "sim/cia401_dev.h"
 #include "sim/cia402_dev.h"
 
 static sim_cia402_t* make(void) {
@@ -266,6 +268,144 @@ static void test_cia402_reset_node_and_silence(void** state) {
   sim_cia402_destroy(d);
 }
 
+// ---- the bump-panel node ----
+
+// Collects the node's frames: TPDO1s decoded into *last, counted by kind.
+typedef struct bump_out {
+  int pdos, heartbeats, other;
+  cia401_bumpers_t last;
+  uint8_t last_hb_state;
+} bump_out_t;
+
+static bump_out_t bump_drain(sim_cia401_t* d) {
+  bump_out_t o;
+  memset(&o, 0, sizeof o);
+  canopen_frame_t f;
+  while (sim_cia401_drain(d, &f)) {
+    uint8_t node = 0;
+    const canopen_kind_t kind = canopen_classify(&f, &node);
+    assert_int_equal(node, CANOPEN_NODE_BUMPERS_DEFAULT);
+    if (kind == CANOPEN_KIND_TPDO1) {
+      assert_int_equal(f.id, 0x190);
+      assert_int_equal(cia401_decode_bumpers(&f, &o.last), PROTO_OK);
+      ++o.pdos;
+    } else if (kind == CANOPEN_KIND_HEARTBEAT) {
+      o.last_hb_state = f.data[0];
+      ++o.heartbeats;
+    } else {
+      ++o.other;
+    }
+  }
+  return o;
+}
+
+static void nmt(sim_cia401_t* d, uint8_t command, uint8_t node, double t) {
+  canopen_frame_t f;
+  assert_int_equal(canopen_encode_nmt(&f, command, node), PROTO_OK);
+  sim_cia401_feed(d, &f, t);
+}
+
+// Boot-up, silence in pre-operational; NMT start for another node does nothing, for this node
+// (or all) the inputs go out at once; then on every change and, unchanged, every 100 ms.
+static void test_cia401_start_change_and_event_timer(void** state) {
+  (void)state;
+  sim_cia401_config_t cfg;
+  sim_cia401_config_default(&cfg);
+  assert_int_equal(cfg.node, 16);
+  sim_cia401_t* d = sim_cia401_create(&cfg);
+  assert_non_null(d);
+  uint8_t panels[CIA401_BUMP_PANELS] = {0};
+  bump_out_t o = bump_drain(d);
+  assert_int_equal(o.heartbeats, 1);
+  assert_int_equal(o.last_hb_state, CANOPEN_NMT_STATE_BOOTUP);
+  sim_cia401_poll(d, panels, 0.05);
+  assert_int_equal(bump_drain(d).pdos, 0);  // pre-operational: no PDOs
+  nmt(d, CANOPEN_NMT_START, 1, 0.05);
+  sim_cia401_poll(d, panels, 0.05);
+  assert_int_equal(bump_drain(d).pdos, 0);
+  assert_false(sim_cia401_operational(d));
+  nmt(d, CANOPEN_NMT_START, 16, 0.06);
+  assert_true(sim_cia401_operational(d));
+  sim_cia401_poll(d, panels, 0.06);
+  o = bump_drain(d);
+  assert_int_equal(o.pdos, 1);
+  assert_int_equal(cia401_bumper_mask(&o.last), 0);
+  sim_cia401_poll(d, panels, 0.07);
+  assert_int_equal(bump_drain(d).pdos, 0);  // unchanged, timer not run out
+  panels[9] = 0x24;                         // bits above the 4 segments are not inputs
+  sim_cia401_poll(d, panels, 0.08);
+  o = bump_drain(d);
+  assert_int_equal(o.pdos, 1);
+  assert_int_equal(o.last.panels[9], 0x4);
+  sim_cia401_poll(d, panels, 0.17);
+  o = bump_drain(d);
+  assert_int_equal(o.pdos, 0);
+  assert_int_equal(o.heartbeats, 1);  // the heartbeat due at 0.1 s
+  assert_int_equal(o.last_hb_state, CANOPEN_NMT_STATE_OPERATIONAL);
+  sim_cia401_poll(d, panels, 0.18);  // 100 ms after the last PDO
+  o = bump_drain(d);
+  assert_int_equal(o.pdos, 1);
+  assert_int_equal(o.heartbeats, 0);
+  assert_int_equal(o.last.panels[9], 0x4);
+  // Periodic: 10 PDOs in a second of 10 ms polls, one heartbeat per 100 ms.
+  int pdos = 0, hbs = 0;
+  for (int i = 1; i <= 100; ++i) {
+    sim_cia401_poll(d, panels, 0.18 + 0.01 * i);
+    o = bump_drain(d);
+    pdos += o.pdos;
+    hbs += o.heartbeats;
+  }
+  assert_int_equal(pdos, 10);
+  assert_int_equal(hbs, 10);
+  const sim_cia401_counters_t* c = sim_cia401_get_counters(d);
+  assert_int_equal(c->pdos, 13);
+  assert_int_equal(c->pdos_on_change, 2);
+  sim_cia401_destroy(d);
+}
+
+// Silence: nothing (PDO, heartbeat) until its end, and frames are ignored; stop and reset: no
+// PDOs, a reset sends boot-up and needs a new start. Invalid configurations are refused.
+static void test_cia401_silence_stop_and_reset(void** state) {
+  (void)state;
+  sim_cia401_config_t cfg;
+  sim_cia401_config_default(&cfg);
+  sim_cia401_t* d = sim_cia401_create(&cfg);
+  uint8_t panels[CIA401_BUMP_PANELS] = {0};
+  nmt(d, CANOPEN_NMT_START, 0, 0.0);
+  sim_cia401_poll(d, panels, 0.0);
+  assert_int_equal(bump_drain(d).pdos, 1);
+  sim_cia401_set_silent_until(d, 0.5);
+  panels[0] = 0x1;
+  for (int i = 1; i < 50; ++i) {
+    sim_cia401_poll(d, panels, 0.01 * i);
+  }
+  nmt(d, CANOPEN_NMT_STOP, 16, 0.3);  // ignored while silent
+  bump_out_t o = bump_drain(d);
+  assert_int_equal(o.pdos + o.heartbeats + o.other, 0);
+  assert_true(sim_cia401_operational(d));
+  sim_cia401_poll(d, panels, 0.5);
+  o = bump_drain(d);
+  assert_int_equal(o.pdos, 1);
+  assert_int_equal(o.last.panels[0], 0x1);
+  nmt(d, CANOPEN_NMT_STOP, 16, 0.6);
+  panels[0] = 0x0;
+  sim_cia401_poll(d, panels, 0.8);
+  o = bump_drain(d);
+  assert_int_equal(o.pdos, 0);
+  assert_int_equal(o.last_hb_state, CANOPEN_NMT_STATE_STOPPED);
+  nmt(d, CANOPEN_NMT_RESET_NODE, 16, 0.85);
+  o = bump_drain(d);
+  assert_int_equal(o.heartbeats, 1);
+  assert_int_equal(o.last_hb_state, CANOPEN_NMT_STATE_BOOTUP);
+  assert_false(sim_cia401_operational(d));
+  sim_cia401_destroy(d);
+  cfg.node = 0;
+  assert_null(sim_cia401_create(&cfg));
+  sim_cia401_config_default(&cfg);
+  cfg.event_timer_s = -1.0;
+  assert_null(sim_cia401_create(&cfg));
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_cia402_boot_up_then_preoperational),
@@ -274,6 +414,8 @@ int main(void) {
       cmocka_unit_test(test_cia402_fault_sends_emcy_and_resets_on_edge),
       cmocka_unit_test(test_cia402_rpdo_timeout_stops_drive),
       cmocka_unit_test(test_cia402_reset_node_and_silence),
+      cmocka_unit_test(test_cia401_start_change_and_event_timer),
+      cmocka_unit_test(test_cia401_silence_stop_and_reset),
   };
   return cmocka_run_group_tests_name("sim.cia402", tests, NULL, NULL);
 }

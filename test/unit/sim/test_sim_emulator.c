@@ -185,6 +185,31 @@ static void test_emu_fault_drive_fault_on_canopen(void** state) {
   sim_emu_destroy(e);
 }
 
+// bumper_silent on CANopen: the bump-panel node sends nothing for that long (its PDO and its
+// heartbeat), the drives go on; afterwards its PDO comes back at once. rFLEX refuses it.
+static void test_emu_fault_bumper_silent_on_canopen(void** state) {
+  (void)state;
+  sim_emu_t* e = make("corridor10.world", SIM_BASE_CANOPEN, SIM_MODE_LOCKSTEP);
+  host_canopen_startup(&g_host);
+  host_read(&g_host);
+  assert_int_equal(ctl(e, "fault bumper_silent 500"), SIM_EMU_CTRL_OK);
+  for (int cycle = 0; cycle < 4; ++cycle) {
+    host_can_cycle(&g_host, CIA402_CW_ENABLE_OPERATION, 0.0, 0.0);
+    host_read(&g_host);
+    assert_int_equal(g_host.bump_pdos, 0);
+    assert_int_equal(g_host.bump_heartbeats, 0);
+    assert_int_equal(g_host.tpdo1, 2);
+  }
+  assert_int_equal(ctl(e, "fault clear"), SIM_EMU_CTRL_OK);
+  host_can_cycle(&g_host, CIA402_CW_ENABLE_OPERATION, 0.0, 0.0);
+  host_read(&g_host);
+  assert_int_equal(g_host.bump_pdos, 1);
+  sim_emu_destroy(e);
+  e = make("corridor10.world", SIM_BASE_RFLEX, SIM_MODE_LOCKSTEP);
+  assert_int_equal(ctl(e, "fault bumper_silent 500"), SIM_EMU_CTRL_ERROR);
+  sim_emu_destroy(e);
+}
+
 // The trace picture: an SVG with the world, one polyline per run coloured in run order on the
 // viridis scale of tools/b21r_trajectories.py, a legend naming the runs and the symbols, written
 // atomically.
@@ -279,6 +304,7 @@ int main(void) {
       cmocka_unit_test(test_emu_fault_corrupt_changes_bytes),
       cmocka_unit_test(test_emu_fault_bumper_reports_panel),
       cmocka_unit_test(test_emu_fault_drive_fault_on_canopen),
+      cmocka_unit_test(test_emu_fault_bumper_silent_on_canopen),
       cmocka_unit_test(test_emu_svg_shows_runs),
       cmocka_unit_test(test_emu_realtime_rates_and_watchdog),
       cmocka_unit_test(test_emu_create_rejects_bad_period),

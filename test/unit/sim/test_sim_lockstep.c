@@ -109,6 +109,8 @@ static void test_lockstep_canopen_sync_advances_one_period(void** state) {
   assert_int_equal(g_host.scans, 1);
   assert_int_equal(g_host.tpdo1, 3 * 2);  // one pair per SYNC, the last one is t_0
   assert_true(cia402_operation_enabled(g_host.last_tpdo1[0].statusword));
+  assert_int_equal(g_host.bump_pdos, 1);  // the bump-panel node answered its NMT start
+  assert_int_equal(cia401_bumper_mask(&g_host.last_bump), 0);
   for (int cycle = 1; cycle <= 20; ++cycle) {
     host_can_cycle(&g_host, CIA402_CW_ENABLE_OPERATION, 0.5, 0.2);
     host_read(&g_host);
@@ -116,6 +118,8 @@ static void test_lockstep_canopen_sync_advances_one_period(void** state) {
     assert_int_equal(g_host.tpdo1, 2);
     assert_int_equal(g_host.tpdo2, 2);
     assert_int_equal(g_host.heartbeats, 2);
+    assert_int_equal(g_host.bump_pdos, 1);  // event timer = period: one per period
+    assert_int_equal(g_host.bump_heartbeats, 1);
     assert_true(fabs(sim_emu_time(e) - 0.1 * cycle) < 1e-9);
   }
   // After 2 s: the translation axis reached 0.5 m/s (0.7 s ramp at 0.5 m/s^2 + 1.3 s cruise).
@@ -161,6 +165,65 @@ static void test_lockstep_collision_reaches_controller_as_bumper(void** state) {
   host_velocity(&g_host, -0.3, 0.0);
   host_read(&g_host);
   assert_int_equal(g_host.dio_reports, 0);
+  sim_emu_destroy(e);
+}
+
+// The same wall on the CANopen base: the bump-panel node's TPDO1 carries the same panel (6, the
+// skirt's front) and segment bits as the rFLEX DIO report, in the period of the contact, and
+// releases it after backing off. `fault bumper 3` presses panel 3 from the next period on.
+static void test_lockstep_canopen_collision_and_fault_reach_controller_as_bumper(void** state) {
+  (void)state;
+  uint16_t rflex_value = 0;
+  int rflex_cycle = -1;
+  {
+    sim_emu_t* e = make("corridor10.world", SIM_BASE_RFLEX, 7);
+    char reply[256];
+    (void)sim_emu_control(e, "reset 3 0 1.5707963267948966", reply, sizeof(reply));
+    host_rflex_startup(&g_host);
+    host_read(&g_host);
+    for (int cycle = 0; cycle < 60 && rflex_cycle < 0; ++cycle) {
+      host_velocity(&g_host, 0.4, 0.0);
+      host_read(&g_host);
+      if (g_host.dio_reports > 0) {
+        rflex_cycle = cycle;
+        rflex_value = g_host.last_dio.value;
+      }
+    }
+    sim_emu_destroy(e);
+  }
+  assert_true(rflex_cycle > 0);
+  sim_emu_t* e = make("corridor10.world", SIM_BASE_CANOPEN, 7);
+  char reply[256];
+  assert_int_equal(sim_emu_control(e, "reset 3 0 1.5707963267948966", reply, sizeof(reply)), SIM_EMU_CTRL_OK);
+  host_canopen_startup(&g_host);
+  host_read(&g_host);
+  int first = -1;
+  for (int cycle = 0; cycle < 60 && first < 0; ++cycle) {
+    host_can_cycle(&g_host, CIA402_CW_ENABLE_OPERATION, 0.4, 0.0);
+    host_read(&g_host);
+    assert_int_equal(g_host.bump_pdos, 1);
+    if (cia401_bumper_mask(&g_host.last_bump) != 0U) {
+      first = cycle;
+      assert_int_equal(cia401_bumper_mask(&g_host.last_bump), 1U << 6);
+      assert_int_equal(g_host.last_bump.panels[6], rflex_value);
+    }
+  }
+  assert_true(first > 0);
+  for (int cycle = 0; cycle < 3; ++cycle) {
+    host_can_cycle(&g_host, CIA402_CW_ENABLE_OPERATION, -0.3, 0.0);
+    host_read(&g_host);
+  }
+  assert_int_equal(cia401_bumper_mask(&g_host.last_bump), 0);
+  assert_int_equal(sim_emu_control(e, "fault bumper 3", reply, sizeof(reply)), SIM_EMU_CTRL_OK);
+  host_can_cycle(&g_host, CIA402_CW_ENABLE_OPERATION, 0.0, 0.0);
+  host_read(&g_host);
+  assert_int_equal(g_host.bump_pdos, 1);
+  assert_int_equal(cia401_bumper_mask(&g_host.last_bump), 1U << 3);
+  assert_int_equal(g_host.last_bump.panels[3], 0x0F);
+  assert_int_equal(sim_emu_control(e, "fault clear", reply, sizeof(reply)), SIM_EMU_CTRL_OK);
+  host_can_cycle(&g_host, CIA402_CW_ENABLE_OPERATION, 0.0, 0.0);
+  host_read(&g_host);
+  assert_int_equal(cia401_bumper_mask(&g_host.last_bump), 0);
   sim_emu_destroy(e);
 }
 
@@ -213,21 +276,34 @@ static void test_lockstep_same_seed_gives_identical_streams(void** state) {
   assert_true(h1 != h3);
 }
 
-// The same holds on the CANopen base (TPDOs, heartbeats, scans).
+// The same holds on the CANopen base (TPDOs, heartbeats, scans, the bump-panel node's PDOs
+// through contacts, an injected bumper and its silence).
 static void test_lockstep_canopen_streams_are_reproducible(void** state) {
   (void)state;
   uint64_t h[2];
+  int pressed[2] = {0, 0};
   for (int run = 0; run < 2; ++run) {
     sim_emu_t* e = make("corridor10.world", SIM_BASE_CANOPEN, 99);
+    char reply[256];
     host_canopen_startup(&g_host);
     for (int cycle = 0; cycle < 100; ++cycle) {
+      if (cycle == 30) {
+        (void)sim_emu_control(e, "fault bumper 5", reply, sizeof(reply));
+      } else if (cycle == 40) {
+        (void)sim_emu_control(e, "fault bumper_silent 300", reply, sizeof(reply));
+      } else if (cycle == 50) {
+        (void)sim_emu_control(e, "fault clear", reply, sizeof(reply));
+      }
       host_can_cycle(&g_host, CIA402_CW_ENABLE_OPERATION, 0.6, 0.3 * cos(0.1 * cycle));
       host_read(&g_host);
+      pressed[run] += g_host.bump_pdos > 0 && cia401_bumper_mask(&g_host.last_bump) != 0U;
     }
     h[run] = g_host.hash;
     sim_emu_destroy(e);
   }
   assert_true(h[0] == h[1]);
+  assert_int_equal(pressed[0], pressed[1]);
+  assert_true(pressed[0] >= 10);  // at least cycles 30..39 (the silence hides some of 40..49)
 }
 
 int main(void) {
@@ -235,6 +311,7 @@ int main(void) {
       cmocka_unit_test(test_lockstep_rflex_one_scan_and_odometry_per_period),
       cmocka_unit_test(test_lockstep_canopen_sync_advances_one_period),
       cmocka_unit_test(test_lockstep_collision_reaches_controller_as_bumper),
+      cmocka_unit_test(test_lockstep_canopen_collision_and_fault_reach_controller_as_bumper),
       cmocka_unit_test(test_lockstep_same_seed_gives_identical_streams),
       cmocka_unit_test(test_lockstep_canopen_streams_are_reproducible),
   };

@@ -144,6 +144,8 @@ typedef struct fw_config {
   int32_t can_node_translation;    ///< CiA 402 node id of the translation drive [1, 127]
   int32_t can_node_rotation;       ///< CiA 402 node id of the rotation drive [1, 127]
   double can_heartbeat_timeout_s;  ///< drive heartbeat silence that counts as a fault
+  int32_t can_node_bumpers;        ///< CiA 401 node id of the bump-panel inputs [1, 127], not a drive's
+  double can_bumper_timeout_s;     ///< no bump-panel TPDO1 for this long → base fault [s] (lockstep: ticks)
   double distance_counts_per_m;    ///< base conversion K_d (rFLEX: 103000)
   double angle_counts_per_rad;     ///< base conversion K_a (rFLEX: 35000)
   int32_t reposition;              ///< fw_reposition_t

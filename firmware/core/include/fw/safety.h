@@ -64,7 +64,7 @@ typedef struct fw_safety_inputs {
                                ///< a silent laser with these > 0 is reported as a corrupt stream
   bool device_lost;            ///< a device is gone (EOF, EIO, ENODEV, hang-up) or, in lockstep, silent
   const char* device_lost_detail; ///< e.g. "laser device lost: /dev/ttyUSB0 (EIO)"
-  bool base_fault;             ///< EMCY, statusword fault, heartbeat lost, watchdog
+  bool base_fault;             ///< EMCY, statusword fault, heartbeat lost, watchdog, bump-panel node silent
   const char* base_fault_detail;
   uint32_t bumper_mask;        ///< bit n = bump panel n pressed (B21r: 14 panels)
   bool non_finite;             ///< a NaN/Inf anywhere in the tick's numbers

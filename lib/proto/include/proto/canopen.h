@@ -17,7 +17,23 @@
 ///
 /// Velocities are drive counts/s, positions drive counts; the scale is a per-drive parameter
 /// of the caller (canopen_counts_from_si()). TPDO1 and TPDO2 are sent by the drives on SYNC.
-/// `lib/proto/b21r_canopen.dbc` describes exactly these frames for nodes 1 and 2.
+///
+/// The B21r's 14 bump panels reach the controller through a CiA 401 digital-input node (default
+/// node 16, away from the drives' ids so that more drives fit below it), started by the same
+/// NMT master:
+///
+/// | frame  | COB-ID      | DLC | layout                                                           |
+/// |--------|-------------|-----|------------------------------------------------------------------|
+/// | TPDO1  | 0x180 + id  | 7   | digital inputs 0x6000 sub 1..7 (8 lines each); line 4p + s =     |
+/// |        | (0x190)     |     | segment s (0..3) of bump panel p (0..13): byte p/2, low nibble   |
+/// |        |             |     | for even p, high nibble for odd p                                |
+/// | HB     | 0x700 + id  | 1   | [0] NMT state                                                    |
+///
+/// Panel numbers are the rFLEX ones (panel p = DIO address 0x40 + p): 0..5 the upper enclosure,
+/// 6..13 the base skirt; a panel's nibble is the value its DIO report carries, so one mapping
+/// serves both bases. The node sends TPDO1 when any input changes and, without a change, every
+/// event timer (0x1800 sub 5, 100 ms), so that its silence can be told from "no contact".
+/// `lib/proto/b21r_canopen.dbc` describes exactly these frames for nodes 1, 2 and 16.
 ///
 /// Frames are a plain struct (no Linux headers here); firmware/drivers converts them to and
 /// from `struct can_frame`. Only 11-bit identifiers are used; no RTR frames.
@@ -56,6 +72,15 @@ typedef struct canopen_frame {
 #define CANOPEN_NODE_MAX 127U
 #define CANOPEN_NODE_TRANS_DEFAULT 1U  ///< Translation drive.
 #define CANOPEN_NODE_ROT_DEFAULT 2U    ///< Rotation (steering) drive.
+#define CANOPEN_NODE_BUMPERS_DEFAULT 16U  ///< CiA 401 bump-panel input node (COB-ID TPDO1 0x190).
+/// @}
+
+/// @name CiA 401 bump-panel node
+/// @{
+#define CIA401_BUMP_PANELS 14U        ///< B21r: 6 upper enclosure panels + 8 base skirt panels.
+#define CIA401_BUMP_SEGMENTS 0x0FU    ///< Contact bits of one panel (4 segments).
+#define CIA401_BUMP_TPDO1_DLC 7U      ///< 14 panels × 4 lines = 56 inputs = 7 input bytes.
+#define CIA401_EVENT_TIMER_MS 100U    ///< TPDO1 period without a change (0x1800 sub 5) [ms].
 /// @}
 
 /// @name NMT commands (frame byte 0) and NMT states (heartbeat byte 0)
@@ -178,6 +203,23 @@ proto_status_t canopen_decode_rpdo1(const canopen_frame_t* f, canopen_rpdo1_t* o
 proto_status_t canopen_decode_tpdo1(const canopen_frame_t* f, canopen_tpdo1_t* out);
 proto_status_t canopen_decode_tpdo2(const canopen_frame_t* f, canopen_tpdo2_t* out);
 proto_status_t canopen_decode_heartbeat(const canopen_frame_t* f, canopen_heartbeat_t* out);
+
+/// Decoded bump-panel TPDO1 of the CiA 401 node.
+typedef struct cia401_bumpers {
+  uint8_t node;
+  uint8_t panels[CIA401_BUMP_PANELS];  ///< Per panel its segment bits 0..0x0F (0 = released).
+} cia401_bumpers_t;
+
+/// Bump-panel TPDO1 (input node -> host) from the panels' segment bits (each 0..0x0F).
+/// @return PROTO_OK, or PROTO_ERR_INVALID_ARG (NULL, node not 1..127, a value above 0x0F). O(1).
+proto_status_t cia401_encode_bumpers(canopen_frame_t* f, uint8_t node, const uint8_t panels[CIA401_BUMP_PANELS]);
+/// Decodes a bump-panel TPDO1: PROTO_OK, PROTO_ERR_FORMAT (not a TPDO1, DLC below 7) or
+/// PROTO_ERR_INVALID_ARG. The node id is the frame's; the caller checks it is the input node
+/// (a drive's TPDO1 has the same function code). O(1).
+proto_status_t cia401_decode_bumpers(const canopen_frame_t* f, cia401_bumpers_t* out);
+/// Bit p set when panel p has any segment pressed (the layout of rflex_host_t.bumper_mask).
+/// NULL gives 0. O(panels).
+uint32_t cia401_bumper_mask(const cia401_bumpers_t* b);
 
 /// Drive counts from an SI value (m/s, rad/s, m, rad) and a counts-per-unit factor:
 /// round(value × counts_per_unit), saturated to int32; non-finite input gives 0. O(1).

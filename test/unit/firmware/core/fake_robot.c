@@ -84,9 +84,30 @@ static void emit_base(fake_robot_t* f) {
   }
 }
 
+static void push_bumpers(fake_robot_t* f) {
+  if (!f->bump_operational || f->bump_absent || f->bump_silent_ticks > 0) {
+    return;
+  }
+  canopen_frame_t fr;
+  (void)cia401_encode_bumpers(&fr, CANOPEN_NODE_BUMPERS_DEFAULT, f->bump_panels);
+  push_frame(f, &fr);
+  f->bump_pdos++;
+}
+
+// The bump-panel node's periodic TPDO1 (its event timer is one period), before the drives' TPDOs.
+static void emit_bumpers(fake_robot_t* f) {
+  if (f->bump_silent_ticks > 0) {
+    f->bump_silent_ticks--;
+    return;
+  }
+  push_bumpers(f);
+}
+
 static void set_bumper(fake_robot_t* f, bool pressed) {
   if (f->canopen) {
-    return;  // the CANopen base of this product has no bumper channel
+    f->bump_panels[PANEL_FRONT] = pressed ? 0x3U : 0x0U;
+    push_bumpers(f);  // on change
+    return;
   }
   rflex_dio_report_t d = {.timestamp = (uint32_t)f->ticks,
                           .address = (uint8_t)(RFLEX_DIO_BUMPER_FIRST + PANEL_FRONT),
@@ -148,6 +169,9 @@ static void advance(fake_robot_t* f) {
     }
   }
   emit_scan(f);
+  if (f->canopen) {
+    emit_bumpers(f);
+  }
   emit_base(f);
 }
 
@@ -221,6 +245,11 @@ static void handle_frame(fake_robot_t* f, const canopen_frame_t* fr) {
   switch (canopen_classify(fr, &node)) {
     case CANOPEN_KIND_NMT: {
       canopen_nmt_t n;
+      if (canopen_decode_nmt(fr, &n) == PROTO_OK && n.command == CANOPEN_NMT_START &&
+          (n.node == 0U || n.node == CANOPEN_NODE_BUMPERS_DEFAULT) && !f->bump_operational) {
+        f->bump_operational = true;
+        push_bumpers(f);  // a started node sends its inputs at once
+      }
       if (canopen_decode_nmt(fr, &n) == PROTO_OK && n.command == CANOPEN_NMT_START && !f->streaming) {
         f->streaming = true;
         emit_scan(f);  // t_0 scan; TPDOs answer the SYNCs
@@ -237,8 +266,8 @@ static void handle_frame(fake_robot_t* f, const canopen_frame_t* fr) {
     }
     case CANOPEN_KIND_SYNC:
       f->commands++;
-      if (f->streaming) {
-        advance_timed(f);
+      if (f->streaming && !f->paced) {
+        advance_timed(f);  // paced: the periods follow the clock (catch_up)
       }
       break;
     default:

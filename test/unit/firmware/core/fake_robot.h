@@ -2,13 +2,14 @@
 /// fake_robot.h — A deterministic in-process B21r for loop-core tests and the firmware
 /// benchmark: the analytic corridor world and kinematic synchro drive of b21r_test/synthetic_world.h
 /// behind the loop's I/O vtable, speaking the real byte protocols (LMS200 0xB0 telegrams decoded
-/// with lib/proto, rFLEX packets stuffed as the base sends them, CiA 402 frames).
+/// with lib/proto, rFLEX packets stuffed as the base sends them, CiA 402 frames and the CiA 401
+/// bump-panel node's TPDO1).
 ///
 /// Lockstep like the emulator's contract: time advances one control period when the rotation
 /// SET_DIR (rFLEX) or SYNC (CANopen) arrives; then the scan and the odometry of the new period
 /// are queued. The clock is simulated: `wait` jumps it to the deadline when nothing is pending.
 /// Fault injection mirrors the emulator's control socket (laser drop, base silence, drive fault,
-/// bumper, corrupt bytes). No allocation after fake_robot_init. Not thread-safe.
+/// bumper, bump-panel node silence, corrupt bytes). No allocation after fake_robot_init. Not thread-safe.
 #ifndef B21R_TEST_FAKE_ROBOT_H
 #define B21R_TEST_FAKE_ROBOT_H
 
@@ -68,6 +69,12 @@ typedef struct fake_robot {
   uint32_t n_frames;
   cia402_drive_t drive[2];
   int32_t drive_target[2];
+  // CANopen bump-panel node (node 16): TPDO1 on NMT start, on change and once per period.
+  uint8_t bump_panels[CIA401_BUMP_PANELS];
+  bool bump_operational;
+  bool bump_absent;          ///< no such node on the bus (start-up must fail naming it)
+  int32_t bump_silent_ticks; ///< periods the node sends nothing
+  int64_t bump_pdos;
   // Faults.
   int32_t laser_drop_ticks;
   int32_t base_silent_ticks;

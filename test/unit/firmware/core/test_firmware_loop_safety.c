@@ -151,6 +151,118 @@ static void test_loop_bumper_stops_and_ends_run_as_collision(void** state) {
   harness_close(&g_h);
 }
 
+static void push_can(const canopen_frame_t* fr) {
+  assert_true(g_h.fake.n_frames < FAKE_FRAMES);
+  g_h.fake.frames[g_h.fake.n_frames++] = *fr;
+}
+
+// CANopen: the bump-panel node's TPDO1 sets the same bumper mask as the rFLEX DIO reports: a
+// contact ends the run as a collision and stops the robot in that tick, exactly like rFLEX.
+// Bump-like frames of another node and a short TPDO1 of the node itself change nothing.
+static void test_loop_canopen_bumper_stops_and_ends_run_as_collision(void** state) {
+  (void)state;
+  open_running(true, NULL);
+  canopen_frame_t fr;
+  uint8_t all[CIA401_BUMP_PANELS];
+  memset(all, CIA401_BUMP_SEGMENTS, sizeof all);
+  (void)cia401_encode_bumpers(&fr, CANOPEN_NODE_BUMPERS_DEFAULT + 1, all);  // node 17: not the bumpers
+  push_can(&fr);
+  (void)cia401_encode_bumpers(&fr, CANOPEN_NODE_BUMPERS_DEFAULT, all);
+  fr.dlc = 6;  // shorter than the mapping
+  push_can(&fr);
+  harness_run(&g_h, 3);
+  fw_loop_stats_t st;
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.stop_reason, FW_STOP_NONE);
+  assert_int_equal(st.safety_stops, 0);
+  const int64_t pdos = g_h.fake.bump_pdos;
+  assert_true(pdos >= 40);  // one per period since the NMT start
+  g_h.fake.bumper_ticks = 3;
+  expect_stop_within(FW_STOP_BUMPER, 5);
+  assert_non_null(strstr(g_h.last_status_detail, "bump panel 6 pressed (mask 0x0040)"));
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.runs_aborted, 0);
+  assert_int_equal(st.runs_finished, 1);
+  assert_false(st.last_run_goal);
+  expect_resume(60 + REPLAY_TICKS);
+  harness_close(&g_h);
+}
+
+// The bump-panel node's silence for can_bumper_timeout_s (0.35 s: 4 ticks in lockstep) is a base
+// fault naming the node, not a bumper stop: the run is aborted, not ended as a collision. It
+// clears once the node sends again.
+static void bump_node_silence(bool lockstep) {
+  open_running(true, lockstep ? NULL : real_time);
+  g_h.fake.bump_silent_ticks = 8;
+  const int ticks = expect_stop_within(FW_STOP_BASE_FAULT, 10);
+  assert_true(ticks >= 4 && ticks <= 5);
+  assert_non_null(strstr(g_h.last_status_detail, "bump-panel node 16 (CiA 401): no TPDO1 0x190"));
+  assert_non_null(strstr(g_h.last_status_detail, lockstep ? "for 4 ticks (limit 4)" : "(limit 350 ms)"));
+  fw_loop_stats_t st;
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.runs_aborted, 1);
+  assert_int_equal(st.stops_by_reason[FW_STOP_BUMPER], 0);
+  expect_resume(60 + REPLAY_TICKS);
+  harness_close(&g_h);
+}
+
+static void test_loop_canopen_bumper_node_silence_is_base_fault_lockstep(void** state) {
+  (void)state;
+  bump_node_silence(true);
+}
+
+static void test_loop_canopen_bumper_node_silence_is_base_fault_real_time(void** state) {
+  (void)state;
+  bump_node_silence(false);
+}
+
+// A node that restarts (boot-up heartbeat, pre-operational: no PDOs) is started again by the
+// controller, and its PDOs resume before its silence becomes a fault.
+static void test_loop_canopen_bumper_node_restart_is_started_again(void** state) {
+  (void)state;
+  open_running(true, NULL);
+  g_h.fake.bump_operational = false;
+  canopen_frame_t fr;
+  (void)canopen_encode_heartbeat(&fr, CANOPEN_NODE_BUMPERS_DEFAULT, CANOPEN_NMT_STATE_BOOTUP);
+  push_can(&fr);
+  harness_run(&g_h, 1);
+  assert_true(g_h.fake.bump_operational);
+  harness_run(&g_h, 10);
+  fw_loop_stats_t st;
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.safety_stops, 0);
+  harness_close(&g_h);
+}
+
+// A CANopen base whose bump-panel node never answers does not start: the error names the node,
+// its COB-ID and the key. A drive id shared with the node is refused by the configuration.
+static void test_loop_canopen_bumper_node_missing_refuses_start(void** state) {
+  (void)state;
+  fw_config_t c;
+  harness_config(&c);
+  c.base_protocol = FW_BASE_CANOPEN;
+  fake_robot_t* fake = &g_h.fake;
+  fake_robot_init(fake, true, 1.0 / c.tick_rate_hz, 9);
+  fake->bump_absent = true;
+  const fw_io_t io = fake_robot_io(fake);
+  fw_pubq_t* q = fw_pubq_create(256);
+  assert_non_null(q);
+  const fw_loop_outputs_t out = {.queue = q, .notify = NULL, .notify_user = NULL, .checkpoints = NULL};
+  char err[FW_LOOP_ERR_MAX];
+  fw_loop_t* loop = fw_loop_create(&c, &io, &out, err, sizeof err);
+  assert_non_null(loop);
+  assert_int_not_equal(fw_loop_start(loop, err, sizeof err), 0);
+  assert_non_null(strstr(err, "bump-panel node 16 (CiA 401 digital inputs, TPDO1 COB-ID 0x190)"));
+  assert_non_null(strstr(err, "nothing at all from that id"));
+  assert_non_null(strstr(err, "can_node_bumpers"));
+  assert_true(fake->drive[0].state == CIA402_OPERATION_ENABLED);  // the drives themselves came up
+  fw_loop_destroy(loop);
+  fw_pubq_destroy(q);
+  c.can_node_bumpers = c.can_node_rotation;
+  assert_int_not_equal(fw_config_validate(&c, err, sizeof err), 0);
+  assert_non_null(strstr(err, "can_node_bumpers = 2 is also can_node_rotation"));
+}
+
 // A CiA 402 drive fault (EMCY + statusword) stops the robot; after the fault condition clears,
 // the loop's fault-reset edge recovers the drive and the loop resumes.
 static void test_loop_drive_fault_stops_and_recovers(void** state) {
@@ -461,6 +573,11 @@ int main(void) {
       cmocka_unit_test(test_loop_lockstep_silence_ends_loop),
       cmocka_unit_test(test_loop_base_silence_stops_within_one_tick),
       cmocka_unit_test(test_loop_bumper_stops_and_ends_run_as_collision),
+      cmocka_unit_test(test_loop_canopen_bumper_stops_and_ends_run_as_collision),
+      cmocka_unit_test(test_loop_canopen_bumper_node_silence_is_base_fault_lockstep),
+      cmocka_unit_test(test_loop_canopen_bumper_node_silence_is_base_fault_real_time),
+      cmocka_unit_test(test_loop_canopen_bumper_node_restart_is_started_again),
+      cmocka_unit_test(test_loop_canopen_bumper_node_missing_refuses_start),
       cmocka_unit_test(test_loop_drive_fault_stops_and_recovers),
       cmocka_unit_test(test_loop_signal_stops_and_ends),
       cmocka_unit_test(test_loop_teleop_deadman_and_validation),
