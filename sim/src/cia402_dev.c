@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 // Two emulated CiA 402 drives on one CANopen bus: NMT, PDOs, heartbeat, EMCY, watchdog.
 #include "sim/cia402_dev.h"
+#include "sim/plant.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -207,15 +208,12 @@ void sim_cia402_emit_tpdos(sim_cia402_t* d, const sim_cia402_sample_t* s, double
     }
     const double k = i == 0 ? d->cfg.trans_counts_per_m : d->cfg.rot_counts_per_rad;
     const double vel = i == 0 ? s->v_mps : s->omega_radps;
-    const double pos = i == 0 ? s->pos_trans_m : s->pos_rot_rad;
     const int32_t vel_counts = canopen_counts_from_si(vel, k);
     const bool reached =
         drive_running(dr) && llabs((long long)vel_counts - (long long)dr->target_counts) <= 1LL;
     // Positions wrap at 32 bits like a real encoder count (canopen_counts_from_si saturates).
-    const double c = fmod(nearbyint(pos * k), 4294967296.0);
-    const uint32_t u = (uint32_t)(int64_t)(c < 0.0 ? c + 4294967296.0 : c);
-    int32_t pos_counts;
-    memcpy(&pos_counts, &u, sizeof(pos_counts));
+    const int32_t pos_counts = i == 0 ? sim_plant_axis_counts(s->pos_trans_at_reset_m, s->pos_trans_m, k)
+                                      : sim_plant_axis_counts(s->pos_rot_at_reset_rad, s->pos_rot_rad, k);
     canopen_frame_t f;
     if (canopen_encode_tpdo1(&f, dr->node, cia402_drive_statusword(&dr->sm, reached), vel_counts) ==
         PROTO_OK) {

@@ -154,6 +154,8 @@ static void rflex_sample(const sim_emu_t* e, sim_rflex_sample_t* out) {
   memset(out, 0, sizeof(*out));
   out->odo_trans_m = s.odo_trans_m;
   out->odo_rot_rad = s.odo_rot_rad;
+  out->odo_trans_at_reset_m = s.odo_trans_at_reset_m;
+  out->odo_rot_at_reset_rad = s.odo_rot_at_reset_rad;
   out->v_mps = s.v_mps;
   out->omega_radps = s.omega_radps;
   bump_panels(e, &s, out->panels);
@@ -174,6 +176,8 @@ static void cia402_sample(const sim_emu_t* e, sim_cia402_sample_t* out) {
   sim_plant_get_state(e->plant, &s);
   out->pos_trans_m = s.odo_trans_m;
   out->pos_rot_rad = s.odo_rot_rad;
+  out->pos_trans_at_reset_m = s.odo_trans_at_reset_m;
+  out->pos_rot_at_reset_rad = s.odo_rot_at_reset_rad;
   out->v_mps = s.v_mps;
   out->omega_radps = s.omega_radps;
 }

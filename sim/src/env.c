@@ -42,6 +42,7 @@ struct sim_env {
   sim_emu_t* emu;
   rflex_b21r_params_t rflex;
   rflex_host_t host;
+  rflex_odometry_t run_odom;   // the episode's odometry from (0, 0, 0), as the controller's run_odometry
   lms_decoder_t lms;
   lms_scan_t lms_scan;
   features_scan_t scan;
@@ -128,6 +129,11 @@ static bool receive(sim_env_t* env) {
   if (got_odometry) {
     (void)rflex_odom_update(&env->host.odometry);
   }
+  env->run_odom.have_trans = env->host.odometry.have_trans;
+  env->run_odom.have_rot = env->host.odometry.have_rot;
+  env->run_odom.trans_latest = env->host.odometry.trans_latest;
+  env->run_odom.rot_latest = env->host.odometry.rot_latest;
+  (void)rflex_odom_update(&env->run_odom);
   env->host.report_new[0] = false;
   env->host.report_new[1] = false;
   return got_scan && got_odometry;
@@ -147,7 +153,7 @@ static bool command_period(sim_env_t* env, double v_mps, double w_radps) {
 }
 
 static features_pose_t odom_pose(const sim_env_t* env) {
-  const features_pose_t p = {env->host.odometry.x_m, env->host.odometry.y_m, env->host.odometry.theta_rad};
+  const features_pose_t p = {env->run_odom.x_m, env->run_odom.y_m, env->run_odom.theta_rad};
   return p;
 }
 
@@ -311,6 +317,8 @@ sim_env_status_t sim_env_reset(sim_env_t* env, sim_env_start_t start, uint32_t e
     if (!command_period(env, 0.0, 0.0)) {
       return SIM_ENV_ERR_DEVICE;
     }
+    env->run_odom = env->host.odometry;  // the episode's odometry starts here, at (0, 0, 0)
+    rflex_odom_set_pose(&env->run_odom, 0.0, 0.0, 0.0);
     tasks_episode_begin(&env->ep, p, odom_pose(env));
     ok = tasks_episode_observe(&env->ep, &env->scan, odom_pose(env), env->state);
   } else {

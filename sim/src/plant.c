@@ -28,7 +28,8 @@ struct sim_plant {
   double v_mps, omega_radps;
   double theta_rad;
   double skirt_heading_rad;
-  double odo_trans_m, odo_rot_rad;
+  double odo_trans_m, odo_rot_rad;  // since the last reset
+  double odo_trans_at_reset_m, odo_rot_at_reset_rad;
   uint64_t substeps;
   uint64_t contacts_total;
   int in_contact;
@@ -148,6 +149,9 @@ void sim_plant_reset(sim_plant_t* p, double x_m, double y_m, double theta_rad) {
   dBodySetAngularVel(p->body, 0.0, 0.0, 0.0);
   p->theta_rad = sim_angle_wrap(theta_rad);
   p->skirt_heading_rad = p->theta_rad;
+  p->odo_trans_at_reset_m += p->odo_trans_m;
+  p->odo_rot_at_reset_rad += p->odo_rot_rad;
+  p->odo_trans_m = p->odo_rot_rad = 0.0;
   p->v_cmd_mps = p->omega_cmd_radps = 0.0;
   p->v_mps = p->omega_radps = 0.0;
   p->in_contact = 0;
@@ -262,6 +266,15 @@ void sim_plant_step(sim_plant_t* p, uint32_t n) {
   }
 }
 
+int32_t sim_plant_axis_counts(double at_reset, double since, double counts_per_unit) {
+  const double c = nearbyint(at_reset * counts_per_unit) + nearbyint(since * counts_per_unit);
+  const double m = fmod(c, 4294967296.0);
+  const uint32_t u = (uint32_t)(int64_t)(m < 0.0 ? m + 4294967296.0 : m);
+  int32_t s;
+  memcpy(&s, &u, sizeof(s));
+  return s;
+}
+
 void sim_plant_get_state(const sim_plant_t* p, sim_plant_state_t* out) {
   const dReal* pos = dBodyGetPosition(p->body);
   memset(out, 0, sizeof(*out));  // padding too: states are compared byte for byte
@@ -274,6 +287,8 @@ void sim_plant_get_state(const sim_plant_t* p, sim_plant_state_t* out) {
   out->omega_radps = p->omega_radps;
   out->odo_trans_m = p->odo_trans_m;
   out->odo_rot_rad = p->odo_rot_rad;
+  out->odo_trans_at_reset_m = p->odo_trans_at_reset_m;
+  out->odo_rot_at_reset_rad = p->odo_rot_at_reset_rad;
   out->in_contact = p->in_contact;
   out->collided = p->collided;
   out->bumper_panel = p->bumper_panel;

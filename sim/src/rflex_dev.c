@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "byteq.h"
+#include "sim/plant.h"
 
 struct sim_rflex {
   sim_rflex_config_t cfg;
@@ -253,7 +254,8 @@ void sim_rflex_emit_odometry(sim_rflex_t* d, const sim_rflex_sample_t* s, double
       r.rv = 0;
       r.timestamp = timestamp(t_s);
       r.axis = axis;
-      r.position = wrap_counts(trans ? s->odo_trans_m : s->odo_rot_rad, k);
+      r.position = trans ? sim_plant_axis_counts(s->odo_trans_at_reset_m, s->odo_trans_m, k)
+                         : sim_plant_axis_counts(s->odo_rot_at_reset_rad, s->odo_rot_rad, k);
       r.velocity = wrap_counts(trans ? s->v_mps : s->omega_radps, k);
       r.acceleration = (uint32_t)lround((trans ? d->acc_trans_mps2 : d->acc_rot_radps2) * k);
       r.torque = d->torque[axis];

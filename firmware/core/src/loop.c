@@ -315,6 +315,7 @@ static sensed_t sense(fw_loop_t* L, int64_t now_us) {
   in.running = fw_run_running(L);
   in.run_starting = L->mode == B21R_STATUS_T_MODE_REPOSITIONING && L->pose_requested && L->settle_ticks == 0 &&
                     L->scan_new && (!L->awaiting_confirm || L->confirm_pending) && fw_learning_idle(L);
+  fw_run_odometry_update(L, in.run_starting);
   if (in.run_starting) {
     tasks_episode_begin(&L->ep, L->start_pose, fw_run_odom_pose(L));  // the run's frame
   }

@@ -157,6 +157,10 @@ struct fw_loop {
 
   // Base (both protocols integrate odometry with the rFLEX rule, in base.odometry).
   rflex_host_t base;           // rFLEX: decoder, odometry, report flags, bumpers, brake, battery
+  // The odometry of the run: the same encoder counts integrated from (0, 0, 0) at the run's start
+  // (base.odometry keeps the start-up frame for B21R_POSE). The run's poses then come from its
+  // own encoder steps only, not from the rounding of a pose that grew over earlier runs.
+  rflex_odometry_t run_odometry;
   int32_t base_silent_ticks;
   int64_t last_base_us;
   int64_t base_packets;
@@ -320,7 +324,11 @@ bool fw_run_is_corridor(const fw_loop_t* L);
 uint32_t fw_run_step_limit(const fw_loop_t* L);
 bool fw_run_joystick_drives(const fw_loop_t* L);
 bool fw_run_running(const fw_loop_t* L);
+/// The pose of the run's odometry (run_odometry: (0, 0, 0) where the run started).
 features_pose_t fw_run_odom_pose(const fw_loop_t* L);
+/// Once per tick after base.odometry's update: run_starting restarts run_odometry at the
+/// current counts; otherwise it integrates the same counts as base.odometry. O(1).
+void fw_run_odometry_update(fw_loop_t* L, bool run_starting);
 /// The state of the newest scan (features at the odometry pose); false when unusable.
 bool fw_run_observe(fw_loop_t* L);
 void fw_run_begin_repositioning(fw_loop_t* L);

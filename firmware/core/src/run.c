@@ -19,8 +19,21 @@ bool fw_run_joystick_drives(const fw_loop_t* L) {
 }
 
 features_pose_t fw_run_odom_pose(const fw_loop_t* L) {
-  const features_pose_t p = {L->base.odometry.x_m, L->base.odometry.y_m, L->base.odometry.theta_rad};
+  const features_pose_t p = {L->run_odometry.x_m, L->run_odometry.y_m, L->run_odometry.theta_rad};
   return p;
+}
+
+void fw_run_odometry_update(fw_loop_t* L, bool run_starting) {
+  if (run_starting) {
+    L->run_odometry = L->base.odometry;  // its baseline: the counts of this tick
+    rflex_odom_set_pose(&L->run_odometry, 0.0, 0.0, 0.0);
+    return;
+  }
+  L->run_odometry.have_trans = L->base.odometry.have_trans;
+  L->run_odometry.have_rot = L->base.odometry.have_rot;
+  L->run_odometry.trans_latest = L->base.odometry.trans_latest;
+  L->run_odometry.rot_latest = L->base.odometry.rot_latest;
+  (void)rflex_odom_update(&L->run_odometry);
 }
 
 bool fw_run_observe(fw_loop_t* L) {

@@ -60,10 +60,12 @@ typedef struct sim_cia402_config {
 
 /// What the drives report (filled by the emulator from the plant).
 typedef struct sim_cia402_sample {
-  double pos_trans_m;     ///< translation drive position [m]
-  double pos_rot_rad;     ///< rotation drive position [rad]
+  double pos_trans_m;     ///< translation drive position since the last reset [m]
+  double pos_rot_rad;     ///< rotation drive position since the last reset [rad]
   double v_mps;           ///< translation velocity actual
   double omega_radps;     ///< rotation velocity actual
+  double pos_trans_at_reset_m;  ///< translation drive position at the last reset [m]
+  double pos_rot_at_reset_rad;  ///< rotation drive position at the last reset [rad]
 } sim_cia402_sample_t;
 
 /// Axis commands in force.

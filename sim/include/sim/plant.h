@@ -70,8 +70,13 @@ typedef struct sim_plant_state {
   double x_m, y_m, theta_rad; ///< ground-truth pose
   double v_mps;               ///< translation axis velocity (wheel speed) [m/s]
   double omega_radps;         ///< rotation axis velocity [rad/s]
-  double odo_trans_m;         ///< translation axis position: signed distance rolled [m]
-  double odo_rot_rad;         ///< rotation axis position: accumulated heading change [rad]
+  // Axis positions (wheel odometry) in two parts: the position at the last reset plus the motion
+  // since (summed in counts by sim_plant_axis_counts). Each run's encoder steps then depend only
+  // on the run's motion, not on the rounding of a position that grew over earlier runs.
+  double odo_trans_m;         ///< translation axis: signed distance rolled since the last reset [m]
+  double odo_rot_rad;         ///< rotation axis: heading change accumulated since the last reset [rad]
+  double odo_trans_at_reset_m;  ///< translation axis position at the last reset [m]
+  double odo_rot_at_reset_rad;  ///< rotation axis position at the last reset [rad]
   int in_contact;             ///< 1 while the base touches an obstacle
   int collided;               ///< 1 once the base touched anything since the last reset
   int bumper_panel;           ///< base panel 0..7 at the contact bearing, -1 without contact
@@ -113,6 +118,10 @@ void sim_plant_set_limits(sim_plant_t* p, const sim_kin_limits_t* limits);
 void sim_plant_step(sim_plant_t* p, uint32_t n);
 
 /// Copies the current state into *out. O(1).
+/// An axis encoder's count: round(at_reset · k) + round(since · k), wrapping at 32 bits like a
+/// real encoder (two's complement). k: counts per metre or per radian. O(1).
+int32_t sim_plant_axis_counts(double at_reset, double since, double counts_per_unit);
+
 void sim_plant_get_state(const sim_plant_t* p, sim_plant_state_t* out);
 
 /// Casts one ray in the floor plane at the laser height from (x, y) in direction dir_rad and

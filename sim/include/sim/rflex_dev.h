@@ -62,8 +62,10 @@ typedef struct sim_rflex_config {
 
 /// What the base reports from the body (filled by the emulator from the plant).
 typedef struct sim_rflex_sample {
-  double odo_trans_m;      ///< translation axis position [m]
-  double odo_rot_rad;      ///< rotation axis position (accumulated heading change) [rad]
+  double odo_trans_m;      ///< translation axis position since the last reset [m]
+  double odo_rot_rad;      ///< rotation axis position (accumulated heading change) since the last reset [rad]
+  double odo_trans_at_reset_m;  ///< translation axis position at the last reset [m]
+  double odo_rot_at_reset_rad;  ///< rotation axis position at the last reset [rad]
   double v_mps;            ///< translation axis velocity
   double omega_radps;      ///< rotation axis velocity
   uint8_t panels[SIM_RFLEX_PANELS];  ///< pressed-segment bits per bump panel (0 = released)

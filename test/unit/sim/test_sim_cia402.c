@@ -125,7 +125,7 @@ static void test_cia402_enable_sequence_and_tpdos(void** state) {
   assert_true(fabs(c.omega_radps + 0.3) < 1e-12);
   const canopen_frame_t sync = frame(0x080, 0, NULL);
   assert_int_equal(sim_cia402_feed(d, &sync, 0.0), SIM_CIA402_EV_SYNC);
-  const sim_cia402_sample_t s = {1.0, -0.25, 0.5, -0.3};
+  const sim_cia402_sample_t s = {.pos_trans_m = 1.0, .pos_rot_rad = -0.25, .v_mps = 0.5, .omega_radps = -0.3};
   sim_cia402_emit_tpdos(d, &s, 0.0);
   assert_int_equal(drain_all(d, out, 16), 4);
   assert_int_equal(out[0].id, 0x181);
