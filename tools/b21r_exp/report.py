@@ -241,10 +241,11 @@ def write(out, fig_dir, path, configs_dir):
             suc = stats.mean_ci([s["final"]["successes"] for s in S["seeds"]])
             doc.add("| %s | %s | %s | %s | %s | %s |" % (v, fmt_ci(*fin[:2]), fmt_ci(*suc[:2]), fmt_ci(*S["training_hours"][:2], 2),
                                                        fmt_ci(*S["switch_after"][:2]), "baseline" if v not in same else ("yes" if same[v] else "no")))
-        doc.add("", "Phase-one data are identical across variants only when nothing else differs: the example "
-                "policy's gains and start poses are the same for a seed, but the emulator's sensor-noise stream is "
-                "shared by all runs, so evaluation runs of different length in between shift the noise that "
-                "later training runs see.", "",
+        doc.add("", "Phase-one data are identical across variants unless the variant changes phase one itself (the "
+                "automatic phase switch ends it at another run): for a seed the example policy's gains and start "
+                "poses are the same, each run's sensor noise starts from its run id, each run integrates its own "
+                "odometry, and the emulator places the robot only once the learner is done, so the learner-driven "
+                "evaluation runs in between leave nothing behind (`experiments.learner_variants` checks it).", "",
                 "| comparison (paired by seed) | final steps: difference, test | training hours: difference, test |", "|---|---|---|")
         for c in comps:
             f, h = c["final"], c["hours"]
