@@ -1,13 +1,16 @@
 # SPDX-License-Identifier: MIT
 """Sweeps: every (experiment, variant, seed) of the chosen configs is one Ray task that runs
 b21r-experiment and hands its result file's content back; the driver writes it atomically to
-<out>/results/... . Finished tasks (a valid result file) are skipped, so an interrupted sweep is
-resumed by running the same command again, and result folders of several machines can be merged
-by copying them together. A failed task is reported by name with its error; the others go on
+<out>/results/... . Finished tasks (a valid result file made by this very build of b21r-experiment:
+each result records the SHA-256 of the program that made it) are skipped, so an interrupted sweep
+is resumed by running the same command again, a result of an older build is run again instead of
+being mixed with new ones, and result folders of several machines can be merged by copying them
+together. A failed task is reported by name with its error; the others go on
 and keep their results.
 
 Ray: `ray.init()` on this machine by default (all cores; --num-cpus to limit), or the cluster at
 --address (every node needs this checkout at the same path and a build of b21r-experiment)."""
+import hashlib
 import json
 import os
 import subprocess
@@ -43,12 +46,22 @@ def plan(exe, config, seeds=None):
     return d
 
 
+def build_id(exe):
+    """The identity of a b21r-experiment build: the first 16 hex digits of its SHA-256."""
+    h = hashlib.sha256()
+    with open(exe, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()[:16]
+
+
 def tasks_of(p):
     return [Task(p["name"], p["config"], v, s) for v in p["variants"] for s in p["seeds"]]
 
 
-def run_one(exe, task):
-    """Runs one task in a scratch folder; returns (ok, result text or error text, wall seconds)."""
+def run_one(exe, task, build):
+    """Runs one task in a scratch folder; returns (ok, result text or error text, wall seconds).
+    The result records `build` (build_id of exe)."""
     t0 = time.time()
     with tempfile.TemporaryDirectory(prefix="b21r-exp-") as d:
         out = os.path.join(d, "result.json")
@@ -59,7 +72,9 @@ def run_one(exe, task):
         if p.returncode != 0:
             return False, "exit status %d: %s" % (p.returncode, p.stderr.strip()[-2000:]), time.time() - t0
         with open(out) as f:
-            return True, f.read(), time.time() - t0
+            d = json.load(f)
+        d["build"] = build
+        return True, json.dumps(d, indent=1), time.time() - t0
 
 
 def write_atomic(path, text):
@@ -80,9 +95,13 @@ def fmt_s(s):
 def run(exe, plans, out, address=None, num_cpus=None, rerun=False, log=print):
     """Runs every task of the plans not finished yet. Returns the list of (task, error) that failed."""
     all_tasks = [t for p in plans for t in tasks_of(p)]
-    todo = [t for t in all_tasks
-            if rerun or results.read_result(results.result_path(out, t.experiment, t.variant, t.seed)) is None]
-    log("sweep: %d tasks, %d finished already, %d to run" % (len(all_tasks), len(all_tasks) - len(todo), len(todo)))
+    build = build_id(exe)
+    done_before = {t: results.read_result(results.result_path(out, t.experiment, t.variant, t.seed)) for t in all_tasks}
+    stale = [t for t, r in done_before.items() if r is not None and r.get("build") != build]
+    todo = [t for t in all_tasks if rerun or done_before[t] is None or t in stale]
+    log("sweep: %d tasks, %d finished already by this build (%s), %d to run%s" % (
+        len(all_tasks), len(all_tasks) - len(todo), build, len(todo),
+        " (%d of them made by another build: run again)" % len(stale) if stale and not rerun else ""))
     if not todo:
         return []
     import ray  # installed on first use by b21r_experiments.py
@@ -96,7 +115,7 @@ def run(exe, plans, out, address=None, num_cpus=None, rerun=False, log=print):
         remote = ray.remote(num_cpus=1)(run_one)
         log("sweep: Ray with %d CPUs (%s)" % (int(ray.cluster_resources().get("CPU", 0)),
                                               "cluster at %s" % address if address else "this machine"))
-        pending = {remote.remote(exe, t): t for t in todo}
+        pending = {remote.remote(exe, t, build): t for t in todo}
         t0 = time.time()
         done = 0
         task_seconds = 0.0

@@ -4,11 +4,13 @@
 - writes one result file per (experiment, variant, seed);
 - names a failed task with its error, exits non-zero, and keeps every other task's result;
 - resumes: a second run skips the finished tasks and runs only the failed one again;
+- never mixes builds: a result made by another build of b21r-experiment is run again;
 - merges, draws and reports from the result files.
 Skipped (exit 77) when the sweep's packages (tools/requirements-experiments.txt) are not installed
 in build/venv: tools/b21r_experiments.py installs them on first use; CI's set-up does not.
 usage: test_sweep.py B21R_EXPERIMENT"""
 import glob
+import json
 import os
 import subprocess
 import sys
@@ -53,8 +55,19 @@ def main():
         if "[5/5]" not in text or "elapsed" not in text or "left" not in text:
             fail("no progress lines (done/total, elapsed, estimate)")
         p = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
-        if "5 tasks, 4 finished already, 1 to run" not in p.stdout:
+        if "5 tasks, 4 finished already by this build" not in p.stdout or ", 1 to run" not in p.stdout:
             fail("a second run did not resume (skip the finished tasks): %s" % p.stdout[-1500:])
+        with open(done[0]) as f:
+            r = json.load(f)
+        build = r.get("build")
+        r["build"] = "0" * 16  # as if an older program had made it
+        with open(done[0], "w") as f:
+            json.dump(r, f)
+        p = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+        with open(done[0]) as f:
+            again = json.load(f).get("build")
+        if "(1 of them made by another build: run again)" not in p.stdout or not build or again != build:
+            fail("a result of another build was not run again (build %s -> %s): %s" % (build, again, p.stdout[-1500:]))
         p = subprocess.run([VENV_PY, TOOL, "merge", "figures", "report", "--configs", confs, "--out", out,
                             "--report", os.path.join(d, "docs", "RESULTS.md")], capture_output=True, text=True,
                            timeout=600)
