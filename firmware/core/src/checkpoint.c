@@ -5,11 +5,11 @@
 
 #include "fw/prefault.h"
 #include "le_bytes.h"
+#include "errfmt.h"
 
 #include <errno.h>
 #include <fcntl.h>
 #include <pthread.h>
-#include <stdarg.h>
 #include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -18,17 +18,6 @@
 #include <unistd.h>
 
 static const char k_magic[8] = {'B', '2', '1', 'R', 'C', 'K', 'P', 'T'};
-
-static void fmt(char* err, size_t cap, const char* format, ...) __attribute__((format(printf, 3, 4)));
-static void fmt(char* err, size_t cap, const char* format, ...) {
-  if (err == NULL || cap == 0) {
-    return;
-  }
-  va_list ap;
-  va_start(ap, format);
-  (void)vsnprintf(err, cap, format, ap);
-  va_end(ap);
-}
 
 uint32_t fw_crc32(uint32_t crc, const void* data, size_t n) {
   // Nibble table: small and fast enough for checkpoints written off the tick.
@@ -94,7 +83,7 @@ int fw_checkpoint_write(const char* path, const void* meta, size_t meta_size, co
                         size_t payload_size, char* err, size_t err_cap) {
   char tmp[4096];
   if ((size_t)snprintf(tmp, sizeof tmp, "%s.tmp", path) >= sizeof tmp) {
-    fmt(err, err_cap, "checkpoint %s: path too long", path);
+    fw_errfmt(err, err_cap, "checkpoint %s: path too long", path);
     return -1;
   }
   uint8_t header[FW_CHECKPOINT_HEADER_SIZE];
@@ -110,7 +99,7 @@ int fw_checkpoint_write(const char* path, const void* meta, size_t meta_size, co
 
   const int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) {
-    fmt(err, err_cap, "checkpoint: cannot create %s: %s", tmp, strerror(errno));
+    fw_errfmt(err, err_cap, "checkpoint: cannot create %s: %s", tmp, strerror(errno));
     return -1;
   }
   const char* step = NULL;
@@ -125,20 +114,20 @@ int fw_checkpoint_write(const char* path, const void* meta, size_t meta_size, co
     step = "close";
   }
   if (step != NULL) {
-    fmt(err, err_cap, "checkpoint: %s of %s failed: %s (previous checkpoint %s kept)", step, tmp,
+    fw_errfmt(err, err_cap, "checkpoint: %s of %s failed: %s (previous checkpoint %s kept)", step, tmp,
         strerror(step[0] == 'c' ? errno : saved), path);
     unlink(tmp);
     return -1;
   }
   if (rename(tmp, path) != 0) {
-    fmt(err, err_cap, "checkpoint: rename %s -> %s failed: %s (previous checkpoint kept)", tmp, path,
+    fw_errfmt(err, err_cap, "checkpoint: rename %s -> %s failed: %s (previous checkpoint kept)", tmp, path,
         strerror(errno));
     unlink(tmp);
     return -1;
   }
   if (fsync_dir_of(path) != 0) {
     // The new file is in place; only its durability across power loss is in doubt.
-    fmt(err, err_cap, "checkpoint: fsync of the directory of %s failed: %s", path, strerror(errno));
+    fw_errfmt(err, err_cap, "checkpoint: fsync of the directory of %s failed: %s", path, strerror(errno));
     return -1;
   }
   return 0;
@@ -153,28 +142,28 @@ static int open_checkpoint(const char* path, FILE** out, char* err, size_t err_c
     if (errno == ENOENT) {
       return 0;
     }
-    fmt(err, err_cap, "checkpoint %s: cannot open: %s", path, strerror(errno));
+    fw_errfmt(err, err_cap, "checkpoint %s: cannot open: %s", path, strerror(errno));
     return -1;
   }
   struct stat st;
   const char* problem = NULL;
   if (fstat(fd, &st) != 0) {
-    fmt(err, err_cap, "checkpoint %s: cannot stat: %s", path, strerror(errno));
+    fw_errfmt(err, err_cap, "checkpoint %s: cannot stat: %s", path, strerror(errno));
     problem = "stat";
   } else if (S_ISDIR(st.st_mode)) {
-    fmt(err, err_cap,
+    fw_errfmt(err, err_cap,
         "checkpoint %s is a directory; checkpoint_file must name a file (e.g. '%s/hedger.ckpt'), which is created "
         "if it does not exist",
         path, path);
     problem = "directory";
   } else if (!S_ISREG(st.st_mode)) {
-    fmt(err, err_cap, "checkpoint %s is not a regular file; checkpoint_file must name a file", path);
+    fw_errfmt(err, err_cap, "checkpoint %s is not a regular file; checkpoint_file must name a file", path);
     problem = "type";
   }
   FILE* f = problem == NULL ? fdopen(fd, "rb") : NULL;
   if (f == NULL) {
     if (problem == NULL) {
-      fmt(err, err_cap, "checkpoint %s: cannot open: %s", path, strerror(errno));
+      fw_errfmt(err, err_cap, "checkpoint %s: cannot open: %s", path, strerror(errno));
     }
     close(fd);
     return -1;
@@ -186,9 +175,9 @@ static int open_checkpoint(const char* path, FILE** out, char* err, size_t err_c
 // "truncated" for a short file, the system's reason for a failed read.
 static void short_read(FILE* f, const char* path, const char* what, char* err, size_t err_cap) {
   if (ferror(f)) {
-    fmt(err, err_cap, "checkpoint %s: cannot read: %s", path, strerror(errno));
+    fw_errfmt(err, err_cap, "checkpoint %s: cannot read: %s", path, strerror(errno));
   } else {
-    fmt(err, err_cap, "checkpoint %s is truncated (%s); " FW_CHECKPOINT_FRESH_HINT, path, what, path, path);
+    fw_errfmt(err, err_cap, "checkpoint %s is truncated (%s); " FW_CHECKPOINT_FRESH_HINT, path, what, path, path);
   }
 }
 
@@ -200,17 +189,17 @@ static int read_header(FILE* f, const char* path, uint64_t* meta_size, uint64_t*
     return -1;
   }
   if (memcmp(h, k_magic, sizeof k_magic) != 0) {
-    fmt(err, err_cap, "%s is not a B21r checkpoint (bad magic); " FW_CHECKPOINT_FRESH_HINT, path, path, path);
+    fw_errfmt(err, err_cap, "%s is not a B21r checkpoint (bad magic); " FW_CHECKPOINT_FRESH_HINT, path, path, path);
     return -1;
   }
   if (fw_get_u32(h + 44) != fw_crc32(0, h, 44)) {
-    fmt(err, err_cap, "checkpoint %s is corrupt (header checksum mismatch); " FW_CHECKPOINT_FRESH_HINT,
+    fw_errfmt(err, err_cap, "checkpoint %s is corrupt (header checksum mismatch); " FW_CHECKPOINT_FRESH_HINT,
         path, path, path);
     return -1;
   }
   const uint32_t version = fw_get_u32(h + 8);
   if (version != FW_CHECKPOINT_VERSION || fw_get_u32(h + 12) != FW_CHECKPOINT_HEADER_SIZE) {
-    fmt(err, err_cap,
+    fw_errfmt(err, err_cap,
         "checkpoint %s has format version %u; this controller reads version %u only; " FW_CHECKPOINT_FRESH_HINT, path,
         (unsigned)version, FW_CHECKPOINT_VERSION, path, path);
     return -1;
@@ -238,7 +227,7 @@ int fw_checkpoint_peek(const char* path, size_t* meta_size, size_t* payload_size
     return -1;
   }
   if (m > SIZE_MAX / 2 || p > SIZE_MAX / 2) {
-    fmt(err, err_cap, "checkpoint %s is corrupt (implausible section sizes); " FW_CHECKPOINT_FRESH_HINT,
+    fw_errfmt(err, err_cap, "checkpoint %s is corrupt (implausible section sizes); " FW_CHECKPOINT_FRESH_HINT,
         path, path, path);
     return -1;
   }
@@ -260,7 +249,7 @@ int fw_checkpoint_read(const char* path, void* meta, size_t meta_cap, size_t* me
   uint32_t pc = 0;
   int rc = read_header(f, path, &m, &p, &mc, &pc, err, err_cap);
   if (rc == 0 && (m > meta_cap || p > payload_cap)) {
-    fmt(err, err_cap,
+    fw_errfmt(err, err_cap,
         "checkpoint %s holds %llu + %llu bytes, more than this configuration can load (%zu + %zu; "
         "was it written with a larger hedger_capacity?); " FW_CHECKPOINT_FRESH_HINT,
         path, (unsigned long long)m, (unsigned long long)p, meta_cap, payload_cap, path, path);
@@ -271,12 +260,12 @@ int fw_checkpoint_read(const char* path, void* meta, size_t meta_cap, size_t* me
     rc = -1;
   }
   if (rc == 0 && fgetc(f) != EOF) {
-    fmt(err, err_cap, "checkpoint %s has trailing bytes after its sections; " FW_CHECKPOINT_FRESH_HINT,
+    fw_errfmt(err, err_cap, "checkpoint %s has trailing bytes after its sections; " FW_CHECKPOINT_FRESH_HINT,
         path, path, path);
     rc = -1;
   }
   if (rc == 0 && (fw_crc32(0, meta, (size_t)m) != mc || fw_crc32(0, payload, (size_t)p) != pc)) {
-    fmt(err, err_cap, "checkpoint %s is corrupt (section checksum mismatch); " FW_CHECKPOINT_FRESH_HINT,
+    fw_errfmt(err, err_cap, "checkpoint %s is corrupt (section checksum mismatch); " FW_CHECKPOINT_FRESH_HINT,
         path, path, path);
     rc = -1;
   }
@@ -357,11 +346,11 @@ fw_ckpt_writer_t* fw_ckpt_writer_create(const char* path, size_t meta_cap, size_
                                         size_t err_cap) {
   fw_ckpt_writer_t* w = (fw_ckpt_writer_t*)calloc(1, sizeof *w);
   if (w == NULL) {
-    fmt(err, err_cap, "checkpoint writer: out of memory");
+    fw_errfmt(err, err_cap, "checkpoint writer: out of memory");
     return NULL;
   }
   if (strlen(path) + 8 >= sizeof w->path) {
-    fmt(err, err_cap, "checkpoint writer: path too long: %s", path);
+    fw_errfmt(err, err_cap, "checkpoint writer: path too long: %s", path);
     free(w);
     return NULL;
   }
@@ -371,7 +360,7 @@ fw_ckpt_writer_t* fw_ckpt_writer_create(const char* path, size_t meta_cap, size_
   for (int i = 0; i < 2; ++i) {
     w->buf[i] = (uint8_t*)malloc(meta_cap + payload_cap + 1U);
     if (w->buf[i] == NULL) {
-      fmt(err, err_cap, "checkpoint writer: cannot allocate %zu bytes", meta_cap + payload_cap);
+      fw_errfmt(err, err_cap, "checkpoint writer: cannot allocate %zu bytes", meta_cap + payload_cap);
       free(w->buf[0]);
       free(w);
       return NULL;
@@ -380,7 +369,7 @@ fw_ckpt_writer_t* fw_ckpt_writer_create(const char* path, size_t meta_cap, size_
   pthread_mutex_init(&w->mu, NULL);
   pthread_cond_init(&w->cv, NULL);
   if (pthread_create(&w->thread, NULL, writer_main, w) != 0) {
-    fmt(err, err_cap, "checkpoint writer: cannot start thread");
+    fw_errfmt(err, err_cap, "checkpoint writer: cannot start thread");
     pthread_mutex_destroy(&w->mu);
     pthread_cond_destroy(&w->cv);
     free(w->buf[0]);

@@ -2,12 +2,12 @@
 // Table-driven configuration: one row per key carries its type, range, default and help text, so
 // the parser, the error messages, --help and the reference file cannot drift apart.
 #include "fw/config.h"
+#include "errfmt.h"
 
 #include <hedger/hedger.h>
 
 #include <errno.h>
 #include <math.h>
-#include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -303,17 +303,6 @@ _Static_assert(FW_CONFIG_MAX_SOURCES <= 255U, "source indices are uint8_t");
 
 // The program that reads these settings, for the hints in error messages.
 #define REFERENCE_HINT "b21r-controller --print-reference-config lists every key with its documentation"
-
-static void fmt(char* err, size_t cap, const char* format, ...) __attribute__((format(printf, 3, 4)));
-static void fmt(char* err, size_t cap, const char* format, ...) {
-  if (err == NULL || cap == 0) {
-    return;
-  }
-  va_list ap;
-  va_start(ap, format);
-  (void)vsnprintf(err, cap, format, ap);
-  va_end(ap);
-}
 
 static const key_desc_t* find_key(const char* name) {
   for (size_t i = 0; i < N_KEYS; ++i) {
@@ -749,9 +738,9 @@ int fw_config_set(fw_config_t* cfg, const char* key, const char* value, const ch
   if (k == NULL) {
     const key_desc_t* near = nearest_key(key);
     if (near != NULL) {
-      fmt(err, err_cap, "%s: unknown key '%s'; did you mean '%s'? (%s)", source, key, near->name, REFERENCE_HINT);
+      fw_errfmt(err, err_cap, "%s: unknown key '%s'; did you mean '%s'? (%s)", source, key, near->name, REFERENCE_HINT);
     } else {
-      fmt(err, err_cap, "%s: unknown key '%s' (%s)", source, key, REFERENCE_HINT);
+      fw_errfmt(err, err_cap, "%s: unknown key '%s' (%s)", source, key, REFERENCE_HINT);
     }
     return -1;
   }
@@ -761,7 +750,7 @@ int fw_config_set(fw_config_t* cfg, const char* key, const char* value, const ch
   }
   char allowed[256];
   describe_allowed(k, allowed, sizeof allowed);
-  fmt(err, err_cap, "%s: bad value '%s' for key '%s': expected %s (default %s)", source, value, key, allowed,
+  fw_errfmt(err, err_cap, "%s: bad value '%s' for key '%s': expected %s (default %s)", source, value, key, allowed,
       k->def[0] != '\0' ? k->def : "\"\"");
   return -1;
 }
@@ -808,20 +797,20 @@ static int split_line(char* line, char** key, char** value, char* why, size_t wh
   }
   char* eq = strchr(s, '=');
   if (eq == NULL) {
-    fmt(why, why_cap, "expected 'key = value', got '%s'", s);
+    fw_errfmt(why, why_cap, "expected 'key = value', got '%s'", s);
     return -1;
   }
   *eq = '\0';
   char* k = trim(s);
   char* v = trim(eq + 1);
   if (*k == '\0') {
-    fmt(why, why_cap, "missing key before '='");
+    fw_errfmt(why, why_cap, "missing key before '='");
     return -1;
   }
   const size_t n = strlen(v);
   if (n > 0 && v[0] == '"') {
     if (n < 2 || v[n - 1] != '"') {
-      fmt(why, why_cap, "unterminated quoted value for key '%s'", k);
+      fw_errfmt(why, why_cap, "unterminated quoted value for key '%s'", k);
       return -1;
     }
     v[n - 1] = '\0';
@@ -836,7 +825,7 @@ int fw_config_set_arg(fw_config_t* cfg, const char* key_eq_value, char* err, siz
   char buf[1024];
   const size_t n = strlen(key_eq_value);
   if (n >= sizeof buf) {
-    fmt(err, err_cap, "--set: argument longer than %zu characters", sizeof buf - 1);
+    fw_errfmt(err, err_cap, "--set: argument longer than %zu characters", sizeof buf - 1);
     return -1;
   }
   memcpy(buf, key_eq_value, n + 1);
@@ -845,7 +834,7 @@ int fw_config_set_arg(fw_config_t* cfg, const char* key_eq_value, char* err, siz
   char why[FW_CONFIG_ERR_MAX];
   const int r = split_line(buf, &key, &value, why, sizeof why);
   if (r <= 0) {
-    fmt(err, err_cap, "--set '%s': %s", key_eq_value, r == 0 ? "expected key=value" : why);
+    fw_errfmt(err, err_cap, "--set '%s': %s", key_eq_value, r == 0 ? "expected key=value" : why);
     return -1;
   }
   return fw_config_set(cfg, key, value, "--set", err, err_cap);
@@ -863,7 +852,7 @@ int fw_config_load_file_with(fw_config_t* cfg, const char* path, fw_config_extra
                              char* err, size_t err_cap) {
   FILE* f = fopen(path, "r");
   if (f == NULL) {
-    fmt(err, err_cap, "%s: cannot open config file: %s", path, strerror(errno));
+    fw_errfmt(err, err_cap, "%s: cannot open config file: %s", path, strerror(errno));
     return -1;
   }
   char line[1024];
@@ -879,7 +868,7 @@ int fw_config_load_file_with(fw_config_t* cfg, const char* path, fw_config_extra
     snprintf(source, sizeof source, "%s:%d", path, line_no);
     const size_t n = strlen(line);
     if (n == sizeof line - 1 && line[n - 1] != '\n' && !feof(f)) {
-      fmt(err, err_cap, "%s: line longer than %zu characters", source, sizeof line - 2);
+      fw_errfmt(err, err_cap, "%s: line longer than %zu characters", source, sizeof line - 2);
       rc = -1;
       break;
     }
@@ -888,7 +877,7 @@ int fw_config_load_file_with(fw_config_t* cfg, const char* path, fw_config_extra
     char why[FW_CONFIG_ERR_MAX];
     const int r = split_line(line, &key, &value, why, sizeof why);
     if (r < 0) {
-      fmt(err, err_cap, "%s: %s", source, why);
+      fw_errfmt(err, err_cap, "%s: %s", source, why);
       rc = -1;
       break;
     }
@@ -902,7 +891,7 @@ int fw_config_load_file_with(fw_config_t* cfg, const char* path, fw_config_extra
         twice = twice || strcmp(extra_seen[i], key) == 0;
       }
       if (twice) {
-        fmt(err, err_cap, "%s: key '%s' appears twice in this file", source, key);
+        fw_errfmt(err, err_cap, "%s: key '%s' appears twice in this file", source, key);
         rc = -1;
         break;
       }
@@ -919,7 +908,7 @@ int fw_config_load_file_with(fw_config_t* cfg, const char* path, fw_config_extra
       }
     }
     if (k != NULL && seen[k - k_keys]) {
-      fmt(err, err_cap, "%s: key '%s' appears twice in this file (first on line %u)", source, key,
+      fw_errfmt(err, err_cap, "%s: key '%s' appears twice in this file (first on line %u)", source, key,
           (unsigned)cfg->origins.key_line[k - k_keys]);
       rc = -1;
       break;
@@ -931,7 +920,7 @@ int fw_config_load_file_with(fw_config_t* cfg, const char* path, fw_config_extra
     seen[k - k_keys] = true;
   }
   if (rc == 0 && ferror(f)) {
-    fmt(err, err_cap, "%s: read error", path);
+    fw_errfmt(err, err_cap, "%s: read error", path);
     rc = -1;
   }
   fclose(f);
@@ -957,7 +946,7 @@ int fw_config_validate_program(const fw_config_t* cfg, char* err, size_t err_cap
     return 0;
   }
   if (cfg->lockstep) {
-    fmt(err, err_cap,
+    fw_errfmt(err, err_cap,
         "%s: phase_one_driver = joystick needs real time, but lockstep = true (set at %s): the emulator's time "
         "only advances with the loop, so no operator can drive it; set lockstep = false (and run b21r-sim "
         "without --lockstep) or phase_one_driver = example",
@@ -965,7 +954,7 @@ int fw_config_validate_program(const fw_config_t* cfg, char* err, size_t err_cap
     return -1;
   }
   if (strcmp(cfg->lcm_url, "none") == 0) {
-    fmt(err, err_cap,
+    fw_errfmt(err, err_cap,
         "%s: phase_one_driver = joystick needs B21R_TELEOP over LCM, but lcm_url = none (set at %s); set lcm_url "
         "(\"\" = LCM's default, e.g. udpm://239.255.76.67:7667?ttl=0 for this host only) or "
         "phase_one_driver = example",
@@ -977,27 +966,27 @@ int fw_config_validate_program(const fw_config_t* cfg, char* err, size_t err_cap
 
 int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
   if (cfg->laser_resolution_cdeg == 25 && cfg->laser_fov_deg != 100) {
-    fmt(err, err_cap,
+    fw_errfmt(err, err_cap,
         "%s: laser_resolution_deg = 0.25 needs laser_fov_deg = 100 (set at %s; the LMS200 has no 180/0.25 variant)",
         origin_of(cfg, "laser_resolution_deg").text, origin_of(cfg, "laser_fov_deg").text);
     return -1;
   }
   if (cfg->hedger_k_min > cfg->hedger_k_max) {
-    fmt(err, err_cap, "%s: hedger_k_min (%d) must not exceed hedger_k_max (%d, set at %s)",
+    fw_errfmt(err, err_cap, "%s: hedger_k_min (%d) must not exceed hedger_k_max (%d, set at %s)",
         origin_of(cfg, "hedger_k_min").text, (int)cfg->hedger_k_min, (int)cfg->hedger_k_max,
         origin_of(cfg, "hedger_k_max").text);
     return -1;
   }
   const int32_t dims = (cfg->task == FW_TASK_CORRIDOR ? 3 : 4) + 1;
   if (cfg->hedger_input_scale_n != 0 && cfg->hedger_input_scale_n != dims) {
-    fmt(err, err_cap,
+    fw_errfmt(err, err_cap,
         "%s: hedger_input_scale has %d values; task %s (set at %s) needs %d (state dimensions, then the action)",
         origin_of(cfg, "hedger_input_scale").text, (int)cfg->hedger_input_scale_n,
         cfg->task == FW_TASK_CORRIDOR ? "corridor" : "obstacles", origin_of(cfg, "task").text, (int)dims);
     return -1;
   }
   if (cfg->learner == FW_LEARNER_TABULAR && cfg->checkpoint_file[0] != '\0') {
-    fmt(err, err_cap,
+    fw_errfmt(err, err_cap,
         "%s: learner = tabular cannot checkpoint (checkpoint_file set at %s); set checkpoint_file = \"\" or use "
         "learner = hedger",
         origin_of(cfg, "learner").text, origin_of(cfg, "checkpoint_file").text);
@@ -1014,7 +1003,7 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
     for (int i = 0; i < 3; ++i) {
       for (int j = i + 1; j < 3; ++j) {
         if (nodes[i].node == nodes[j].node) {
-          fmt(err, err_cap, "%s: %s = %d is also %s (set at %s); every CANopen node needs its own id",
+          fw_errfmt(err, err_cap, "%s: %s = %d is also %s (set at %s); every CANopen node needs its own id",
               origin_of(cfg, nodes[j].key).text, nodes[j].key, (int)nodes[j].node, nodes[i].key,
               origin_of(cfg, nodes[i].key).text);
           return -1;
@@ -1023,29 +1012,29 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
     }
   }
   if (cfg->reposition == FW_REPOSITION_EMULATOR && cfg->emulator_control[0] == '\0') {
-    fmt(err, err_cap, "%s: reposition = emulator needs emulator_control = <path of the emulator's control socket>",
+    fw_errfmt(err, err_cap, "%s: reposition = emulator needs emulator_control = <path of the emulator's control socket>",
         origin_of(cfg, "reposition").text);
     return -1;
   }
   if (cfg->device_reopen_backoff_max_s < cfg->device_reopen_backoff_s) {
-    fmt(err, err_cap, "%s: device_reopen_backoff_max_s (%g) must not be below device_reopen_backoff_s (%g, set at %s)",
+    fw_errfmt(err, err_cap, "%s: device_reopen_backoff_max_s (%g) must not be below device_reopen_backoff_s (%g, set at %s)",
         origin_of(cfg, "device_reopen_backoff_max_s").text, cfg->device_reopen_backoff_max_s,
         cfg->device_reopen_backoff_s, origin_of(cfg, "device_reopen_backoff_s").text);
     return -1;
   }
   const int32_t q = cfg->queue_capacity;
   if ((q & (q - 1)) != 0) {
-    fmt(err, err_cap, "%s: queue_capacity = %d: must be a power of two in [16, 65536]",
+    fw_errfmt(err, err_cap, "%s: queue_capacity = %d: must be a power of two in [16, 65536]",
         origin_of(cfg, "queue_capacity").text, (int)q);
     return -1;
   }
   if (cfg->mode == FW_MODE_LEARN && cfg->phase_one_runs + cfg->phase_two_runs == 0) {
-    fmt(err, err_cap, "%s: phase_one_runs + phase_two_runs is 0 (phase_two_runs set at %s): nothing to learn",
+    fw_errfmt(err, err_cap, "%s: phase_one_runs + phase_two_runs is 0 (phase_two_runs set at %s): nothing to learn",
         origin_of(cfg, "phase_one_runs").text, origin_of(cfg, "phase_two_runs").text);
     return -1;
   }
   if (cfg->phase_switch == FW_SWITCH_AUTO && cfg->auto_switch_min_runs > cfg->phase_one_runs) {
-    fmt(err, err_cap, "%s: auto_switch_min_runs (%d) exceeds phase_one_runs (%d, set at %s), the latest switch",
+    fw_errfmt(err, err_cap, "%s: auto_switch_min_runs (%d) exceeds phase_one_runs (%d, set at %s), the latest switch",
         origin_of(cfg, "auto_switch_min_runs").text, (int)cfg->auto_switch_min_runs, (int)cfg->phase_one_runs,
         origin_of(cfg, "phase_one_runs").text);
     return -1;

@@ -1,22 +1,11 @@
 // SPDX-License-Identifier: MIT
 // --endpoints: b21r-sim's ready line applied to the config (fw/endpoints.h).
 #include "fw/endpoints.h"
+#include "errfmt.h"
 
-#include <stdarg.h>
 #include <stdbool.h>
 #include <stdio.h>
 #include <string.h>
-
-static void fmt(char* err, size_t cap, const char* format, ...) __attribute__((format(printf, 3, 4)));
-static void fmt(char* err, size_t cap, const char* format, ...) {
-  if (err == NULL || cap == 0) {
-    return;
-  }
-  va_list ap;
-  va_start(ap, format);
-  (void)vsnprintf(err, cap, format, ap);
-  va_end(ap);
-}
 
 static bool blank(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\n'; }
 
@@ -51,11 +40,11 @@ int fw_endpoints_apply_line(fw_config_t* cfg, const char* line, char* err, size_
         continue;
       }
       if (value_len == 0U) {
-        fmt(err, err_cap, "--endpoints: %s= has no value", k_map[i].field);
+        fw_errfmt(err, err_cap, "--endpoints: %s= has no value", k_map[i].field);
         return -1;
       }
       if (value_len >= FW_CONFIG_STR_MAX) {
-        fmt(err, err_cap, "--endpoints: the value of %s= is longer than %u characters", k_map[i].field,
+        fw_errfmt(err, err_cap, "--endpoints: the value of %s= is longer than %u characters", k_map[i].field,
             FW_CONFIG_STR_MAX - 1U);
         return -1;
       }
@@ -76,7 +65,7 @@ int fw_endpoints_apply_line(fw_config_t* cfg, const char* line, char* err, size_
     }
   }
   if (found == 0) {
-    fmt(err, err_cap, "--endpoints: no laser=/base=/can=/control= fields in '%.200s'", line);
+    fw_errfmt(err, err_cap, "--endpoints: no laser=/base=/can=/control= fields in '%.200s'", line);
     return -1;
   }
   c.base_write_gap_us = 0;
@@ -92,17 +81,17 @@ int fw_endpoints_apply(fw_config_t* cfg, const char* arg, char* err, size_t err_
     const bool whole = ok && (strchr(line, '\n') != NULL || feof(f));
     fclose(f);
     if (!ok) {
-      fmt(err, err_cap, "--endpoints %s: empty file", arg);
+      fw_errfmt(err, err_cap, "--endpoints %s: empty file", arg);
       return -1;
     }
     if (!whole || strlen(line) > FW_ENDPOINTS_LINE_MAX) {
-      fmt(err, err_cap, "--endpoints %s: first line longer than %u characters", arg, FW_ENDPOINTS_LINE_MAX);
+      fw_errfmt(err, err_cap, "--endpoints %s: first line longer than %u characters", arg, FW_ENDPOINTS_LINE_MAX);
       return -1;
     }
   } else if (strchr(arg, '=') != NULL && strlen(arg) <= FW_ENDPOINTS_LINE_MAX) {
     memcpy(line, arg, strlen(arg) + 1U);
   } else {
-    fmt(err, err_cap, "--endpoints %s: neither a readable file nor a 'laser=... base=...' line", arg);
+    fw_errfmt(err, err_cap, "--endpoints %s: neither a readable file nor a 'laser=... base=...' line", arg);
     return -1;
   }
   return fw_endpoints_apply_line(cfg, line, err, err_cap);

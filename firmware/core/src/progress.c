@@ -4,28 +4,17 @@
 
 #include "fw/config.h"
 #include "le_bytes.h"
+#include "errfmt.h"
 
 #include <hedger/hedger.h>
 
 #include <math.h>
-#include <stdarg.h>
 #include <stdbool.h>
 #include <stdio.h>
 #include <string.h>
 
 #define MAGIC "FWMETA01"
 #define USED_BYTES 56U
-
-static void fmt(char* why, size_t cap, const char* format, ...) __attribute__((format(printf, 3, 4)));
-static void fmt(char* why, size_t cap, const char* format, ...) {
-  if (why == NULL || cap == 0) {
-    return;
-  }
-  va_list ap;
-  va_start(ap, format);
-  (void)vsnprintf(why, cap, format, ap);
-  va_end(ap);
-}
 
 size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]) {
   const fw_schedule_progress_t* g = &p->schedule;
@@ -51,7 +40,7 @@ static bool is_zero(double x) { return x >= 0.0 && x <= 0.0; }
 static bool counter(const uint8_t* b, size_t off, const char* name, int32_t* v, char* why, size_t cap) {
   const uint32_t u = fw_get_u32(b + off);
   if (u > (uint32_t)INT32_MAX) {
-    fmt(why, cap, "%s %u, expected at most %d", name, (unsigned)u, INT32_MAX);
+    fw_errfmt(why, cap, "%s %u, expected at most %d", name, (unsigned)u, INT32_MAX);
     return false;
   }
   *v = (int32_t)u;
@@ -60,13 +49,13 @@ static bool counter(const uint8_t* b, size_t off, const char* name, int32_t* v, 
 
 int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why, size_t cap) {
   if (n != FW_PROGRESS_BYTES || memcmp(b, MAGIC, 8) != 0) {
-    fmt(why, cap, "unknown format (%zu bytes%s, expected %u starting with " MAGIC ")", n,
+    fw_errfmt(why, cap, "unknown format (%zu bytes%s, expected %u starting with " MAGIC ")", n,
         n >= 8 && memcmp(b, MAGIC, 8) != 0 ? ", other magic" : "", FW_PROGRESS_BYTES);
     return -1;
   }
   for (size_t i = USED_BYTES; i < FW_PROGRESS_BYTES; ++i) {
     if (b[i] != 0) {
-      fmt(why, cap, "reserved byte %zu is 0x%02x, expected 0", i, b[i]);
+      fw_errfmt(why, cap, "reserved byte %zu is 0x%02x, expected 0", i, b[i]);
       return -1;
     }
   }
@@ -75,19 +64,19 @@ int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why
   fw_schedule_progress_t* g = &p.schedule;
   const uint32_t task = fw_get_u32(b + 8);
   if (task != (uint32_t)FW_TASK_CORRIDOR && task != (uint32_t)FW_TASK_OBSTACLES) {
-    fmt(why, cap, "task %u, expected %d (corridor) or %d (obstacles)", (unsigned)task, FW_TASK_CORRIDOR,
+    fw_errfmt(why, cap, "task %u, expected %d (corridor) or %d (obstacles)", (unsigned)task, FW_TASK_CORRIDOR,
         FW_TASK_OBSTACLES);
     return -1;
   }
   p.task = (int32_t)task;
   p.state_dim = fw_get_u32(b + 12);
   if (p.state_dim < 1U || p.state_dim > HEDGER_MAX_STATE_DIM) {
-    fmt(why, cap, "state dimension %u, expected 1..%u", (unsigned)p.state_dim, HEDGER_MAX_STATE_DIM);
+    fw_errfmt(why, cap, "state dimension %u, expected 1..%u", (unsigned)p.state_dim, HEDGER_MAX_STATE_DIM);
     return -1;
   }
   const uint32_t phase = fw_get_u32(b + 16);
   if (phase != 1U && phase != 2U) {
-    fmt(why, cap, "phase %u, expected 1 or 2", (unsigned)phase);
+    fw_errfmt(why, cap, "phase %u, expected 1 or 2", (unsigned)phase);
     return -1;
   }
   g->phase = (int32_t)phase;
@@ -103,16 +92,16 @@ int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why
   }
   g->example_steps_sum = fw_get_f64(b + 40);
   if ((int64_t)g->phase_one_runs + g->phase_two_runs != g->training_runs) {
-    fmt(why, cap, "training runs %d != phase-one runs %d + phase-two runs %d", (int)g->training_runs,
+    fw_errfmt(why, cap, "training runs %d != phase-one runs %d + phase-two runs %d", (int)g->training_runs,
         (int)g->phase_one_runs, (int)g->phase_two_runs);
     return -1;
   }
   if (g->phase == 1 && g->phase_two_runs != 0) {
-    fmt(why, cap, "phase 1 with %d phase-two runs", (int)g->phase_two_runs);
+    fw_errfmt(why, cap, "phase 1 with %d phase-two runs", (int)g->phase_two_runs);
     return -1;
   }
   if (g->example_runs > g->phase_one_runs) {
-    fmt(why, cap, "successful phase-one runs %d > phase-one runs %d", (int)g->example_runs, (int)g->phase_one_runs);
+    fw_errfmt(why, cap, "successful phase-one runs %d > phase-one runs %d", (int)g->example_runs, (int)g->phase_one_runs);
     return -1;
   }
   const double sum = g->example_steps_sum;
@@ -123,12 +112,12 @@ int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why
                                                    sum >= (double)g->best_example_steps * runs &&
                                                    sum <= runs * (double)INT32_MAX;
   if (!stats_ok) {
-    fmt(why, cap, "phase-one statistics inconsistent (%d successful runs, %.17g steps in total, shortest %d)",
+    fw_errfmt(why, cap, "phase-one statistics inconsistent (%d successful runs, %.17g steps in total, shortest %d)",
         (int)g->example_runs, sum, (int)g->best_example_steps);
     return -1;
   }
   if (run_id_plus_1 < g->training_runs) {
-    fmt(why, cap, "run id %d below the %d training runs", (int)run_id_plus_1 - 1, (int)g->training_runs);
+    fw_errfmt(why, cap, "run id %d below the %d training runs", (int)run_id_plus_1 - 1, (int)g->training_runs);
     return -1;
   }
   p.run_id = run_id_plus_1 - 1;

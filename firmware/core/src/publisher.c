@@ -2,12 +2,12 @@
 // Publisher thread: queue → LCM encode → lcm_publish and LCM event logs.
 #define _POSIX_C_SOURCE 200809L
 #include "fw/publisher.h"
+#include "errfmt.h"
 
 #include <errno.h>
 #include <lcm/eventlog.h>
 #include <pthread.h>
 #include <semaphore.h>
-#include <stdarg.h>
 #include <stdatomic.h>
 #include <stdbool.h>
 #include <stdio.h>
@@ -44,17 +44,6 @@ static void count(atomic_uint_fast64_t* c, uint64_t n) {
   if (n > 0) {
     atomic_fetch_add_explicit(c, n, memory_order_relaxed);
   }
-}
-
-static void fmt(char* err, size_t cap, const char* format, ...) __attribute__((format(printf, 3, 4)));
-static void fmt(char* err, size_t cap, const char* format, ...) {
-  if (err == NULL || cap == 0) {
-    return;
-  }
-  va_list ap;
-  va_start(ap, format);
-  (void)vsnprintf(err, cap, format, ap);
-  va_end(ap);
 }
 
 // Encodes m into buf; returns the size or -1.
@@ -193,7 +182,7 @@ static void* publisher_main(void* arg) {
 fw_publisher_t* fw_publisher_create(fw_pubq_t* q, const fw_publisher_config_t* cfg, char* err, size_t err_cap) {
   fw_publisher_t* p = (fw_publisher_t*)calloc(1, sizeof *p);
   if (p == NULL) {
-    fmt(err, err_cap, "publisher: out of memory");
+    fw_errfmt(err, err_cap, "publisher: out of memory");
     return NULL;
   }
   p->q = q;
@@ -201,7 +190,7 @@ fw_publisher_t* fw_publisher_create(fw_pubq_t* q, const fw_publisher_config_t* c
   if (cfg->log_file != NULL && cfg->log_file[0] != '\0') {
     p->log = lcm_eventlog_create(cfg->log_file, "w");
     if (p->log == NULL) {
-      fmt(err, err_cap, "log_file %s: cannot create: %s", cfg->log_file, strerror(errno));
+      fw_errfmt(err, err_cap, "log_file %s: cannot create: %s", cfg->log_file, strerror(errno));
       free(p);
       return NULL;
     }
@@ -209,7 +198,7 @@ fw_publisher_t* fw_publisher_create(fw_pubq_t* q, const fw_publisher_config_t* c
   if (cfg->experience_log_file != NULL && cfg->experience_log_file[0] != '\0') {
     p->exp_log = lcm_eventlog_create(cfg->experience_log_file, "w");
     if (p->exp_log == NULL) {
-      fmt(err, err_cap, "experience_log_file %s: cannot create: %s", cfg->experience_log_file, strerror(errno));
+      fw_errfmt(err, err_cap, "experience_log_file %s: cannot create: %s", cfg->experience_log_file, strerror(errno));
       if (p->log != NULL) {
         lcm_eventlog_destroy(p->log);
       }
@@ -228,7 +217,7 @@ fw_publisher_t* fw_publisher_create(fw_pubq_t* q, const fw_publisher_config_t* c
   atomic_init(&p->recorded, 0);
   p->idle = true;
   if (pthread_create(&p->thread, NULL, publisher_main, p) != 0) {
-    fmt(err, err_cap, "publisher: cannot start thread");
+    fw_errfmt(err, err_cap, "publisher: cannot start thread");
     if (p->log != NULL) {
       lcm_eventlog_destroy(p->log);
     }

@@ -1,0 +1,12 @@
+// SPDX-License-Identifier: MIT
+// Internal: the firmware's error-text helper (config, endpoints, checkpoints, progress, publisher).
+#ifndef FW_ERRFMT_H
+#define FW_ERRFMT_H
+
+#include <stddef.h>
+
+/// printf-style text into err[cap] (always NUL-terminated, truncated to fit); does nothing when
+/// err is NULL or cap is 0, so every caller may pass an optional error buffer straight through.
+void fw_errfmt(char* err, size_t cap, const char* format, ...) __attribute__((format(printf, 3, 4)));
+
+#endif  // FW_ERRFMT_H
