@@ -70,6 +70,25 @@
 ///   learned policy after the 30 example runs 140.1 +- 0.5 steps, after phase two 140.1 +- 0.5,
 ///   against 146.2 / 139.7 / 138.5 / 138.4 for the example policy at gains 0.5 / 1 / 1.5 / 2 and
 ///   137.3 for the hand-tuned optimal controller from the same ten poses.
+///   Why the learned policy does not beat its teachers (Fig. 4 schedule; seed 11 traced, seeds
+///   11-20 swept): the greedy policy is an imitation of the average example. Least squares of the
+///   executed rotation on (target angle θ, lateral offset d): phase-one training data 0.89 θ +
+///   0.00 d (gains 0.5-2 with the clamp at 1 rad/s, plus dither); learned policy after phase one
+///   0.82 θ + 0.03 d, after phase two 0.32 θ + 0.13 d; the optimal controller 1.54 θ - 1.09 d.
+///   Steps are lost at the off-axis starts (pose (1.5, 0, 0.9): first second at |ω| 0.3-0.6 where
+///   optimal and the examples command 1.0; 138 steps vs 132 example, 131 optimal) and in centring
+///   (the robot settles 0.3 m off the centre line at 0.52 m/s instead of 0.6). One tick's action
+///   changes the return by about 0.3 step (estimate: 6 steps over the 20 ticks of that turn;
+///   value 0.0075 at γ^T = 0.25), far below the standard
+///   error of the local fit, so value − 4 SE stays at the neighbours' policy. Measured on seeds
+///   11-20 (baseline: last phase-one block 140.7 ± 0.6, +1.9 ± 0.6 vs the example policy, 11
+///   failed phase-two evaluation runs): pessimism 2 → 150.8 (failures, 20 in phase two);
+///   phase-one dither and phase-two exploration held 1 s at σ 0.3 (explore_hold_s also holds the
+///   phase-one dither) → 169.4, 29 failures; no phase-one dither → 490 (the state model cannot
+///   be formed without action spread); an advantage-weighted anchor (neighbours weighted by
+///   exp(A / τ σ_A), A = value above a fit on the state alone; branch learn2-advantage, not
+///   merged) τ = 1 → final block 141.1 ± 0.7 (+2.3 ± 0.7 vs examples, 0 phase-two failures),
+///   τ = 0.3 → 143.1. None beats the examples.
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are
