@@ -41,6 +41,19 @@ import threading
 import time
 
 HOST_LOCAL_URL = "udpm://239.255.76.67:7667?ttl=0"
+# lcm-logger's socket receive buffer over udpm [bytes]: about 1.5 s of a 20x lockstep run, so a
+# recorder the scheduler leaves out for a moment loses nothing (the kernel caps it at
+# net.core.rmem_max).
+RECORDER_RECV_BUF = 4 * 1024 * 1024
+
+
+def recorder_url(url):
+    """The URL for lcm-logger: the session's, with a large receive buffer on udpm unless it names one."""
+    if not url.startswith("udpm://") or "recv_buf_size=" in url:
+        return url
+    return url + ("&" if "?" in url else "?") + "recv_buf_size=%d" % RECORDER_RECV_BUF
+
+
 # The lockstep pace at which lcm-logger over UDP records every message on a 2-core machine
 # (tools.session_lossless checks it on a whole session).
 DEFAULT_PACE = 20.0
@@ -197,7 +210,7 @@ def main():
         if not wait_for_file(endpoints, sim, 20.0):
             say("the emulator did not start (see %s)" % os.path.join(out, "sim.log"))
             return 1
-        children.append(Child("lcm-logger", [logger_exe, "--lcm-url=" + args.lcm_url, "--force",
+        children.append(Child("lcm-logger", [logger_exe, "--lcm-url=" + recorder_url(args.lcm_url), "--force",
                                              os.path.join(out, "session.lcmlog")],
                               os.path.join(out, "logger.log")))
         if spy_exe is not None:
