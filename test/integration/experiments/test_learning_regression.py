@@ -11,9 +11,12 @@ Failed runs count at the step limit. Comparisons are paired by seed; one-sided t
 Claims, each printed with its numbers; ASSERTED ones fail the test when they do not hold:
   improves        the learned policy after phase one is significantly better than after 5 runs
   keeps           phase two does not make it significantly worse (final block vs end of phase one)
-  reaches         the final block reaches the goal from at least 9.5 of 10 poses on average
-  within_3pct     guard: the final block's excess over the optimal controller, upper 95 % bound,
-                  is below 3 % (measured: about 2 %)
+  reaches         reliability: the final block reaches the goal from at least 9.5 of 10 poses on
+                  average (a collision is a failed run)
+  within_3pct     path quality: over the final block's successful runs, the excess over the optimal
+                  controller from the same poses (paired pose by pose), upper 95 % bound, is below
+                  3 % (measured: about 2 %). Failures are the business of `reaches`: counted at the
+                  step limit here, one collision in 100 runs alone would add about 6 %.
   beats_examples  the paper's Fig. 4 claim: the final block is significantly better than the
                   example policy from the same poses (not reproduced; reported, not asserted)
   near_optimal    the paper's claim for phase two: the final block is not significantly worse than
@@ -67,7 +70,7 @@ def main():
             except RuntimeError as e:
                 print("FAIL:", e)
                 return 1
-    first, end_p1, final, example, optimal, successes = [], [], [], [], [], []
+    first, end_p1, final, example, optimal, successes, excess = [], [], [], [], [], [], []
     for r in rs:
         blocks = r["learning"]["blocks"]
         p1 = [b for b in blocks if b["phase"] == 1]
@@ -83,6 +86,11 @@ def main():
         end_p1.append(mean(p1[-1]["steps"]))
         final.append(mean(blocks[-1]["steps"]))
         successes.append(blocks[-1]["successes"])
+        ok_poses = [i for i, s in enumerate(blocks[-1]["success"]) if s]
+        opt_steps = r["references"]["optimal"]["steps"]
+        if ok_poses:
+            excess.append(100.0 * (mean([blocks[-1]["steps"][i] for i in ok_poses]) /
+                                   mean([opt_steps[i] for i in ok_poses]) - 1.0))
         example.append(mean(r["references"]["example"]["steps"]))
         optimal.append(mean(r["references"]["optimal"]["steps"]))
         print("seed %2d: after 5 runs %.1f, after phase one %.1f, final %.1f (%d/10); example %.1f, optimal %.1f; "
@@ -96,10 +104,10 @@ def main():
     results["keeps"] = (t <= T95_ONE_SIDED_DF9, "final minus after phase one: %+.1f ± %.1f steps, t = %.2f" % (m, h, t))
     ms = mean(successes)
     results["reaches"] = (ms >= 9.5, "final block: %.1f of 10 poses reached on average" % ms)
-    excess = [100.0 * (f / o - 1.0) for f, o in zip(final, optimal)]
     m, t, h = paired(excess, [0.0] * len(excess))
-    results["within_3pct"] = (m + h * T95_ONE_SIDED_DF9 / 2.262 < 3.0,
-                              "final excess over optimal: %+.2f %% ± %.2f %%" % (m, h))
+    results["within_3pct"] = (len(excess) == len(rs) and m + h * T95_ONE_SIDED_DF9 / 2.262 < 3.0,
+                              "final block, successful runs: excess over optimal from the same poses %+.2f %% ± %.2f %%"
+                              % (m, h))
     m, t, h = paired(final, example)
     results["beats_examples"] = (t < -T95_ONE_SIDED_DF9, "final minus example policy: %+.1f ± %.1f steps, t = %.2f" % (m, h, t))
     m, t, h = paired(final, optimal)
