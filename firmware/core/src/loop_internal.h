@@ -234,6 +234,8 @@ struct fw_loop {
   int32_t retry_countdown;
   bool stopped_pose_requested; // a start pose was requested while stopped (bumper case)
   bool stopped_pose_pending;   // that request is under way (the binding answered 2)
+  bool start_pose_chosen;      // start_pose is the next run's (drawn once per run: the pose sequence
+                               // of a seed does not depend on stops between runs)
   features_pose_t start_pose;
   int32_t run_id;
   int32_t actions_taken;       // actions executed in the current run

@@ -69,6 +69,7 @@ static uint64_t next_run_id(const fw_loop_t* L) { return (uint64_t)(L->run_id + 
 
 static void begin_run(fw_loop_t* L) {
   L->run_id++;
+  L->start_pose_chosen = false;
   L->explore_steps_left = 0;
   L->actions_taken = 0;
   L->have_prev = false;
@@ -106,7 +107,10 @@ static void begin_run(fw_loop_t* L) {
 
 void fw_run_begin_repositioning(fw_loop_t* L) {
   L->mode = B21R_STATUS_T_MODE_REPOSITIONING;
-  L->pose_requested = L->stopped_pose_requested;
+  // The emulator places the robot again once the learner is done, even when a stop already put
+  // it there to free a bumper: the run then starts the same number of periods after its reset
+  // whatever happened before (see fw_run_reposition). A person placed it once and has confirmed.
+  L->pose_requested = L->stopped_pose_requested && L->cfg.reposition != FW_REPOSITION_EMULATOR;
   L->stopped_pose_requested = false;
   L->stopped_pose_pending = false;
   L->awaiting_confirm = false;
@@ -123,8 +127,9 @@ void fw_run_begin_repositioning(fw_loop_t* L) {
                 L->sched.p.eval_blocks);
     return;
   }
-  if (!L->pose_requested) {
+  if (!L->start_pose_chosen) {
     L->start_pose = next_start_pose(L, &L->plan);
+    L->start_pose_chosen = true;
   }
 }
 
@@ -260,12 +265,13 @@ void fw_run_request_pose_while_stopped(fw_loop_t* L) {
       L->cfg.reposition != FW_REPOSITION_EMULATOR) {
     return;
   }
-  if (!L->stopped_pose_pending) {
+  if (!L->start_pose_chosen) {
     const fw_run_plan_t plan = fw_schedule_next(&L->sched);
     if (plan.kind == FW_RUN_NONE) {
       return;
     }
     L->start_pose = next_start_pose(L, &plan);
+    L->start_pose_chosen = true;
   }
   const int r = L->io.vt->request_start_pose(L->io.user, L->start_pose.x_m, L->start_pose.y_m,
                                              L->start_pose.theta_rad, next_run_id(L));

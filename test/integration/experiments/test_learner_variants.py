@@ -29,7 +29,7 @@ def main():
         for learner in ("hedger", "lwa", "tabular"):
             out = os.path.join(d, learner + ".json")
             p = subprocess.run([exe, "--config", conf, "--seed", "2", "--variant", "learner=" + learner,
-                                "--set", "phase_one_runs=4", "--set", "phase_two_runs=2", "--set", "eval_every_runs=2",
+                                "--set", "phase_one_runs=6", "--set", "phase_two_runs=2", "--set", "eval_every_runs=2",
                                 "--set", "eval_starts=2", "--out", out], capture_output=True, text=True)
             if p.returncode != 0:
                 fail("learner=%s: exit %d: %s" % (learner, p.returncode, p.stderr))
@@ -39,7 +39,7 @@ def main():
         if r["controller"].get("learner") != learner:
             fail("learner=%s not recorded in the result's controller settings: %s" % (learner, r["controller"]))
         lr = r["learning"]
-        if lr["totals"]["training_runs"] != 6 or len(lr["blocks"]) != 3:
+        if lr["totals"]["training_runs"] != 8 or len(lr["blocks"]) != 4:
             fail("learner=%s: incomplete schedule: %s" % (learner, lr["totals"]))
         print("%-8s digest %s over %d transitions; phase two steps by source %s; store %d" % (
             learner, lr["phase_one_data_digest"], lr["phase_one_transitions"],
