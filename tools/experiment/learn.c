@@ -4,6 +4,7 @@
 // what the loop publishes (experiences, evaluation blocks) and its counters between ticks.
 #define _POSIX_C_SOURCE 200809L
 #include "experiment.h"
+#include "fw/errfmt.h"
 #include "fw/loop.h"
 #include "fw/publisher.h"
 #include "fw/pubq.h"
@@ -12,18 +13,9 @@
 #include <sim/task_worlds.h>
 #include <tasks/tasks.h>
 
-#include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
-
-static void fmt(char* err, size_t cap, const char* format, ...) __attribute__((format(printf, 3, 4)));
-static void fmt(char* err, size_t cap, const char* format, ...) {
-  va_list ap;
-  va_start(ap, format);
-  (void)vsnprintf(err, cap, format, ap);
-  va_end(ap);
-}
 
 // Sources of an executed action, indexed by b21r_experience_t SOURCE_* (0..4).
 #define N_SOURCES 5
@@ -233,7 +225,7 @@ static int run_session(const fw_config_t* cfg, const session_io_t* sio, session_
   int rc = -1;
   if (loop == NULL) {
     if (q == NULL) {
-      fmt(err, err_cap, "out of memory");
+      fw_errfmt(err, err_cap, "out of memory");
     }
   } else if (fw_loop_start(loop, err, err_cap) == 0) {
     const double t0 = now_s();
@@ -283,16 +275,16 @@ static int run_session(const fw_config_t* cfg, const session_io_t* sio, session_
     S->wall_s = now_s() - t0;
     fw_loop_get_stats(loop, &S->final);
     if (more) {
-      fmt(err, err_cap, "the schedule did not end within %lld ticks (%d runs finished, %d aborted, %lld safety stops)",
+      fw_errfmt(err, err_cap, "the schedule did not end within %lld ticks (%d runs finished, %d aborted, %lld safety stops)",
           (long long)budget, S->final.runs_finished, S->final.runs_aborted, (long long)S->final.safety_stops);
     } else if (S->final.experiences_dropped > 0 || fw_pubq_drops(q, -1) > 0) {
-      fmt(err, err_cap, "the loop's queue dropped %llu messages: results would be incomplete",
+      fw_errfmt(err, err_cap, "the loop's queue dropped %llu messages: results would be incomplete",
           (unsigned long long)fw_pubq_drops(q, -1));
     } else {
       rc = 0;
     }
     if (rc == 0 && sio->trace_svg != NULL && sim_emu_write_svg(sim.emu, sio->trace_svg) != 0) {
-      fmt(err, err_cap, "%s: cannot write the picture", sio->trace_svg);
+      fw_errfmt(err, err_cap, "%s: cannot write the picture", sio->trace_svg);
       rc = -1;
     }
   }
@@ -300,7 +292,7 @@ static int run_session(const fw_config_t* cfg, const session_io_t* sio, session_
   if (pub != NULL) {
     fw_publisher_flush(pub);
     if (fw_publisher_counters(pub).log_errors > 0 && rc == 0) {
-      fmt(err, err_cap, "%s: write errors in the experience log", sio->experience_log);
+      fw_errfmt(err, err_cap, "%s: write errors in the experience log", sio->experience_log);
       rc = -1;
     }
     fw_publisher_destroy(pub);
@@ -441,14 +433,14 @@ int exp_run_learn(const exp_settings_t* s, const fw_config_t* cfg_in, const exp_
     tasks_corridor_spec_default(&spec);
     spec.length_m = cfg.corridor_length_m;
     if (sim_world_from_corridor_spec(&spec, &world) != SIM_WORLD_OK) {
-      fmt(err, err_cap, "cannot build the corridor world (length %g m)", cfg.corridor_length_m);
+      fw_errfmt(err, err_cap, "cannot build the corridor world (length %g m)", cfg.corridor_length_m);
       return -1;
     }
   } else {
     tasks_obstacles_spec_t spec;
     tasks_obstacles_spec_default(&spec);
     if (sim_world_from_obstacles_spec(&spec, &world) != SIM_WORLD_OK) {
-      fmt(err, err_cap, "cannot build the obstacle world");
+      fw_errfmt(err, err_cap, "cannot build the obstacle world");
       return -1;
     }
   }
@@ -471,13 +463,13 @@ int exp_run_learn(const exp_settings_t* s, const fw_config_t* cfg_in, const exp_
     char inner[EXP_ERR_MAX];
     if (fw_config_set(&rc_cfg, "mode", "evaluate", "reference", inner, sizeof inner) != 0 ||
         fw_config_set(&rc_cfg, "evaluate_policy", s->references[i], "reference", inner, sizeof inner) != 0) {
-      fmt(err, err_cap, "%s", inner);
+      fw_errfmt(err, err_cap, "%s", inner);
       rc = -1;
       break;
     }
     const session_io_t ref_io = {.world = &world, .sim_seed = task->seed, .verbose = task->verbose};
     if (run_session(&rc_cfg, &ref_io, &refs[i], inner, sizeof inner) != 0 || refs[i].n_blocks != 1) {
-      fmt(err, err_cap, "reference '%s': %s", s->references[i], refs[i].n_blocks != 1 ? "no evaluation block" : inner);
+      fw_errfmt(err, err_cap, "reference '%s': %s", s->references[i], refs[i].n_blocks != 1 ? "no evaluation block" : inner);
       rc = -1;
     }
   }

@@ -3,26 +3,15 @@
 // experiment file loader on top of the controller's parser, result-file helpers, JSON writer.
 #define _POSIX_C_SOURCE 200809L
 #include "experiment.h"
+#include "fw/errfmt.h"
 
 #include <errno.h>
 #include <fcntl.h>
 #include <libgen.h>
 #include <math.h>
-#include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
-
-static void fmt(char* err, size_t cap, const char* format, ...) __attribute__((format(printf, 3, 4)));
-static void fmt(char* err, size_t cap, const char* format, ...) {
-  if (err == NULL || cap == 0) {
-    return;
-  }
-  va_list ap;
-  va_start(ap, format);
-  (void)vsnprintf(err, cap, format, ap);
-  va_end(ap);
-}
 
 typedef enum xkind { X_STRING, X_KIND, X_INT, X_DOUBLE, X_BOOL, X_REFS, X_VARY, X_REQUIRES } xkind_t;
 
@@ -138,11 +127,11 @@ static int set_refs(exp_settings_t* s, const char* value, char* why, size_t cap)
     bool too_long = false;
     p = next_token(p, ',', tok, sizeof tok, &too_long);
     if (too_long || (strcmp(tok, "optimal") != 0 && strcmp(tok, "example") != 0 && strcmp(tok, "human") != 0)) {
-      fmt(why, cap, "a comma-separated list of optimal, example, human (values of evaluate_policy)");
+      fw_errfmt(why, cap, "a comma-separated list of optimal, example, human (values of evaluate_policy)");
       return -1;
     }
     if (t.n_references == EXP_MAX_REFERENCES) {
-      fmt(why, cap, "at most %d references", EXP_MAX_REFERENCES);
+      fw_errfmt(why, cap, "at most %d references", EXP_MAX_REFERENCES);
       return -1;
     }
     strcpy(t.references[t.n_references++], tok);
@@ -158,7 +147,7 @@ static int set_requires(exp_settings_t* s, const char* value, char* why, size_t 
     bool too_long = false;
     p = next_token(p, ',', tok, sizeof tok, &too_long);
     if (too_long || tok[0] == '\0') {
-      fmt(why, cap, "comma-separated key names of at most 63 characters");
+      fw_errfmt(why, cap, "comma-separated key names of at most 63 characters");
       return -1;
     }
     if (!fw_config_has_key(tok)) {
@@ -179,7 +168,7 @@ static int set_vary(exp_settings_t* s, fw_config_t* cfg, const char* value, char
   }
   const char* eq = strchr(value, '=');
   if (eq == NULL || eq == value || (size_t)(eq - value) >= sizeof t.vary_key) {
-    fmt(why, cap, "KEY=V1|V2|... (e.g. hedger_capacity=500|2000|20000)");
+    fw_errfmt(why, cap, "KEY=V1|V2|... (e.g. hedger_capacity=500|2000|20000)");
     return -1;
   }
   memcpy(t.vary_key, value, (size_t)(eq - value));
@@ -189,7 +178,7 @@ static int set_vary(exp_settings_t* s, fw_config_t* cfg, const char* value, char
     bool too_long = false;
     p = next_token(p, '|', tok, sizeof tok, &too_long);
     if (too_long || tok[0] == '\0' || t.n_vary == EXP_MAX_VARIANTS) {
-      fmt(why, cap, "KEY=V1|V2|... with 1 to %d non-empty values of at most 63 characters", EXP_MAX_VARIANTS);
+      fw_errfmt(why, cap, "KEY=V1|V2|... with 1 to %d non-empty values of at most 63 characters", EXP_MAX_VARIANTS);
       return -1;
     }
     // Every value must be valid for its key now, not only when its task runs (unless the key
@@ -201,7 +190,7 @@ static int set_vary(exp_settings_t* s, fw_config_t* cfg, const char* value, char
                              s->missing[0] != '\0';
     if (!missing_key && (strcmp(t.vary_key, "experiment.vary") == 0 ||
                          exp_set(&probe_s, &probe_c, t.vary_key, tok, "experiment.vary", inner, sizeof inner) != 0)) {
-      fmt(why, cap, "value '%s' is not valid for '%s' (%s)", tok, t.vary_key, inner);
+      fw_errfmt(why, cap, "value '%s' is not valid for '%s' (%s)", tok, t.vary_key, inner);
       return -1;
     }
     strcpy(t.vary_values[t.n_vary++], tok);
@@ -299,7 +288,7 @@ static int set_xkey(exp_settings_t* s, fw_config_t* cfg, const xkey_t* k, const 
   }
   char allowed[128];
   describe(k, allowed, sizeof allowed);
-  fmt(err, err_cap, "%s: bad value '%s' for key '%s': expected %s%s%s (default \"%s\")", source, value, k->name,
+  fw_errfmt(err, err_cap, "%s: bad value '%s' for key '%s': expected %s%s%s (default \"%s\")", source, value, k->name,
       allowed, why[0] != '\0' ? ": " : "", why, k->def);
   return -1;
 }
@@ -318,7 +307,7 @@ int exp_set(exp_settings_t* s, fw_config_t* cfg, const char* key, const char* va
   if (strncmp(key, "experiment.", 11) == 0) {
     const xkey_t* k = find_xkey(key);
     if (k == NULL) {
-      fmt(err, err_cap, "%s: unknown key '%s' (b21r-experiment --print-reference-config lists every key)", source,
+      fw_errfmt(err, err_cap, "%s: unknown key '%s' (b21r-experiment --print-reference-config lists every key)", source,
           key);
       return -1;
     }
@@ -342,7 +331,7 @@ int exp_load_file(exp_settings_t* s, fw_config_t* cfg, const char* path, char* e
   }
   char copy[EXP_STR_MAX];
   if (strlen(path) >= sizeof copy) {
-    fmt(err, err_cap, "%s: path longer than %u characters", path, EXP_STR_MAX - 1U);
+    fw_errfmt(err, err_cap, "%s: path longer than %u characters", path, EXP_STR_MAX - 1U);
     return -1;
   }
   strcpy(copy, path);
@@ -366,26 +355,26 @@ int exp_validate(const exp_settings_t* s, const fw_config_t* cfg, char* err, siz
   for (const char* p = s->name; *p != '\0'; ++p) {
     if (!((*p >= 'a' && *p <= 'z') || (*p >= 'A' && *p <= 'Z') || (*p >= '0' && *p <= '9') || *p == '_' ||
           *p == '-' || *p == '.')) {
-      fmt(err, err_cap, "experiment.name '%s': use letters, digits, '_', '-' and '.' only (it names a folder)",
+      fw_errfmt(err, err_cap, "experiment.name '%s': use letters, digits, '_', '-' and '.' only (it names a folder)",
           s->name);
       return -1;
     }
   }
   if (s->kind == EXP_LEARN && cfg->mode != FW_MODE_LEARN) {
-    fmt(err, err_cap, "experiment.kind = learn needs mode = learn (references are evaluated by the runner)");
+    fw_errfmt(err, err_cap, "experiment.kind = learn needs mode = learn (references are evaluated by the runner)");
     return -1;
   }
   if (s->kind == EXP_LEARN && cfg->phase_driver == FW_DRIVER_JOYSTICK) {
-    fmt(err, err_cap,
+    fw_errfmt(err, err_cap,
         "phase_one_driver = joystick needs a person; experiments use example or human (the simulated driver)");
     return -1;
   }
   if (s->kind == EXP_EXPLORE_CORRIDOR && cfg->task != FW_TASK_CORRIDOR) {
-    fmt(err, err_cap, "experiment.kind = explore_corridor needs task = corridor");
+    fw_errfmt(err, err_cap, "experiment.kind = explore_corridor needs task = corridor");
     return -1;
   }
   if (s->kind == EXP_EXPLORE_GOAL && cfg->task != FW_TASK_OBSTACLES) {
-    fmt(err, err_cap, "experiment.kind = explore_goal needs task = obstacles (the goal task, without obstacles)");
+    fw_errfmt(err, err_cap, "experiment.kind = explore_goal needs task = obstacles (the goal task, without obstacles)");
     return -1;
   }
   return 0;
@@ -542,12 +531,12 @@ void exp_write_header(json_writer_t* w, const exp_settings_t* s, const fw_config
 
 FILE* exp_open_result(const char* path, char* tmp_path, size_t tmp_cap, char* err, size_t err_cap) {
   if (snprintf(tmp_path, tmp_cap, "%s.tmp", path) >= (int)tmp_cap) {
-    fmt(err, err_cap, "%s: path too long", path);
+    fw_errfmt(err, err_cap, "%s: path too long", path);
     return NULL;
   }
   FILE* f = fopen(tmp_path, "w");
   if (f == NULL) {
-    fmt(err, err_cap, "%s: cannot create: %s (does its folder exist?)", tmp_path, strerror(errno));
+    fw_errfmt(err, err_cap, "%s: cannot create: %s (does its folder exist?)", tmp_path, strerror(errno));
   }
   return f;
 }
@@ -555,12 +544,12 @@ FILE* exp_open_result(const char* path, char* tmp_path, size_t tmp_cap, char* er
 int exp_commit_result(FILE* f, const char* tmp_path, const char* path, char* err, size_t err_cap) {
   const bool bad = ferror(f) != 0 || fflush(f) != 0 || fsync(fileno(f)) != 0;
   if (fclose(f) != 0 || bad) {
-    fmt(err, err_cap, "%s: write failed: %s", tmp_path, strerror(errno));
+    fw_errfmt(err, err_cap, "%s: write failed: %s", tmp_path, strerror(errno));
     (void)unlink(tmp_path);
     return -1;
   }
   if (rename(tmp_path, path) != 0) {
-    fmt(err, err_cap, "%s: cannot rename to %s: %s", tmp_path, path, strerror(errno));
+    fw_errfmt(err, err_cap, "%s: cannot rename to %s: %s", tmp_path, path, strerror(errno));
     (void)unlink(tmp_path);
     return -1;
   }

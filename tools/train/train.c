@@ -4,6 +4,7 @@
 #include "train.h"
 
 #include <fw/checkpoint.h>
+#include <fw/errfmt.h>
 #include <fw/io.h>
 #include <fw/loop.h>
 #include <fw/pubq.h>
@@ -12,7 +13,6 @@
 #include <lcm/eventlog.h>
 
 #include <errno.h>
-#include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -33,17 +33,6 @@ struct trainer {
   double started_s;
 };
 
-static void fmt(char* err, size_t cap, const char* format, ...) __attribute__((format(printf, 3, 4)));
-static void fmt(char* err, size_t cap, const char* format, ...) {
-  if (err == NULL || cap == 0) {
-    return;
-  }
-  va_list ap;
-  va_start(ap, format);
-  (void)vsnprintf(err, cap, format, ap);
-  va_end(ap);
-}
-
 static double now_s(void) {
   struct timespec ts;
   clock_gettime(CLOCK_MONOTONIC, &ts);
@@ -53,7 +42,7 @@ static double now_s(void) {
 trainer_t* trainer_create(const fw_config_t* cfg, const train_options_t* opt, char* err, size_t err_cap) {
   trainer_t* t = (trainer_t*)calloc(1, sizeof *t);
   if (t == NULL) {
-    fmt(err, err_cap, "out of memory");
+    fw_errfmt(err, err_cap, "out of memory");
     return NULL;
   }
   t->cfg = *cfg;
@@ -65,14 +54,14 @@ trainer_t* trainer_create(const fw_config_t* cfg, const train_options_t* opt, ch
     t->opt.progress_period_s = 1.0;
   }
   if (cfg->learner == FW_LEARNER_TABULAR) {
-    fmt(err, err_cap, "learner = tabular: the offline trainer trains HEDGER only (learner = hedger or lwa)");
+    fw_errfmt(err, err_cap, "learner = tabular: the offline trainer trains HEDGER only (learner = hedger or lwa)");
     free(t);
     return NULL;
   }
   fw_loop_learner_config(cfg, &t->hc);
   const hedger_status_t hs = hedger_create(&t->hedger, &t->hc);
   if (hs != HEDGER_OK) {
-    fmt(err, err_cap, "cannot set up HEDGER with the controller's settings (%s; check the hedger_* keys)",
+    fw_errfmt(err, err_cap, "cannot set up HEDGER with the controller's settings (%s; check the hedger_* keys)",
         hedger_status_str(hs));
     free(t);
     return NULL;
@@ -100,7 +89,7 @@ int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t er
   size_t payload_size = 0;
   int r = fw_checkpoint_peek(path, &meta_size, &payload_size, err, err_cap);
   if (r == 0) {
-    fmt(err, err_cap, "%s: no such checkpoint", path);
+    fw_errfmt(err, err_cap, "%s: no such checkpoint", path);
   }
   if (r <= 0) {
     return -1;
@@ -109,14 +98,14 @@ int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t er
   void* payload = malloc(payload_size + 1U);
   int rc = -1;
   if (meta == NULL || payload == NULL) {
-    fmt(err, err_cap, "%s: cannot allocate %zu bytes", path, meta_size + payload_size);
+    fw_errfmt(err, err_cap, "%s: cannot allocate %zu bytes", path, meta_size + payload_size);
   } else if (fw_checkpoint_read(path, meta, meta_size + 1U, &meta_size, payload, payload_size + 1U, &payload_size,
                                 err, err_cap) == 1) {
     const hedger_status_t hs = hedger_load(t->hedger, payload, payload_size);
     if (hs == HEDGER_OK) {
       rc = 0;
     } else {
-      fmt(err, err_cap,
+      fw_errfmt(err, err_cap,
           "%s: the learned state does not fit these settings (%s): train with the configuration it was "
           "learned with (task, hedger_capacity, max_rotation_radps, gamma, hedger_input_scale)",
           path, hedger_status_str(hs));
@@ -159,7 +148,7 @@ static void report_progress(trainer_t* t, const char* path, bool final) {
 // One decoded experience. Returns 0, or -1 with a message when the log does not fit cfg.
 static int learn(trainer_t* t, const b21r_experience_t* e, const char* path, char* err, size_t err_cap) {
   if (e->task != (int8_t)t->cfg.task || e->state_dim != (int8_t)t->hc.state_dim) {
-    fmt(err, err_cap,
+    fw_errfmt(err, err_cap,
         "%s: experience seq %lld is of task %s with %d state dimensions, but the configuration says task = %s (%u): "
         "give the configuration the controller ran with (--config/--set task = ...)",
         path, (long long)e->seq, e->task == 0 ? "corridor" : "obstacles", (int)e->state_dim,
@@ -194,7 +183,7 @@ static int learn(trainer_t* t, const b21r_experience_t* e, const char* path, cha
 int trainer_add_log(trainer_t* t, const char* path, char* err, size_t err_cap) {
   lcm_eventlog_t* log = lcm_eventlog_create(path, "r");
   if (log == NULL) {
-    fmt(err, err_cap, "%s: cannot open: %s", path, strerror(errno));
+    fw_errfmt(err, err_cap, "%s: cannot open: %s", path, strerror(errno));
     return -1;
   }
   end_run(t);  // a log starts with a run of its own
@@ -234,7 +223,7 @@ int trainer_add_log(trainer_t* t, const char* path, char* err, size_t err_cap) {
       fclose(f);
     }
     if (!empty) {
-      fmt(err, err_cap, "%s: not an LCM event log (no event could be read)", path);
+      fw_errfmt(err, err_cap, "%s: not an LCM event log (no event could be read)", path);
       return -1;
     }
   }
@@ -351,10 +340,10 @@ static size_t phase_two_meta(const fw_config_t* cfg, const char* dir, uint8_t** 
       }
       free(payload);
     } else {
-      fmt(err, err_cap, "cannot write a temporary checkpoint in %s", dir);
+      fw_errfmt(err, err_cap, "cannot write a temporary checkpoint in %s", dir);
     }
   } else if (q == NULL) {
-    fmt(err, err_cap, "out of memory");
+    fw_errfmt(err, err_cap, "out of memory");
   }
   fw_ckpt_writer_destroy(w);
   fw_loop_destroy(loop);
@@ -369,7 +358,7 @@ static size_t phase_two_meta(const fw_config_t* cfg, const char* dir, uint8_t** 
 
 int trainer_write_checkpoint(trainer_t* t, const char* path, bool overwrite, char* err, size_t err_cap) {
   if (!overwrite && access(path, F_OK) == 0) {
-    fmt(err, err_cap, "%s exists; give --force to replace it (or another output file)", path);
+    fw_errfmt(err, err_cap, "%s exists; give --force to replace it (or another output file)", path);
     return -1;
   }
   char dir[FW_CONFIG_STR_MAX];
@@ -383,14 +372,14 @@ int trainer_write_checkpoint(trainer_t* t, const char* path, bool overwrite, cha
       snprintf(dir, sizeof dir, "/");
     }
   } else {
-    fmt(err, err_cap, "%s: path too long", path);
+    fw_errfmt(err, err_cap, "%s: path too long", path);
     return -1;
   }
   uint8_t* meta = NULL;
   char why[FW_LOOP_ERR_MAX];
   const size_t meta_size = phase_two_meta(&t->cfg, dir, &meta, why, sizeof why);
   if (meta_size == 0) {
-    fmt(err, err_cap, "%s: cannot build the controller's section of the checkpoint: %s", path, why);
+    fw_errfmt(err, err_cap, "%s: cannot build the controller's section of the checkpoint: %s", path, why);
     return -1;
   }
   const size_t cap = hedger_serialized_size(t->hedger);
@@ -398,9 +387,9 @@ int trainer_write_checkpoint(trainer_t* t, const char* path, bool overwrite, cha
   size_t written = 0;
   int rc = -1;
   if (payload == NULL) {
-    fmt(err, err_cap, "out of memory (%zu bytes)", cap);
+    fw_errfmt(err, err_cap, "out of memory (%zu bytes)", cap);
   } else if (hedger_save(t->hedger, payload, cap, &written) != HEDGER_OK) {
-    fmt(err, err_cap, "%s: the learned state could not be serialised", path);
+    fw_errfmt(err, err_cap, "%s: the learned state could not be serialised", path);
   } else {
     rc = fw_checkpoint_write(path, meta, meta_size, payload, written, err, err_cap);
   }

@@ -5,7 +5,7 @@
 
 #include "fw/prefault.h"
 #include "le_bytes.h"
-#include "errfmt.h"
+#include "fw/errfmt.h"
 
 #include <errno.h>
 #include <fcntl.h>

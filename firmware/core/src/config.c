@@ -2,7 +2,7 @@
 // Table-driven configuration: one row per key carries its type, range, default and help text, so
 // the parser, the error messages, --help and the reference file cannot drift apart.
 #include "fw/config.h"
-#include "errfmt.h"
+#include "fw/errfmt.h"
 
 #include <hedger/hedger.h>
 

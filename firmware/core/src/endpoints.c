@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: MIT
 // --endpoints: b21r-sim's ready line applied to the config (fw/endpoints.h).
 #include "fw/endpoints.h"
-#include "errfmt.h"
+#include "fw/errfmt.h"
 
 #include <stdbool.h>
 #include <stdio.h>

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: MIT
-#include "errfmt.h"
+#include "fw/errfmt.h"
 
 #include <stdarg.h>
 #include <stdio.h>

@@ -4,7 +4,7 @@
 
 #include "fw/config.h"
 #include "le_bytes.h"
-#include "errfmt.h"
+#include "fw/errfmt.h"
 
 #include <hedger/hedger.h>
 

@@ -2,7 +2,7 @@
 // Publisher thread: queue → LCM encode → lcm_publish and LCM event logs.
 #define _POSIX_C_SOURCE 200809L
 #include "fw/publisher.h"
-#include "errfmt.h"
+#include "fw/errfmt.h"
 
 #include <errno.h>
 #include <lcm/eventlog.h>

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: MIT
-// Internal: the firmware's error-text helper (config, endpoints, checkpoints, progress, publisher).
+// The error-text helper of the firmware and its tools (config, endpoints, checkpoints, progress,
+// publisher, b21r-experiment, b21r-train).
 #ifndef FW_ERRFMT_H
 #define FW_ERRFMT_H
 
