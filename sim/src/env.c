@@ -129,11 +129,7 @@ static bool receive(sim_env_t* env) {
   if (got_odometry) {
     (void)rflex_odom_update(&env->host.odometry);
   }
-  env->run_odom.have_trans = env->host.odometry.have_trans;
-  env->run_odom.have_rot = env->host.odometry.have_rot;
-  env->run_odom.trans_latest = env->host.odometry.trans_latest;
-  env->run_odom.rot_latest = env->host.odometry.rot_latest;
-  (void)rflex_odom_update(&env->run_odom);
+  (void)rflex_odom_follow(&env->run_odom, &env->host.odometry);
   env->host.report_new[0] = false;
   env->host.report_new[1] = false;
   return got_scan && got_odometry;

@@ -29,11 +29,7 @@ void fw_run_odometry_update(fw_loop_t* L, bool run_starting) {
     rflex_odom_set_pose(&L->run_odometry, 0.0, 0.0, 0.0);
     return;
   }
-  L->run_odometry.have_trans = L->base.odometry.have_trans;
-  L->run_odometry.have_rot = L->base.odometry.have_rot;
-  L->run_odometry.trans_latest = L->base.odometry.trans_latest;
-  L->run_odometry.rot_latest = L->base.odometry.rot_latest;
-  (void)rflex_odom_update(&L->run_odometry);
+  (void)rflex_odom_follow(&L->run_odometry, &L->base.odometry);
 }
 
 bool fw_run_observe(fw_loop_t* L) {

@@ -851,6 +851,17 @@ bool rflex_odom_update(rflex_odometry_t* odo) {
   return true;
 }
 
+bool rflex_odom_follow(rflex_odometry_t* odo, const rflex_odometry_t* source) {
+  if (odo == NULL || source == NULL) {
+    return false;
+  }
+  odo->have_trans = source->have_trans;
+  odo->have_rot = source->have_rot;
+  odo->trans_latest = source->trans_latest;
+  odo->rot_latest = source->rot_latest;
+  return rflex_odom_update(odo);
+}
+
 void rflex_odom_set_pose(rflex_odometry_t* odo, double x_m, double y_m, double theta_rad) {
   if (odo == NULL) {
     return;

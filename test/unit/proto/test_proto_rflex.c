@@ -673,6 +673,38 @@ static rflex_motor_report_t report(uint8_t axis, int32_t pos) {
   return (rflex_motor_report_t){.axis = axis, .position = pos, .velocity = 0};
 }
 
+// A follower restarted at (0, 0, 0) integrates only the encoder steps after its restart, from
+// the counts its source was fed; the source is only read.
+static void test_rflex_odometry_follow(void** state) {
+  (void)state;
+  rflex_b21r_params_t p;
+  rflex_b21r_params_default(&p);
+  rflex_odometry_t base;
+  assert_int_equal(rflex_odom_init(&base, &p), PROTO_OK);
+  rflex_motor_report_t r = report(0, 1000);
+  (void)rflex_odom_feed(&base, &r);
+  r = report(1, 5000);
+  (void)rflex_odom_feed(&base, &r);
+  assert_true(rflex_odom_update(&base));
+  r = report(0, 1000 + 20600);  // 0.2 m before the restart
+  (void)rflex_odom_feed(&base, &r);
+  assert_true(rflex_odom_update(&base));
+  rflex_odometry_t run = base;
+  rflex_odom_set_pose(&run, 0.0, 0.0, 0.0);
+  r = report(0, 1000 + 20600 + 51500);  // 0.5 m after it
+  (void)rflex_odom_feed(&base, &r);
+  assert_true(rflex_odom_update(&base));
+  assert_true(rflex_odom_follow(&run, &base));
+  ASSERT_NEAR(base.x_m, 0.7, 1e-12);
+  ASSERT_NEAR(run.x_m, 0.5, 1e-12);
+  ASSERT_NEAR(run.y_m, 0.0, 0.0);
+  assert_true(rflex_odom_follow(&run, &base));  // no new counts: no motion
+  ASSERT_NEAR(run.x_m, 0.5, 1e-12);
+  ASSERT_NEAR(base.x_m, 0.7, 1e-12);  // the source is only read
+  assert_false(rflex_odom_follow(NULL, &base));
+  assert_false(rflex_odom_follow(&run, NULL));
+}
+
 // Odometry: the first update sets the baseline; then heading first, then translation along the
 // new heading; int32 wrap-around is a small step; implausible jumps are rejected and counted.
 static void test_rflex_odometry_heading_first_wrap_and_rejects(void** state) {
@@ -843,6 +875,7 @@ int main(void) {
       cmocka_unit_test(test_rflex_device_parses_host_commands),
       cmocka_unit_test(test_rflex_every_message_round_trips),
       cmocka_unit_test(test_rflex_odometry_heading_first_wrap_and_rejects),
+      cmocka_unit_test(test_rflex_odometry_follow),
       cmocka_unit_test(test_rflex_decoder_no_allocation),
       cmocka_unit_test(test_rflex_host_view_follows_reports),
   };

@@ -394,6 +394,10 @@ proto_status_t rflex_odom_feed(rflex_odometry_t* odo, const rflex_motor_report_t
 bool rflex_odom_update(rflex_odometry_t* odo);
 /// Sets the pose (e.g. heading from the index pulse); keeps the baseline. O(1).
 void rflex_odom_set_pose(rflex_odometry_t* odo, double x_m, double y_m, double theta_rad);
+/// A second integrator of the same encoders (e.g. one restarted at (0, 0, 0) per run): takes the
+/// latest counts `source` has been fed and integrates them like rflex_odom_update. O(1).
+/// @return rflex_odom_update's result.
+bool rflex_odom_follow(rflex_odometry_t* odo, const rflex_odometry_t* source);
 
 // ---------------------------------------------------------------------------------------------
 // Host view of the base: what a controller learns from the base's reports
