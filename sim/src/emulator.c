@@ -240,17 +240,28 @@ static void advance_period(sim_emu_t* e) {
   record(e);
 }
 
-// rFLEX: streaming starts as soon as both conditions hold, with the t_0 data.
+// Streaming starts as soon as both conditions hold, with the t_0 data, and needs no command: the
+// host's first command (rFLEX velocity pair, CANopen SYNC) is the one that ends period 0. rFLEX
+// sends the t_0 scan and odometry. CANopen sends the t_0 scan and the bump-panel inputs, not the
+// drives' TPDOs: those answer SYNCs only, one TPDO1 and one TPDO2 per drive and SYNC, so that the
+// host can match every answer to its SYNC; time has not moved since the last answer.
 static void lockstep_check_start(sim_emu_t* e) {
   const bool cond = stream_conditions(e, !e->streaming);
   if (!cond) {
     e->streaming = false;
     return;
   }
-  if (!e->streaming && e->rflex != NULL) {
-    e->streaming = true;
-    record(e);
+  if (e->streaming) {
+    return;
+  }
+  e->streaming = true;
+  record(e);
+  if (e->rflex != NULL) {
     emit_period_data(e);
+  } else {
+    const double t = now(e);
+    sim_lms_emit_scan(e->laser, t);
+    poll_bumpers(e, t);
   }
 }
 
@@ -312,16 +323,17 @@ void sim_emu_can_write(sim_emu_t* e, const canopen_frame_t* f) {
   if (e->streaming) {
     advance_period(e);
     emit_period_data(e);
-  } else if (stream_conditions(e, true)) {
-    e->streaming = true;  // the first SYNC after start-up gets the t_0 data
-    record(e);
-    emit_period_data(e);
-  } else {
-    poll_bumpers(e, t);
-    sim_cia402_sample_t s;
-    cia402_sample(e, &s);
-    sim_cia402_emit_tpdos(e->cia402, &s, t);
+    return;
   }
+  // Not streaming: the answer at the current time. If the drives were enabled last (the laser
+  // already streams), streaming starts here: the t_0 scan and inputs go first, time stands still.
+  lockstep_check_start(e);
+  if (!e->streaming) {
+    poll_bumpers(e, t);
+  }
+  sim_cia402_sample_t s;
+  cia402_sample(e, &s);
+  sim_cia402_emit_tpdos(e->cia402, &s, t);
 }
 
 // ---- device output ---------------------------------------------------------------------------

@@ -108,6 +108,7 @@ static void can_handle(fw_loop_t* L, const canopen_frame_t* f, int64_t now_us) {
         }
         d->velocity = t.velocity_actual;
         d->tpdo1_new = true;
+        d->tpdo1_count++;
       }
       break;
     }
@@ -116,6 +117,7 @@ static void can_handle(fw_loop_t* L, const canopen_frame_t* f, int64_t now_us) {
       if (canopen_decode_tpdo2(f, &t) == PROTO_OK) {
         d->position = t.position_actual;
         d->tpdo2_new = true;
+        d->tpdo2_count++;
         rflex_motor_report_t r;
         memset(&r, 0, sizeof r);
         r.axis = (uint8_t)i;
@@ -166,7 +168,23 @@ static void can_send_cycle(fw_loop_t* L, double v_mps, double w_radps, cia402_re
   }
   canopen_frame_t sync;
   (void)canopen_encode_sync(&sync);
-  (void)L->io.vt->can_write(L->io.user, &sync);
+  if (L->io.vt->can_write(L->io.user, &sync) == 0) {
+    L->can_syncs_sent++;
+  }
+}
+
+// Every SYNC sent since the NMT start has been answered by both drives' TPDO1 and TPDO2 (their
+// transmission type is synchronous: one of each per SYNC). Arrival flags alone cannot tell the
+// answer to this period's SYNC from an earlier answer still in flight (the socket and the laser's
+// line are separate channels); counting can.
+static bool can_all_answered(const fw_loop_t* L) {
+  for (int i = 0; i < 2; ++i) {
+    const fw_drive_t* d = &L->drive[i];
+    if ((int32_t)(d->tpdo1_count - L->can_syncs_sent) < 0 || (int32_t)(d->tpdo2_count - L->can_syncs_sent) < 0) {
+      return false;
+    }
+  }
+  return true;
 }
 
 // ---- common -------------------------------------------------------------------------------
@@ -182,6 +200,9 @@ void fw_base_poll(fw_loop_t* L, int64_t now_us) {
 bool fw_base_all_reports(const fw_loop_t* L) {
   if (is_rflex(L)) {
     return L->base.report_new[0] && L->base.report_new[1];
+  }
+  if (L->cfg.lockstep) {
+    return can_all_answered(L);
   }
   return L->drive[0].tpdo1_new && L->drive[0].tpdo2_new && L->drive[1].tpdo1_new && L->drive[1].tpdo2_new;
 }
@@ -331,7 +352,13 @@ static int rflex_start_sequence(fw_loop_t* L) {
 }
 
 // Starts the drives and the bump-panel node (each by its id: other nodes on the bus stay as they are).
+// The SYNC/answer count starts again: a started drive answers every SYNC that follows.
 static void can_nmt_start(fw_loop_t* L, int* failed_node) {
+  L->can_syncs_sent = 0;
+  for (int i = 0; i < 2; ++i) {
+    L->drive[i].tpdo1_count = 0;
+    L->drive[i].tpdo2_count = 0;
+  }
   for (int i = 0; i < 2; ++i) {
     can_send_nmt(L, CANOPEN_NMT_START, L->drive[i].node, failed_node);
   }
@@ -429,18 +456,24 @@ int fw_base_start(fw_loop_t* L, char* err, size_t err_cap) {
     snprintf(err, err_cap, "CANopen: cannot send NMT start to node %d", failed_node);
     return -1;
   }
-  // Walk both drives to OPERATION ENABLED: one controlword step per SYNC cycle.
+  // Walk both drives to OPERATION ENABLED: one controlword step per SYNC cycle. Each cycle waits
+  // for the whole answer (both TPDOs of both drives), so the last one gives the odometry its
+  // baseline: the loop's start then needs no SYNC of its own (in lockstep every later SYNC
+  // advances the emulator by one period, see fw_loop_start).
   for (int cycle = 0; cycle < 40; ++cycle) {
     can_send_cycle(L, 0.0, 0.0, CIA402_REQ_ENABLE);
     const int64_t deadline = now(L) + 500000;
     while (now(L) < deadline) {
       can_poll(L, now(L));
-      if (L->drive[0].tpdo1_new && L->drive[1].tpdo1_new) {
+      if (L->drive[0].tpdo1_new && L->drive[1].tpdo1_new && L->drive[0].tpdo2_new && L->drive[1].tpdo2_new) {
         break;
       }
       (void)L->io.vt->wait(L->io.user, deadline);
     }
     const bool ok = cia402_operation_enabled(L->drive[0].statusword) && cia402_operation_enabled(L->drive[1].statusword);
+    if (fw_base_any_report(L)) {
+      (void)rflex_odom_update(&L->base.odometry);
+    }
     fw_base_clear_flags(L);
     if (ok) {
       return can_wait_bumpers(L, err, err_cap);

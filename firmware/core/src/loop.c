@@ -594,8 +594,12 @@ int fw_loop_start(fw_loop_t* L, char* err, size_t err_cap) {
     return -1;
   }
   // The first scan (the laser driver may first have to find the LMS200's baud rate) and the
-  // first odometry. Zero commands keep the base's watchdog fed meanwhile (and, in lockstep,
-  // make the emulator's time advance).
+  // first odometry. Real time: zero commands keep the base's watchdog fed meanwhile. Lockstep:
+  // no command at all. The emulator sends the t_0 scan (and rFLEX odometry) by itself once the
+  // laser streams, and every command would advance it by one period: one sent while that data is
+  // still on its way would leave a second period's data in flight, which a later tick would take
+  // for its own (a tick behind, by the machine's timing). The CANopen base's answers to the
+  // start-up SYNCs must all be in.
   const int64_t start = io_now(L);
   const int64_t limit_us = 20000000;
   int64_t next_cmd = start;
@@ -607,7 +611,7 @@ int fw_loop_start(fw_loop_t* L, char* err, size_t err_cap) {
     }
     // The arrival flags are kept: the first tick then runs at once on this data (in lockstep
     // the emulator waits for our first command before it sends more).
-    if (L->have_scan && L->base.odometry.baseline) {
+    if (L->have_scan && L->base.odometry.baseline && (!L->cfg.lockstep || fw_base_all_reports(L))) {
       break;
     }
     if (now - start > limit_us) {
@@ -617,7 +621,7 @@ int fw_loop_start(fw_loop_t* L, char* err, size_t err_cap) {
                              : (L->cfg.base_protocol == FW_BASE_RFLEX ? L->cfg.base_device : "CAN bus"));
       return -1;
     }
-    if (now >= next_cmd) {
+    if (!L->cfg.lockstep && now >= next_cmd) {
       fw_base_command(L, 0.0, 0.0, true);  // keeps the base's watchdog fed
       next_cmd = now + L->period_us;
     }

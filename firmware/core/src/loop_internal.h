@@ -39,6 +39,8 @@ typedef struct fw_drive {
   bool sw_seen;
   bool tpdo1_new;   // since the last tick
   bool tpdo2_new;
+  uint32_t tpdo1_count; // since the NMT start (wraps): lockstep matches them with the SYNCs sent
+  uint32_t tpdo2_count;
   int32_t position;
   int32_t velocity;
   uint16_t emcy_code;
@@ -175,6 +177,8 @@ struct fw_loop {
   fw_bump_node_t bump;
   int32_t bump_limit_ticks;    // lockstep: can_bumper_timeout_s in whole ticks
   int64_t can_start_us;
+  uint32_t can_syncs_sent;     // since the NMT start (wraps); every one is answered by a TPDO1 and
+                               // a TPDO2 of each operational drive
 
   // Mailboxes (filled by other threads).
   pthread_mutex_t mbox_mu;

@@ -28,15 +28,19 @@
 ///   - rFLEX: requested odometry reports (MOT_SYSTEM_REPORT_REQ, period > 0, mask != 0): the
 ///     emulator then emits the t_0 data at once (after the reply to the completing request);
 ///   - CANopen: started both drives (NMT start) and enabled them (OPERATION_ENABLED): the
-///     emulator answers the first SYNC after that with the t_0 data (scan + TPDOs) without
-///     advancing; every later SYNC advances one period. Before streaming, a SYNC is answered
-///     with the TPDOs at the current time only.
+///     emulator then emits the t_0 scan and bump-panel inputs at once (with the answer to the
+///     first SYNC after both are enabled, if the laser streamed first); every later SYNC
+///     advances one period. Every SYNC gets exactly one TPDO1 and one TPDO2 from each
+///     operational drive (before streaming, and for the frame that starts it, at the current
+///     time), so the host can match answers to SYNCs; no other TPDO is ever sent.
+///   Neither base needs a command to start: the host's first command ends period 0 (a host
+///   that sends commands while waiting for the t_0 data gets more than one period's data).
 ///   Streaming stops (time stands still again) when the laser stream stops, odometry is
 ///   switched off (rFLEX) or a drive leaves NMT operational (CANopen). A drive fault does not
 ///   stop it: the controller keeps receiving scans and TPDOs (statusword with the fault bit)
 ///   while it handles the fault.
 /// - In lockstep the controller waits (poll with a generous wall timeout) for one full scan and
-///   odometry per tick.
+///   odometry per tick (CANopen: the answers to every SYNC it has sent).
 ///
 /// ## Real time
 /// The caller runs sim_emu_run_until(now) on its own monotonic clock; the laser streams at the

@@ -129,6 +129,44 @@ static void test_lockstep_canopen_sync_advances_one_period(void** state) {
   sim_emu_destroy(e);
 }
 
+// CANopen in the controller's order (drives enabled, then the laser stream): the stream starts at
+// the laser's start request with the t_0 scan and no TPDO, without a SYNC; from then on
+// every SYNC is answered by exactly one TPDO1 and one TPDO2 per drive, so a host can match each
+// answer to its SYNC.
+static void test_lockstep_canopen_t0_at_laser_start_tpdos_only_answer_syncs(void** state) {
+  (void)state;
+  sim_emu_t* e = make("corridor10.world", SIM_BASE_CANOPEN, 7);
+  uint8_t req[32];
+  canopen_frame_t f;
+  (void)canopen_encode_nmt(&f, CANOPEN_NMT_START, 0);
+  host_can(&g_host, &f);
+  host_can_cycle(&g_host, CIA402_CW_SHUTDOWN, 0.0, 0.0);
+  host_can_cycle(&g_host, CIA402_CW_SWITCH_ON, 0.0, 0.0);
+  host_can_cycle(&g_host, CIA402_CW_ENABLE_OPERATION, 0.0, 0.0);
+  host_read(&g_host);
+  assert_int_equal(g_host.scans, 0);
+  assert_int_equal(g_host.tpdo1, 3 * 2);
+  assert_int_equal(g_host.tpdo2, 3 * 2);
+  assert_int_equal(g_host.bump_pdos, 1);  // the node's inputs at its NMT start
+  assert_false(sim_emu_streaming(e));
+  host_laser(&g_host, req, lms_encode_start_stream(req, sizeof(req)));
+  assert_true(sim_emu_streaming(e));
+  assert_true(sim_emu_time(e) == 0.0);
+  host_read(&g_host);
+  assert_int_equal(g_host.scans, 1);
+  assert_int_equal(g_host.tpdo1, 0);
+  assert_int_equal(g_host.tpdo2, 0);
+  for (int cycle = 1; cycle <= 3; ++cycle) {
+    host_can_cycle(&g_host, CIA402_CW_ENABLE_OPERATION, 0.2, 0.0);
+    host_read(&g_host);
+    assert_int_equal(g_host.scans, 1);
+    assert_int_equal(g_host.tpdo1, 2);
+    assert_int_equal(g_host.tpdo2, 2);
+    assert_true(fabs(sim_emu_time(e) - 0.1 * cycle) < 1e-9);
+  }
+  sim_emu_destroy(e);
+}
+
 // Driving into the left wall: the body stops, the controller receives a DIO report of base
 // panel 0 (0x46: the skirt's front, the heading at reset) and `pose` reports the collision.
 static void test_lockstep_collision_reaches_controller_as_bumper(void** state) {
@@ -310,6 +348,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_lockstep_rflex_one_scan_and_odometry_per_period),
       cmocka_unit_test(test_lockstep_canopen_sync_advances_one_period),
+      cmocka_unit_test(test_lockstep_canopen_t0_at_laser_start_tpdos_only_answer_syncs),
       cmocka_unit_test(test_lockstep_collision_reaches_controller_as_bumper),
       cmocka_unit_test(test_lockstep_canopen_collision_and_fault_reach_controller_as_bumper),
       cmocka_unit_test(test_lockstep_same_seed_gives_identical_streams),

@@ -21,9 +21,12 @@ static void push_base(fake_robot_t* f, const rflex_packet_t* p) {
 
 static void push_frame(fake_robot_t* f, const canopen_frame_t* fr) {
   if (f->n_frames < FAKE_FRAMES) {
+    f->frame_ready_us[f->n_frames] = f->clock_us + f->can_lag_us;
     f->frames[f->n_frames++] = *fr;
   }
 }
+
+static bool frame_readable(const fake_robot_t* f) { return f->n_frames > 0 && f->frame_ready_us[0] <= f->clock_us; }
 
 static void emit_scan(fake_robot_t* f) {
   if (f->laser_drop_ticks > 0) {
@@ -292,12 +295,15 @@ static int64_t v_now(void* user) {
   return f->clock_us;
 }
 
-static bool pending(const fake_robot_t* f) { return f->laser_fill > 0 || f->base_fill > 0 || f->n_frames > 0; }
+static bool pending(const fake_robot_t* f) { return f->laser_fill > 0 || f->base_fill > 0 || frame_readable(f); }
 
 static int v_wait(void* user, int64_t deadline_us) {
   fake_robot_t* f = (fake_robot_t*)user;
   if (pending(f)) {
     return 1;
+  }
+  if (f->n_frames > 0 && f->frame_ready_us[0] < deadline_us) {
+    deadline_us = f->frame_ready_us[0];  // a lagging frame arrives first
   }
   if (deadline_us > f->clock_us) {
     f->clock_us = deadline_us;  // a blocking wait that nothing interrupts
@@ -359,11 +365,12 @@ static int v_base_write(void* user, const uint8_t* buf, size_t n) {
 
 static int v_can_read(void* user, canopen_frame_t* frame) {
   fake_robot_t* f = (fake_robot_t*)user;
-  if (f->n_frames == 0) {
+  if (!frame_readable(f)) {
     return 0;
   }
   *frame = f->frames[0];
   memmove(&f->frames[0], &f->frames[1], (f->n_frames - 1U) * sizeof f->frames[0]);
+  memmove(&f->frame_ready_us[0], &f->frame_ready_us[1], (f->n_frames - 1U) * sizeof f->frame_ready_us[0]);
   f->n_frames--;
   return 1;
 }

@@ -66,7 +66,12 @@ typedef struct fake_robot {
   rflex_decoder_t host_dec;         // host -> device packets
   uint8_t dev_id;
   canopen_frame_t frames[FAKE_FRAMES];
+  int64_t frame_ready_us[FAKE_FRAMES];  ///< clock time from which each queued frame can be read
   uint32_t n_frames;
+  /// CAN frames become readable this long after they are sent [µs] (0 = at once), while the
+  /// laser's bytes are readable at once: the bus reaches the host later than the laser's line,
+  /// as separate channels may on a loaded machine.
+  int64_t can_lag_us;
   cia402_drive_t drive[2];
   int32_t drive_target[2];
   // CANopen bump-panel node (node 16): TPDO1 on NMT start, on change and once per period.

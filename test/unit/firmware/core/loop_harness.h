@@ -48,6 +48,9 @@ void harness_config(fw_config_t* cfg);
 /// Creates fake + queue + loop and runs fw_loop_start. Returns 0 or fails the test.
 int harness_open(harness_t* h, const fw_config_t* cfg, bool canopen, uint64_t fake_seed);
 
+/// harness_open with the fake's CAN frames lagging can_lag_us behind the laser (fake_robot_t.can_lag_us).
+int harness_open_can_lag(harness_t* h, const fw_config_t* cfg, uint64_t fake_seed, int64_t can_lag_us);
+
 /// Drains the queue (hash experiences, track EVAL and STATUS).
 void harness_drain(harness_t* h);
 
