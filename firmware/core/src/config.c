@@ -306,7 +306,8 @@ _Static_assert(FW_CONFIG_MAX_SOURCES <= 255U, "source indices are uint8_t");
 
 static const key_desc_t* find_key(const char* name) {
   for (size_t i = 0; i < N_KEYS; ++i) {
-    if (strcmp(k_keys[i].name, name) == 0) {
+    // The first letter rules out most keys without a string comparison.
+    if (k_keys[i].name[0] == name[0] && strcmp(k_keys[i].name, name) == 0) {
       return &k_keys[i];
     }
   }
@@ -325,19 +326,33 @@ static size_t bounded_len(const char* s) {
   return n;
 }
 
-static size_t edit_distance(const char* a, const char* b) {
+// Returns the distance, or some value above `limit` as soon as it is certain to exceed it. Only
+// the diagonal band |i - j| <= limit is computed (a cell outside it is above the limit: "far", the
+// limit + 1), and a row's minimum never falls below the smaller of the previous row's minimum and
+// the one before's plus one, so two rows in a row above the limit end the work. An unknown name
+// costs a few short rows per key instead of the whole table.
+static size_t edit_distance_within(const char* a, const char* b, size_t limit) {
   const size_t na = bounded_len(a);
   const size_t nb = bounded_len(b);
-  size_t rows[3][KEY_CMP_MAX + 1U];
+  const size_t far = limit + 1U;
+  if ((na > nb ? na - nb : nb - na) > limit) {
+    return far;
+  }
+  size_t rows[3][KEY_CMP_MAX + 2U];
   size_t* prev2 = rows[0];
   size_t* prev = rows[1];
   size_t* cur = rows[2];
-  for (size_t j = 0; j <= nb; ++j) {
-    prev[j] = j;
+  for (size_t j = 0; j <= nb + 1U; ++j) {
+    prev[j] = j <= limit ? j : far;
+    prev2[j] = far;
   }
+  bool prev_over = false;  // the previous row's minimum exceeds the limit
   for (size_t i = 1; i <= na; ++i) {
-    cur[0] = i;
-    for (size_t j = 1; j <= nb; ++j) {
+    const size_t lo = i > limit ? i - limit : 1U;
+    const size_t hi = i + limit < nb ? i + limit : nb;
+    cur[lo - 1U] = lo == 1U && i <= limit ? i : far;
+    size_t row_min = cur[lo - 1U];
+    for (size_t j = lo; j <= hi; ++j) {
       const size_t cost = a[i - 1] == b[j - 1] ? 0U : 1U;
       size_t best = prev[j] + 1U;
       if (cur[j - 1] + 1U < best) {
@@ -349,8 +364,16 @@ static size_t edit_distance(const char* a, const char* b) {
       if (i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] && prev2[j - 2] + 1U < best) {
         best = prev2[j - 2] + 1U;
       }
-      cur[j] = best;
+      cur[j] = best < far ? best : far;
+      row_min = cur[j] < row_min ? cur[j] : row_min;
     }
+    if (hi < nb) {
+      cur[hi + 1U] = far;  // read by the next row as its band moves right
+    }
+    if (row_min > limit && prev_over) {
+      return far;
+    }
+    prev_over = row_min > limit;
     size_t* t = prev2;
     prev2 = prev;
     prev = cur;
@@ -368,7 +391,10 @@ static const key_desc_t* nearest_key(const char* name) {
   const key_desc_t* best = NULL;
   size_t best_d = SIZE_MAX;
   for (size_t i = 0; i < N_KEYS; ++i) {
-    size_t d = edit_distance(name, k_keys[i].name);
+    // The distance is at least the difference of the lengths: a key too short or too long to be
+    // within the limit is only a candidate by the prefix rule (a long name costs no table scan).
+    const size_t kn = strlen(k_keys[i].name);
+    size_t d = (kn > n ? kn - n : n - kn) > limit ? SIZE_MAX : edit_distance_within(name, k_keys[i].name, limit);
     if (d > limit && n >= 4U && strncmp(k_keys[i].name, name, n) == 0) {
       d = limit;  // a prefix of a key counts as close, after any real near-miss
     }
