@@ -24,9 +24,7 @@
 #ifndef HEDGER_CORE_HPP
 #define HEDGER_CORE_HPP
 
-#include <Eigen/Cholesky>
 #include <Eigen/Core>
-#include <Eigen/Eigenvalues>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -35,6 +33,7 @@
 
 #include "hedger/hedger.h"
 #include "kdtree.hpp"
+#include "linalg.hpp"
 
 namespace hg {
 
@@ -48,14 +47,13 @@ constexpr double kPivotRatioMin = 1e-12;
 
 /// Factorises a symmetric matrix; false if it is not numerically positive definite.
 template <class Mat>
-bool factor_spd(Eigen::LDLT<Mat>& ldlt, const Mat& m) noexcept {
-  ldlt.compute(m);
-  if (ldlt.info() != Eigen::Success) return false;
-  const auto d = ldlt.vectorD();
-  double dmin = d[0], dmax = d[0];
-  for (int i = 1; i < d.size(); ++i) {
-    if (d[i] < dmin) dmin = d[i];
-    if (d[i] > dmax) dmax = d[i];
+bool factor_spd(SymFactor& ldlt, const Eigen::MatrixBase<Mat>& m) noexcept {
+  if (!ldlt.compute_from(m)) return false;
+  double dmin = ldlt.pivot(0), dmax = dmin;
+  for (int i = 1; i < ldlt.size(); ++i) {
+    const double d = ldlt.pivot(i);
+    if (d < dmin) dmin = d;
+    if (d > dmax) dmax = d;
   }
   return dmin > 0.0 && dmin > kPivotRatioMin * dmax;
 }
@@ -119,14 +117,14 @@ bool spans_inputs(const Eigen::Matrix<double, D + 1, 1>* rows, uint32_t n) noexc
   {
     constexpr double eps = std::numeric_limits<double>::epsilon();
     const double delta = 4.0 * D * D * eps * tr;
-    Eigen::LDLT<MatD> ldlt(scatter);
-    if (ldlt.info() == Eigen::Success) {
-      const auto piv = ldlt.vectorD();
+    SymFactor ldlt;
+    if (ldlt.compute_from(scatter)) {
       double det = 1.0;
-      double dmin = piv[0];
+      double dmin = ldlt.pivot(0);
       for (int i = 0; i < D; ++i) {
-        det *= piv[i] > 0.0 ? piv[i] : 0.0;
-        dmin = piv[i] < dmin ? piv[i] : dmin;
+        const double piv = ldlt.pivot(i);
+        det *= piv > 0.0 ? piv : 0.0;
+        dmin = piv < dmin ? piv : dmin;
       }
       double bound = kScatterRatioMin * tr + delta;
       for (int i = 1; i < D; ++i) bound *= tr + delta;
@@ -134,11 +132,9 @@ bool spans_inputs(const Eigen::Matrix<double, D + 1, 1>* rows, uint32_t n) noexc
       if (dmin + delta <= kScatterRatioMin * tr / D) return false;
     }
   }
-  Eigen::SelfAdjointEigenSolver<MatD> eig;
-  eig.compute(scatter, Eigen::EigenvaluesOnly);
-  if (eig.info() != Eigen::Success) return false;
-  const VecD& ev = eig.eigenvalues();  // ascending
-  return ev[0] > kScatterRatioMin * ev[D - 1];
+  double ev_min = 0.0, ev_max = 0.0;
+  if (!sym_eigen_extremes(scatter, &ev_min, &ev_max)) return false;
+  return ev_min > kScatterRatioMin * ev_max;
 }
 
 /// Offsets of every array in the storage block (bytes from its start).
@@ -307,11 +303,11 @@ void predict_from(hedger& h, const double* x, const Neigh& nb, hedger_prediction
   {
     // Independent-variable hull: inside iff e^T V^-1 e <= max_i h_ii.
     const Mat& v = unweighted_ivh ? xtx : xtwx;
-    Eigen::LDLT<Mat> ldlt;
+    SymFactor ldlt;
     if (!spans_inputs<D>(rows, nb.n) || !factor_spd(ldlt, v)) {
       fb = HEDGER_FALLBACK_SINGULAR;
     } else {
-      const Mat vinv = ldlt.solve(Mat::Identity());
+      const Mat vinv = ldlt.inverse_as<Mat>();
       const double lq = vinv(D, D);
       double hmax = 0.0;
       for (uint32_t i = 0; i < nb.n; ++i) {
@@ -326,7 +322,7 @@ void predict_from(hedger& h, const double* x, const Neigh& nb, hedger_prediction
     // Ridge LWR: (X^T W X + λ diag(1…1, 0)) β = X^T W q; the intercept is not shrunk.
     Mat a = xtwx;
     for (int j = 0; j < D; ++j) a(j, j) += h.cfg.ridge;
-    Eigen::LDLT<Mat> ldlt;
+    SymFactor ldlt;
     if (!factor_spd(ldlt, a)) {
       fb = HEDGER_FALLBACK_SINGULAR;
     } else {
@@ -548,7 +544,7 @@ bool greedy_state_model(hedger& h, const double* x, double reach, GreedyResult& 
   }
   if (!unweighted_ivh) v = a;
   for (int j = 0; j < P - 1; ++j) a(j, j) += h.cfg.ridge;
-  Eigen::LDLT<Mat> af;
+  SymFactor af;
   if (!factor_spd(af, a)) return false;
   Vec beta = af.solve(xtwq);
   if (beta[D] > 0.0) {
@@ -565,7 +561,7 @@ bool greedy_state_model(hedger& h, const double* x, double reach, GreedyResult& 
     if (!factor_spd(af, a)) return false;
     beta = af.solve(xtwq);
   }
-  const Mat ainv = af.solve(Mat::Identity());
+  const Mat ainv = af.inverse_as<Mat>();
   double rss = 0.0;
   for (uint32_t i = 0; i < n; ++i) {
     const double res = h.val[nbuf[i].id] - rows[i].dot(beta);
@@ -602,7 +598,7 @@ bool greedy_state_model(hedger& h, const double* x, double reach, GreedyResult& 
     sa_t.noalias() += (w[i] * rows[i][D - 1]) * z;
   }
   for (int j = 0; j < D - 1; ++j) sa_m(j, j) += h.cfg.ridge;
-  Eigen::LDLT<SMat> sa_f;
+  SymFactor sa_f;
   if (!factor_spd(sa_f, sa_m)) return false;
   const SVec alpha = sa_f.solve(sa_t);
   const double u_anchor = alpha[D - 1];
@@ -637,9 +633,9 @@ bool greedy_state_model(hedger& h, const double* x, double reach, GreedyResult& 
   if (g.status != HEDGER_OK) return false;
   // The value of the chosen action: the regression where it interpolates, else the average.
   bool lwr = false;
-  Eigen::LDLT<Mat> vf;
+  SymFactor vf;
   if (reach <= 1.0 && factor_spd(vf, v) && g.value >= q_min(h) && g.value <= q_max(h)) {
-    const Mat vinv = vf.solve(Mat::Identity());
+    const Mat vinv = vf.inverse_as<Mat>();
     double hmax = 0.0;
     for (uint32_t i = 0; i < n; ++i) {
       double hi = rows[i].dot(vinv * rows[i]);

@@ -2,8 +2,9 @@
 // HEDGER's per-dimension algorithms behind one table: the core is templated on the input
 // dimension D (state + action, 2..HEDGER_MAX_STATE_DIM + 1) so every Eigen object is fixed-size
 // and allocation-free. Each D is compiled in its own translation unit (dim.cpp.in, generated once
-// per D by CMake) and reached through dim_ops(d): the eight instantiations are the library's
-// whole build cost, and separate units let a build spread them over every core.
+// per D by CMake) and reached through dim_ops(d): the eight instantiations are most of the
+// library's build cost, and separate units let a build spread them over every core. The
+// factorisations they share are compiled once, in linalg.cpp (see linalg.hpp).
 #ifndef HEDGER_DIMS_HPP
 #define HEDGER_DIMS_HPP
 
