@@ -88,7 +88,14 @@
 ///   be formed without action spread); an advantage-weighted anchor (neighbours weighted by
 ///   exp(A / τ σ_A), A = value above a fit on the state alone; branch learn2-advantage, not
 ///   merged) τ = 1 → final block 141.1 ± 0.7 (+2.3 ± 0.7 vs examples, 0 phase-two failures),
-///   τ = 0.3 → 143.1. None beats the examples.
+///   τ = 0.3 → 143.1. Nor do (same seeds, last phase-one block minus the example policy; baseline
+///   +2.0 ± 0.6): k_max 64 +2.4 ± 0.8, bandwidth 0.35 +10.6 ± 19.4 (failures), pessimism 3
+///   +2.9 ± 0.9, and a squared term
+///   per state dimension in the state model (so that the value's curvature across the
+///   neighbourhood, about γ^(steps) over ±2.5 m of corridor, is not counted as noise in the
+///   action's standard error; not merged) +1.9 ± 0.6, with pessimism 2 +12.6 ± 19.0 and 0
+///   +52.9 ± 59.4 (collisions). The imitation is not the state model's misfit. None beats the
+///   examples.
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are
