@@ -173,6 +173,11 @@ static void can_send_cycle(fw_loop_t* L, double v_mps, double w_radps, cia402_re
   }
 }
 
+// A TPDO1 and a TPDO2 of each drive arrived since the flags were last cleared.
+static bool can_all_new(const fw_loop_t* L) {
+  return L->drive[0].tpdo1_new && L->drive[0].tpdo2_new && L->drive[1].tpdo1_new && L->drive[1].tpdo2_new;
+}
+
 // Every SYNC sent since the NMT start has been answered by both drives' TPDO1 and TPDO2 (their
 // transmission type is synchronous: one of each per SYNC). Arrival flags alone cannot tell the
 // answer to this period's SYNC from an earlier answer still in flight (the socket and the laser's
@@ -201,10 +206,7 @@ bool fw_base_all_reports(const fw_loop_t* L) {
   if (is_rflex(L)) {
     return L->base.report_new[0] && L->base.report_new[1];
   }
-  if (L->cfg.lockstep) {
-    return can_all_answered(L);
-  }
-  return L->drive[0].tpdo1_new && L->drive[0].tpdo2_new && L->drive[1].tpdo1_new && L->drive[1].tpdo2_new;
+  return L->cfg.lockstep ? can_all_answered(L) : can_all_new(L);
 }
 
 bool fw_base_any_report(const fw_loop_t* L) {
@@ -465,7 +467,7 @@ int fw_base_start(fw_loop_t* L, char* err, size_t err_cap) {
     const int64_t deadline = now(L) + 500000;
     while (now(L) < deadline) {
       can_poll(L, now(L));
-      if (L->drive[0].tpdo1_new && L->drive[1].tpdo1_new && L->drive[0].tpdo2_new && L->drive[1].tpdo2_new) {
+      if (can_all_new(L)) {
         break;
       }
       (void)L->io.vt->wait(L->io.user, deadline);

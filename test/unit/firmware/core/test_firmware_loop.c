@@ -58,6 +58,20 @@ static void test_loop_learns_corridor_reaches_goal_from_all_poses(void** state) 
   harness_close(&g_h);
 }
 
+// Runs c's schedule on a fresh fake robot (fake seed 5; CANopen with its frames can_lag_us behind
+// the laser when canopen) for at most 100,000 ticks; returns the hash of the experience stream.
+static uint64_t run_stream(const fw_config_t* c, bool canopen, int64_t can_lag_us, int64_t* count, bool* done) {
+  assert_int_equal(canopen ? harness_open_can_lag(&g_h, c, 5, can_lag_us) : harness_open(&g_h, c, false, 5), 0);
+  harness_run(&g_h, 100000);
+  fw_loop_stats_t st;
+  fw_loop_get_stats(g_h.loop, &st);
+  *done = st.done;
+  *count = g_h.exp_count;
+  const uint64_t hash = g_h.exp_hash;
+  harness_close(&g_h);
+  return hash;
+}
+
 // The same configuration and seeds give bit-identical experience streams; another seed differs.
 static void test_loop_same_seed_bit_identical_experiences(void** state) {
   (void)state;
@@ -71,11 +85,8 @@ static void test_loop_same_seed_bit_identical_experiences(void** state) {
   int64_t counts[3];
   for (int i = 0; i < 3; ++i) {
     c.seed = i < 2 ? 11 : 12;
-    assert_int_equal(harness_open(&g_h, &c, false, 5), 0);
-    harness_run(&g_h, 100000);
-    hashes[i] = g_h.exp_hash;
-    counts[i] = g_h.exp_count;
-    harness_close(&g_h);
+    bool done = false;
+    hashes[i] = run_stream(&c, false, 0, &counts[i], &done);
   }
   print_message("experiences %lld, hash %016llx / %016llx / %016llx\n", (long long)counts[0],
                 (unsigned long long)hashes[0], (unsigned long long)hashes[1], (unsigned long long)hashes[2]);
@@ -103,14 +114,9 @@ static void test_loop_canopen_stream_independent_of_answer_lag(void** state) {
   uint64_t hashes[4];
   int64_t counts[4];
   for (int i = 0; i < 4; ++i) {
-    assert_int_equal(harness_open_can_lag(&g_h, &c, 5, lags_us[i]), 0);
-    harness_run(&g_h, 100000);
-    fw_loop_stats_t st;
-    fw_loop_get_stats(g_h.loop, &st);
-    assert_true(st.done);
-    hashes[i] = g_h.exp_hash;
-    counts[i] = g_h.exp_count;
-    harness_close(&g_h);
+    bool done = false;
+    hashes[i] = run_stream(&c, true, lags_us[i], &counts[i], &done);
+    assert_true(done);
     print_message("CAN answers %3lld ms after the scan: %lld experiences, hash %016llx\n",
                   (long long)(lags_us[i] / 1000), (long long)counts[i], (unsigned long long)hashes[i]);
   }
