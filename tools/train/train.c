@@ -150,7 +150,7 @@ static int learn(trainer_t* t, const b21r_experience_t* e, const char* path, cha
   if (e->task != (int8_t)t->cfg.task || e->state_dim != (int8_t)t->hc.state_dim) {
     fw_errfmt(err, err_cap,
         "%s: experience seq %lld is of task %s with %d state dimensions, but the configuration says task = %s (%u): "
-        "give the configuration the controller ran with (--config/--set task = ...)",
+        "give the configuration the controller ran with (--config, or --set task = ... and state_rotation = ...)",
         path, (long long)e->seq, e->task == 0 ? "corridor" : "obstacles", (int)e->state_dim,
         t->cfg.task == FW_TASK_CORRIDOR ? "corridor" : "obstacles", t->hc.state_dim);
     return -1;

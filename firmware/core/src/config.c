@@ -218,7 +218,8 @@ static const key_desc_t k_keys[] = {
    "kernel bandwidth h in scaled input units (inputs scaled to about [0, 1])"},
   {NULL, "hedger_input_scale", KIND_DLIST, OFF(hedger_input_scale), 0, 1000, true, false, NULL, "",
    "raw units per scaled unit, comma-separated: each state dimension then the action (\"\" = the task's: "
-   "corridor 10,0.5,0.5,0.25 for end distance m, lateral fraction, target angle rad, rotation rad/s)"},
+   "corridor 1,0.5,0.5,0.25 for end distance m, lateral fraction, target angle rad, rotation rad/s; obstacles "
+   "1,1,1,1,0.5; with state_rotation the executed rotation comes before the action, at 1 rad/s)"},
   {NULL, "hedger_merge_radius", KIND_DOUBLE, OFF(hedger_merge_radius), 0, 10, false, false, NULL, "0.02",
    "a new sample closer than this (scaled units) to a stored one is merged into it"},
   {NULL, "hedger_greedy_actions", KIND_INT, OFF(hedger_greedy_actions), 2, 64, false, false, NULL, "9",
@@ -275,6 +276,9 @@ static const key_desc_t k_keys[] = {
   {NULL, "example_noise_radps", KIND_DOUBLE, OFF(example_noise_radps), 0, 4, false, false, NULL, "0.3",
    "phase one, example driver: standard deviation of Gaussian noise added to every example action "
    "[rad/s] (spreads the actions the learner sees around the example's)"},
+  {NULL, "state_rotation", KIND_BOOL, OFF(state_rotation), 0, 0, false, false, NULL, "true",
+   "the learner's state ends with the rotation the base executes, the last command sent [rad/s]: the "
+   "acceleration limit ties the next rotation to it (false = the paper's task features alone)"},
 
   {"Output", "lcm_url", KIND_STRING, OFF(lcm_url), 0, 0, false, false, NULL, "",
    "LCM provider (\"\" = LCM's default or $LCM_DEFAULT_URL; \"none\" = no LCM)"},
@@ -1003,12 +1007,13 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
         origin_of(cfg, "hedger_k_max").text);
     return -1;
   }
-  const int32_t dims = (cfg->task == FW_TASK_CORRIDOR ? 3 : 4) + 1;
+  const int32_t dims = (cfg->task == FW_TASK_CORRIDOR ? 3 : 4) + (cfg->state_rotation ? 1 : 0) + 1;
   if (cfg->hedger_input_scale_n != 0 && cfg->hedger_input_scale_n != dims) {
     fw_errfmt(err, err_cap,
-        "%s: hedger_input_scale has %d values; task %s (set at %s) needs %d (state dimensions, then the action)",
+        "%s: hedger_input_scale has %d values; task %s (set at %s) needs %d (state dimensions%s, then the action)",
         origin_of(cfg, "hedger_input_scale").text, (int)cfg->hedger_input_scale_n,
-        cfg->task == FW_TASK_CORRIDOR ? "corridor" : "obstacles", origin_of(cfg, "task").text, (int)dims);
+        cfg->task == FW_TASK_CORRIDOR ? "corridor" : "obstacles", origin_of(cfg, "task").text, (int)dims,
+        cfg->state_rotation ? ", the last one the executed rotation of state_rotation" : "");
     return -1;
   }
   if (cfg->learner == FW_LEARNER_TABULAR && cfg->checkpoint_file[0] != '\0') {

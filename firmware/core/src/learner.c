@@ -31,6 +31,10 @@ static void tabular_ranges(const fw_loop_t* L, tabq_config_t* tc) {
     tc->state_min[3] = 0.0;        // obstacle distance [m], 8 = the edge of sensing
     tc->state_max[3] = 8.0;
   }
+  if (L->cfg.state_rotation) {
+    tc->state_min[L->ep.state_dim] = -L->omega_max;  // executed rotation [rad/s]
+    tc->state_max[L->ep.state_dim] = L->omega_max;
+  }
 }
 
 int fw_learner_init(fw_loop_t* L, uint64_t seed, char* err, size_t err_cap) {

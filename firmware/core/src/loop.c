@@ -54,7 +54,7 @@ static void setup_task(fw_loop_t* L) {
   L->limits.max_rotation_radps = cfg->max_rotation_radps;
   L->limits.max_translation_accel_mps2 = cfg->max_translation_accel_mps2;
   L->limits.max_rotation_accel_radps2 = cfg->max_rotation_accel_radps2;
-  L->state_dim = L->ep.state_dim;
+  L->state_dim = L->ep.state_dim + (cfg->state_rotation ? 1U : 0U);
   L->gamma = cfg->gamma > 0.0 ? cfg->gamma : tasks_episode_gamma(&L->ep);
 }
 

@@ -28,7 +28,7 @@
 #include <pthread.h>
 #include <stdatomic.h>
 
-#define FW_MAX_STATE TASKS_MAX_STATE_DIM
+#define FW_MAX_STATE (TASKS_MAX_STATE_DIM + 1)
 #define FW_MAILBOX 8
 
 typedef struct fw_drive {

@@ -33,6 +33,9 @@ void fw_run_odometry_update(fw_loop_t* L, bool run_starting) {
 }
 
 bool fw_run_observe(fw_loop_t* L) {
+  if (L->cfg.state_rotation) {
+    L->s[L->ep.state_dim] = L->cmd_w;
+  }
   return tasks_episode_observe(&L->ep, &L->scan, fw_run_odom_pose(L), L->s) == 1;
 }
 

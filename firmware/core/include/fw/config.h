@@ -205,6 +205,7 @@ typedef struct fw_config {
   double explore_hold_s;           ///< duration of an exploration segment (one held offset)
   bool advisor;                    ///< phase two: example policy acts where HEDGER knows nothing
   double example_noise_radps;      ///< phase one, example driver: std-dev of noise on its actions
+  bool state_rotation;             ///< the state ends with the rotation the base executes [rad/s] (default)
 
   // Output.
   char lcm_url[FW_CONFIG_STR_MAX]; ///< LCM provider URL; "" = LCM's default; "none" = off

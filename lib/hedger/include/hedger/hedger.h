@@ -104,6 +104,20 @@
 ///   of a run, while the rotation still ramps up at the acceleration limit, 0.29 rad/s per tick, a
 ///   rotation the 3-D state does not show), and the greedy turns more gently than the example
 ///   (pose (9.0, 0.7, 0.7): 0.29, 0.35, 0.47, 0.44, 0.40 rad/s, 0.5-0.65 θ, mostly LWA values).
+///   The executed rotation as a last state entry (controller key state_rotation, the default: the
+///   last command sent, which the acceleration limit ties the next rotation to; scale 1 rad/s).
+///   Chosen on seeds 11-20: Fig. 4 last phase-one block +1.3 ± 0.4 steps vs the example policy (was
+///   +2.0), final block 140.4 ± 0.3 and no failed phase-two evaluation run (was 158.0 ± 25.9, 9
+///   failed phase-two runs); at scale 0.25 (the action's) +0.8 ± 0.4 after phase one but the
+///   human-driven corridor (Fig. 5) lost: final block 274.7 ± 26.1 against 243.5 ± 4.3 (252.3 ± 7.0
+///   at scale 1); obstacles 17 failed phase-two runs against 26. Confirmed on seeds 1-10 (the
+///   ablations in docs/RESULTS.md, paired with the same seeds): Fig. 4 final block 0.5 ± 0.5 steps
+///   shorter (+1.1 ± 0.4 vs the examples, +2.6 ± 0.4 vs optimal), Fig. 5 final block 240.7 ± 6.0
+///   against 255.5 ± 24.6 with 2 failed phase-two runs against 9, obstacles 10 failed phase-two
+///   runs against 41 at an equal final block. Pessimism 8 on top (seeds 11-20, scale 0.25) helped
+///   Fig. 4 (+0.7 / +0.9) and cost Fig. 5 (280.1, 30 failed runs) and the obstacles (174.4 against
+///   137.8). The off-axis deficit stays (the poses heading 0.7-0.9 rad off still lose up to 2.3
+///   steps each): the first ticks of such a run are seen in only three phase-one runs per pose.
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are

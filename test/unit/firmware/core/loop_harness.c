@@ -62,6 +62,9 @@ static uint64_t fnv1a(uint64_t h, const uint8_t* p, int n) {
   return h;
 }
 
+// Bit for bit: the state carries the very value the loop commanded, not an approximation.
+static bool same_bits(double a, double b) { return memcmp(&a, &b, sizeof a) == 0; }
+
 void harness_drain(harness_t* h) {
   const fw_msg_t* m;
   while ((m = fw_pubq_peek(h->q)) != NULL) {
@@ -78,6 +81,18 @@ void harness_drain(harness_t* h) {
         }
         h->exp_next_seq = m->u.experience.seq + 1;
         h->exp_count++;
+        const b21r_experience_t* e = &m->u.experience;
+        h->exp_state_dim = e->state_dim;
+        if (h->cfg.state_rotation && e->state_dim >= 1) {
+          const int last = e->state_dim - 1;
+          const double before = e->step_id > 0 && e->run_id == h->exp_prev_run_id ? h->exp_prev_action : 0.0;
+          h->rotation_checked++;
+          if (!same_bits(e->s_next[last], e->action_radps) || !same_bits(e->s[last], before)) {
+            h->rotation_mismatches++;
+          }
+        }
+        h->exp_prev_run_id = e->run_id;
+        h->exp_prev_action = e->action_radps;
         if (m->u.experience.terminal && m->u.experience.reward > 0.0) {
           h->goals++;
         }

@@ -25,6 +25,13 @@ typedef struct harness {
   int64_t exp_count;
   int64_t exp_next_seq;     // gap detection
   int64_t exp_gaps;
+  int8_t exp_state_dim;     // of the newest experience
+  // The executed rotation in the state (cfg.state_rotation): s_next's last entry must be the
+  // experience's action, s's last entry the run's previous action (0 at a run's first step).
+  int64_t rotation_checked;
+  int64_t rotation_mismatches;
+  int32_t exp_prev_run_id;
+  double exp_prev_action;
   int64_t goals;
   b21r_eval_t last_eval;
   int evals;

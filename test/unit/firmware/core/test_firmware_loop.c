@@ -58,6 +58,36 @@ static void test_loop_learns_corridor_reaches_goal_from_all_poses(void** state) 
   harness_close(&g_h);
 }
 
+// state_rotation: the state ends with the rotation the base executes, i.e. the command in force
+// while the step ran (the previous action, after the acceleration limit), so every transition's
+// s_next ends with its own action and its s with the run's previous action (0 at the start: the
+// robot stands while it is placed). Without the option the state keeps the task's 3 entries.
+static void test_loop_state_rotation_is_the_executed_command(void** state) {
+  (void)state;
+  for (int on = 0; on <= 1; ++on) {
+    fw_config_t c;
+    harness_config(&c);
+    c.phase_one_runs = 5;
+    c.phase_two_runs = 3;
+    c.eval_every_runs = 4;
+    c.hedger_replay_passes = 2;
+    c.state_rotation = on != 0;
+    assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
+    harness_run(&g_h, 100000);
+    fw_loop_stats_t st;
+    fw_loop_get_stats(g_h.loop, &st);
+    print_message("state_rotation %d: %lld experiences, state_dim %d, executed rotation checked %lld times, %lld "
+                  "mismatches\n", on, (long long)g_h.exp_count, g_h.exp_state_dim, (long long)g_h.rotation_checked,
+                  (long long)g_h.rotation_mismatches);
+    assert_true(st.done);
+    assert_int_equal(g_h.exp_state_dim, on ? 4 : 3);
+    assert_int_equal(g_h.rotation_checked, on ? g_h.exp_count : 0);
+    assert_int_equal(g_h.rotation_mismatches, 0);
+    assert_true(g_h.exp_count > 500);
+    harness_close(&g_h);
+  }
+}
+
 // Runs c's schedule on a fresh fake robot (fake seed 5; CANopen with its frames can_lag_us behind
 // the laser when canopen) for at most 100,000 ticks; returns the hash of the experience stream.
 static uint64_t run_stream(const fw_config_t* c, bool canopen, int64_t can_lag_us, int64_t* count, bool* done) {
@@ -274,6 +304,19 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
   assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), 1);
   harness_close(&g_h);
 
+  // Learned with the executed rotation in the state (the default), loaded without it: refused
+  // with the setting that continues it, and nothing loaded.
+  assert_true(c.state_rotation);
+  fw_config_t cr = c;
+  cr.state_rotation = false;
+  assert_int_equal(harness_open(&g_h, &cr, false, 3), 0);
+  assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), -1);
+  assert_non_null(strstr(err, c.checkpoint_file));
+  assert_non_null(strstr(err, "set state_rotation = true to go on with it"));
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.store_fill, 0);
+  harness_close(&g_h);
+
   // A directory given as the checkpoint is named as such (not "truncated").
   fw_config_t cd = c;
   snprintf(cd.checkpoint_file, sizeof cd.checkpoint_file, "%s", dir);
@@ -304,6 +347,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_loop_learns_corridor_reaches_goal_from_all_poses),
       cmocka_unit_test(test_loop_same_seed_bit_identical_experiences),
+      cmocka_unit_test(test_loop_state_rotation_is_the_executed_command),
       cmocka_unit_test(test_loop_canopen_stream_independent_of_answer_lag),
       cmocka_unit_test(test_loop_tick_allocates_nothing),
       cmocka_unit_test(test_loop_checkpoint_restart_resumes),
