@@ -37,29 +37,38 @@ EXPLORE_SIGMA = 0.1
 NOMINAL_GAIN = 0.5 * (0.5 + 2.0)  # middle of the example policy's gain range
 
 
-def run_episode(env, options, choose, learner=None):
-    """One run: choose(obs) gives the rotation command; with a learner, every transition is
+def learner_state(obs, executed, rotation):
+    """The controller's learner state: the task's features (the observation), then, with
+    state_rotation (the controller's default), the rotation the base executes: the last command
+    sent (0 when a run starts)."""
+    return np.append(obs, executed) if rotation else obs
+
+
+def run_episode(env, options, choose, learner=None, rotation=True):
+    """One run: choose(state) gives the rotation command; with a learner, every transition is
     learned and the run replayed at its end. Returns (steps, reached the goal)."""
     obs, _ = env.reset(options=options)
+    state = learner_state(obs, 0.0, rotation)
     steps = 0
     while True:
-        action = choose(obs)
+        action = choose(state)
         nxt, reward, terminated, truncated, info = env.step(np.array([action]))
         steps += 1
+        nxt_state = learner_state(nxt, info["action"], rotation)
         if learner is not None:
-            learner.update(obs, info["action"], reward, None if terminated else nxt, terminated)
-        obs = nxt
+            learner.update(state, info["action"], reward, None if terminated else nxt_state, terminated)
+        state = nxt_state
         if terminated or truncated:
             if learner is not None:
                 learner.end_run()
             return steps, info["reason"] == "goal"
 
 
-def evaluate(env, choose_for_run, step_limit):
+def evaluate(env, choose_for_run, step_limit, rotation):
     """The 10 evaluation poses; returns (successes, mean steps, 95 % half-width)."""
     steps, successes = [], 0
     for index in range(b21r_learn._core.N_EVAL_STARTS):
-        n, goal = run_episode(env, {"start": "eval", "eval_index": index}, choose_for_run(index))
+        n, goal = run_episode(env, {"start": "eval", "eval_index": index}, choose_for_run(index), rotation=rotation)
         successes += goal
         if goal:
             steps.append(float(n))
@@ -85,6 +94,7 @@ def main():
     config = b21r_learn.controller_learner_config("corridor")
     config["seed"] = args.seed
     hedger = b21r_learn.Hedger(**config)
+    rotation = config["state_dim"] > env.observation_space.shape[0]  # state_rotation
     driver = b21r_learn.Driver("proportional", "corridor")
     print("learn-corridor: B21rCorridor-v0 (%s back-end), seed %d; HEDGER as the controller configures it "
           "(capacity %d, bandwidth %.2f, alpha %.1f, gamma %.2f, replay %s)"
@@ -101,7 +111,7 @@ def main():
                 ref.gain = NOMINAL_GAIN
             return lambda obs: core.driver_action(ref)
 
-        ok, mean, half = evaluate(env, ref_for_run, step_limit)
+        ok, mean, half = evaluate(env, ref_for_run, step_limit, rotation)
         print("REFERENCE %-26s %2d/10 reached the goal, mean %.1f +- %.1f steps" % (name, ok, mean, half))
 
     def learned(obs):
@@ -127,13 +137,14 @@ def main():
     for run in range(runs):
         phase = 1 if run < args.phase_one_runs else 2
         driver.begin_run(int(rng.integers(0, 2**63 - 1)))
-        steps, goal = run_episode(env, {"start": "training"}, phase_one if phase == 1 else phase_two, learner=hedger)
+        steps, goal = run_episode(env, {"start": "training"}, phase_one if phase == 1 else phase_two, learner=hedger,
+                                  rotation=rotation)
         if phase == 1 and goal:
             example_steps.append(steps)
         print("run %4d  phase %d  train  %-7s %4d steps  store %d/%d"
               % (run, phase, "goal" if goal else "no goal", steps, len(hedger), config["capacity"]))
         if (run + 1) % args.eval_every == 0:
-            ok, mean, half = evaluate(env, lambda index: learned, step_limit)
+            ok, mean, half = evaluate(env, lambda index: learned, step_limit, rotation)
             print("EVAL block %2d after %3d training runs (phase %d): %2d/10 reached the goal, mean %.1f +- %.1f steps"
                   % ((run + 1) // args.eval_every - 1, run + 1, phase, ok, mean, half))
             if run + 1 == args.phase_one_runs:

@@ -242,6 +242,8 @@ int main(int argc, char** argv) {
     print_vec(f, e->s, dim);
     fprintf(f, ", \"s_next\": ");
     print_vec(f, e->s_next, dim);
+    fprintf(f, ", \"learner_s\": ");  // the learner's state: the features, then what state_rotation adds
+    print_vec(f, e->s, e->state_dim);
     fputc('}', f);
   }
   if (run >= 0) {

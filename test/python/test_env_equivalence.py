@@ -84,9 +84,14 @@ class EnvironmentEqualsController(unittest.TestCase):
         h.load(payload)
         self.assertEqual(len(h), trace["store_fill"])
         self.assertEqual(h.save(), payload, "save() writes the controller's payload bytes again")
+        rotation = h.config["state_dim"] > len(trace["runs"][0]["steps"][0]["s"])  # state_rotation
         for run in trace["runs"]:
+            executed = 0.0  # the learner's state ends with the last command sent, 0 at a run's start
             for st in run["steps"]:
-                p = h.predict(np.array(st["s"]), st["a"])
+                learner_s = np.append(st["s"], executed) if rotation else np.array(st["s"])
+                np.testing.assert_array_equal(learner_s, np.array(st["learner_s"]))
+                executed = st["a"]
+                p = h.predict(learner_s, st["a"])
                 self.assertEqual(p.value, st["q"])
                 self.assertEqual(p.kind, st["q_kind"])
 

@@ -262,11 +262,15 @@ class BindingContract(unittest.TestCase):
                          h.predict(s64.astype(np.float32).astype(np.float64), 0.0).value)
 
     def test_controller_learner_config(self):
+        # The task's features, then the executed rotation (state_rotation, the default), then the action.
         c = b21r_learn.controller_learner_config("corridor")
-        self.assertEqual(c["state_dim"], 3)
-        self.assertEqual(c["input_scale"], [1.0, 0.5, 0.5, 0.25])
+        self.assertEqual(c["state_dim"], 4)
+        self.assertEqual(c["input_scale"][:5], [1.0, 0.5, 0.5, 1.0, 0.25])
+        c3 = b21r_learn.controller_learner_config("corridor", {"state_rotation": False})
+        self.assertEqual(c3["state_dim"], 3)
+        self.assertEqual(c3["input_scale"][:4], [1.0, 0.5, 0.5, 0.25])
         o = b21r_learn.controller_learner_config("obstacles", {"hedger_capacity": 5000})
-        self.assertEqual((o["state_dim"], o["capacity"], o["gamma"]), (4, 5000, 0.9))
+        self.assertEqual((o["state_dim"], o["capacity"], o["gamma"]), (5, 5000, 0.9))
         with self.assertRaises(ValueError):
             b21r_learn.controller_learner_config("corridor", {"hedger_capacity": -3})
         with self.assertRaises(ValueError):

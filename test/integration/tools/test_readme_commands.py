@@ -64,9 +64,10 @@ def write_session_log(path):
             p.run_id, p.step_id, p.x_m = run_id, k + 1, 0.3 * k
             log.write_event(seq * 10, "B21R_POSE", p.encode())
             e = experience_t()
-            e.seq, e.run_id, e.step_id, e.phase, e.task, e.state_dim = seq, run_id, k, 1, 0, 3
-            e.s = [9.0 - 0.3 * k, 0.5, 0.0] + [0.0] * 5
-            e.s_next = [8.7 - 0.3 * k, 0.5, 0.0] + [0.0] * 5
+            # The controller's learner state: features, then the executed rotation (state_rotation).
+            e.seq, e.run_id, e.step_id, e.phase, e.task, e.state_dim = seq, run_id, k, 1, 0, 4
+            e.s = [9.0 - 0.3 * k, 0.5, 0.0, 0.01 * (k - 1) if k > 0 else 0.0] + [0.0] * 4
+            e.s_next = [8.7 - 0.3 * k, 0.5, 0.0, 0.01 * k] + [0.0] * 4
             e.action_radps = 0.01 * k
             e.terminal = k == 19
             e.reward = 10.0 if k == 19 else 0.0

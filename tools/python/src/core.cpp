@@ -646,7 +646,9 @@ nb::dict controller_learner_config(const std::string& task, const nb::dict& sett
     throw nb::value_error(err);
   for (auto [key, value] : settings) {
     const std::string k = nb::cast<std::string>(key);
-    const std::string v = nb::cast<std::string>(nb::str(value));
+    // A Python bool prints as True/False; the config language says true/false.
+    const std::string v = nb::isinstance<nb::bool_>(value) ? (nb::cast<bool>(value) ? "true" : "false")
+                                                           : nb::cast<std::string>(nb::str(value));
     if (fw_config_set(&cfg, k.c_str(), v.c_str(), "controller_learner_config", err, sizeof err) != 0)
       throw nb::value_error(err);
   }
