@@ -51,12 +51,13 @@ static int write_store(const fw_config_t* cfg, uint32_t n, const char* path) {
   }
   uint64_t s = 12345;
   while (hedger_size(h) < n) {
-    double u[4];
-    for (int i = 0; i < 4; ++i) {
+    double u[5];
+    for (int i = 0; i < 5; ++i) {
       s = s * 6364136223846793005ULL + 1442695040888963407ULL;
       u[i] = (double)(s >> 11) / 9007199254740992.0;
     }
-    const double state[3] = {10.0 * u[0], 0.1 + 0.8 * u[1], -1.2 + 2.4 * u[2]};
+    // end distance, lateral fraction, target angle, and (state_rotation) the executed rotation
+    const double state[4] = {10.0 * u[0], 0.1 + 0.8 * u[1], -1.2 + 2.4 * u[2], -1.0 + 2.0 * u[4]};
     const double a = -1.0 + 2.0 * u[3];
     const double q = 10.0 * pow(0.99, state[0] / 0.06) * (1.0 - 0.5 * fabs(state[1] - 0.5));
     if (hedger_insert(h, state, a, q, 0, NULL) != HEDGER_OK) {
@@ -68,7 +69,7 @@ static int write_store(const fw_config_t* cfg, uint32_t n, const char* path) {
   uint8_t meta[96];
   memset(meta, 0, sizeof meta);
   memcpy(meta, "FWMETA01", 8);
-  meta[12] = 3;   // state dimension
+  meta[12] = (uint8_t)hc.state_dim;
   meta[16] = 2;   // phase two
   const size_t size = hedger_serialized_size(h);
   void* buf = malloc(size);

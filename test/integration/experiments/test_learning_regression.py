@@ -3,13 +3,17 @@
 """experiments.learning_regression: the paper's Fig. 4 experiment at full size, as a regression
 test of learning. Corridor (10 m), proportional examples in phase one (30 runs), the learned
 policy with exploration in phase two (35 runs), an evaluation block (the 10 fixed start poses,
-learning off, greedy policy only) every 5 training runs; the example policy (its nominal gain)
-and the optimal controller are evaluated from the same 10 poses. 10 seeds (1-10), two at a time.
-Failed runs count at the step limit. Comparisons are paired by seed; one-sided t-tests at the
-95 % level (Student-t 0.95 quantile, 9 degrees of freedom: 1.833).
+learning off, greedy policy only) before the first training run and every 5 training runs; the
+example policy (its nominal gain) and the optimal controller are evaluated from the same 10 poses.
+10 seeds (1-10), two at a time. Failed runs count at the step limit. Comparisons are paired by
+seed; one-sided t-tests at the 95 % level (Student-t 0.95 quantile, 9 degrees of freedom: 1.833).
 
 Claims, each printed with its numbers; ASSERTED ones fail the test when they do not hold:
-  improves        the learned policy after phase one is significantly better than after 5 runs
+  learns          the learned policy after phase one is significantly better than before training
+  improves        the curve falls: after phase one is not significantly worse than after 5 runs
+                  (with the executed rotation in the state most seeds are at the examples' level
+                  after 5 runs already, so "significantly better than after 5 runs" is no longer
+                  a test of learning; the mean drop is printed)
   keeps           phase two does not make it significantly worse (final block vs end of phase one)
   reaches         reliability: the final block reaches the goal from at least 9.5 of 10 poses on
                   average (a collision is a failed run)
@@ -32,13 +36,13 @@ import tempfile
 
 SEEDS = list(range(1, 11))
 T95_ONE_SIDED_DF9 = 1.833
-ASSERTED = {"improves": True, "keeps": True, "reaches": True, "within_3pct": True,
+ASSERTED = {"learns": True, "improves": True, "keeps": True, "reaches": True, "within_3pct": True,
             "beats_examples": False, "near_optimal": False}
 
 
 def run(exe, conf, seed, d):
     out = os.path.join(d, "seed-%d.json" % seed)
-    cmd = [exe, "--config", conf, "--seed", str(seed), "--out", out]
+    cmd = [exe, "--config", conf, "--seed", str(seed), "--set", "eval_at_start=true", "--out", out]
     p = subprocess.run(cmd, capture_output=True, text=True)
     if p.returncode != 0:
         raise RuntimeError("%s: exit status %d: %s" % (" ".join(cmd), p.returncode, p.stderr))
@@ -70,19 +74,21 @@ def main():
             except RuntimeError as e:
                 print("FAIL:", e)
                 return 1
-    first, end_p1, final, example, optimal, successes, excess = [], [], [], [], [], [], []
+    before, first, end_p1, final, example, optimal, successes, excess = [], [], [], [], [], [], [], []
     for r in rs:
         blocks = r["learning"]["blocks"]
         p1 = [b for b in blocks if b["phase"] == 1]
-        if len(blocks) != 13 or len(p1) != 6:
-            print("FAIL: seed %d: expected 13 blocks (6 in phase one), got %d (%d)" % (r["seed"], len(blocks), len(p1)))
+        if len(blocks) != 14 or len(p1) != 7 or blocks[0]["training_runs"] != 0:
+            print("FAIL: seed %d: expected 14 blocks (7 in phase one, the first before training), got %d (%d)"
+                  % (r["seed"], len(blocks), len(p1)))
             return 1
         src = r["learning"]["totals"]["phase_two_steps_by_source"]
         # Phase two is the learner's: the example advisor may step in only where no action is known.
         if src["example"] + src["joystick"] > 0 or src["advisor"] > 0.01 * sum(src.values()):
             print("FAIL: seed %d: phase two was not driven by the learner: %s" % (r["seed"], src))
             return 1
-        first.append(mean(blocks[0]["steps"]))
+        before.append(mean(blocks[0]["steps"]))
+        first.append(mean(blocks[1]["steps"]))
         end_p1.append(mean(p1[-1]["steps"]))
         final.append(mean(blocks[-1]["steps"]))
         successes.append(blocks[-1]["successes"])
@@ -93,13 +99,15 @@ def main():
                                    mean([opt_steps[i] for i in ok_poses]) - 1.0))
         example.append(mean(r["references"]["example"]["steps"]))
         optimal.append(mean(r["references"]["optimal"]["steps"]))
-        print("seed %2d: after 5 runs %.1f, after phase one %.1f, final %.1f (%d/10); example %.1f, optimal %.1f; "
+        print("seed %2d: before training %.1f, after 5 runs %.1f, after phase one %.1f, final %.1f (%d/10); example %.1f, optimal %.1f; "
               "phase two steps: greedy %d, exploration %d, advisor %d" % (
-                  r["seed"], first[-1], end_p1[-1], final[-1], successes[-1], example[-1], optimal[-1],
+                  r["seed"], before[-1], first[-1], end_p1[-1], final[-1], successes[-1], example[-1], optimal[-1],
                   src["greedy"], src["exploration"], src["advisor"]))
     results = {}
+    m, t, h = paired(end_p1, before)
+    results["learns"] = (t < -T95_ONE_SIDED_DF9, "after phase one minus before training: %+.1f ± %.1f steps, t = %.2f" % (m, h, t))
     m, t, h = paired(end_p1, first)
-    results["improves"] = (t < -T95_ONE_SIDED_DF9, "after phase one minus after 5 runs: %+.1f ± %.1f steps, t = %.2f" % (m, h, t))
+    results["improves"] = (t <= T95_ONE_SIDED_DF9, "after phase one minus after 5 runs: %+.1f ± %.1f steps, t = %.2f" % (m, h, t))
     m, t, h = paired(final, end_p1)
     results["keeps"] = (t <= T95_ONE_SIDED_DF9, "final minus after phase one: %+.1f ± %.1f steps, t = %.2f" % (m, h, t))
     ms = mean(successes)
