@@ -34,6 +34,9 @@ void fw_run_odometry_update(fw_loop_t* L, bool run_starting) {
 
 bool fw_run_observe(fw_loop_t* L) {
   if (L->cfg.state_rotation) {
+    // The command of the previous tick after the limits: the rotation the base executes now, and
+    // the one the acceleration limit measures this tick's change against. Known exactly, unlike
+    // the odometry's noisy rate, so a lockstep run stays a function of its inputs.
     L->s[L->ep.state_dim] = L->cmd_w;
   }
   return tasks_episode_observe(&L->ep, &L->scan, fw_run_odom_pose(L), L->s) == 1;
