@@ -42,30 +42,29 @@ void fw_learning_config(const fw_loop_t* L, hedger_config_t* hc) {
     for (int32_t i = 0; i < L->cfg.hedger_input_scale_n; ++i) {
       hc->input_scale[i] = L->cfg.hedger_input_scale[i];
     }
-  } else if (fw_run_is_corridor(L)) {
-    // One scaled unit is about the distance over which the value of an action changes
-    // markedly. Along the corridor the value falls by 1 % per 6 cm of progress: a 1 m scale keeps
-    // a neighbourhood within a few tenths of a metre, where the value is nearly linear in the
-    // distance; lateral position and angle at half their useful ranges; the action's scale sets
-    // how far apart two actions must be to count as different.
-    hc->input_scale[0] = 1.0;   // end distance [m]
-    hc->input_scale[1] = 0.5;   // lateral fraction of the width
-    hc->input_scale[2] = 0.5;   // target angle [rad]
-    hc->input_scale[3] = 0.25;  // rotation [rad/s]
-    if (L->cfg.state_rotation) {
-      hc->input_scale[3] = kExecutedRotationScale;  // executed rotation [rad/s]
-      hc->input_scale[4] = 0.25;                    // rotation [rad/s]
-    }
   } else {
-    hc->input_scale[0] = 1.0;   // goal bearing [rad]
-    hc->input_scale[1] = 1.0;   // goal distance [m]
-    hc->input_scale[2] = 1.0;   // obstacle bearing [rad]
-    hc->input_scale[3] = 1.0;   // obstacle distance [m]
-    hc->input_scale[4] = 0.5;   // rotation [rad/s]
-    if (L->cfg.state_rotation) {
-      hc->input_scale[4] = kExecutedRotationScale;  // executed rotation [rad/s]
-      hc->input_scale[5] = 0.5;                     // rotation [rad/s]
+    // The inputs are the task's features, then (state_rotation) the executed rotation, then the
+    // action: the feature scales per task, the other two by position.
+    const uint32_t features = L->ep.state_dim;
+    if (fw_run_is_corridor(L)) {
+      // One scaled unit is about the distance over which the value of an action changes
+      // markedly. Along the corridor the value falls by 1 % per 6 cm of progress: a 1 m scale
+      // keeps a neighbourhood within a few tenths of a metre, where the value is nearly linear in
+      // the distance; lateral position and angle at half their useful ranges; the action's scale
+      // sets how far apart two actions must be to count as different.
+      hc->input_scale[0] = 1.0;  // end distance [m]
+      hc->input_scale[1] = 0.5;  // lateral fraction of the width
+      hc->input_scale[2] = 0.5;  // target angle [rad]
+    } else {
+      hc->input_scale[0] = 1.0;  // goal bearing [rad]
+      hc->input_scale[1] = 1.0;  // goal distance [m]
+      hc->input_scale[2] = 1.0;  // obstacle bearing [rad]
+      hc->input_scale[3] = 1.0;  // obstacle distance [m]
     }
+    if (L->cfg.state_rotation) {
+      hc->input_scale[features] = kExecutedRotationScale;  // executed rotation [rad/s]
+    }
+    hc->input_scale[L->state_dim] = fw_run_is_corridor(L) ? 0.25 : 0.5;  // rotation (the action) [rad/s]
   }
   hc->merge_radius = L->cfg.hedger_merge_radius;
   hc->greedy_coarse_actions = (uint32_t)L->cfg.hedger_greedy_actions;
@@ -174,7 +173,7 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
              path, path);
     return -1;
   }
-  const uint32_t dim_other_rotation = L->cfg.state_rotation ? L->state_dim - 1U : L->state_dim + 1U;
+  const uint32_t dim_other_rotation = L->ep.state_dim + (L->cfg.state_rotation ? 0U : 1U);  // the other setting's
   if (g.task == L->cfg.task && g.state_dim == dim_other_rotation) {
     free(payload);
     snprintf(err, err_cap,
