@@ -46,6 +46,7 @@ void fw_learning_config(const fw_loop_t* L, hedger_config_t* hc) {
     // The inputs are the task's features, then (state_rotation) the executed rotation, then the
     // action: the feature scales per task, the other two by position.
     const uint32_t features = L->ep.state_dim;
+    double action_scale;
     if (fw_run_is_corridor(L)) {
       // One scaled unit is about the distance over which the value of an action changes
       // markedly. Along the corridor the value falls by 1 % per 6 cm of progress: a 1 m scale
@@ -55,16 +56,18 @@ void fw_learning_config(const fw_loop_t* L, hedger_config_t* hc) {
       hc->input_scale[0] = 1.0;  // end distance [m]
       hc->input_scale[1] = 0.5;  // lateral fraction of the width
       hc->input_scale[2] = 0.5;  // target angle [rad]
+      action_scale = 0.25;       // rotation [rad/s]
     } else {
       hc->input_scale[0] = 1.0;  // goal bearing [rad]
       hc->input_scale[1] = 1.0;  // goal distance [m]
       hc->input_scale[2] = 1.0;  // obstacle bearing [rad]
       hc->input_scale[3] = 1.0;  // obstacle distance [m]
+      action_scale = 0.5;        // rotation [rad/s]
     }
     if (L->cfg.state_rotation) {
       hc->input_scale[features] = kExecutedRotationScale;  // executed rotation [rad/s]
     }
-    hc->input_scale[L->state_dim] = fw_run_is_corridor(L) ? 0.25 : 0.5;  // rotation (the action) [rad/s]
+    hc->input_scale[L->state_dim] = action_scale;
   }
   hc->merge_radius = L->cfg.hedger_merge_radius;
   hc->greedy_coarse_actions = (uint32_t)L->cfg.hedger_greedy_actions;
