@@ -265,10 +265,11 @@ class BindingContract(unittest.TestCase):
         # The task's features, then the executed rotation (state_rotation, the default), then the action.
         c = b21r_learn.controller_learner_config("corridor")
         self.assertEqual(c["state_dim"], 4)
-        self.assertEqual(c["input_scale"][:5], [1.0, 0.5, 0.5, 1.0, 0.25])
+        self.assertEqual(c["input_scale"][:5], [1.0, 0.5, 0.125, 1.0, 0.25])
+        self.assertEqual((c["k_min"], c["k_max"]), (6, 64))
         c3 = b21r_learn.controller_learner_config("corridor", {"state_rotation": False})
         self.assertEqual(c3["state_dim"], 3)
-        self.assertEqual(c3["input_scale"][:4], [1.0, 0.5, 0.5, 0.25])
+        self.assertEqual(c3["input_scale"][:4], [1.0, 0.5, 0.125, 0.25])
         o = b21r_learn.controller_learner_config("obstacles", {"hedger_capacity": 5000})
         self.assertEqual((o["state_dim"], o["capacity"], o["gamma"]), (5, 5000, 0.9))
         with self.assertRaises(ValueError):

@@ -212,13 +212,13 @@ static const key_desc_t k_keys[] = {
    "stored samples of the value function (fixed memory)"},
   {NULL, "hedger_k_min", KIND_INT, OFF(hedger_k_min), 1, 64, false, false, NULL, "6",
    "fewer neighbours than this and HEDGER answers 'unknown'"},
-  {NULL, "hedger_k_max", KIND_INT, OFF(hedger_k_max), 2, 64, false, false, NULL, "32",
-   "neighbourhood size of a prediction"},
+  {NULL, "hedger_k_max", KIND_INT, OFF(hedger_k_max), 2, 64, false, false, NULL, "64",
+   "neighbourhood size of a prediction (cost: the tick's greedy search and update grow with it)"},
   {NULL, "hedger_bandwidth", KIND_DOUBLE, OFF(hedger_bandwidth), 0, 100, true, false, NULL, "0.25",
    "kernel bandwidth h in scaled input units (inputs scaled to about [0, 1])"},
   {NULL, "hedger_input_scale", KIND_DLIST, OFF(hedger_input_scale), 0, 1000, true, false, NULL, "",
    "raw units per scaled unit, comma-separated: each state dimension then the action (\"\" = the task's: "
-   "corridor 1,0.5,0.5,0.25 for end distance m, lateral fraction, target angle rad, rotation rad/s; obstacles "
+   "corridor 1,0.5,0.125,0.25 for end distance m, lateral fraction, target angle rad, rotation rad/s; obstacles "
    "1,1,1,1,0.5; with state_rotation the executed rotation comes before the action, at 1 rad/s)"},
   {NULL, "hedger_merge_radius", KIND_DOUBLE, OFF(hedger_merge_radius), 0, 10, false, false, NULL, "0.02",
    "a new sample closer than this (scaled units) to a stored one is merged into it"},

@@ -10,6 +10,7 @@
 // The robot is the in-process fake (lockstep); its simulation time is excluded. The store is
 // pre-filled through a checkpoint of synthetic samples spread over the corridor's state space,
 // then the learned policy drives with learning on (phase two), as on the robot.
+// Arguments: `--set key=value` (repeatable) measures another setting, e.g. a larger hedger_k_max.
 #define _POSIX_C_SOURCE 200809L
 #include "fw/checkpoint.h"
 #include "loop_harness.h"
@@ -85,7 +86,7 @@ static int write_store(const fw_config_t* cfg, uint32_t n, const char* path) {
   return rc;
 }
 
-int main(void) {
+int main(int argc, char** argv) {
   const uint32_t sizes[] = {1000, 10000, 20000, 100000};
   const int ticks = 3000;
   const int64_t target_us = 2000;  // at 20k samples
@@ -101,6 +102,17 @@ int main(void) {
   for (size_t k = 0; k < sizeof sizes / sizeof sizes[0]; ++k) {
     fw_config_t c;
     harness_config(&c);
+    for (int a = 1; a < argc; ++a) {
+      if (strcmp(argv[a], "--set") != 0 || a + 1 == argc) {
+        fprintf(stderr, "bench: usage: %s [--set key=value]...\n", argv[0]);
+        return 2;
+      }
+      char err[FW_CONFIG_ERR_MAX];
+      if (fw_config_set_arg(&c, argv[++a], err, sizeof err) != 0) {
+        fprintf(stderr, "bench: %s\n", err);
+        return 2;
+      }
+    }
     c.phase_one_runs = 0;
     c.phase_two_runs = 1000;
     c.eval_every_runs = 1000;

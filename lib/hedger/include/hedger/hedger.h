@@ -123,7 +123,17 @@
 ///   steps at 0.25, -0.8 ± 0.2 at 0.125, -0.6 ± 0.5 at 0.0625 (10 failed phase-two runs: too few
 ///   neighbours); but Fig. 5 (the noisier human examples) +6.8 ± 18.0 at 0.25 and +13.4 ± 35.3 at
 ///   0.125 with 11 failed phase-two runs against 5. Confirmed for Fig. 4 on seeds 1-10
-///   (ablation_angle_scale: -0.4 ± 0.4, +0.7 ± 0.3 vs the examples); the default stays 0.5.
+///   (ablation_angle_scale: -0.4 ± 0.4, +0.7 ± 0.3 vs the examples); the default stayed 0.5.
+///   With a larger neighbourhood the finer angle keeps Fig. 5 (seeds 11-20, final block against
+///   k_max 32 and 0.5 rad, paired; failed phase-two runs of 700 in brackets): k_max 64 (the
+///   ceiling) and 0.125 rad: Fig. 4 -0.8 ± 0.2 (0), Fig. 5 -4.6 ± 4.2 (2 against 5; after phase
+///   one -17.5 ± 6.8); k_max 64 alone: Fig. 4 +0.2 ± 0.4, Fig. 5 -10.7 ± 5.6 (1), obstacles
+///   -16.4 ± 13.3 (10 against 17). Both are the defaults now (controller keys hedger_k_max and
+///   the corridor's scales in learning.c). Confirmed on seeds 1-10: Fig. 4 -0.6 ± 0.3 (+0.5 ± 0.2
+///   vs the examples, +2.0 ± 0.2 vs optimal, 0 failed runs against 1), obstacles -14.8 ± 19.2 (5
+///   against 10), Fig. 5 after phase one -18.5 ± 4.6 but final block +6.7 ± 20.5, not significant
+///   (one seed failed 2 runs late in phase two; 3 against 2). Cost per tick (firmware.bench, 20k
+///   points, tick compute): p50 74 us against 59, max 576 us against 412.
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are

@@ -346,6 +346,7 @@ static void test_config_validate_cross_key_rules(void** state) {
   c.laser_fov_deg = 100;
   assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
   fw_config_defaults(&c);
+  c.hedger_k_max = 32;
   c.hedger_k_min = 40;
   assert_int_equal(fw_config_validate(&c, err, sizeof err), -1);
   assert_non_null(strstr(err, "hedger_k_min"));
@@ -401,7 +402,7 @@ static void test_config_validate_errors_carry_file_and_line(void** state) {
     const char* set_arg;    // then applied with --set (NULL: none)
     const char* want[2];    // substrings of the error
   } cases[] = {
-      {"# robot\nalpha = 0.3\nhedger_k_min = 40\n", NULL, {"robot.conf:3: hedger_k_min (40)", "(32, set at default)"}},
+      {"# robot\nalpha = 0.3\nhedger_k_min = 40\nhedger_k_max = 32\n", NULL, {"robot.conf:3: hedger_k_min (40)", "robot.conf:4)"}},
       {"hedger_k_max = 4\n", "hedger_k_min=5", {"--set: hedger_k_min (5)", "robot.conf:1)"}},
       {"\nlaser_resolution_deg = 0.25\n", NULL, {"robot.conf:2: laser_resolution_deg = 0.25", "(set at default;"}},
       {"task = obstacles\nstate_rotation = false\n", "hedger_input_scale=1,2,3,4", {"--set: hedger_input_scale has 4 values", "robot.conf:1) needs 5"}},
