@@ -133,7 +133,13 @@
 ///   vs the examples, +2.0 ± 0.2 vs optimal, 0 failed runs against 1), obstacles -14.8 ± 19.2 (5
 ///   against 10), Fig. 5 after phase one -18.5 ± 4.6 but final block +6.7 ± 20.5, not significant
 ///   (one seed failed 2 runs late in phase two; 3 against 2). Cost per tick (firmware.bench, 20k
-///   points, tick compute): p50 74 us against 59, max 576 us against 412.
+///   points, tick compute): p50 74 us against 59, max 576 us against 412. The price is early
+///   learning: with few runs a state's fine neighbourhood is often empty (Fig. 4, seeds 1-10,
+///   after 5 runs 5.2/10 poses against 9.9/10 at 0.5 rad). A wider second attempt (greedy_reach 8
+///   instead of 3) recovers it on seeds 11-20 (Fig. 4 after 5 runs 227.0 steps against 511.7,
+///   after 10 runs 140.2 against 296.1, final block 139.6 both) but cost failed phase-two runs
+///   elsewhere (Fig. 5 5 against 2, final +9.8 ± 17.1; obstacles 26 against 10, +4.2 ± 12.6);
+///   greedy_reach 5: Fig. 4 365.2 after 5 runs. Not adopted.
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are
