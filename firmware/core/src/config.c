@@ -240,9 +240,9 @@ static const key_desc_t k_keys[] = {
    "state, quadratic in the action (falls back to per_action where it cannot be formed)"},
   {NULL, "hedger_greedy_pessimism", KIND_DOUBLE, OFF(hedger_greedy_pessimism), 0, 1000, false, false, NULL, "4",
    "the greedy search ranks actions by value - this x the regression's standard error"},
-  {NULL, "hedger_greedy_reach", KIND_DOUBLE, OFF(hedger_greedy_reach), 1, 100, false, false, NULL, "3",
+  {NULL, "hedger_greedy_reach", KIND_DOUBLE, OFF(hedger_greedy_reach), 0, 100, false, false, NULL, "0",
    "state_model: where a state has too few neighbours, form the model again with the kernel widened by "
-   "this factor (1 = no)"},
+   "this factor (1 = no; 0 = the task's: corridor 8, obstacles 3)"},
   {NULL, "phase_one_driver", KIND_ENUM, OFF(phase_driver), 0, 0, false, false, k_driver, "example",
    "phase one is driven by the example policy (code), the operator's joystick (B21R_TELEOP), or a "
    "simulated sloppy human driver (code)"},
@@ -1005,6 +1005,11 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
     fw_errfmt(err, err_cap, "%s: hedger_k_min (%d) must not exceed hedger_k_max (%d, set at %s)",
         origin_of(cfg, "hedger_k_min").text, (int)cfg->hedger_k_min, (int)cfg->hedger_k_max,
         origin_of(cfg, "hedger_k_max").text);
+    return -1;
+  }
+  if (cfg->hedger_greedy_reach > 0.0 && cfg->hedger_greedy_reach < 1.0) {
+    fw_errfmt(err, err_cap, "%s: hedger_greedy_reach = %g must be 0 (the task's) or at least 1 (1 = no widening)",
+        origin_of(cfg, "hedger_greedy_reach").text, cfg->hedger_greedy_reach);
     return -1;
   }
   const int32_t dims = (cfg->task == FW_TASK_CORRIDOR ? 3 : 4) + (cfg->state_rotation ? 1 : 0) + 1;

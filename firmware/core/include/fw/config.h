@@ -189,7 +189,7 @@ typedef struct fw_config {
   double hedger_replay_lambda;     ///< λ of the replay's λ-return target (0 Q-learning, 1 the run's return)
   int32_t hedger_greedy_method;    ///< hedger_greedy_method_t
   double hedger_greedy_pessimism;  ///< κ: greedy ranks by value − κ · standard error
-  double hedger_greedy_reach;      ///< state model: kernel widening where the state has too few neighbours
+  double hedger_greedy_reach;      ///< state model: kernel widening where the state has too few neighbours (0 = the task's)
   int32_t phase_driver;            ///< fw_driver_t: who drives phase one
   int32_t phase_switch;            ///< fw_phase_switch_t
   int32_t phase_one_runs;          ///< training runs in phase one (paper: 30)

@@ -409,6 +409,7 @@ static void test_config_validate_errors_carry_file_and_line(void** state) {
       {"alpha = 0.2\n", "hedger_input_scale=1,2,3,4", {"--set: hedger_input_scale has 4 values", "needs 5 (state dimensions, the last one the executed rotation"}},
       {"seed = 2\nreposition = emulator\n", NULL, {"robot.conf:2: reposition = emulator needs emulator_control", NULL}},
       {"queue_capacity = 1000\n", NULL, {"robot.conf:1: queue_capacity = 1000", NULL}},
+      {"\nhedger_greedy_reach = 0.5\n", NULL, {"robot.conf:2: hedger_greedy_reach = 0.5 must be 0", NULL}},
       {"phase_one_runs = 0\nphase_two_runs = 0\n", NULL, {"robot.conf:1: phase_one_runs", "robot.conf:2): nothing to learn"}},
       {"phase_switch = auto\nphase_one_runs = 3\n", NULL, {"default: auto_switch_min_runs (5)", "robot.conf:2), the latest switch"}},
   };
