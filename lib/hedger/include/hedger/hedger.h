@@ -135,11 +135,14 @@
 ///   (one seed failed 2 runs late in phase two; 3 against 2). Cost per tick (firmware.bench, 20k
 ///   points, tick compute): p50 74 us against 59, max 576 us against 412. The price is early
 ///   learning: with few runs a state's fine neighbourhood is often empty (Fig. 4, seeds 1-10,
-///   after 5 runs 5.2/10 poses against 9.9/10 at 0.5 rad). A wider second attempt (greedy_reach 8
-///   instead of 3) recovers it on seeds 11-20 (Fig. 4 after 5 runs 227.0 steps against 511.7,
-///   after 10 runs 140.2 against 296.1, final block 139.6 both) but cost failed phase-two runs
-///   elsewhere (Fig. 5 5 against 2, final +9.8 ± 17.1; obstacles 26 against 10, +4.2 ± 12.6);
-///   greedy_reach 5: Fig. 4 365.2 after 5 runs. Not adopted.
+///   after 5 runs 5.2/10 poses against 9.9/10 at 0.5 rad). A wider second attempt for the
+///   corridor (greedy_reach 8 instead of 3; the controller's task default) recovers most of it,
+///   seeds 11-20, paired against reach 3: Fig. 4 after 5 runs -284.7 ± 87.5 steps, after 10 runs
+///   -155.8 ± 56.9, final block 0.0 ± 0.1; Fig. 5 after 5 runs -137.7 ± 68.6, final +9.8 ± 17.1
+///   (5 failed phase-two runs against 2). Greedy_reach 5: Fig. 4 365.2 after 5 runs. Obstacles
+///   keep 3 (reach 8 there: final +4.2 ± 12.6, 26 failed runs against 10; reach 5: 3 failed).
+///   Seeds 1-10 (docs/RESULTS.md): Fig. 4 after 5 runs 262.3 against 553.5, final +0.2 ± 0.2;
+///   Fig. 5 final -7.4 ± 17.5 (1 failed run against 3); tick cost unchanged (firmware.bench).
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are
