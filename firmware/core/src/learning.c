@@ -51,14 +51,15 @@ void fw_learning_config(const fw_loop_t* L, hedger_config_t* hc) {
       // One scaled unit is about the distance over which the value of an action changes
       // markedly. Along the corridor the value falls by 1 % per 6 cm of progress: a 1 m scale
       // keeps a neighbourhood within a few tenths of a metre, where the value is nearly linear in
-      // the distance; lateral position and angle at half their useful ranges; the action's scale
-      // sets how far apart two actions must be to count as different. The target angle is
-      // finer (0.125 rad): a run that starts heading far off the axis is then judged by runs that
-      // started at a similar heading, not by the on-axis majority (hedger.h, "Choices").
+      // the distance; the lateral position at half its useful range; the action's scale sets how
+      // far apart two actions must be to count as different. The target angle is finer (0.125
+      // rad, about a tenth of its range): a run that starts heading far off the axis is then
+      // judged by runs that started at a similar heading, not by the on-axis majority (hedger.h,
+      // "Choices").
       hc->input_scale[0] = 1.0;    // end distance [m]
       hc->input_scale[1] = 0.5;    // lateral fraction of the width
       hc->input_scale[2] = 0.125;  // target angle [rad]
-      action_scale = 0.25;       // rotation [rad/s]
+      action_scale = 0.25;         // rotation [rad/s]
     } else {
       hc->input_scale[0] = 1.0;  // goal bearing [rad]
       hc->input_scale[1] = 1.0;  // goal distance [m]
