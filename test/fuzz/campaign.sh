@@ -35,6 +35,8 @@ targets=("$@")
 if ((${#targets[@]} == 0)); then
   mapfile -t targets < <(ls test/fuzz/corpus)
 fi
+# ledger_totals LEDGER: "executions wall_s chunks" summed over its rows (date commit executions wall_s result)
+ledger_totals() { awk '{e += $3; w += $4; n++} END {print e + 0, w + 0, n + 0}' "$1"; }
 printf '%-15s %12s %10s %7s  %s\n' target executions wall_s chunks result
 for t in "${targets[@]}"; do
   mkdir -p "$out/$t"
@@ -42,8 +44,7 @@ for t in "${targets[@]}"; do
   touch "$ledger"
   result="no finding"
   while :; do
-    # ledger columns: date commit executions wall_s result
-    read -r done_execs done_wall chunks < <(awk '{e += $3; w += $4; n++} END {print e + 0, w + 0, n + 0}' "$ledger")
+    read -r done_execs done_wall chunks < <(ledger_totals "$ledger")
     if grep -q FINDING "$ledger"; then
       result="FINDING earlier: see $ledger"
       break
@@ -81,7 +82,7 @@ for t in "${targets[@]}"; do
       break
     fi
   done
-  read -r done_execs done_wall chunks < <(awk '{e += $3; w += $4; n++} END {print e + 0, w + 0, n + 0}' "$ledger")
+  read -r done_execs done_wall chunks < <(ledger_totals "$ledger")
   starved=$(grep -c interrupted-by-starvation "$ledger" || true)
   ((starved == 0)) || result="$result ($starved chunk(s) cut short by a starvation timeout whose input reran fine)"
   printf '%-15s %12s %10s %7s  %s\n' "$t" "$done_execs" "$done_wall" "$chunks" "$result"

@@ -91,6 +91,20 @@ int main(int argc, char** argv) {
   const int ticks = 3000;
   const int64_t target_us = 2000;  // at 20k samples
   static int64_t t_us[3000];
+  // The harness's settings with the command line's --set applied, once, before anything is made.
+  fw_config_t base;
+  harness_config(&base);
+  for (int a = 1; a < argc; ++a) {
+    if (strcmp(argv[a], "--set") != 0 || a + 1 == argc) {
+      fprintf(stderr, "bench: usage: %s [--set key=value]...\n", argv[0]);
+      return 2;
+    }
+    char err[FW_CONFIG_ERR_MAX];
+    if (fw_config_set_arg(&base, argv[++a], err, sizeof err) != 0) {
+      fprintf(stderr, "bench: %s\n", err);
+      return 2;
+    }
+  }
   char dir[] = "/tmp/b21r-bench-XXXXXX";
   if (mkdtemp(dir) == NULL) {
     return 1;
@@ -100,19 +114,7 @@ int main(int argc, char** argv) {
          "run_ends", "store_end");
   int status = 0;
   for (size_t k = 0; k < sizeof sizes / sizeof sizes[0]; ++k) {
-    fw_config_t c;
-    harness_config(&c);
-    for (int a = 1; a < argc; ++a) {
-      if (strcmp(argv[a], "--set") != 0 || a + 1 == argc) {
-        fprintf(stderr, "bench: usage: %s [--set key=value]...\n", argv[0]);
-        return 2;
-      }
-      char err[FW_CONFIG_ERR_MAX];
-      if (fw_config_set_arg(&c, argv[++a], err, sizeof err) != 0) {
-        fprintf(stderr, "bench: %s\n", err);
-        return 2;
-      }
-    }
+    fw_config_t c = base;
     c.phase_one_runs = 0;
     c.phase_two_runs = 1000;
     c.eval_every_runs = 1000;
