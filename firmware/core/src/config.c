@@ -268,14 +268,17 @@ static const key_desc_t k_keys[] = {
   {NULL, "explore_sigma_radps", KIND_DOUBLE, OFF(explore_sigma_radps), 0, 4, false, false, NULL, "0.1",
    "phase two: standard deviation of the offset an exploration segment adds to the greedy action [rad/s]"},
   {NULL, "explore_probability", KIND_DOUBLE, OFF(explore_probability), 0, 1, false, false, NULL, "0.2",
-   "probability per training step (outside a segment) that an exploration segment starts"},
+   "probability per training step (outside a segment) that an exploration segment starts; phase one's "
+   "example dither (example_noise_radps) starts its segments the same way"},
   {NULL, "explore_hold_s", KIND_DOUBLE, OFF(explore_hold_s), 0, 100, false, false, NULL, "0",
-   "duration of an exploration segment: one offset held this long (0 = a new offset every step)"},
+   "duration of an exploration segment, and of a phase-one dither segment: one offset held this long (0 = "
+   "one step)"},
   {NULL, "advisor", KIND_BOOL, OFF(advisor), 0, 0, false, false, NULL, "true",
    "phase two training: the example policy acts where HEDGER knows no action at all"},
   {NULL, "example_noise_radps", KIND_DOUBLE, OFF(example_noise_radps), 0, 4, false, false, NULL, "0.3",
-   "phase one, example driver: standard deviation of Gaussian noise added to every example action "
-   "[rad/s] (spreads the actions the learner sees around the example's)"},
+   "phase one, example driver: standard deviation of the Gaussian offset a dither segment adds to the "
+   "example's action [rad/s]; segments start with explore_probability per step and last explore_hold_s "
+   "(spreads the actions the learner sees around the example's)"},
   {NULL, "state_rotation", KIND_BOOL, OFF(state_rotation), 0, 0, false, false, NULL, "true",
    "the learner's state ends with the rotation the base executes, the last command sent [rad/s]: the "
    "acceleration limit ties the next rotation to it (false = the paper's task features alone)"},

@@ -204,7 +204,7 @@ typedef struct fw_config {
   double explore_probability;      ///< probability per step of starting an exploration segment
   double explore_hold_s;           ///< duration of an exploration segment (one held offset)
   bool advisor;                    ///< phase two: example policy acts where HEDGER knows nothing
-  double example_noise_radps;      ///< phase one, example driver: std-dev of noise on its actions
+  double example_noise_radps;      ///< phase one, example driver: std-dev of a dither segment's offset
   bool state_rotation;             ///< the state ends with the rotation the base executes [rad/s] (default)
 
   // Output.

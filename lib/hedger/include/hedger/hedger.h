@@ -143,6 +143,14 @@
 ///   keep 3 (reach 8 there: final +4.2 ± 12.6, 26 failed runs against 10; reach 5: 3 failed).
 ///   Seeds 1-10 (docs/RESULTS.md): Fig. 4 after 5 runs 262.3 against 553.5, final +0.2 ± 0.2;
 ///   Fig. 5 final -7.4 ± 17.5 (1 failed run against 3); tick cost unchanged (firmware.bench).
+///   With these defaults the Fig. 4 policy is a fixed point that no exploration or search setting
+///   moves (seeds 11-20, final block minus the defaults', paired, 0-1 failed phase-two runs each):
+///   example dither σ 0.15 / 0.5 rad/s -0.2 ± 0.2 / -0.1 ± 0.3; pessimism 3 / 6 +0.2 ± 0.2 /
+///   -0.2 ± 0.2; exploration σ 0.3 -0.1 ± 0.2; exploration probability 0.5 +0.1 ± 0.2; replay
+///   lambda 1 -0.1 ± 0.2; 17 coarse greedy actions 0.0 ± 0.1; 100 phase-two runs instead of 35
+///   -0.1 ± 0.2 (the last phase-one block and the final block agree within 0.2 step in every one).
+///   Phase two re-learns its own actions: one tick's effect on the return stays below the fit's
+///   error, so value - 4 SE keeps the action the neighbours took.
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are
