@@ -153,8 +153,11 @@
 ///   error, so value - 4 SE keeps the action the neighbours took. Holding each greedy decision for
 ///   3 ticks (learning still per tick; not merged) made it worse: after phase one +0.5 ± 0.3 steps
 ///   (the coarser evaluation policy), final +1.2 ± 0.4, and with the exploration offset held as
-///   long +10.1 ± 19.5 (1 failed run); a gain would need the held action learned as one transition
-///   (reward summed, discount gamma^3), which HEDGER's fixed gamma does not express yet.
+///   long +10.1 ± 19.5 (1 failed run). Learned as one transition as well (every driver decides
+///   every N ticks, the learner sees (s, a, discounted reward sum, s after N ticks) with gamma^N;
+///   not merged): final -0.4 ± 0.2 steps against the defaults at N = 3 and N = 5, still +0.4 ± 0.2
+///   / ± 0.4 vs the per-tick example policy and +1.9 ± 0.2 / ± 0.4 vs optimal, and again no change from the
+///   last phase-one block to the final one.
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are
