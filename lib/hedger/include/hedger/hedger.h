@@ -155,9 +155,13 @@
 ///   (the coarser evaluation policy), final +1.2 ± 0.4, and with the exploration offset held as
 ///   long +10.1 ± 19.5 (1 failed run). Learned as one transition as well (every driver decides
 ///   every N ticks, the learner sees (s, a, discounted reward sum, s after N ticks) with gamma^N;
-///   not merged): final -0.4 ± 0.2 steps against the defaults at N = 3 and N = 5, still +0.4 ± 0.2
-///   / ± 0.4 vs the per-tick example policy and +1.9 ± 0.2 / ± 0.4 vs optimal, and again no change from the
-///   last phase-one block to the final one.
+///   not merged): final -0.4 ± 0.2 steps against the defaults at N = 3 and N = 5, still +0.4 vs
+///   the per-tick example policy and +1.9 vs optimal, and again no change from the last phase-one
+///   block to the final one. Exploration of whole-run policy parameters in phase two instead (each
+///   training run adds g θ + c (lateral fraction - 0.5) to the greedy action, g and c drawn once
+///   per run; not merged): σ_g = σ_c = 0.5 final +51.6 ± 42.9 (24 failed phase-two runs),
+///   σ_g = 0.25 +34.6 ± 43.3 (12), σ_c = 1 +52.2 ± 51.5 (29): the greedy policy takes up the
+///   perturbed runs' actions as its neighbours' policy.
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are
