@@ -162,6 +162,46 @@
 ///   per run; not merged): σ_g = σ_c = 0.5 final +51.6 ± 42.9 (24 failed phase-two runs),
 ///   σ_g = 0.25 +34.6 ± 43.3 (12), σ_c = 1 +52.2 ± 51.5 (29): the greedy policy takes up the
 ///   perturbed runs' actions as its neighbours' policy.
+///   Noise or bias? (seeds 11-20, paired with the defaults; scratch builds, not merged.) The stored
+///   values are noisy: at the off-axis start states (seed 11, end of phase two) the state model's
+///   weighted residual standard deviation is 0.2-0.7 in value (values about 2.5, one step about
+///   0.025, so 8-28 steps), and neighbours from one run share an offset of up to 0.4. Yet the
+///   imitation is not a noise floor. Standard errors that treat each run as one observation (a
+///   sandwich summed per run) changed nothing: final block +0.0 ± 0.2 / +0.1 ± 0.3 / +1.0 ± 0.7
+///   steps at pessimism 4 / 2 / 1. Three times the example data (90 phase-one runs) +0.1 ± 0.3
+///   after phase one (also with lambda 1), and 128 / 256 neighbours for the state model (final)
+///   +0.0 ± 0.1 / +0.1 ± 0.1. With that data and 256 neighbours, lowering the pessimism to 1 / 0
+///   gave 9 / 18 failed evaluation runs after phase one (lambda 1: 14 / 27): at the off-axis starts
+///   the wide second attempt (greedy_reach) fits a negative action slope (across its neighbourhood
+///   the large turns happen in the worse states), so the greedy turned away from the target and the
+///   target angle grew from 0.85 to 1.5 rad. Taking the neighbours' policy (the anchor) in the wide
+///   attempt instead removed every failure (0 at pessimism 0; at the default 4 it changes nothing,
+///   0.0 ± 0.2), but the value-ranked choice of the first attempt still lost to the imitation after
+///   phase one, from every one of the ten poses: pessimism 1 +1.2 ± 0.3, 0 +2.4 ± 1.0, 0 with the
+///   run's return as the target (lambda 1) +3.5 ± 1.2, lambda 0 +2.2 ± 0.9, without the executed
+///   rotation in the state +3.4 ± 1.0. Limiting each choice to ±0.1 rad/s around the anchor at
+///   pessimism 0 (with the default data): after phase one +0.3 ± 0.4, final +0.8 ± 0.4, worse run
+///   by run in phase two (±0.05: -0.3 ± 0.2 / -0.1 ± 0.2). The more the greedy trusts the fitted
+///   action effect, the worse the policy, with three times the data as well: the action effect is
+///   misjudged, not merely uncertain, and the pessimism is what keeps the policy at its teachers'
+///   level. Dropping the executed rotation from the anchor's regression in the wide attempt: final
+///   +0.3 ± 0.2. A controlled test makes the misjudgement plain: phase-one gains drawn from
+///   {0.5, 2} only (two teachers, 146.1 and 138.4 steps from the ten poses), 90 runs. The default
+///   greedy lands between them after phase one (141.9 ± 0.9: -4.2 ± 0.9 against the worse teacher,
+///   +3.5 ± 0.9 against the better); ranked by value alone (pessimism 0, 256 neighbours, the anchor
+///   in the wide attempt) it is worse than the worse teacher, 150.2 ± 2.2 (+4.0 ± 2.1), also with
+///   the run's return as the target (lambda 1: 149.1 ± 2.3) and without the executed rotation in
+///   the state (151.5 ± 2.4); the per-action search failed 45 of 100 runs. Nor are the pulls and
+///   merges the cause (without both: 157.0 ± 19.1 after phase one, 1 failed run). Near the data the
+///   fitted direction is right on average: a step of at most 0.03 rad/s from the anchor, ranked by
+///   value alone, beat the default greedy in the same test (140.8 ± 0.5, -1.1 ± 0.9) and, by
+///   little, with the default data (after phase one -0.3 ± 0.2, final -0.2 ± 0.1; with 100
+///   phase-two runs final -0.2 ± 0.2, phase two flat), while 0.1 rad/s lost (+2.3 ± 0.7). What
+///   loses is the size of the step: a choice far from the neighbours' policy leads into states the
+///   data does not cover, where the model's action effect no longer holds, and a step small enough
+///   to stay inside gains a fraction of a step per run at best. Lead: a greedy whose step is
+///   bounded by the data's coverage of the states it leads to, checked against the one-tick effects
+///   measured by rollouts in the lockstep emulator.
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are
