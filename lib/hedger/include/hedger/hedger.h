@@ -202,6 +202,57 @@
 ///   to stay inside gains a fraction of a step per run at best. Lead: a greedy whose step is
 ///   bounded by the data's coverage of the states it leads to, checked against the one-tick effects
 ///   measured by rollouts in the lockstep emulator.
+///   Planning on the values instead of the action slope does not help either (seeds 11-20, final
+///   block against the defaults, paired; scratch build, not merged). With the robot's known
+///   kinematics (the odometry model with both acceleration limits and the task's speed rule; one
+///   tick predicted within about 0.01 rad of the measured target angle) each of 21 rotations, held
+///   for H ticks, was rolled forward from the state and ranked by γ^H times the greedy value at the
+///   predicted state: H = 5 / 8 / 12 gave +36.9 ± 42.9 / +6.2 ± 3.1 / +4.5 ± 1.7 steps (27 / 1 / 0
+///   failed evaluation runs after phase one); ranked by the state model's value at the neighbours'
+///   policy there (H = 8) +27.2 ± 42.2 (11 failed); ranked by the value gradient of one state model
+///   fitted at the state itself (seed 11) the choice jumps between the action bounds and reaches
+///   0-2 of 10 poses. The learned values do not hold the few-step differences between states that
+///   such a comparison needs. Seed 11 after phase one, greedy value against the return each
+///   evaluation run then obtained, in steps: 0.6 low on average, standard deviation 7.8 over all
+///   ticks; 1.7-3.6 along the runs from the five poses with |θ| <= 0.45 rad and 5.5-15 from the
+///   five with |θ| 0.7-0.9, whose start values are up to 46 steps low (1.57 against a return of
+///   2.50). The stored values at the first ticks of the training runs are the worst (one run's
+///   first eight: 0.69 rising to 1.55, where the return changes by 1 % per tick): their targets (a
+///   tenth of each step's lambda-return is the greedy value at the next state) and the pulls of
+///   neighbouring updates lean on the local prediction, an extrapolation at the edge of the data.
+///   With the run's return as the replay target (lambda 1) the errors shrink to a standard
+///   deviation of 3.4 steps (1.5-1.9 along the runs near the axis, at most 15 steps at a start),
+///   yet the planned choice is still worse: H = 8 +16.8 ± 13.7 (6 failed runs after phase one), at
+///   the neighbours' policy +71.4 ± 70.0; with H = 1 the ranking follows the executed-rotation
+///   entry of the predicted state (its effect on the value is fitted from data in which the
+///   rotation follows the heading) and flips between ±1 rad/s near the axis. So the action's effect
+///   cannot be read from the values' dependence on the state either: the rotation entry carries the
+///   same confounding, and at the edge of the data the values themselves are off. With both
+///   remedies (lambda 1, no rotation entry; H = 8) and a recovery check (a candidate is dropped
+///   when the base, turning toward the target point from the predicted state, would still touch a
+///   wall) phase two does move for the first time: final block -0.8 ± 0.5 steps against the
+///   defaults (138.8, level with the example policy, +1.5 ± 0.4 vs optimal; 0 failed phase-two
+///   evaluation runs), but after phase one it is 17.9 ± 12.3 steps slower (157.5: on the teachers'
+///   data the plan leaves the states they visited); overriding the imitation only for a predicted
+///   gain of 3 steps -0.4 ± 0.7 / +14.4 ± 10.2, H = 12 +0.3 ± 0.6 / +12.4 ± 10.1, the 3-step
+///   override with the default lambda and rotation entry -0.4 ± 0.3 / +14.1 ± 12.3 (final / after
+///   phase one). Without the exploration and dither segments (explore_probability 0, both phases)
+///   the MC returns are less noisy and the plan after phase one is 139.3 ± 0.2 (+0.5 ± 0.2 vs the
+///   example policy), but phase two then drifts (final 139.9 ± 1.0); 100 phase-two runs stay at
+///   138.8-140.0 per block. Neither claim is reached this way. Nor by imitating the better
+///   neighbours with the more accurate values: the advantage-weighted anchor (weights exp(A / τ
+///   σ_A), A = value above a fit on the state alone) with lambda 1 after phase one / final: τ = 1
+///   -0.2 ± 0.2 / -0.1 ± 0.2, τ = 0.5 -0.1 ± 0.1 / -0.0 ± 0.4, τ = 0.2 +17.6 ± 26.1 (2 failed runs)
+///   / +0.3 ± 0.5; without the rotation entry (against the same without weights) τ = 0.5
+///   -0.3 ± 0.5 / +0.1 ± 0.5. Judging each candidate where the base settles (after the H ticks it
+///   turns toward the target point until aligned; the value is read there, in well-covered states)
+///   keeps the plan safe after phase one but no better: lambda 1 without the rotation entry
+///   +0.1 ± 0.5 after phase one, -0.4 ± 0.6 final; with the defaults +0.6 ± 0.9 / -0.0 ± 0.6. Each
+///   variant ranks by values of the policies that produced the data, and those that stay safe land
+///   within a step of the imitation: about half a step better than the average training run
+///   (140.1 steps), short of the example policy at its best gain (138.4). Lead: values within a
+///   step at the off-axis starts (lambda 1 halves their error) before any ranking by value can beat
+///   the imitation.
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are
