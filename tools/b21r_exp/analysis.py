@@ -96,6 +96,22 @@ def ref_col(seeds, name):
     return [s["refs"][name]["mean_all"] if name in s["refs"] else math.nan for s in seeds]
 
 
+def ref_label(name):
+    """A reference's name for people: example@2 -> "example policy at gain 2"."""
+    if name == "example":
+        return "example policy at its nominal gain"
+    if name.startswith("example@"):
+        return "example policy at gain %s" % name[len("example@"):]
+    return {"optimal": "optimal controller", "human": "simulated human driver"}.get(name, name)
+
+
+def best_example_ref(S):
+    """The example reference (the nominal gain or example@GAIN) with the fewest mean steps over the
+    seeds from the same poses, or None when the experiment evaluated none."""
+    names = [k for k in S["refs"] if k == "example" or k.startswith("example@")]
+    return min(names, key=lambda k: (S["refs"][k][0], k)) if names else None
+
+
 def corridor_claims(S, human):
     """Claims of Figs. 4 and 5 (corridor)."""
     seeds = S["seeds"]
@@ -110,10 +126,19 @@ def corridor_claims(S, human):
             "phase-one training run (\"best example\").",
             "learned, last phase-one block", p1, "best example (shortest phase-one run; jittered starts)",
             _col(seeds, "best_example"), "less"))
-        out.append(paired_claim(
-            "(Fair form of the same claim) better than the example policy evaluated from the same 10 poses.",
-            "learned, last phase-one block", p1, "example policy at its nominal gain, same poses",
-            ref_col(seeds, "example"), "less"))
+        best = best_example_ref(S)
+        if best is not None:
+            gains = sorted(k for k in S["refs"] if k == "example" or k.startswith("example@"))
+            of = "the best of %d gains evaluated" % len(gains) if len(gains) > 1 else "the only gain evaluated"
+            out.append(paired_claim(
+                "(Fair form of the same claim) better than the example policy at its best gain (%s), evaluated "
+                "from the same 10 poses." % of,
+                "learned, last phase-one block", p1, "%s, same poses" % ref_label(best), ref_col(seeds, best), "less"))
+            out.append(paired_claim(
+                "(Issue 10) After phase one the learned policy is at least as good as the example policy at its best "
+                "gain, same poses (tested as: not significantly worse, one-sided).",
+                "learned, last phase-one block", p1, "%s, same poses" % ref_label(best), ref_col(seeds, best),
+                "greater", holds_if_significant=False))
     else:
         out.append(paired_claim(
             "After phase two the learned policy is significantly better than the phase-one (human) runs.",

@@ -75,7 +75,7 @@ def curve_table(doc, S):
         doc.add("| %d | %.1f | %s | %s | %s | %s |" % (c["training_runs"], c["phase2_fraction"], fmt_ci(*c["mean_all"][:2]),
                                                    fmt_ci(*c["mean_succ"][:2]), fmt_ci(*c["successes"][:2]),
                                                    fmt_ci(*c["store_fill"][:2], 0)))
-    refs = ", ".join("%s %s" % (k, fmt_ci(*v[:2])) for k, v in S["refs"].items())
+    refs = ", ".join("%s %s" % (analysis.ref_label(k), fmt_ci(*v[:2])) for k, v in S["refs"].items())
     doc.add("", "Comparators (mean steps over seeds, failures at the step limit): %s; best example (shortest "
             "phase-one run) %s; mean phase-one run %s." % (refs or "none", fmt_ci(*S["best_example"][:2]),
                                                             fmt_ci(*S["mean_example"][:2])), "")

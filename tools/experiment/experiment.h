@@ -32,7 +32,7 @@
 
 #define EXP_STR_MAX 256U
 #define EXP_ERR_MAX 768U
-#define EXP_MAX_REFERENCES 4
+#define EXP_MAX_REFERENCES 8
 #define EXP_MAX_VARIANTS 16
 
 typedef enum exp_kind { EXP_LEARN = 0, EXP_EXPLORE_CORRIDOR = 1, EXP_EXPLORE_GOAL = 2 } exp_kind_t;
@@ -46,7 +46,8 @@ typedef struct exp_settings {
   int32_t first_seed;
   char world[EXP_STR_MAX];         ///< world file ("" = built from the task's specification)
   char config_dir[EXP_STR_MAX];    ///< folder of the experiment file (relative paths start there)
-  /// Reference controllers evaluated from the evaluation poses (values of evaluate_policy).
+  /// Reference controllers evaluated from the evaluation poses: values of evaluate_policy, or
+  /// example@GAIN for the example policy at GAIN [1/s] (evaluate_example_gain).
   char references[EXP_MAX_REFERENCES][16];
   int32_t n_references;
   /// One sweep axis: `key=v1|v2|...` over a controller or experiment key ("" = no variants).
@@ -68,6 +69,10 @@ typedef struct exp_settings {
 
 /// Defaults of every experiment key. O(keys).
 void exp_settings_defaults(exp_settings_t* s);
+
+/// True when `name` is a reference of the form example@GAIN with 0 < GAIN <= 100 [1/s]; then the
+/// gain is written to *gain (when gain is not NULL). O(length of name).
+bool exp_reference_example_gain(const char* name, double* gain);
 
 /// Sets one key: an `experiment.*` key into *s, any other into *cfg (fw_config_set). Errors
 /// name source, key, value and what is allowed. Returns 0 or -1.

@@ -46,7 +46,8 @@ static const xkey_t k_xkeys[] = {
    "corridor_length_m included)"},
   {"experiment.references", X_REFS, 0, 0, 0, "optimal,example",
    "reference controllers evaluated from the same evaluation poses with the same emulator seed "
-   "(controller mode = evaluate, evaluate_policy = each of these; \"\" = none)"},
+   "(controller mode = evaluate, evaluate_policy = each of these; example@GAIN = the example policy at GAIN "
+   "1/s, evaluate_example_gain; \"\" = none)"},
   {"experiment.vary", X_VARY, 0, 0, 0, "",
    "one sweep axis, KEY=V1|V2|...: each value of a controller or experiment key is a variant with its "
    "own result files (\"\" = no variants)"},
@@ -115,6 +116,24 @@ static const char* next_token(const char* p, char sep, char* out, size_t cap, bo
   return e != NULL ? e + 1 : NULL;
 }
 
+bool exp_reference_example_gain(const char* name, double* gain) {
+  static const char prefix[] = "example@";
+  if (strncmp(name, prefix, sizeof prefix - 1) != 0) {
+    return false;
+  }
+  const char* num = name + sizeof prefix - 1;
+  char* end = NULL;
+  errno = 0;
+  const double g = strtod(num, &end);
+  if (end == num || *end != '\0' || errno != 0 || !(g > 0.0 && g <= 100.0)) {
+    return false;
+  }
+  if (gain != NULL) {
+    *gain = g;
+  }
+  return true;
+}
+
 static int set_refs(exp_settings_t* s, const char* value, char* why, size_t cap) {
   exp_settings_t t = *s;
   t.n_references = 0;
@@ -126,9 +145,17 @@ static int set_refs(exp_settings_t* s, const char* value, char* why, size_t cap)
     char tok[16];
     bool too_long = false;
     p = next_token(p, ',', tok, sizeof tok, &too_long);
-    if (too_long || (strcmp(tok, "optimal") != 0 && strcmp(tok, "example") != 0 && strcmp(tok, "human") != 0)) {
-      fw_errfmt(why, cap, "a comma-separated list of optimal, example, human (values of evaluate_policy)");
+    if (too_long || !(strcmp(tok, "optimal") == 0 || strcmp(tok, "example") == 0 || strcmp(tok, "human") == 0 ||
+                      exp_reference_example_gain(tok, NULL))) {
+      fw_errfmt(why, cap, "'%s' is none of them (example@GAIN is the example policy at GAIN 1/s, 0 < GAIN <= 100, "
+                "e.g. example@2; the others are values of evaluate_policy)", tok);
       return -1;
+    }
+    for (int32_t i = 0; i < t.n_references; ++i) {
+      if (strcmp(t.references[i], tok) == 0) {
+        fw_errfmt(why, cap, "reference '%s' appears twice", tok);
+        return -1;
+      }
     }
     if (t.n_references == EXP_MAX_REFERENCES) {
       fw_errfmt(why, cap, "at most %d references", EXP_MAX_REFERENCES);
@@ -217,7 +244,7 @@ static void describe(const xkey_t* k, char* out, size_t cap) {
       snprintf(out, cap, "true or false");
       break;
     case X_REFS:
-      snprintf(out, cap, "a comma-separated list of optimal, example, human, or empty");
+      snprintf(out, cap, "a comma-separated list of optimal, example, example@GAIN, human, or empty");
       break;
     case X_VARY:
       snprintf(out, cap, "KEY=V1|V2|... or empty");

@@ -7,7 +7,10 @@
 - an exploration study writes a complete result (no temporary file left) and is a function of
   its seed (same seed: same runs; another seed: other runs);
 - corridor_length_m reaches the task and the emulator's world: the optimal controller needs
-  about (15 - 10) m / 0.6 m/s = 83 more steps in the 15 m corridor than in the 10 m one.
+  about (15 - 10) m / 0.6 m/s = 83 more steps in the 15 m corridor than in the 10 m one;
+- a reference example@GAIN evaluates the example policy at that gain: example@1.25 (the middle of
+  the corridor's range 0.5-2) drives exactly as the plain example reference, example@0.5 (the
+  gentlest) needs more steps; a misspelt, duplicated or out-of-range reference is refused by name.
 usage: test_runner.py B21R_EXPERIMENT CONFIG_DIR"""
 import json
 import os
@@ -104,6 +107,31 @@ def main():
                 fail("corridor %d m: optimal did not reach the goal in world %s" % (length, r["world"]))
             steps[length] = ref["steps"][0]
         print("optimal controller: %d steps in 10 m, %d steps in 15 m" % (steps[10], steps[15]))
+
+        for refs, wrong in (("optimal,exampel", "'exampel'"), ("example@2,example@2", "appears twice"),
+                            ("example@0", "'example@0'"), ("example@2x", "'example@2x'")):
+            p = run(exe, "--config", os.path.join(configs, "fig4_corridor_examples.conf"), "--plan",
+                    "--set", "experiment.references=" + refs)
+            if p.returncode != 2 or wrong not in p.stderr:
+                fail("references %s were not refused naming %s (%d): %s" % (refs, wrong, p.returncode, p.stderr))
+        out = os.path.join(d, "gains.json")
+        p = run(exe, "--config", os.path.join(configs, "fig4_corridor_examples.conf"), "--seed", "1", "--out", out,
+                "--set", "experiment.references=example,example@1.25,example@0.5",
+                "--set", "phase_one_runs=1", "--set", "phase_two_runs=0", "--set", "eval_starts=4")
+        if p.returncode != 0:
+            fail("example@GAIN references: %s" % p.stderr)
+        with open(out) as f:
+            refs = json.load(f)["references"]
+        if set(refs) != {"example", "example@1.25", "example@0.5"}:
+            fail("references missing from the result: %s" % sorted(refs))
+        if refs["example@1.25"]["steps"] != refs["example"]["steps"]:
+            fail("example@1.25 should drive as the nominal example: %s vs %s" % (
+                refs["example@1.25"]["steps"], refs["example"]["steps"]))
+        if not sum(refs["example@0.5"]["steps"]) > sum(refs["example"]["steps"]):
+            fail("the gentlest gain should need more steps: %s vs %s" % (
+                refs["example@0.5"]["steps"], refs["example"]["steps"]))
+        print("example policy from 4 poses: nominal gain %d steps, gain 0.5 %d steps" % (
+            sum(refs["example"]["steps"]), sum(refs["example@0.5"]["steps"])))
         if not 70 <= steps[15] - steps[10] <= 100:
             fail("the 15 m corridor should take about 83 more steps than the 10 m one")
     print("PASS")
