@@ -266,17 +266,21 @@
 ///   (seed 11, first phase-two block, the centre-line pose heading 0.9 rad off): the rotation peaks
 ///   at 0.69 rad/s where the examples turn at 1, the effective gain falls from 0.8 to 0.4 within
 ///   two seconds, and the robot stays more than 0.1 m off the centre line for about 7 s (137 steps,
-///   the example 132); with the executed rotation in the state a gently turning robot has the
-///   gentle gains' runs as neighbours and copies them. Decisions held for a second (every driver
-///   decides every 10 ticks, one transition per decision with gamma^10; scratch build, not merged)
-///   imitate better: after phase one 138.8 ± 0.2, final 138.5 ± 0.3 (-1.2 ± 0.3 against the
-///   defaults, level with the example at gain 2, +1.2 ± 0.3 vs optimal), but 579 steps after 5 runs
-///   against 227; at pessimism 100 the same (138.4), 15 ticks 139.2, 20 ticks 147.2. Lower
-///   pessimism loses at every decision period (final against pessimism 4, pessimism 2 / 1 / 0): 10
-///   ticks +0.3 / +3.7 / +43.4 (0 / 1 / 37 failed runs), 5 ticks +0.2 / +10.6 / +107.2 (0 / 2 /
-///   57): a larger action effect per decision does not make the values rank actions better than the
-///   imitation does. Measuring the default's choices against the anchor is what tells value
-///   learning from imitation; a claim of learning beyond the examples needs that ablation.
+///   the example 132). Not a copycat effect of the rotation entry (a gently turning robot finding
+///   the gentle gains' runs as neighbours): the anchor from neighbours chosen without it +0.2 ± 0.2
+///   final, the commanded instead of the executed rotation stored (the examples' full turns at the
+///   starts imitated, not the acceleration ramp) +0.0 ± 0.2 (-0.1 ± 0.3 at pessimism 100); the
+///   imitation copies a mixture of gains and lands near the average run. Decisions held for a
+///   second (every driver decides every 10 ticks, one transition per decision with gamma^10;
+///   scratch build, not merged) imitate better: after phase one 138.8 ± 0.2, final 138.5 ± 0.3
+///   (-1.2 ± 0.3 against the defaults, level with the example at gain 2, +1.2 ± 0.3 vs optimal),
+///   but 579 steps after 5 runs against 227; at pessimism 100 the same (138.4), 15 ticks 139.2, 20
+///   ticks 147.2. Lower pessimism loses at every decision period (final against pessimism 4,
+///   pessimism 2 / 1 / 0): 10 ticks +0.3 / +3.7 / +43.4 (0 / 1 / 37 failed runs), 5 ticks +0.2 /
+///   +10.6 / +107.2 (0 / 2 / 57): a larger action effect per decision does not make the values rank
+///   actions better than the imitation does. Measuring the default's choices against the anchor is
+///   what tells value learning from imitation; a claim of learning beyond the examples needs that
+///   ablation.
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are
