@@ -70,8 +70,9 @@ typedef struct exp_settings {
 /// Defaults of every experiment key. O(keys).
 void exp_settings_defaults(exp_settings_t* s);
 
-/// True when `name` is a reference of the form example@GAIN with 0 < GAIN <= 100 [1/s]; then the
-/// gain is written to *gain (when gain is not NULL). O(length of name).
+/// True when `name` is a reference of the form example@GAIN with 0 < GAIN <= 100 [1/s] written
+/// as plain decimals (digits, at most one inner point); then the gain is written to *gain (when
+/// gain is not NULL). O(length of name).
 bool exp_reference_example_gain(const char* name, double* gain);
 
 /// Sets one key: an `experiment.*` key into *s, any other into *cfg (fw_config_set). Errors

@@ -461,15 +461,18 @@ int exp_run_learn(const exp_settings_t* s, const fw_config_t* cfg_in, const exp_
   for (int32_t i = 0; i < s->n_references && rc == 0; ++i) {
     fw_config_t rc_cfg = cfg;
     char inner[EXP_ERR_MAX];
-    // example@GAIN: the example policy at that gain (the plain name: the middle of its range).
+    // example@GAIN: the example policy at that gain; the plain name always the nominal gain (the
+    // middle of its range), whatever evaluate_example_gain the experiment sets.
     double gain = 0.0;
     const bool at_gain = exp_reference_example_gain(s->references[i], &gain);
+    const bool plain_example = strcmp(s->references[i], "example") == 0;
     char gain_text[32];
     snprintf(gain_text, sizeof gain_text, "%.17g", gain);
     if (fw_config_set(&rc_cfg, "mode", "evaluate", "reference", inner, sizeof inner) != 0 ||
         fw_config_set(&rc_cfg, "evaluate_policy", at_gain ? "example" : s->references[i], "reference", inner,
                       sizeof inner) != 0 ||
-        (at_gain && fw_config_set(&rc_cfg, "evaluate_example_gain", gain_text, "reference", inner, sizeof inner) != 0)) {
+        ((at_gain || plain_example) &&
+         fw_config_set(&rc_cfg, "evaluate_example_gain", gain_text, "reference", inner, sizeof inner) != 0)) {
       fw_errfmt(err, err_cap, "%s", inner);
       rc = -1;
       break;

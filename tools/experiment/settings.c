@@ -121,7 +121,21 @@ bool exp_reference_example_gain(const char* name, double* gain) {
   if (strncmp(name, prefix, sizeof prefix - 1) != 0) {
     return false;
   }
+  // One spelling per gain: plain decimal digits with at most one point (no sign, exponent, hex,
+  // spaces, or a trailing point), so two names never stand for the same gain unnoticed.
   const char* num = name + sizeof prefix - 1;
+  int points = 0;
+  for (const char* c = num; *c != '\0'; ++c) {
+    if (*c == '.') {
+      points++;
+    } else if (*c < '0' || *c > '9') {
+      return false;
+    }
+  }
+  const size_t len = strlen(num);
+  if (len == 0 || points > 1 || num[0] == '.' || num[len - 1] == '.') {
+    return false;
+  }
   char* end = NULL;
   errno = 0;
   const double g = strtod(num, &end);
@@ -142,18 +156,25 @@ static int set_refs(exp_settings_t* s, const char* value, char* why, size_t cap)
     return 0;
   }
   for (const char* p = value; p != NULL;) {
-    char tok[16];
+    char tok[sizeof t.references[0]];
     bool too_long = false;
     p = next_token(p, ',', tok, sizeof tok, &too_long);
-    if (too_long || !(strcmp(tok, "optimal") == 0 || strcmp(tok, "example") == 0 || strcmp(tok, "human") == 0 ||
-                      exp_reference_example_gain(tok, NULL))) {
-      fw_errfmt(why, cap, "'%s' is none of them (example@GAIN is the example policy at GAIN 1/s, 0 < GAIN <= 100, "
-                "e.g. example@2; the others are values of evaluate_policy)", tok);
+    if (too_long) {
+      fw_errfmt(why, cap, "a reference name has at most %zu characters", sizeof tok - 1);
+      return -1;
+    }
+    double gain = 0.0;
+    const bool at_gain = exp_reference_example_gain(tok, &gain);
+    if (!(strcmp(tok, "optimal") == 0 || strcmp(tok, "example") == 0 || strcmp(tok, "human") == 0 || at_gain)) {
+      fw_errfmt(why, cap, "'%s' is none of them (example@GAIN is the example policy at GAIN 1/s, 0 < GAIN <= 100 in "
+                "plain decimals, e.g. example@2 or example@1.5; the others are values of evaluate_policy)", tok);
       return -1;
     }
     for (int32_t i = 0; i < t.n_references; ++i) {
-      if (strcmp(t.references[i], tok) == 0) {
-        fw_errfmt(why, cap, "reference '%s' appears twice", tok);
+      double other = 0.0;
+      if (strcmp(t.references[i], tok) == 0 ||
+          (at_gain && exp_reference_example_gain(t.references[i], &other) && !(other < gain || other > gain))) {
+        fw_errfmt(why, cap, "references '%s' and '%s' are the same", t.references[i], tok);
         return -1;
       }
     }

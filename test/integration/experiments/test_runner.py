@@ -10,7 +10,8 @@
   about (15 - 10) m / 0.6 m/s = 83 more steps in the 15 m corridor than in the 10 m one;
 - a reference example@GAIN evaluates the example policy at that gain: example@1.25 (the middle of
   the corridor's range 0.5-2) drives exactly as the plain example reference, example@0.5 (the
-  gentlest) needs more steps; a misspelt, duplicated or out-of-range reference is refused by name.
+  gentlest) needs more steps; a misspelt, duplicated (also as another spelling of one gain),
+  out-of-range or too long reference is refused by name.
 usage: test_runner.py B21R_EXPERIMENT CONFIG_DIR"""
 import json
 import os
@@ -108,8 +109,13 @@ def main():
             steps[length] = ref["steps"][0]
         print("optimal controller: %d steps in 10 m, %d steps in 15 m" % (steps[10], steps[15]))
 
-        for refs, wrong in (("optimal,exampel", "'exampel'"), ("example@2,example@2", "appears twice"),
-                            ("example@0", "'example@0'"), ("example@2x", "'example@2x'")):
+        for refs, wrong in (("optimal,exampel", "'exampel' is none"),
+                            ("example@2,example@2", "'example@2' and 'example@2' are the same"),
+                            ("example@2,example@2.0", "'example@2' and 'example@2.0' are the same"),
+                            ("optimal,example@0", "'example@0' is none"), ("optimal,example@2x", "'example@2x' is none"),
+                            ("optimal,example@2e0", "'example@2e0' is none"), ("optimal,example@+2", "'example@+2' is none"),
+                            ("optimal,example@nan", "'example@nan' is none"),
+                            ("optimal,example@0.1234567", "at most 15 characters")):
             p = run(exe, "--config", os.path.join(configs, "fig4_corridor_examples.conf"), "--plan",
                     "--set", "experiment.references=" + refs)
             if p.returncode != 2 or wrong not in p.stderr:
