@@ -105,10 +105,15 @@ def ref_label(name):
     return {"optimal": "optimal controller", "human": "simulated human driver"}.get(name, name)
 
 
+def example_refs(S):
+    """The example references the experiment evaluated: the nominal gain and each example@GAIN."""
+    return sorted(k for k in S["refs"] if k == "example" or k.startswith("example@"))
+
+
 def best_example_ref(S):
-    """The example reference (the nominal gain or example@GAIN) with the fewest mean steps over the
-    seeds from the same poses, or None when the experiment evaluated none."""
-    names = [k for k in S["refs"] if k == "example" or k.startswith("example@")]
+    """The example reference with the fewest mean steps over the seeds from the same poses, or None
+    when the experiment evaluated none."""
+    names = example_refs(S)
     return min(names, key=lambda k: (S["refs"][k][0], k)) if names else None
 
 
@@ -128,7 +133,7 @@ def corridor_claims(S, human):
             _col(seeds, "best_example"), "less"))
         best = best_example_ref(S)
         if best is not None:
-            gains = sorted(k for k in S["refs"] if k == "example" or k.startswith("example@"))
+            gains = example_refs(S)
             of = "the best of %d gains evaluated" % len(gains) if len(gains) > 1 else "the only gain evaluated"
             out.append(paired_claim(
                 "(Fair form of the same claim) better than the example policy at its best gain (%s), evaluated "

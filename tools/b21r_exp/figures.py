@@ -56,8 +56,8 @@ def learn_figure(S, title, path, command, successes_only=False):
     _hline(ax, S["refs"].get("example", (math.nan, math.nan, 0)), "example policy, nominal gain (same poses)", "-.", "#1f77b4")
     best = analysis.best_example_ref(S)
     if best is not None and best != "example":
-        _hline(ax, S["refs"][best], "%s, the best gain evaluated (same poses)" % analysis.ref_label(best)
-               .replace("example policy at", "example policy,"), (0, (1, 1)), "#17becf")
+        _hline(ax, S["refs"][best], "%s (the best gain evaluated, same poses)" % analysis.ref_label(best),
+               (0, (1, 1)), "#17becf")
     _hline(ax, S["best_example"], "best example (shortest phase-one run)", ":", "#9467bd")
     _hline(ax, S["mean_example"], "mean phase-one run", (0, (5, 2, 1, 2)), "#8c564b")
     sm, _, sn = S["switch_after"]
