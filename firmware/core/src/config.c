@@ -46,6 +46,9 @@ typedef struct key_desc {
 _Static_assert(offsetof(fw_config_t, hedger_input_scale_n) ==
                    offsetof(fw_config_t, hedger_input_scale) + FW_CONFIG_MAX_SCALES * sizeof(double),
                "list count must follow the list");
+_Static_assert(offsetof(fw_config_t, example_gain_range_n) ==
+                   offsetof(fw_config_t, example_gain_range) + FW_CONFIG_MAX_SCALES * sizeof(double),
+               "list count must follow the list");
 
 static const choice_t k_task[] = {{"corridor", FW_TASK_CORRIDOR}, {"obstacles", FW_TASK_OBSTACLES}, {NULL, 0}};
 static const choice_t k_mode[] = {{"learn", FW_MODE_LEARN}, {"evaluate", FW_MODE_EVALUATE}, {NULL, 0}};
@@ -85,6 +88,9 @@ static const key_desc_t k_keys[] = {
    "simulated human driver)"},
   {NULL, "evaluate_example_gain", KIND_DOUBLE, OFF(evaluate_example_gain), 0, 100, false, false, NULL, "0",
    "evaluate_policy = example: the example policy's gain [1/s] (0 = the middle of its training range)"},
+  {NULL, "example_gain_range", KIND_DLIST, OFF(example_gain_range), 0, 100, true, false, NULL, "",
+   "the example policy's gains [1/s] as lowest,highest: each run's gain is drawn uniformly in between "
+   "(\"\" = the task's range: corridor 0.5,2, obstacles 0.8,2)"},
   {NULL, "seed", KIND_U64, OFF(seed), 0, 9.2e18, false, false, NULL, "1",
    "root seed of every random generator (example gains, start poses, exploration)"},
   {NULL, "corridor_length_m", KIND_DOUBLE, OFF(corridor_length_m), 4, 200, false, false, NULL, "10",
@@ -1013,6 +1019,13 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
   if (cfg->hedger_greedy_reach > 0.0 && cfg->hedger_greedy_reach < 1.0) {
     fw_errfmt(err, err_cap, "%s: hedger_greedy_reach = %g must be 0 (the task's) or at least 1 (1 = no widening)",
         origin_of(cfg, "hedger_greedy_reach").text, cfg->hedger_greedy_reach);
+    return -1;
+  }
+  if (cfg->example_gain_range_n != 0 &&
+      (cfg->example_gain_range_n != 2 || cfg->example_gain_range[0] > cfg->example_gain_range[1])) {
+    fw_errfmt(err, err_cap,
+        "%s: example_gain_range needs two gains [1/s], the lowest first (e.g. \"0.5,2\"), or \"\" for the task's range",
+        origin_of(cfg, "example_gain_range").text);
     return -1;
   }
   const int32_t dims = (cfg->task == FW_TASK_CORRIDOR ? 3 : 4) + (cfg->state_rotation ? 1 : 0) + 1;

@@ -92,16 +92,23 @@ static void begin_run(fw_loop_t* L) {
   }
   tasks_driver_begin_run(&L->driver, kind, fw_run_is_corridor(L) ? TASKS_TASK_CORRIDOR : TASKS_TASK_OBSTACLES,
                          L->omega_max, run_seed);
+  const double task_lo = fw_run_is_corridor(L) ? TASKS_PROPORTIONAL_CORRIDOR_GAIN_MIN : TASKS_PROPORTIONAL_OBSTACLES_GAIN_MIN;
+  const double task_hi = fw_run_is_corridor(L) ? TASKS_PROPORTIONAL_CORRIDOR_GAIN_MAX : TASKS_PROPORTIONAL_OBSTACLES_GAIN_MAX;
+  const bool ranged = L->cfg.example_gain_range_n == 2;
+  const double lo = ranged ? L->cfg.example_gain_range[0] : task_lo;
+  const double hi = ranged ? L->cfg.example_gain_range[1] : task_hi;
+  if (ranged && kind == TASKS_DRIVER_PROPORTIONAL) {
+    // The configured range takes the place of the task's: the run's draw is rescaled, not drawn
+    // again, so every other stream (start poses, noise) stays the same as with the task's range.
+    L->driver.gain = lo + (L->driver.gain - task_lo) * ((hi - lo) / (task_hi - task_lo));
+  }
   if (L->cfg.mode == FW_MODE_EVALUATE && L->cfg.evaluate_policy == FW_EVAL_EXAMPLE) {
     // The example policy at a fixed gain: the configured one, or the middle of the range the
     // training runs draw from.
-    const double nominal = fw_run_is_corridor(L)
-                               ? 0.5 * (TASKS_PROPORTIONAL_CORRIDOR_GAIN_MIN + TASKS_PROPORTIONAL_CORRIDOR_GAIN_MAX)
-                               : 0.5 * (TASKS_PROPORTIONAL_OBSTACLES_GAIN_MIN + TASKS_PROPORTIONAL_OBSTACLES_GAIN_MAX);
-    L->driver.gain = L->cfg.evaluate_example_gain > 0.0 ? L->cfg.evaluate_example_gain : nominal;
-    if (!fw_run_is_corridor(L)) {
-      L->driver.law[0] = L->driver.gain;
-    }
+    L->driver.gain = L->cfg.evaluate_example_gain > 0.0 ? L->cfg.evaluate_example_gain : 0.5 * (lo + hi);
+  }
+  if (!fw_run_is_corridor(L) && kind == TASKS_DRIVER_PROPORTIONAL) {
+    L->driver.law[0] = L->driver.gain;  // the obstacle example policy's law holds its gain
   }
   L->mode = L->plan.kind == FW_RUN_EVAL ? B21R_STATUS_T_MODE_EVALUATING : B21R_STATUS_T_MODE_RUNNING;
   L->status_now = true;

@@ -11,7 +11,10 @@
 - a reference example@GAIN evaluates the example policy at that gain: example@1.25 (the middle of
   the corridor's range 0.5-2) drives exactly as the plain example reference, example@0.5 (the
   gentlest) needs more steps; a misspelt, duplicated (also as another spelling of one gain),
-  out-of-range or too long reference is refused by name.
+  out-of-range or too long reference is refused by name;
+- example_gain_range replaces the example policy's gain range: at 0.5,0.5 the phase-one runs and
+  the plain example reference (the middle of the range) drive at gain 0.5 (the same steps as
+  example@0.5; more training steps than at 2,2 from the same starts); a reversed range is refused.
 usage: test_runner.py B21R_EXPERIMENT CONFIG_DIR"""
 import json
 import os
@@ -138,6 +141,29 @@ def main():
                 refs["example@0.5"]["steps"], refs["example"]["steps"]))
         print("example policy from 4 poses: nominal gain %d steps, gain 0.5 %d steps" % (
             sum(refs["example"]["steps"]), sum(refs["example@0.5"]["steps"])))
+        ranged = {}
+        for rng in ("0.5,0.5", "2,2"):
+            out = os.path.join(d, "range.json")
+            p = run(exe, "--config", os.path.join(configs, "fig4_corridor_examples.conf"), "--seed", "1", "--out", out,
+                    "--set", "experiment.references=example,example@0.5", "--set", "example_gain_range=" + rng,
+                    "--set", "phase_one_runs=2", "--set", "phase_two_runs=0", "--set", "eval_starts=2",
+                    "--set", "eval_every_runs=2")
+            if p.returncode != 0:
+                fail("example_gain_range=%s: %s" % (rng, p.stderr))
+            with open(out) as f:
+                ranged[rng] = json.load(f)
+        refs = ranged["0.5,0.5"]["references"]
+        if refs["example"]["steps"] != refs["example@0.5"]["steps"]:
+            fail("with example_gain_range=0.5,0.5 the plain example should drive at gain 0.5: %s vs %s" % (
+                refs["example"]["steps"], refs["example@0.5"]["steps"]))
+        train = {rng: ranged[rng]["learning"]["blocks"][0]["training_steps"] for rng in ranged}
+        if not train["0.5,0.5"] > train["2,2"]:
+            fail("phase-one runs at gain 0.5 should need more steps than at gain 2: %s" % train)
+        print("two phase-one runs: %d steps at gain 0.5, %d at gain 2" % (train["0.5,0.5"], train["2,2"]))
+        p = run(exe, "--config", os.path.join(configs, "fig4_corridor_examples.conf"), "--plan",
+                "--set", "example_gain_range=2,1")
+        if p.returncode != 2 or "example_gain_range" not in p.stderr or "lowest first" not in p.stderr:
+            fail("a reversed example_gain_range was not refused (%d): %s" % (p.returncode, p.stderr))
         if not 70 <= steps[15] - steps[10] <= 100:
             fail("the 15 m corridor should take about 83 more steps than the 10 m one")
     print("PASS")

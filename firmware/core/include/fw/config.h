@@ -112,6 +112,10 @@ typedef struct fw_config {
   int32_t mode;                    ///< fw_mode_t
   int32_t evaluate_policy;         ///< fw_eval_policy_t (mode = evaluate only)
   double evaluate_example_gain;    ///< evaluate_policy = example: its gain [1/s]; 0 = nominal
+  /// The example policy's gains [1/s], {lowest, highest}: each run draws its gain uniformly in
+  /// between (the same draw as the task's default range, rescaled). Unset (n = 0): the task's range.
+  double example_gain_range[FW_CONFIG_MAX_SCALES];
+  int32_t example_gain_range_n;    ///< entries set: 0 (the task's range) or 2
   uint64_t seed;                   ///< root of every random generator
   double corridor_length_m;        ///< corridor task: start wall to end wall [m] (default 10)
 

@@ -358,6 +358,20 @@ static void test_config_validate_cross_key_rules(void** state) {
   c.queue_capacity = 1000;
   assert_int_equal(fw_config_validate(&c, err, sizeof err), -1);
   assert_non_null(strstr(err, "power of two"));
+  // The example policy's gain range: two gains, the lowest first; one gain or a reversed pair
+  // is refused with the key and the fix.
+  static const char* const bad_ranges[] = {"2,1", "1.5", "0.5,1,2"};
+  for (size_t i = 0; i < sizeof bad_ranges / sizeof bad_ranges[0]; ++i) {
+    fw_config_defaults(&c);
+    assert_int_equal(fw_config_set(&c, "example_gain_range", bad_ranges[i], "--set", err, sizeof err), 0);
+    assert_int_equal(fw_config_validate(&c, err, sizeof err), -1);
+    assert_non_null(strstr(err, "example_gain_range needs two gains"));
+  }
+  fw_config_defaults(&c);
+  assert_int_equal(fw_config_set(&c, "example_gain_range", "1.75,2", "--set", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
+  assert_int_equal(c.example_gain_range_n, 2);
+  assert_true(c.example_gain_range[0] < c.example_gain_range[1]);
 }
 
 // The program refuses joystick driving where no operator can drive: in lockstep, and with LCM
