@@ -248,6 +248,21 @@ def explore_goal_summary(variants):
     return rows
 
 
+def against_references(S):
+    """A variant's final block against its own references from the same poses, paired by seed:
+    the example policy at its nominal gain (the middle of the range the variant's runs drew
+    from) and the optimal controller. Returns {"final_succ": mean_ci, ref: {"mean": mean_ci,
+    "diff": paired}} for each reference the variant evaluated."""
+    seeds = S["seeds"]
+    fin = _col(seeds, "final", "mean_all")
+    out = {"final_succ": stats.mean_ci(_col(seeds, "final", "mean_succ"))}
+    for ref in ("example", "optimal"):
+        if ref in S["refs"]:
+            col = ref_col(seeds, ref)
+            out[ref] = {"mean": stats.mean_ci(col), "diff": stats.paired(fin, col, "two-sided")}
+    return out
+
+
 def ablation_comparisons(variants):
     """Every variant against the first one (the baseline order of experiment.vary), paired by seed:
     final block (failures at the step limit), training hours, phase switch point."""

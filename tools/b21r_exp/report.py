@@ -241,6 +241,21 @@ def write(out, fig_dir, path, configs_dir):
             suc = stats.mean_ci([s["final"]["successes"] for s in S["seeds"]])
             doc.add("| %s | %s | %s | %s | %s | %s |" % (v, fmt_ci(*fin[:2]), fmt_ci(*suc[:2]), fmt_ci(*S["training_hours"][:2], 2),
                                                        fmt_ci(*S["switch_after"][:2]), "baseline" if v not in same else ("yes" if same[v] else "no")))
+        doc.add("", "Each variant against its own references from the same poses (final block, paired by seed; "
+                "the example policy at its nominal gain, the middle of the gains its runs drew):", "",
+                "| variant | final block, successful runs | example policy, same poses | learned minus example | "
+                "learned minus optimal |", "|---|---|---|---|---|")
+        for v, S in summ.items():
+            R = analysis.against_references(S)
+
+            def diff(ref):
+                if ref not in R:
+                    return "not evaluated"
+                d = R[ref]["diff"]
+                return "%s, %s%s" % (fmt_ci(d["mean_diff"], d["ci"]), fmt_p(d["p"]), " (significant)" if d["significant"] else "")
+            doc.add("| %s | %s | %s | %s | %s |" % (
+                v, fmt_ci(*R["final_succ"][:2]), fmt_ci(*R["example"]["mean"][:2]) if "example" in R else "not evaluated",
+                diff("example"), diff("optimal")))
         doc.add("", "Phase-one data are identical across variants unless the variant changes phase one itself (the "
                 "automatic phase switch ends it at another run): for a seed the example policy's gains and start "
                 "poses are the same, each run's sensor noise starts from its run id, each run integrates its own "

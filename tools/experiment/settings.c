@@ -408,6 +408,18 @@ int exp_validate(const exp_settings_t* s, const fw_config_t* cfg, char* err, siz
       return -1;
     }
   }
+  // Every variant must pass the controller's checks across keys too (e.g. a reversed
+  // example_gain_range), now rather than when its task runs.
+  for (int32_t i = 0; i < s->n_vary; ++i) {
+    exp_settings_t probe_s = *s;
+    fw_config_t probe_c = *cfg;
+    char source[EXP_ERR_MAX];
+    snprintf(source, sizeof source, "experiment.vary (variant %s=%s)", s->vary_key, s->vary_values[i]);
+    if (exp_set(&probe_s, &probe_c, s->vary_key, s->vary_values[i], source, err, err_cap) != 0 ||
+        fw_config_validate(&probe_c, err, err_cap) != 0) {
+      return -1;
+    }
+  }
   if (s->kind == EXP_LEARN && cfg->mode != FW_MODE_LEARN) {
     fw_errfmt(err, err_cap, "experiment.kind = learn needs mode = learn (references are evaluated by the runner)");
     return -1;

@@ -1023,9 +1023,16 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
   }
   if (cfg->example_gain_range_n != 0 &&
       (cfg->example_gain_range_n != 2 || cfg->example_gain_range[0] > cfg->example_gain_range[1])) {
+    char given[FW_CONFIG_MAX_SCALES * 26];
+    size_t used = 0;
+    for (int32_t i = 0; i < cfg->example_gain_range_n && used < sizeof given; ++i) {
+      used += (size_t)snprintf(given + used, sizeof given - used, "%s%g", i == 0 ? "" : ",",
+                               cfg->example_gain_range[i]);
+    }
     fw_errfmt(err, err_cap,
-        "%s: example_gain_range needs two gains [1/s], the lowest first (e.g. \"0.5,2\"), or \"\" for the task's range",
-        origin_of(cfg, "example_gain_range").text);
+        "%s: example_gain_range = \"%s\": it needs two gains [1/s], the lowest first (e.g. \"0.5,2\"), or \"\" "
+        "for the task's range",
+        origin_of(cfg, "example_gain_range").text, given);
     return -1;
   }
   const int32_t dims = (cfg->task == FW_TASK_CORRIDOR ? 3 : 4) + (cfg->state_rotation ? 1 : 0) + 1;

@@ -14,7 +14,10 @@
   out-of-range or too long reference is refused by name;
 - example_gain_range replaces the example policy's gain range: at 0.5,0.5 the phase-one runs and
   the plain example reference (the middle of the range) drive at gain 0.5 (the same steps as
-  example@0.5; more training steps than at 2,2 from the same starts); a reversed range is refused.
+  example@0.5; more training steps than at 2,2 from the same starts); the task's own range 0.5,2
+  changes nothing (the draw is rescaled, so the same runs bit for bit); at 1,2 the plain example
+  drives as example@1.5, in the obstacle task at 0.8,0.8 as example@0.8; a reversed range is
+  refused, also as one variant of experiment.vary, before anything runs.
 usage: test_runner.py B21R_EXPERIMENT CONFIG_DIR"""
 import json
 import os
@@ -142,28 +145,40 @@ def main():
         print("example policy from 4 poses: nominal gain %d steps, gain 0.5 %d steps" % (
             sum(refs["example"]["steps"]), sum(refs["example@0.5"]["steps"])))
         ranged = {}
-        for rng in ("0.5,0.5", "2,2"):
+        for conf, rng, refs_set in (("fig4_corridor_examples", "0.5,0.5", "example,example@0.5"),
+                                    ("fig4_corridor_examples", "2,2", "example"),
+                                    ("fig4_corridor_examples", "", "example"),
+                                    ("fig4_corridor_examples", "0.5,2", "example"),
+                                    ("fig4_corridor_examples", "1,2", "example,example@1.5"),
+                                    ("fig9_10_obstacles", "0.8,0.8", "example,example@0.8")):
             out = os.path.join(d, "range.json")
-            p = run(exe, "--config", os.path.join(configs, "fig4_corridor_examples.conf"), "--seed", "1", "--out", out,
-                    "--set", "experiment.references=example,example@0.5", "--set", "example_gain_range=" + rng,
-                    "--set", "phase_one_runs=2", "--set", "phase_two_runs=0", "--set", "eval_starts=2",
-                    "--set", "eval_every_runs=2")
+            p = run(exe, "--config", os.path.join(configs, conf + ".conf"), "--seed", "1", "--out", out,
+                    "--set", "experiment.references=" + refs_set, "--set", "example_gain_range=" + rng,
+                    "--set", "phase_one_driver=example", "--set", "phase_one_runs=2", "--set", "phase_two_runs=0",
+                    "--set", "eval_starts=2", "--set", "eval_every_runs=2")
             if p.returncode != 0:
-                fail("example_gain_range=%s: %s" % (rng, p.stderr))
+                fail("%s with example_gain_range=%s: %s" % (conf, rng, p.stderr))
             with open(out) as f:
-                ranged[rng] = json.load(f)
-        refs = ranged["0.5,0.5"]["references"]
-        if refs["example"]["steps"] != refs["example@0.5"]["steps"]:
-            fail("with example_gain_range=0.5,0.5 the plain example should drive at gain 0.5: %s vs %s" % (
-                refs["example"]["steps"], refs["example@0.5"]["steps"]))
-        train = {rng: ranged[rng]["learning"]["blocks"][0]["training_steps"] for rng in ranged}
+                ranged[(conf, rng)] = json.load(f)
+        for conf, rng, gain in (("fig4_corridor_examples", "0.5,0.5", "0.5"), ("fig4_corridor_examples", "1,2", "1.5"),
+                                ("fig9_10_obstacles", "0.8,0.8", "0.8")):
+            refs = ranged[(conf, rng)]["references"]
+            if refs["example"]["steps"] != refs["example@" + gain]["steps"]:
+                fail("%s with example_gain_range=%s: the plain example should drive at gain %s: %s vs %s" % (
+                    conf, rng, gain, refs["example"]["steps"], refs["example@" + gain]["steps"]))
+        blocks = {rng: ranged[("fig4_corridor_examples", rng)]["learning"]["blocks"] for rng in ("", "0.5,2")}
+        if blocks["0.5,2"] != blocks[""]:
+            fail("example_gain_range=0.5,2 (the task's own range) changed the learning session")
+        train = {rng: ranged[("fig4_corridor_examples", rng)]["learning"]["blocks"][0]["training_steps"]
+                 for rng in ("0.5,0.5", "2,2")}
         if not train["0.5,0.5"] > train["2,2"]:
             fail("phase-one runs at gain 0.5 should need more steps than at gain 2: %s" % train)
         print("two phase-one runs: %d steps at gain 0.5, %d at gain 2" % (train["0.5,0.5"], train["2,2"]))
-        p = run(exe, "--config", os.path.join(configs, "fig4_corridor_examples.conf"), "--plan",
-                "--set", "example_gain_range=2,1")
-        if p.returncode != 2 or "example_gain_range" not in p.stderr or "lowest first" not in p.stderr:
-            fail("a reversed example_gain_range was not refused (%d): %s" % (p.returncode, p.stderr))
+        for args in (("--set", "example_gain_range=2,1"),
+                     ("--set", "experiment.vary=example_gain_range=0.5,2|2,1")):
+            p = run(exe, "--config", os.path.join(configs, "fig4_corridor_examples.conf"), "--plan", *args)
+            if p.returncode != 2 or '"2,1"' not in p.stderr or "lowest first" not in p.stderr:
+                fail("a reversed example_gain_range (%s) was not refused (%d): %s" % (args[1], p.returncode, p.stderr))
         if not 70 <= steps[15] - steps[10] <= 100:
             fail("the 15 m corridor should take about 83 more steps than the 10 m one")
     print("PASS")

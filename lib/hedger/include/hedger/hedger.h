@@ -282,21 +282,22 @@
 ///   what tells value learning from imitation; a claim of learning beyond the examples needs that
 ///   ablation.
 ///   One teacher or a mixture? (docs/RESULTS.md, ablation_teachers: the example gains drawn from
-///   0.5-2, 0.5-0.75, 1.75-2 or 0.25-0.35, the same poses and noise; seeds 1-10.) Taught by the
-///   best quarter the policy matches its teacher (138.4 ± 0.1, +0.1 ± 0.1); taught by the mixture
-///   it is 1.0 ± 0.3 behind gain 2; taught by the gentlest quarter it stays at that teacher (143.6
-///   against 143.1) and 6.2 ± 0.5 steps behind the optimal controller, and lower pessimism is worse
-///   there too (seeds 11-20: 2 → +0.8 ± 0.6, 1 → +1.6 ± 0.8); taught by gains 0.25-0.35 (160.8
-///   steps, 17 % above optimal) its successful final runs take 160.9 ± 1.3. The learner reproduces
-///   a consistent teacher and does not improve on it. Ranking whole runs instead of single actions
-///   (seeds 11-20, scratch, not merged): each stored point's weight in the anchor's regression
-///   exp(A / (0.5 σ_A)), A = its run's discounted return minus a local linear fit of the other
-///   runs' returns on their start states, moved the mixture's policy -0.5 ± 0.2 steps (139.1);
-///   weights from the true gains (known to no robot) -0.7 ± 0.2 (138.9): the better third of 30
-///   mixed runs is too little data to imitate as well as 30 consistent runs (138.3). Bounded steps
-///   off the anchor (0.03-0.1 rad/s, ranked by value at pessimism 0) compounded across phase-two
-///   runs by weighting recent points in the anchor (exp(-age / 1000-2000 points)) drifted the wrong
-///   way: +0.7 to +1.1 steps.
+///   0.5-2, 0.5-0.75, 1.75-2 or 0.25-0.35, the same poses and noise; seeds 1-10, final block
+///   against the example policy at the middle of each range.) Taught by the best quarter the policy
+///   matches its teacher (138.4 ± 0.1, +0.1 ± 0.1); taught by the mixture it is 1.0 ± 0.3 behind
+///   gain 2; taught by the gentlest quarter it stays at that teacher (143.6 against 143.1) and
+///   6.2 ± 0.5 steps behind the optimal controller; taught by gains 0.25-0.35 (160.8 steps, 17 %
+///   above optimal) it is worse than the teacher (0.6 poses per seed missed; the successful runs
+///   160.9 ± 1.3). The learner reproduces a consistent teacher and does not improve on it. Seeds
+///   11-20, scratch builds, not merged: lower pessimism is worse with the gentle teachers too (2 →
+///   +0.8 ± 0.6, 1 → +1.6 ± 0.8). Ranking whole runs instead of single actions: each stored point's
+///   weight in the anchor's regression exp(A / (0.5 σ_A)), A = its run's discounted return minus a
+///   local linear fit of the other runs' returns on their start states, moved the mixture's policy
+///   -0.5 ± 0.2 steps (139.1); weights from the true gains (known to no robot) -0.7 ± 0.2 (138.9),
+///   against 138.3 with all 30 runs from the best quarter: the better third of 30 mixed runs is too
+///   little data to imitate as well as 30 consistent runs. Bounded steps off the anchor (0.03-0.1
+///   rad/s, ranked by value at pessimism 0) compounded across phase-two runs by weighting recent
+///   points in the anchor (exp(-age / 1000-2000 points)) drifted the wrong way: +0.7 to +1.1 steps.
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are

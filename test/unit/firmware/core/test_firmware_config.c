@@ -365,13 +365,26 @@ static void test_config_validate_cross_key_rules(void** state) {
     fw_config_defaults(&c);
     assert_int_equal(fw_config_set(&c, "example_gain_range", bad_ranges[i], "--set", err, sizeof err), 0);
     assert_int_equal(fw_config_validate(&c, err, sizeof err), -1);
-    assert_non_null(strstr(err, "example_gain_range needs two gains"));
+    assert_non_null(strstr(err, "it needs two gains"));
+    assert_non_null(strstr(err, bad_ranges[i]));  // the value given is quoted back
+  }
+  // Gains are positive and at most 100 1/s: the list parser refuses the rest with the key.
+  static const char* const out_of_range[] = {"0,2", "-1,2", "1,200"};
+  for (size_t i = 0; i < sizeof out_of_range / sizeof out_of_range[0]; ++i) {
+    fw_config_defaults(&c);
+    assert_int_equal(fw_config_set(&c, "example_gain_range", out_of_range[i], "--set", err, sizeof err), -1);
+    assert_non_null(strstr(err, "example_gain_range"));
   }
   fw_config_defaults(&c);
   assert_int_equal(fw_config_set(&c, "example_gain_range", "1.75,2", "--set", err, sizeof err), 0);
   assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
   assert_int_equal(c.example_gain_range_n, 2);
-  assert_true(c.example_gain_range[0] < c.example_gain_range[1]);
+  assert_true(c.example_gain_range[0] > 1.7499 && c.example_gain_range[0] < 1.7501);
+  assert_true(c.example_gain_range[1] > 1.9999 && c.example_gain_range[1] < 2.0001);
+  // Empty: the task's range again.
+  assert_int_equal(fw_config_set(&c, "example_gain_range", "", "--set", err, sizeof err), 0);
+  assert_int_equal(c.example_gain_range_n, 0);
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
 }
 
 // The program refuses joystick driving where no operator can drive: in lockstep, and with LCM
