@@ -298,6 +298,11 @@
 ///   little data to imitate as well as 30 consistent runs. Bounded steps off the anchor (0.03-0.1
 ///   rad/s, ranked by value at pessimism 0) compounded across phase-two runs by weighting recent
 ///   points in the anchor (exp(-age / 1000-2000 points)) drifted the wrong way: +0.7 to +1.1 steps.
+///   Advantage learning (each target lowered by β times the state model's action gap at s, V(s) −
+///   Q(s, a), so that the gaps grow by 1/(1 − β); gentle teachers, seeds 11-20): β = 0.5 / 0.9
+///   final -0.2 ± 0.2 / -0.1 ± 0.4; at pessimism 2 / 1 +8.0 ± 19.7 / -0.9 ± 1.2 against the same
+///   pessimism without it, still behind the default. Dither and exploration held for 1 s / 0.5 s
+///   (explore_hold_s; same set-up): +24.1 ± 25.2 / +10.7 ± 19.1 (15 / 1 failed phase-two runs).
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are
