@@ -55,6 +55,12 @@ def seeds_of(rs):
     return "%d-%d" % (s[0], s[-1]) if s == list(range(s[0], s[-1] + 1)) else ",".join(map(str, s))
 
 
+def fmt_paired(d, digits=1):
+    """A paired comparison (stats.paired) as "difference ± CI, p (significant)"."""
+    return "%s, %s%s" % (fmt_ci(d["mean_diff"], d["ci"], digits), fmt_p(d["p"]),
+                         " (significant)" if d["significant"] else "")
+
+
 def hours_row(name, S):
     m, hw, n = S["training_hours"]
     return "| %s | %d | %s | %s | %s | %s |" % (name, n, fmt_ci(m, hw, 2), fmt_ci(*S["eval_hours"][:2], 2),
@@ -247,15 +253,11 @@ def write(out, fig_dir, path, configs_dir):
                 "learned minus optimal |", "|---|---|---|---|---|")
         for v, S in summ.items():
             R = analysis.against_references(S)
-
-            def diff(ref):
-                if ref not in R:
-                    return "not evaluated"
-                d = R[ref]["diff"]
-                return "%s, %s%s" % (fmt_ci(d["mean_diff"], d["ci"]), fmt_p(d["p"]), " (significant)" if d["significant"] else "")
+            missing = "not evaluated"
             doc.add("| %s | %s | %s | %s | %s |" % (
-                v, fmt_ci(*R["final_succ"][:2]), fmt_ci(*R["example"]["mean"][:2]) if "example" in R else "not evaluated",
-                diff("example"), diff("optimal")))
+                v, fmt_ci(*R["final_succ"][:2]), fmt_ci(*R["example"]["mean"][:2]) if "example" in R else missing,
+                fmt_paired(R["example"]["diff"]) if "example" in R else missing,
+                fmt_paired(R["optimal"]["diff"]) if "optimal" in R else missing))
         doc.add("", "Phase-one data are identical across variants unless the variant changes phase one itself (the "
                 "automatic phase switch ends it at another run): for a seed the example policy's gains and start "
                 "poses are the same, each run's sensor noise starts from its run id, each run integrates its own "
@@ -264,10 +266,7 @@ def write(out, fig_dir, path, configs_dir):
                 "| comparison (paired by seed) | final steps: difference, test | training hours: difference, test |", "|---|---|---|")
         for c in comps:
             f, h = c["final"], c["hours"]
-            doc.add("| %s vs %s | %s, %s%s | %s, %s%s |" % (
-                c["variant"], c["baseline"], fmt_ci(f["mean_diff"], f["ci"]), fmt_p(f["p"]),
-                " (significant)" if f["significant"] else "", fmt_ci(h["mean_diff"], h["ci"], 3), fmt_p(h["p"]),
-                " (significant)" if h["significant"] else ""))
+            doc.add("| %s vs %s | %s | %s |" % (c["variant"], c["baseline"], fmt_paired(f), fmt_paired(h, 3)))
         doc.add("")
         hours.append(hours_row(name + " (" + next(iter(variants)) + ")", summ[next(iter(variants))]))
     doc.prose("ablations")
