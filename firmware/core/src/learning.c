@@ -22,9 +22,9 @@
 // state_rotation: the executed rotation's scale [rad/s per scaled unit]. Wide (the whole range
 // is about two units): it must tell a robot still ramping up its turn from one turning steadily,
 // and must not split the few samples near a start pose into separate neighbourhoods. Chosen on
-// seeds 11-20 (hedger.h, "Choices"): against the state without it, 0.25 (the action's scale) cost
-// the human-driven corridor 31 steps in the final block, 1.0 cost 9, within the seeds' spread
-// (on seeds 1-10 1.0 gained 15).
+// seeds 11-20 (docs/LEARNING.md, "The executed rotation in the state"): against the state without
+// it, 0.25 (the action's scale) cost the human-driven corridor 31 steps in the final block, 1.0
+// cost 9, within the seeds' spread (on seeds 1-10 1.0 gained 15).
 static const double kExecutedRotationScale = 1.0;
 
 void fw_learning_config(const fw_loop_t* L, hedger_config_t* hc) {
@@ -55,7 +55,8 @@ void fw_learning_config(const fw_loop_t* L, hedger_config_t* hc) {
       // far apart two actions must be to count as different. The target angle is finer (0.125
       // rad, about a tenth of its range): a run that starts heading far off the axis is then
       // judged by runs that started at a similar heading, not by the on-axis majority (hedger.h,
-      // "Choices").
+      // "Greedy method"; the measurements: docs/LEARNING.md, "A finer target-angle scale, and
+      // k_max 64").
       hc->input_scale[0] = 1.0;    // end distance [m]
       hc->input_scale[1] = 0.5;    // lateral fraction of the width
       hc->input_scale[2] = 0.125;  // target angle [rad]
@@ -84,7 +85,8 @@ void fw_learning_config(const fw_loop_t* L, hedger_config_t* hc) {
   // The corridor's fine target-angle scale leaves a state's neighbourhood empty while phase one
   // has covered few headings; a wide second attempt answers there from runs at other headings
   // instead of holding course (Fig. 4, seeds 11-20: 227 steps after 5 runs against 512 at 3, the
-  // same final block; hedger.h, "Choices"). The obstacle task did not gain from it.
+  // same final block; hedger.h, "Greedy method"; docs/LEARNING.md, "greedy_reach 8 for the
+  // corridor, 3 for the obstacles"). The obstacle task did not gain from it.
   const double task_reach = fw_run_is_corridor(L) ? 8.0 : 3.0;
   hc->greedy_reach = L->cfg.hedger_greedy_reach > 0.0 ? L->cfg.hedger_greedy_reach : task_reach;
   hc->local_model = L->cfg.learner == FW_LEARNER_LWA ? HEDGER_LOCAL_LWA : HEDGER_LOCAL_LWR;

@@ -58,261 +58,49 @@
 ///   every state it passed. The lambda-return with lambda = 0.9 (an effective horizon of ten steps
 ///   of the run, then the learned value) over 20 passes learned the corridor best (6 seeds x 65
 ///   runs: 10/10 in every phase-two block; lambda = 0 and 0.8 failed runs, 1.0 more failures).
-/// - Greedy method (cfg.greedy_method): with one prediction per candidate action
-///   (HEDGER_GREEDY_PER_ACTION) every candidate has its own neighbourhood, and the bias each of
-///   them carries from the states around the query is larger than the effect of one action at
-///   10 Hz: on the corridor the greedy policy followed that noise (a gain of 0.15 where the
-///   examples use 0.5-2) and got worse with more data. HEDGER_GREEDY_STATE_MODEL fits one model
-///   at the state (linear in the state, concave quadratic in the action) and judges every
-///   candidate on it, pessimistically (cfg.greedy_pessimism = 4 standard errors of the action's
-///   effect, measured from the neighbours' own policy at the state): 0, 1, 2 gave collisions in
-///   evaluation, 3 and 4 none, 10 a policy that only repeated its data. Corridor, 6 seeds: the
-///   learned policy after the 30 example runs 140.1 +- 0.5 steps, after phase two 140.1 +- 0.5,
-///   against 146.2 / 139.7 / 138.5 / 138.4 for the example policy at gains 0.5 / 1 / 1.5 / 2 and
-///   137.3 for the hand-tuned optimal controller from the same ten poses.
-///   Why the learned policy does not beat its teachers (Fig. 4 schedule; seed 11 traced, seeds
-///   11-20 swept): the greedy policy is an imitation of the average example. Least squares of the
-///   executed rotation on (target angle θ, lateral offset d): phase-one training data 0.89 θ +
-///   0.00 d (gains 0.5-2 with the clamp at 1 rad/s, plus dither); learned policy after phase one
-///   0.82 θ + 0.03 d, after phase two 0.32 θ + 0.13 d; the optimal controller 1.54 θ - 1.09 d.
-///   Steps are lost at the off-axis starts (pose (1.5, 0, 0.9): first second at |ω| 0.3-0.6 where
-///   optimal and the examples command 1.0; 138 steps vs 132 example, 131 optimal) and in centring
-///   (the robot settles 0.3 m off the centre line at 0.52 m/s instead of 0.6). One tick's action
-///   changes the return by about 0.3 step (estimate: 6 steps over the 20 ticks of that turn;
-///   value 0.0075 at γ^T = 0.25), far below the standard
-///   error of the local fit, so value − 4 SE stays at the neighbours' policy. Measured on seeds
-///   11-20 (baseline: last phase-one block 140.7 ± 0.6, +1.9 ± 0.6 vs the example policy, 11
-///   failed phase-two evaluation runs): pessimism 2 → 150.8 (failures, 20 in phase two);
-///   phase-one dither and phase-two exploration held 1 s at σ 0.3 (explore_hold_s also holds the
-///   phase-one dither) → 169.4, 29 failures; no phase-one dither → 490 (the state model cannot
-///   be formed without action spread); an advantage-weighted anchor (neighbours weighted by
-///   exp(A / τ σ_A), A = value above a fit on the state alone; branch learn2-advantage, not
-///   merged) τ = 1 → final block 141.1 ± 0.7 (+2.3 ± 0.7 vs examples, 0 phase-two failures),
-///   τ = 0.3 → 143.1. Nor do (same seeds, last phase-one block minus the example policy; baseline
-///   +2.0 ± 0.6): k_max 64 +2.4 ± 0.8, bandwidth 0.35 +10.6 ± 19.4 (failures), pessimism 3
-///   +2.9 ± 0.9, and a squared term
-///   per state dimension in the state model (so that the value's curvature across the
-///   neighbourhood, about γ^(steps) over ±2.5 m of corridor, is not counted as noise in the
-///   action's standard error; not merged) +1.9 ± 0.6, with pessimism 2 +12.6 ± 19.0 and 0
-///   +52.9 ± 59.4 (collisions). The imitation is not the state model's misfit. None beats the
-///   examples. Where the steps are lost (seeds 11-20, last phase-one block minus the example policy
-///   at its nominal gain, per evaluation pose, state = end distance, lateral fraction, target
-///   angle): +0.3 to +0.7 ± 0.6 steps from each of the five poses with |θ| <= 0.45 rad, +2.0 to
-///   +5.1 (± 1.0 to 3.7) from each of the five with |θ| 0.7-0.9: the learned policy equals its
-///   teachers near the axis and loses to them only where a run starts far off it. There the data
-///   is thin (seed 11: 129 of 4,208 phase-one steps have |θ| > 0.5, 45 of them the first three ticks
-///   of a run, while the rotation still ramps up at the acceleration limit, 0.29 rad/s per tick, a
-///   rotation the 3-D state does not show), and the greedy turns more gently than the example
-///   (pose (9.0, 0.7, 0.7): 0.29, 0.35, 0.47, 0.44, 0.40 rad/s, 0.5-0.65 θ, mostly LWA values).
-///   The executed rotation as a last state entry (controller key state_rotation, the default: the
-///   last command sent, which the acceleration limit ties the next rotation to; scale 1 rad/s).
-///   Chosen on seeds 11-20: Fig. 4 last phase-one block +1.3 ± 0.4 steps vs the example policy (was
-///   +2.0), final block 140.4 ± 0.3 and no failed phase-two evaluation run (was 158.0 ± 25.9, 9
-///   failed phase-two runs); at scale 0.25 (the action's) +0.8 ± 0.4 after phase one but the
-///   human-driven corridor (Fig. 5) lost: final block 274.7 ± 26.1 against 243.5 ± 4.3 (252.3 ± 7.0
-///   at scale 1); obstacles 17 failed phase-two runs against 26. Confirmed on seeds 1-10 (the
-///   ablations in docs/RESULTS.md, paired with the same seeds): Fig. 4 final block 0.5 ± 0.5 steps
-///   shorter (+1.1 ± 0.4 vs the examples, +2.6 ± 0.4 vs optimal), Fig. 5 final block 240.7 ± 6.0
-///   against 255.5 ± 24.6 with 2 failed phase-two runs against 9, obstacles 10 failed phase-two
-///   runs against 41 at an equal final block. Pessimism 8 on top (seeds 11-20, scale 0.25) helped
-///   Fig. 4 (+0.7 / +0.9) and cost Fig. 5 (280.1, 30 failed runs) and the obstacles (174.4 against
-///   137.8). The off-axis deficit stays (the poses heading 0.7-0.9 rad off still lose up to 2.3
-///   steps each): the first ticks of such a run are seen in only three phase-one runs per pose.
-///   A finer target-angle scale keeps those neighbourhoods to runs that started at similar
-///   headings (seeds 11-20, final block against the default 0.5 rad, paired): Fig. 4 -0.4 ± 0.2
-///   steps at 0.25, -0.8 ± 0.2 at 0.125, -0.6 ± 0.5 at 0.0625 (10 failed phase-two runs: too few
-///   neighbours); but Fig. 5 (the noisier human examples) +6.8 ± 18.0 at 0.25 and +13.4 ± 35.3 at
-///   0.125 with 11 failed phase-two runs against 5. Confirmed for Fig. 4 on seeds 1-10
-///   (ablation_angle_scale: -0.4 ± 0.4, +0.7 ± 0.3 vs the examples); the default stayed 0.5.
-///   With a larger neighbourhood the finer angle keeps Fig. 5 (seeds 11-20, final block against
-///   k_max 32 and 0.5 rad, paired; failed phase-two runs of 700 in brackets): k_max 64 (the
-///   ceiling) and 0.125 rad: Fig. 4 -0.8 ± 0.2 (0), Fig. 5 -4.6 ± 4.2 (2 against 5; after phase
-///   one -17.5 ± 6.8); k_max 64 alone: Fig. 4 +0.2 ± 0.4, Fig. 5 -10.7 ± 5.6 (1), obstacles
-///   -16.4 ± 13.3 (10 against 17). Both are the defaults now (controller keys hedger_k_max and
-///   the corridor's scales in learning.c). Confirmed on seeds 1-10: Fig. 4 -0.6 ± 0.3 (+0.5 ± 0.2
-///   vs the examples, +2.0 ± 0.2 vs optimal, 0 failed runs against 1), obstacles -14.8 ± 19.2 (5
-///   against 10), Fig. 5 after phase one -18.5 ± 4.6 but final block +6.7 ± 20.5, not significant
-///   (one seed failed 2 runs late in phase two; 3 against 2). Cost per tick (firmware.bench, 20k
-///   points, tick compute): p50 74 us against 59, max 576 us against 412. The price is early
-///   learning: with few runs a state's fine neighbourhood is often empty (Fig. 4, seeds 1-10,
-///   after 5 runs 5.2/10 poses against 9.9/10 at 0.5 rad). A wider second attempt for the
-///   corridor (greedy_reach 8 instead of 3; the controller's task default) recovers most of it,
-///   seeds 11-20, paired against reach 3: Fig. 4 after 5 runs -284.7 ± 87.5 steps, after 10 runs
-///   -155.8 ± 56.9, final block 0.0 ± 0.1; Fig. 5 after 5 runs -137.7 ± 68.6, final +9.8 ± 17.1
-///   (5 failed phase-two runs against 2). Greedy_reach 5: Fig. 4 365.2 after 5 runs. Obstacles
-///   keep 3 (reach 8 there: final +4.2 ± 12.6, 26 failed runs against 10; reach 5: 3 failed).
-///   Seeds 1-10 (docs/RESULTS.md): Fig. 4 after 5 runs 262.3 against 553.5, final +0.2 ± 0.2;
-///   Fig. 5 final -7.4 ± 17.5 (1 failed run against 3); tick cost unchanged (firmware.bench).
-///   With these defaults the Fig. 4 policy is a fixed point that no exploration or search setting
-///   moves (seeds 11-20, final block minus the defaults', paired, 0-1 failed phase-two runs each):
-///   example dither σ 0.15 / 0.5 rad/s -0.2 ± 0.2 / -0.1 ± 0.3; pessimism 3 / 6 +0.2 ± 0.2 /
-///   -0.2 ± 0.2; exploration σ 0.3 -0.1 ± 0.2; exploration probability 0.5 +0.1 ± 0.2; replay
-///   lambda 1 -0.1 ± 0.2; 17 coarse greedy actions 0.0 ± 0.1; 100 phase-two runs instead of 35
-///   -0.1 ± 0.2 (the last phase-one block and the final block agree within 0.2 step in every one).
-///   Phase two re-learns its own actions: one tick's effect on the return stays below the fit's
-///   error, so value - 4 SE keeps the action the neighbours took. Holding each greedy decision for
-///   3 ticks (learning still per tick; not merged) made it worse: after phase one +0.5 ± 0.3 steps
-///   (the coarser evaluation policy), final +1.2 ± 0.4, and with the exploration offset held as
-///   long +10.1 ± 19.5 (1 failed run). Learned as one transition as well (every driver decides
-///   every N ticks, the learner sees (s, a, discounted reward sum, s after N ticks) with gamma^N;
-///   not merged): final -0.4 ± 0.2 steps against the defaults at N = 3 and N = 5, still +0.4 vs
-///   the per-tick example policy and +1.9 vs optimal, and again no change from the last phase-one
-///   block to the final one. Exploration of whole-run policy parameters in phase two instead (each
-///   training run adds g θ + c (lateral fraction - 0.5) to the greedy action, g and c drawn once
-///   per run; not merged): σ_g = σ_c = 0.5 final +51.6 ± 42.9 (24 failed phase-two runs),
-///   σ_g = 0.25 +34.6 ± 43.3 (12), σ_c = 1 +52.2 ± 51.5 (29): the greedy policy takes up the
-///   perturbed runs' actions as its neighbours' policy.
-///   Noise or bias? (seeds 11-20, paired with the defaults; scratch builds, not merged.) The stored
-///   values are noisy: at the off-axis start states (seed 11, end of phase two) the state model's
-///   weighted residual standard deviation is 0.2-0.7 in value (values about 2.5, one step about
-///   0.025, so 8-28 steps), and neighbours from one run share an offset of up to 0.4. Yet the
-///   imitation is not a noise floor. Standard errors that treat each run as one observation (a
-///   sandwich summed per run) changed nothing: final block +0.0 ± 0.2 / +0.1 ± 0.3 / +1.0 ± 0.7
-///   steps at pessimism 4 / 2 / 1. Three times the example data (90 phase-one runs) +0.1 ± 0.3
-///   after phase one (also with lambda 1), and 128 / 256 neighbours for the state model (final)
-///   +0.0 ± 0.1 / +0.1 ± 0.1. With that data and 256 neighbours, lowering the pessimism to 1 / 0
-///   gave 9 / 18 failed evaluation runs after phase one (lambda 1: 14 / 27): at the off-axis starts
-///   the wide second attempt (greedy_reach) fits a negative action slope (across its neighbourhood
-///   the large turns happen in the worse states), so the greedy turned away from the target and the
-///   target angle grew from 0.85 to 1.5 rad. Taking the neighbours' policy (the anchor) in the wide
-///   attempt instead removed every failure (0 at pessimism 0; at the default 4 it changes nothing,
-///   0.0 ± 0.2), but the value-ranked choice of the first attempt still lost to the imitation after
-///   phase one, from every one of the ten poses: pessimism 1 +1.2 ± 0.3, 0 +2.4 ± 1.0, 0 with the
-///   run's return as the target (lambda 1) +3.5 ± 1.2, lambda 0 +2.2 ± 0.9, without the executed
-///   rotation in the state +3.4 ± 1.0. Limiting each choice to ±0.1 rad/s around the anchor at
-///   pessimism 0 (with the default data): after phase one +0.3 ± 0.4, final +0.8 ± 0.4, worse run
-///   by run in phase two (±0.05: -0.3 ± 0.2 / -0.1 ± 0.2). The more the greedy trusts the fitted
-///   action effect, the worse the policy, with three times the data as well: the action effect is
-///   misjudged, not merely uncertain, and the pessimism is what keeps the policy at its teachers'
-///   level. Dropping the executed rotation from the anchor's regression in the wide attempt: final
-///   +0.3 ± 0.2. A controlled test makes the misjudgement plain: phase-one gains drawn from
-///   {0.5, 2} only (two teachers, 146.1 and 138.4 steps from the ten poses), 90 runs. The default
-///   greedy lands between them after phase one (141.9 ± 0.9: -4.2 ± 0.9 against the worse teacher,
-///   +3.5 ± 0.9 against the better); ranked by value alone (pessimism 0, 256 neighbours, the anchor
-///   in the wide attempt) it is worse than the worse teacher, 150.2 ± 2.2 (+4.0 ± 2.1), also with
-///   the run's return as the target (lambda 1: 149.1 ± 2.3) and without the executed rotation in
-///   the state (151.5 ± 2.4); the per-action search failed 45 of 100 runs. Nor are the pulls and
-///   merges the cause (without both: 157.0 ± 19.1 after phase one, 1 failed run). Near the data the
-///   fitted direction is right on average: a step of at most 0.03 rad/s from the anchor, ranked by
-///   value alone, beat the default greedy in the same test (140.8 ± 0.5, -1.1 ± 0.9) and, by
-///   little, with the default data (after phase one -0.3 ± 0.2, final -0.2 ± 0.1; with 100
-///   phase-two runs final -0.2 ± 0.2, phase two flat), while 0.1 rad/s lost (+2.3 ± 0.7). What
-///   loses is the size of the step: a choice far from the neighbours' policy leads into states the
-///   data does not cover, where the model's action effect no longer holds, and a step small enough
-///   to stay inside gains a fraction of a step per run at best. Lead: a greedy whose step is
-///   bounded by the data's coverage of the states it leads to, checked against the one-tick effects
-///   measured by rollouts in the lockstep emulator.
-///   Planning on the values instead of the action slope does not help either (seeds 11-20, final
-///   block against the defaults, paired; scratch build, not merged). With the robot's known
-///   kinematics (the odometry model with both acceleration limits and the task's speed rule; one
-///   tick predicted within about 0.01 rad of the measured target angle) each of 21 rotations, held
-///   for H ticks, was rolled forward from the state and ranked by γ^H times the greedy value at the
-///   predicted state: H = 5 / 8 / 12 gave +36.9 ± 42.9 / +6.2 ± 3.1 / +4.5 ± 1.7 steps (27 / 1 / 0
-///   failed evaluation runs after phase one); ranked by the state model's value at the neighbours'
-///   policy there (H = 8) +27.2 ± 42.2 (11 failed); ranked by the value gradient of one state model
-///   fitted at the state itself (seed 11) the choice jumps between the action bounds and reaches
-///   0-2 of 10 poses. The learned values do not hold the few-step differences between states that
-///   such a comparison needs. Seed 11 after phase one, greedy value against the return each
-///   evaluation run then obtained, in steps: 0.6 low on average, standard deviation 7.8 over all
-///   ticks; 1.7-3.6 along the runs from the five poses with |θ| <= 0.45 rad and 5.5-15 from the
-///   five with |θ| 0.7-0.9, whose start values are up to 46 steps low (1.57 against a return of
-///   2.50). The stored values at the first ticks of the training runs are the worst (one run's
-///   first eight: 0.69 rising to 1.55, where the return changes by 1 % per tick): their targets (a
-///   tenth of each step's lambda-return is the greedy value at the next state) and the pulls of
-///   neighbouring updates lean on the local prediction, an extrapolation at the edge of the data.
-///   With the run's return as the replay target (lambda 1) the errors shrink to a standard
-///   deviation of 3.4 steps (1.5-1.9 along the runs near the axis, at most 15 steps at a start),
-///   yet the planned choice is still worse: H = 8 +16.8 ± 13.7 (6 failed runs after phase one), at
-///   the neighbours' policy +71.4 ± 70.0; with H = 1 the ranking follows the executed-rotation
-///   entry of the predicted state (its effect on the value is fitted from data in which the
-///   rotation follows the heading) and flips between ±1 rad/s near the axis. So the action's effect
-///   cannot be read from the values' dependence on the state either: the rotation entry carries the
-///   same confounding, and at the edge of the data the values themselves are off. With both
-///   remedies (lambda 1, no rotation entry; H = 8) and a recovery check (a candidate is dropped
-///   when the base, turning toward the target point from the predicted state, would still touch a
-///   wall) phase two does move for the first time: final block -0.8 ± 0.5 steps against the
-///   defaults (138.8, level with the example policy, +1.5 ± 0.4 vs optimal; 0 failed phase-two
-///   evaluation runs), but after phase one it is 17.9 ± 12.3 steps slower (157.5: on the teachers'
-///   data the plan leaves the states they visited); overriding the imitation only for a predicted
-///   gain of 3 steps -0.4 ± 0.7 / +14.4 ± 10.2, H = 12 +0.3 ± 0.6 / +12.4 ± 10.1, the 3-step
-///   override with the default lambda and rotation entry -0.4 ± 0.3 / +14.1 ± 12.3 (final / after
-///   phase one). Without the exploration and dither segments (explore_probability 0, both phases)
-///   the MC returns are less noisy and the plan after phase one is 139.3 ± 0.2 (+0.5 ± 0.2 vs the
-///   example policy), but phase two then drifts (final 139.9 ± 1.0); 100 phase-two runs stay at
-///   138.8-140.0 per block. Neither claim is reached this way. Nor by imitating the better
-///   neighbours with the more accurate values: the advantage-weighted anchor (weights exp(A / τ
-///   σ_A), A = value above a fit on the state alone) with lambda 1 after phase one / final: τ = 1
-///   -0.2 ± 0.2 / -0.1 ± 0.2, τ = 0.5 -0.1 ± 0.1 / -0.0 ± 0.4, τ = 0.2 +17.6 ± 26.1 (2 failed runs)
-///   / +0.3 ± 0.5; without the rotation entry (against the same without weights) τ = 0.5
-///   -0.3 ± 0.5 / +0.1 ± 0.5. Judging each candidate where the base settles (after the H ticks it
-///   turns toward the target point until aligned; the value is read there, in well-covered states)
-///   keeps the plan safe after phase one but no better: lambda 1 without the rotation entry
-///   +0.1 ± 0.5 after phase one, -0.4 ± 0.6 final; with the defaults +0.6 ± 0.9 / -0.0 ± 0.6. Each
-///   variant ranks by values of the policies that produced the data, and those that stay safe land
-///   within a step of the imitation: about half a step better than the average training run
-///   (140.1 steps), short of the example policy at its best gain (138.4). Lead: values within a
-///   step at the off-axis starts (lambda 1 halves their error) before any ranking by value can beat
-///   the imitation.
-///   Values or imitation? At a pessimism of 100 or 1000 no value difference outweighs the penalty
-///   and the greedy is the anchor alone (the neighbours' policy: a locally linear imitation of the
-///   stored actions). Seeds 11-20, against the default 4: Fig. 4 after phase one -0.1 ± 0.2 steps,
-///   final -0.1 ± 0.2 (both settings): the corridor policy with code examples is an imitation, and
-///   phase two an imitation of its own driving. Fig. 5 (human examples) after phase one
-///   +1.6 ± 25.2, final +5.4 ± 24.7 with 17 failed phase-two evaluation runs against 5; obstacles
-///   final +30.9 ± 13.3 (26 failed runs against 10). Seeds 1-10 (docs/RESULTS.md,
-///   ablation_imitation*): Fig. 4 -0.2 ± 0.2, Fig. 5 +16.9 ± 17.3, obstacles +47.3 ± 22.9. So the
-///   values carry the obstacle task and add reliability with the erratic human, and the Fig. 4
-///   fixed point is the imitation's. One run shows how the imitation falls short of its teachers
-///   (seed 11, first phase-two block, the centre-line pose heading 0.9 rad off): the rotation peaks
-///   at 0.69 rad/s where the examples turn at 1, the effective gain falls from 0.8 to 0.4 within
-///   two seconds, and the robot stays more than 0.1 m off the centre line for about 7 s (137 steps,
-///   the example 132). Not a copycat effect of the rotation entry (a gently turning robot finding
-///   the gentle gains' runs as neighbours): the anchor from neighbours chosen without it +0.2 ± 0.2
-///   final, the commanded instead of the executed rotation stored (the examples' full turns at the
-///   starts imitated, not the acceleration ramp) +0.0 ± 0.2 (-0.1 ± 0.3 at pessimism 100); the
-///   imitation copies a mixture of gains and lands near the average run. Decisions held for a
-///   second (every driver decides every 10 ticks, one transition per decision with gamma^10;
-///   scratch build, not merged) imitate better: after phase one 138.8 ± 0.2, final 138.5 ± 0.3
-///   (-1.2 ± 0.3 against the defaults, level with the example at gain 2, +1.2 ± 0.3 vs optimal),
-///   but 579 steps after 5 runs against 227; at pessimism 100 the same (138.4), 15 ticks 139.2, 20
-///   ticks 147.2. Lower pessimism loses at every decision period (final against pessimism 4,
-///   pessimism 2 / 1 / 0): 10 ticks +0.3 / +3.7 / +43.4 (0 / 1 / 37 failed runs), 5 ticks +0.2 /
-///   +10.6 / +107.2 (0 / 2 / 57): a larger action effect per decision does not make the values rank
-///   actions better than the imitation does. Measuring the default's choices against the anchor is
-///   what tells value learning from imitation; a claim of learning beyond the examples needs that
-///   ablation.
-///   One teacher or a mixture? (docs/RESULTS.md, ablation_teachers: the example gains drawn from
-///   0.5-2, 0.5-0.75, 1.75-2 or 0.25-0.35, the same poses and noise; seeds 1-10, final block
-///   against the example policy at the middle of each range.) Taught by the best quarter the policy
-///   matches its teacher (138.4 ± 0.1, +0.1 ± 0.1); taught by the mixture it is 1.0 ± 0.3 behind
-///   gain 2; taught by the gentlest quarter it stays at that teacher (143.6 against 143.1) and
-///   6.2 ± 0.5 steps behind the optimal controller; taught by gains 0.25-0.35 (160.8 steps, 17 %
-///   above optimal) it is worse than the teacher (0.6 poses per seed missed; the successful runs
-///   160.9 ± 1.3). The learner reproduces a consistent teacher and does not improve on it. Seeds
-///   11-20, scratch builds, not merged: lower pessimism is worse with the gentle teachers too (2 →
-///   +0.8 ± 0.6, 1 → +1.6 ± 0.8). Ranking whole runs instead of single actions: each stored point's
-///   weight in the anchor's regression exp(A / (0.5 σ_A)), A = its run's discounted return minus a
-///   local linear fit of the other runs' returns on their start states, moved the mixture's policy
-///   -0.5 ± 0.2 steps (139.1); weights from the true gains (known to no robot) -0.7 ± 0.2 (138.9),
-///   against 138.3 with all 30 runs from the best quarter: the better third of 30 mixed runs is too
-///   little data to imitate as well as 30 consistent runs. Bounded steps off the anchor (0.03-0.1
-///   rad/s, ranked by value at pessimism 0) compounded across phase-two runs by weighting recent
-///   points in the anchor (exp(-age / 1000-2000 points)) drifted the wrong way: +0.7 to +1.1 steps.
-///   Advantage learning (each target lowered by β times the state model's action gap at s, V(s) −
-///   Q(s, a), so that the gaps grow by 1/(1 − β); gentle teachers, seeds 11-20): β = 0.5 / 0.9
-///   final -0.2 ± 0.2 / -0.1 ± 0.4; at pessimism 2 / 1 +8.0 ± 19.7 / -0.9 ± 1.2 against the same
-///   pessimism without it, still behind the default. Dither and exploration held for 1 s / 0.5 s
-///   (explore_hold_s; same set-up): +24.1 ± 25.2 / +10.7 ± 19.1 (15 / 1 failed phase-two runs).
-///   The obstacle task's gap to optimal (final block, successful runs 118.8 against 97.4 on seeds
-///   1-10) is not a setting: seeds 11-30, final block against the defaults (123.2 ± 4.4 steps with
-///   failures at the limit, 13 failed phase-two evaluation runs of 1,400), paired: exploration σ
-///   0.3 rad/s +1.5 ± 7.1 (22), exploration probability 0.4 +7.1 ± 14.9 (16), lambda 1 +3.9 ± 7.8
-///   (22), lambda 0.5 +2.1 ± 11.3 (15), pessimism 3 / 6 +9.0 ± 8.3 (35) / +6.1 ± 8.8 (17),
-///   bandwidth 0.18 +7.7 ± 11.3 (32); seeds 11-20: all input scales 0.5 +2.7 ± 11.4, pessimism 2 /
-///   8 +2.6 ± 17.1 / +12.7 ± 12.8. Where the steps go (seeds 11-20, final block against the optimal
-///   controller per pose): a median of 18 steps per run on the way round the obstacle (a wider
-///   berth and heading swings), and one run in ten that loses 30-80 steps or fails (the one traced
-///   had just missed the goal and circled back to it).
+/// - Greedy method (cfg.greedy_method; the library's defaults are HEDGER_GREEDY_PER_ACTION,
+///   greedy_pessimism 0, greedy_reach 1; the firmware sets the state model and the rest below).
+///   HEDGER_GREEDY_PER_ACTION: one prediction per candidate action, each with its own
+///   neighbourhood. The bias each carries from the states around the query is larger than the
+///   effect of one action at 10 Hz: on the corridor the greedy policy followed that noise (a gain
+///   of 0.15 where the examples use 0.5-2) and got worse with more data.
+///   HEDGER_GREEDY_STATE_MODEL: one model at the state (linear in the state, concave quadratic in
+///   the action) judges every candidate, pessimistically: value - κ standard errors of the
+///   action's effect, measured from the neighbours' own policy at the state (the anchor; κ =
+///   cfg.greedy_pessimism). κ = 4: 0, 1, 2 gave collisions in evaluation, 3 and 4 none, 10 a
+///   policy that only repeated its data. Where the state has too few neighbours, a second
+///   attempt with a kernel greedy_reach times wider.
+///   The firmware's defaults (fw_learning_config(); chosen on seeds 11-20, confirmed on seeds
+///   1-10; paired differences in steps of 0.1 s, negative = shorter):
+///   * the executed rotation (rad/s, scale 1 rad/s) as the last state entry (state_rotation):
+///     the acceleration limit, 0.29 rad/s per tick, ties the next rotation to the last command.
+///     Fig. 4 after phase one +1.3 ± 0.4 vs the example policy (was +2.0), failed phase-two
+///     runs 9 → 0; seeds 1-10, failed runs: Fig. 5 2 against 9, obstacles 10 against 41. At
+///     0.25 rad/s (the action's scale) the human-driven corridor lost (final block 274.7 ± 26.1
+///     against 243.5 ± 4.3; 252.3 ± 7.0 at 1 rad/s).
+///   * the corridor's target angle at 0.125 rad per scaled unit (was 0.5) with k_max 64 (was 32):
+///     an off-axis start is judged by runs that started at a similar heading. Fig. 4 -0.8 ± 0.2,
+///     Fig. 5 -4.6 ± 4.2; seeds 1-10: Fig. 4 -0.6 ± 0.3, obstacles -14.8 ± 19.2, Fig. 5
+///     +6.7 ± 20.5 (not significant). Cost: tick p50 74 us against 59, max 576 us against 412
+///     (20k points), and early learning (Fig. 4 after 5 runs, seeds 1-10: 5.2/10 poses against
+///     9.9/10).
+///   * greedy_reach 8 for the corridor, 3 for the obstacles: with the fine angle an early state's
+///     neighbourhood is often empty; the wide attempt answers from runs at other headings. Fig. 4
+///     after 5 runs -284.7 ± 87.5 against reach 3, final 0.0 ± 0.1; tick cost unchanged.
+///     Obstacles: reach 8 final +4.2 ± 12.6 and 26 failed phase-two runs against 10: they keep 3.
+///   What it learns: with code examples on the corridor the greedy policy is an imitation of the
+///   examples (κ = 100 leaves only the anchor and gives the same policy, Fig. 4 final -0.2 ± 0.2,
+///   seeds 1-10): one tick's action changes the return by about 0.3 step, far below the fit's
+///   standard error. Taught by one consistent teacher it reproduces it and does not improve on it.
+///   The values carry the obstacle task (κ = 100: +47.3 ± 22.9) and add reliability with the
+///   human driver (Fig. 5 +16.9 ± 17.3; seeds 11-20: 17 failed phase-two runs against 5).
+///   docs/LEARNING.md records every alternative measured (lower pessimism, more data and
+///   neighbours, exploration, held decisions, planning on the values, advantage weighting, one
+///   teacher or a mixture, the obstacle task's gap) and the diagnosis behind these choices. The
+///   one method that moves phase two past the imitation ranks whole runs instead of actions:
+///   pairs of phase-two runs from one pose with opposite policy perturbations, each run's points
+///   weighted in the anchor by the pair's measured steps (not merged; the section "Ranking whole
+///   runs in phase two").
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are
