@@ -288,6 +288,23 @@ static const key_desc_t k_keys[] = {
   {NULL, "state_rotation", KIND_BOOL, OFF(state_rotation), 0, 0, false, false, NULL, "true",
    "the learner's state ends with the rotation the base executes, the last command sent [rad/s]: the "
    "acceleration limit ties the next rotation to it (false = the paper's task features alone)"},
+  {NULL, "pair_runs", KIND_BOOL, OFF(pair_runs), 0, 0, false, false, NULL, "false",
+   "phase two, corridor task: training runs come in pairs from one start pose; the first adds a policy "
+   "perturbation g * target angle + c * (lateral fraction - 0.5) to the greedy action (g, c drawn per pair), "
+   "the second subtracts it, with the same exploration noise; the faster run's stored points then weigh "
+   "more in the learned policy's imitation of its data, the slower run's less (docs/LEARNING.md, \"Ranking "
+   "whole runs in phase two\")"},
+  {NULL, "pair_gain_sigma", KIND_DOUBLE, OFF(pair_gain_sigma), 0, 4, false, false, NULL, "0.25",
+   "pair_runs: standard deviation of the perturbation's gain g on the target angle [rad/s per rad]"},
+  {NULL, "pair_centring_sigma", KIND_DOUBLE, OFF(pair_centring_sigma), 0, 8, false, false, NULL, "0.5",
+   "pair_runs: standard deviation of the perturbation's factor c on the lateral fraction's offset from the "
+   "centre line [rad/s per corridor width]"},
+  {NULL, "pair_tau_steps", KIND_DOUBLE, OFF(pair_tau_steps), 0.01, 1000, false, false, NULL, "1",
+   "pair_runs: the faster run's points weigh 2 / (1 + exp(-d / pair_tau_steps)), the slower run's 2 minus "
+   "that, d = the two runs' difference in steps (a failed run counts at the step limit)"},
+  {NULL, "pair_recency_runs", KIND_DOUBLE, OFF(pair_recency_runs), 0, 1e6, false, false, NULL, "150",
+   "pair_runs: in that imitation a point stored N runs ago (evaluation runs counted) weighs exp(-N / "
+   "pair_recency_runs), in both phases (0 = no fading)"},
 
   {"Output", "lcm_url", KIND_STRING, OFF(lcm_url), 0, 0, false, false, NULL, "",
    "LCM provider (\"\" = LCM's default or $LCM_DEFAULT_URL; \"none\" = no LCM)"},
@@ -1042,6 +1059,16 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
         origin_of(cfg, "hedger_input_scale").text, (int)cfg->hedger_input_scale_n,
         cfg->task == FW_TASK_CORRIDOR ? "corridor" : "obstacles", origin_of(cfg, "task").text, (int)dims,
         cfg->state_rotation ? ", the last one the executed rotation of state_rotation" : "");
+    return -1;
+  }
+  if (cfg->pair_runs && (cfg->task != FW_TASK_CORRIDOR || cfg->learner != FW_LEARNER_HEDGER ||
+                         cfg->hedger_greedy_method != (int32_t)HEDGER_GREEDY_STATE_MODEL)) {
+    fw_errfmt(err, err_cap,
+        "%s: pair_runs needs task = corridor (set at %s: its perturbation uses the target angle and the lateral "
+        "fraction), learner = hedger (set at %s) and hedger_greedy_method = state_model (set at %s: the "
+        "weights steer that search's imitation); set pair_runs = false or change those keys",
+        origin_of(cfg, "pair_runs").text, origin_of(cfg, "task").text, origin_of(cfg, "learner").text,
+        origin_of(cfg, "hedger_greedy_method").text);
     return -1;
   }
   if (cfg->learner == FW_LEARNER_TABULAR && cfg->checkpoint_file[0] != '\0') {

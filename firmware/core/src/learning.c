@@ -90,6 +90,7 @@ void fw_learning_config(const fw_loop_t* L, hedger_config_t* hc) {
   const double task_reach = fw_run_is_corridor(L) ? 8.0 : 3.0;
   hc->greedy_reach = L->cfg.hedger_greedy_reach > 0.0 ? L->cfg.hedger_greedy_reach : task_reach;
   hc->local_model = L->cfg.learner == FW_LEARNER_LWA ? HEDGER_LOCAL_LWA : HEDGER_LOCAL_LWR;
+  hc->anchor_recency_runs = L->cfg.pair_runs ? L->cfg.pair_recency_runs : 0.0;
 }
 
 // ---- checkpoints --------------------------------------------------------------------------
@@ -289,8 +290,17 @@ static void save_slice(fw_loop_t* L) {
   }
 }
 
-// One slice of the between-run work: at most learn_updates_per_tick replay updates and, once the
-// replay is done, at most checkpoint_points_per_tick points of the save.
+// pair_runs: the anchor weights of the pair's two runs (run.c ranked them).
+static void weigh_pair(fw_loop_t* L) {
+  L->pair_weigh_pending = false;
+  for (int i = 0; i < 2; ++i) {
+    (void)fw_learner_weight_run(&L->learner, L->pair_weigh_tag[i], L->pair_weigh_w[i]);
+  }
+  L->pairs_ranked++;
+}
+
+// One slice of the between-run work: at most learn_updates_per_tick replay updates, then (pair_runs)
+// the ended pair's weights, then at most checkpoint_points_per_tick points of the save.
 static void between_runs_slice(fw_loop_t* L) {
   if (L->end_run_pending) {
     L->end_run_pending = false;
@@ -308,6 +318,12 @@ static void between_runs_slice(fw_loop_t* L) {
       return;
     }
     L->learn_stage = FW_LEARN_SAVE;
+    if (L->pair_weigh_pending) {
+      // A pair has ended: its ranking goes into the store in this slice (two O(fill) passes, the
+      // robot standing) and is part of the checkpoint that follows.
+      weigh_pair(L);
+      return;
+    }
   }
   save_slice(L);
 }
@@ -331,6 +347,9 @@ void fw_learning_finish_now(fw_loop_t* L) {
     fw_learner_end_run_begin(&L->learner);
   }
   (void)fw_learner_end_run_step(&L->learner, UINT32_MAX);
+  if (L->pair_weigh_pending) {
+    weigh_pair(L);
+  }
   if (L->learn_stage == FW_LEARN_SAVE && L->save_handle >= 0) {
     // A slice-wise save was under way: finish it at once.
     size_t written = 0;

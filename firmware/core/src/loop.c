@@ -170,6 +170,7 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
   fw_schedule_init(&L->sched, &schc, NULL);
   L->mode = B21R_STATUS_T_MODE_STARTING;
   L->run_id = -1;
+  L->pair_member = -1;
   L->last_block.block = -1;
   L->status_countdown = 0;
   return L;
@@ -691,6 +692,7 @@ void fw_loop_get_stats(const fw_loop_t* L, fw_loop_stats_t* out) {
   out->last_run_goal = L->last_run_goal;
   out->learn_ticks = L->learn_ticks;
   out->checkpoints_submitted = L->checkpoints_submitted;
+  out->pairs_ranked = L->pairs_ranked;
   const fw_timing_t* t = &L->timing;
   out->tick_max_ever_us = t->max_ever_us;
   out->tick_overruns = t->overruns;

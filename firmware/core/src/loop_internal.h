@@ -228,6 +228,20 @@ struct fw_loop {
   tasks_start_cycle_t start_cycle;
   int32_t explore_steps_left;  // of the exploration segment under way
   double explore_offset;       // its action offset [rad/s]
+  // pair_runs (phase two, corridor): the pair under way (run.c); its weights are applied between
+  // runs, after the second run's replay (learning.c).
+  int32_t pair_next_member;      // 0: the next phase-two training run starts a pair; 1: it ends one
+  int32_t pair_member;           // of the run under way; -1 = not a pair run
+  double pair_gain;              // the pair's perturbation: gain on the target angle [rad/s per rad]
+  double pair_centring;          // and factor on (lateral fraction - 0.5) [rad/s]
+  int32_t pair_first_steps;      // the first run's steps (a failed run: the step limit)
+  uint32_t pair_first_tag;       // the first run's tag (its run id)
+  features_pose_t pair_pose;     // the pair's start pose
+  tasks_rng_t pair_explore_rng;  // explore_rng as the first run began: the second run's noise
+  bool pair_weigh_pending;       // weights to apply between runs
+  uint32_t pair_weigh_tag[2];    // (first, second) run tags
+  double pair_weigh_w[2];        // and their anchor weights
+  int32_t pairs_ranked;          // pairs whose weights were applied
 
   // Run state.
   int32_t mode;                // b21r_status_t MODE_*
@@ -362,6 +376,10 @@ bool fw_learner_learn(fw_learner_t* lr, const double* s, double a, double r, con
 bool fw_learner_predict(fw_learner_t* lr, const double* s, double a, double* q, hedger_kind_t* kind);
 /// The finished run's backward replay: begin, then steps of at most max_updates (returns those left).
 void fw_learner_end_run_begin(fw_learner_t* lr);
+// pair_runs: tags the points stored from now on with the run id (HEDGER only; false otherwise).
+bool fw_learner_set_run_tag(fw_learner_t* lr, uint32_t tag);
+// pair_runs: the anchor weight of a tagged run's points (HEDGER only). O(store fill).
+bool fw_learner_weight_run(fw_learner_t* lr, uint32_t tag, double weight);
 uint32_t fw_learner_end_run_step(fw_learner_t* lr, uint32_t max_updates);
 fw_learner_stats_t fw_learner_stats(const fw_learner_t* lr);
 

@@ -61,9 +61,80 @@ static const char* run_kind_name(const fw_loop_t* L) {
   return "train";
 }
 
+// pair_runs: a phase-two training run that starts a pair draws its pose; the one that ends the
+// pair starts from the same pose, so that the two runs differ only by their perturbation.
+static bool pair_run_planned(const fw_loop_t* L, const fw_run_plan_t* plan) {
+  return L->cfg.pair_runs && L->cfg.mode == FW_MODE_LEARN && plan->kind == FW_RUN_TRAINING && plan->phase == 2;
+}
+
 static features_pose_t next_start_pose(fw_loop_t* L, const fw_run_plan_t* plan) {
-  return plan->kind == FW_RUN_EVAL ? tasks_episode_eval_start(&L->ep, (uint32_t)plan->eval_index)
-                                   : tasks_episode_training_start(&L->ep, &L->pose_rng);
+  if (plan->kind == FW_RUN_EVAL) {
+    return tasks_episode_eval_start(&L->ep, (uint32_t)plan->eval_index);
+  }
+  if (pair_run_planned(L, plan) && L->pair_next_member == 1) {
+    return L->pair_pose;
+  }
+  const features_pose_t pose = tasks_episode_training_start(&L->ep, &L->pose_rng);
+  if (pair_run_planned(L, plan)) {
+    L->pair_pose = pose;
+  }
+  return pose;
+}
+
+// pair_runs: the run under way is one of a pair. The first run draws the perturbation and keeps
+// the exploration stream's state; the second replays that stream (common random numbers: the
+// same exploration noise, so the pair's difference in steps measures the perturbation).
+static void pair_begin_run(fw_loop_t* L) {
+  L->pair_member = -1;
+  if (L->plan.kind != FW_RUN_TRAINING || L->cfg.mode != FW_MODE_LEARN || !L->cfg.pair_runs) {
+    return;
+  }
+  // Every training run's points carry its id, so that runs can be ranked and fade with age.
+  (void)fw_learner_set_run_tag(&L->learner, (uint32_t)L->run_id);
+  if (L->plan.phase != 2) {
+    return;
+  }
+  L->pair_member = L->pair_next_member;
+  if (L->pair_member == 0) {
+    L->pair_gain = L->cfg.pair_gain_sigma * tasks_rng_normal(&L->explore_rng);
+    L->pair_centring = L->cfg.pair_centring_sigma * tasks_rng_normal(&L->explore_rng);
+    L->pair_explore_rng = L->explore_rng;
+  } else {
+    L->explore_rng = L->pair_explore_rng;
+  }
+}
+
+// pair_runs: the run under way ended (not aborted). After the first run the pair waits for its
+// second; after the second the faster run's points are weighted up, the slower run's down
+// (applied between runs by learning.c). An aborted run drops its pair.
+static void pair_finish_run(fw_loop_t* L, bool aborted, int32_t steps) {
+  if (L->pair_member < 0) {
+    return;
+  }
+  if (aborted) {
+    L->pair_next_member = 0;
+  } else if (L->pair_member == 0) {
+    L->pair_first_steps = steps;
+    L->pair_first_tag = (uint32_t)L->run_id;
+    L->pair_next_member = 1;
+  } else {
+    const double d = (double)(steps - L->pair_first_steps);  // > 0: the first run was faster
+    const double w_first = 2.0 / (1.0 + exp(-d / L->cfg.pair_tau_steps));
+    L->pair_weigh_tag[0] = L->pair_first_tag;
+    L->pair_weigh_tag[1] = (uint32_t)L->run_id;
+    L->pair_weigh_w[0] = w_first;
+    L->pair_weigh_w[1] = 2.0 - w_first;
+    L->pair_weigh_pending = true;
+    L->pair_next_member = 0;
+  }
+  L->pair_member = -1;
+}
+
+// pair_runs: the perturbation of the run under way at state s (corridor: lateral fraction s[1],
+// target angle s[2]); + in the pair's first run, - in its second [rad/s].
+static double pair_offset(const fw_loop_t* L) {
+  const double sign = L->pair_member == 0 ? 1.0 : -1.0;
+  return sign * (L->pair_gain * L->s[2] + L->pair_centring * (L->s[1] - 0.5));
 }
 
 // The id begin_run gives the next run (B21R_RUN.run_id), as the start-pose request passes it on.
@@ -110,6 +181,7 @@ static void begin_run(fw_loop_t* L) {
   if (!fw_run_is_corridor(L) && kind == TASKS_DRIVER_PROPORTIONAL) {
     L->driver.law[0] = L->driver.gain;  // the obstacle example policy's law holds its gain
   }
+  pair_begin_run(L);
   L->mode = L->plan.kind == FW_RUN_EVAL ? B21R_STATUS_T_MODE_EVALUATING : B21R_STATUS_T_MODE_RUNNING;
   L->status_now = true;
 }
@@ -176,6 +248,7 @@ static void finish_run(fw_loop_t* L, bool reached_goal, int8_t end_reason, int32
   const bool training = L->plan.kind == FW_RUN_TRAINING && L->cfg.mode == FW_MODE_LEARN;
   const int32_t steps = reached_goal ? L->actions_taken : (int32_t)fw_run_step_limit(L);
   record_run_end(L, end_reason, stop_reason, why);
+  pair_finish_run(L, aborted, steps);
   fw_eval_block_t block;
   const bool block_done = fw_schedule_finish_run(&L->sched, steps, reached_goal, aborted, &block);
   if (aborted) {
@@ -378,6 +451,11 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
   } else if (greedy_known) {
     a = greedy_action;
     source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
+    if (!evaluating && L->pair_member >= 0) {
+      // A pair run: the learned policy with the pair's perturbation, within the action bounds.
+      a = fmin(fmax(a + pair_offset(L), -L->omega_max), L->omega_max);
+      source = B21R_EXPERIENCE_T_SOURCE_EXPLORATION;
+    }
     if (!evaluating && explore_offset(L, L->cfg.explore_sigma_radps, &offset)) {
       a += offset;
       source = B21R_EXPERIENCE_T_SOURCE_EXPLORATION;

@@ -5,7 +5,8 @@
 //
 // Data (all inside the caller's storage block, see make_layout()):
 //   store   pts[cap × D] scaled coordinates, val[cap] values, seq[cap] sequence numbers,
-//           flags[cap]; slots 0..fill-1 are occupied (eviction replaces in place).
+//           flags[cap], run_tag[cap] and anchor_w[cap] (hedger_weight_run); slots 0..fill-1
+//           are occupied (eviction replaces in place).
 //   fresh   [fresh_cap] slots and coordinates of the points stored after the active tree's
 //           snapshot, scanned linearly (contiguously) by every query; fresh_pos[cap] maps a slot
 //           to its fresh entry, so a slot rewritten again updates its entry in place and every
@@ -140,7 +141,7 @@ bool spans_inputs(const Eigen::Matrix<double, D + 1, 1>* rows, uint32_t n) noexc
 /// Offsets of every array in the storage block (bytes from its start).
 struct Layout {
   size_t total;
-  size_t pts, val, seq, flags, fresh_pos, fresh_slot, fresh_pts, run;
+  size_t pts, val, seq, flags, run_tag, anchor_w, fresh_pos, fresh_slot, fresh_pts, run;
   size_t tpts[2], tids[2], tnodes[2];
   uint32_t max_nodes;
   uint32_t run_stride;  ///< doubles per run record: s, a, r, s', terminal
@@ -170,7 +171,11 @@ struct hedger {
   double* val;
   uint64_t* seq;
   uint8_t* flags;
+  uint32_t* run_tag;  ///< run tag current when the slot was written
+  float* anchor_w;    ///< weight in the neighbours' policy (the anchor), 1 when written
   uint64_t seq_counter;
+  uint32_t cur_tag;   ///< tag of the points stored from now on (hedger_set_run_tag)
+  uint32_t pad_tag;
   // Fresh buffer.
   uint32_t* fresh_pos;   ///< [cap] entry of each slot, or kNone
   uint32_t* fresh_slot;  ///< [fresh_cap]
@@ -586,16 +591,31 @@ bool greedy_state_model(hedger& h, const double* x, double reach, GreedyResult& 
   // edge of the visited states (a start pose heading off the axis: every neighbour has turned
   // part of the way already) both are biased towards the actions of the less extreme states, and
   // the robot turned too gently (measured: the first 2 s of a run from the corridor's start poses).
+  // Each point's kernel weight is multiplied by its anchor weight (hedger_weight_run: runs the
+  // caller ranked) and, with cfg.anchor_recency_runs, by its run's age, so the imitation can
+  // follow the better of the runs it has seen; the value model above never sees either.
   using SVec = Eigen::Matrix<double, D, 1>;
   using SMat = Eigen::Matrix<double, D, D>;
   SMat sa_m = SMat::Zero();
   SVec sa_t = SVec::Zero();
+  const double recency = h.cfg.anchor_recency_runs;
+  double wa[HEDGER_MAX_K];
+  double sw_anchor = 0.0;
+  for (uint32_t i = 0; i < n; ++i) {
+    const uint32_t id = nbuf[i].id;
+    wa[i] = w[i] * static_cast<double>(h.anchor_w[id]);
+    if (recency > 0.0) wa[i] *= std::exp(-static_cast<double>(h.cur_tag - h.run_tag[id]) / recency);
+    sw_anchor += wa[i];
+  }
+  // A neighbourhood whose every point the caller weighted (nearly) zero has no preference left:
+  // the plain kernel weights, not a regression on nothing.
+  const double* wz = sw_anchor > 1e-9 * sw ? wa : w;
   for (uint32_t i = 0; i < n; ++i) {
     SVec z;
     for (int j = 0; j < D - 1; ++j) z[j] = rows[i][j];
     z[D - 1] = 1.0;
-    sa_m.noalias() += (w[i] * z) * z.transpose();
-    sa_t.noalias() += (w[i] * rows[i][D - 1]) * z;
+    sa_m.noalias() += (wz[i] * z) * z.transpose();
+    sa_t.noalias() += (wz[i] * rows[i][D - 1]) * z;
   }
   for (int j = 0; j < D - 1; ++j) sa_m(j, j) += h.cfg.ridge;
   SymFactor sa_f;
@@ -767,6 +787,8 @@ void write_slot(hedger& h, uint32_t slot, const double* x, double q, uint8_t fl)
   for (int j = 0; j < D; ++j) p[j] = x[j];
   h.val[slot] = q;
   h.seq[slot] = ++h.seq_counter;
+  h.run_tag[slot] = h.cur_tag;
+  h.anchor_w[slot] = 1.0f;
   h.flags[slot] = fl;
   if (fl & HEDGER_POINT_PROTECTED) ++h.n_protected;
   add_fresh<D>(h, slot);

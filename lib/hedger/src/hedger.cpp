@@ -59,6 +59,7 @@ bool valid_config(const hedger_config_t* c) {
   }
   if (!std::isfinite(c->greedy_pessimism) || !(c->greedy_pessimism >= 0.0)) return false;
   if (!std::isfinite(c->greedy_reach) || !(c->greedy_reach >= 1.0) || c->greedy_reach > 100.0) return false;
+  if (!std::isfinite(c->anchor_recency_runs) || !(c->anchor_recency_runs >= 0.0)) return false;
   return true;
 }
 
@@ -80,6 +81,8 @@ Layout make_layout(const hedger_config_t& c) {
   l.val = take(cap * sizeof(double));
   l.seq = take(cap * sizeof(uint64_t));
   l.flags = take(cap);
+  l.run_tag = take(cap * sizeof(uint32_t));
+  l.anchor_w = take(cap * sizeof(float));
   l.fresh_pos = take(cap * sizeof(uint32_t));
   l.fresh_slot = take(static_cast<size_t>(c.fresh_capacity) * sizeof(uint32_t));
   l.fresh_pts = take(static_cast<size_t>(c.fresh_capacity) * d * sizeof(double));
@@ -116,6 +119,7 @@ void reset_learned_state(hedger_t* h) {
   h->fill = 0;
   h->n_protected = 0;
   h->seq_counter = 0;
+  h->cur_tag = 0;
   h->n_fresh = 0;
   h->active = 0;
   h->building = 0;
@@ -132,14 +136,31 @@ void reset_learned_state(hedger_t* h) {
 // ---- Byte format ----------------------------------------------------------------------------
 // Little-endian. Offsets: 0 magic "HDGR", 4 u32 version, 8 u64 total length (with CRC), 16 u32
 // state_dim, 20 u32 capacity, 24 u32 count, 28 u32 reward_seen, 32 f64 action_min, 40 f64
-// action_max, 48 f64 gamma, 56 f64 r_min, 64 f64 r_max, 72 u64 generator state, 80 f64
-// input_scale[D], then count × (D f64 scaled coordinates, f64 value, u32 flags), then u32 CRC-32
-// (IEEE 802.3, reflected 0xEDB88320, init and final xor 0xFFFFFFFF) of all preceding bytes.
+// action_max, 48 f64 gamma, 56 f64 r_min, 64 f64 r_max, 72 u64 generator state, 80 u32 current
+// run tag, 84 u32 reserved (0), 88 f64 input_scale[D], then count × (D f64 scaled coordinates,
+// f64 value, u32 flags, u32 run tag, f32 anchor weight), then u32 CRC-32 (IEEE 802.3, reflected
+// 0xEDB88320, init and final xor 0xFFFFFFFF) of all preceding bytes. Version 1 (read only): no
+// run tag fields (input_scale at 80, records of D f64, f64 value, u32 flags).
 constexpr uint8_t kFileMagic[4] = {'H', 'D', 'G', 'R'};
-constexpr size_t kHeaderFixed = 80;
 
-size_t format_size(uint32_t d, uint32_t count) {
-  return kHeaderFixed + 8u * static_cast<size_t>(d) + static_cast<size_t>(count) * (8u * d + 12u) + 4u;
+size_t header_fixed(uint32_t version) { return version == 1u ? 80u : 88u; }
+size_t record_size(uint32_t d, uint32_t version) { return 8u * d + (version == 1u ? 12u : 20u); }
+
+size_t format_size(uint32_t d, uint32_t count, uint32_t version = HEDGER_FORMAT_VERSION) {
+  return header_fixed(version) + 8u * static_cast<size_t>(d) + static_cast<size_t>(count) * record_size(d, version) +
+         4u;
+}
+
+uint32_t f32_bits(float f) {
+  uint32_t u;
+  std::memcpy(&u, &f, sizeof u);
+  return u;
+}
+
+float bits_f32(uint32_t u) {
+  float f;
+  std::memcpy(&f, &u, sizeof f);
+  return f;
 }
 
 struct Crc32Table {
@@ -251,6 +272,7 @@ hedger_config_t hedger_config_default(void) HEDGER_NOEXCEPT {
   c.greedy_pessimism = 0.0;
   c.greedy_reach = 1.0;
   c.local_model = static_cast<uint32_t>(HEDGER_LOCAL_LWR);
+  c.anchor_recency_runs = 0.0;
   return c;
 }
 
@@ -292,6 +314,8 @@ hedger_status_t hedger_init(hedger_t** out, void* storage, size_t storage_size, 
   h->val = reinterpret_cast<double*>(base + l.val);
   h->seq = reinterpret_cast<uint64_t*>(base + l.seq);
   h->flags = base + l.flags;
+  h->run_tag = reinterpret_cast<uint32_t*>(base + l.run_tag);
+  h->anchor_w = reinterpret_cast<float*>(base + l.anchor_w);
   h->fresh_pos = reinterpret_cast<uint32_t*>(base + l.fresh_pos);
   std::memset(h->fresh_pos, 0xFF, static_cast<size_t>(cfg->capacity) * sizeof(uint32_t));  // kNone
   h->fresh_slot = reinterpret_cast<uint32_t*>(base + l.fresh_slot);
@@ -454,6 +478,29 @@ hedger_status_t hedger_get_point(const hedger_t* self, uint32_t slot, hedger_poi
   out->action = p[d - 1] * self->cfg.input_scale[d - 1];
   out->value = self->val[slot];
   out->flags = self->flags[slot];
+  out->run_tag = self->run_tag[slot];
+  out->anchor_weight = static_cast<double>(self->anchor_w[slot]);
+  return HEDGER_OK;
+}
+
+hedger_status_t hedger_set_run_tag(hedger_t* self, uint32_t tag) HEDGER_NOEXCEPT {
+  if (!live(self) || tag < self->cur_tag) return HEDGER_ERR_INVALID_ARG;
+  self->cur_tag = tag;
+  refresh_gauges(self);  // the anchor's recency has moved: a sliced save must start again
+  return HEDGER_OK;
+}
+
+hedger_status_t hedger_weight_run(hedger_t* self, uint32_t tag, double weight, uint32_t* points) HEDGER_NOEXCEPT {
+  if (!live(self) || !std::isfinite(weight) || !(weight >= 0.0) || weight > 16.0) return HEDGER_ERR_INVALID_ARG;
+  const float w = static_cast<float>(weight);
+  uint32_t n = 0;
+  for (uint32_t s = 0; s < self->fill; ++s) {
+    if (self->run_tag[s] != tag) continue;
+    self->anchor_w[s] = w;
+    ++n;
+  }
+  if (points != nullptr) *points = n;
+  refresh_gauges(self);
   return HEDGER_OK;
 }
 
@@ -489,7 +536,9 @@ hedger_status_t hedger_save_begin(const hedger_t* self, void* buf, size_t size, 
   put_f64(p + 56, self->r_min);
   put_f64(p + 64, self->r_max);
   put_u64(p + 72, self->rng);
-  size_t off = kHeaderFixed;
+  put_u32(p + 80, self->cur_tag);
+  put_u32(p + 84, 0u);
+  size_t off = header_fixed(HEDGER_FORMAT_VERSION);
   for (uint32_t i = 0; i < d; ++i, off += 8) put_f64(p + off, self->cfg.input_scale[i]);
   cursor->buf = p;
   cursor->size = total;
@@ -522,6 +571,10 @@ hedger_status_t hedger_save_step(const hedger_t* self, hedger_save_cursor_t* cur
     off += 8;
     put_u32(p + off, self->flags[s]);
     off += 4;
+    put_u32(p + off, self->run_tag[s]);
+    off += 4;
+    put_u32(p + off, f32_bits(self->anchor_w[s]));
+    off += 4;
   }
   cursor->crc = crc32_update(cursor->crc, p + start, off - start);
   cursor->offset = off;
@@ -550,10 +603,12 @@ hedger_status_t hedger_load(hedger_t* self, const void* buf, size_t size) HEDGER
   const size_t nm = size < 4 ? size : 4;
   if (std::memcmp(p, kFileMagic, nm) != 0) return HEDGER_ERR_FORMAT;
   if (size < 8) return HEDGER_ERR_TRUNCATED;
-  if (get_u32(p + 4) != HEDGER_FORMAT_VERSION) return HEDGER_ERR_VERSION;
+  const uint32_t version = get_u32(p + 4);
+  if (version != HEDGER_FORMAT_VERSION && version != 1u) return HEDGER_ERR_VERSION;
   if (size < 16) return HEDGER_ERR_TRUNCATED;
   const uint64_t total = get_u64(p + 8);
-  if (total < kHeaderFixed + 8u + 4u) return HEDGER_ERR_FORMAT;
+  const size_t head = header_fixed(version);
+  if (total < head + 8u + 4u) return HEDGER_ERR_FORMAT;
   if (total > size) return HEDGER_ERR_TRUNCATED;
   const size_t n = static_cast<size_t>(total);
   if (get_u32(p + n - 4) != crc32(p, n - 4)) return HEDGER_ERR_CHECKSUM;
@@ -567,23 +622,32 @@ hedger_status_t hedger_load(hedger_t* self, const void* buf, size_t size) HEDGER
     return HEDGER_ERR_CONFIG_MISMATCH;
   }
   for (uint32_t i = 0; i < d; ++i) {
-    if (!same_bits(get_f64(p + kHeaderFixed + 8u * i), self->cfg.input_scale[i])) return HEDGER_ERR_CONFIG_MISMATCH;
+    if (!same_bits(get_f64(p + head + 8u * i), self->cfg.input_scale[i])) return HEDGER_ERR_CONFIG_MISMATCH;
   }
   if (count > self->cfg.capacity) return HEDGER_ERR_CONFIG_MISMATCH;
   // Contents.
-  if (total != format_size(d, count)) return HEDGER_ERR_FORMAT;
+  if (total != format_size(d, count, version)) return HEDGER_ERR_FORMAT;
   const uint32_t seen = get_u32(p + 28);
   const double rmin = get_f64(p + 56), rmax = get_f64(p + 64);
   const uint64_t rng = get_u64(p + 72);
   if (seen > 1 || !std::isfinite(rmin) || !std::isfinite(rmax) || rmin > rmax || rng == 0) return HEDGER_ERR_FORMAT;
-  const size_t rec = 8u * d + 12u;
-  const size_t first = kHeaderFixed + 8u * d;
+  const bool tagged = version != 1u;
+  const uint32_t cur_tag = tagged ? get_u32(p + 80) : 0u;
+  if (tagged && get_u32(p + 84) != 0u) return HEDGER_ERR_FORMAT;
+  const size_t rec = record_size(d, version);
+  const size_t first = head + 8u * d;
   for (uint32_t s = 0; s < count; ++s) {
     const uint8_t* r = p + first + s * rec;
     for (uint32_t i = 0; i <= d; ++i) {
       if (!std::isfinite(get_f64(r + 8u * i))) return HEDGER_ERR_FORMAT;
     }
     if ((get_u32(r + 8u * d + 8u) & ~HEDGER_POINT_PROTECTED) != 0) return HEDGER_ERR_FORMAT;
+    if (tagged) {
+      const float w = bits_f32(get_u32(r + 8u * d + 16u));
+      if (get_u32(r + 8u * d + 12u) > cur_tag || !std::isfinite(w) || !(w >= 0.0f) || w > 16.0f) {
+        return HEDGER_ERR_FORMAT;
+      }
+    }
   }
   // Valid: replace the learned state.
   reset_learned_state(self);
@@ -594,12 +658,15 @@ hedger_status_t hedger_load(hedger_t* self, const void* buf, size_t size) HEDGER
     for (uint32_t i = 0; i < d; ++i) x[i] = get_f64(r + 8u * i);
     self->val[s] = get_f64(r + 8u * d);
     self->flags[s] = static_cast<uint8_t>(get_u32(r + 8u * d + 8u));
+    self->run_tag[s] = tagged ? get_u32(r + 8u * d + 12u) : 0u;
+    self->anchor_w[s] = tagged ? bits_f32(get_u32(r + 8u * d + 16u)) : 1.0f;
     self->seq[s] = 1;
     prot += self->flags[s] & HEDGER_POINT_PROTECTED;
   }
   self->fill = count;
   self->n_protected = prot;
   self->seq_counter = 1;
+  self->cur_tag = cur_tag;
   self->reward_seen = seen;
   self->r_min = rmin;
   self->r_max = rmax;

@@ -247,7 +247,7 @@ static void test_persist_invalid_contents_refused(void** state) {
   uint8_t* buf = save_all(h, &n);
   size_t nb;
   uint8_t* before = save_all(h, &nb);
-  const size_t first = 80 + 8 * 3;  // header + input scales (D = 3)
+  const size_t first = 88 + 8 * 3;  // header + input scales (D = 3)
   uint8_t* bad = malloc(n);
   memcpy(bad, buf, n);
   const double nan = NAN;
@@ -256,6 +256,23 @@ static void test_persist_invalid_contents_refused(void** state) {
   expect_refused(h, before, nb, bad, n, HEDGER_ERR_FORMAT);
   memcpy(bad, buf, n);
   bad[first + 4 * 8] = 0x42;  // flags of point 0
+  fix_crc(bad, n);
+  expect_refused(h, before, nb, bad, n, HEDGER_ERR_FORMAT);
+  // Run tags and anchor weights: a tag after the current run, a weight outside [0, 16] or not a
+  // number, a reserved header word that is not 0.
+  memcpy(bad, buf, n);
+  put_u32(bad + first + 4 * 8 + 4, 1u);  // run tag of point 0 > current tag (0)
+  fix_crc(bad, n);
+  expect_refused(h, before, nb, bad, n, HEDGER_ERR_FORMAT);
+  const float bad_weights[3] = {-1.0f, 17.0f, NAN};
+  for (int i = 0; i < 3; ++i) {
+    memcpy(bad, buf, n);
+    memcpy(bad + first + 4 * 8 + 8, &bad_weights[i], 4);
+    fix_crc(bad, n);
+    expect_refused(h, before, nb, bad, n, HEDGER_ERR_FORMAT);
+  }
+  memcpy(bad, buf, n);
+  put_u32(bad + 84, 7u);
   fix_crc(bad, n);
   expect_refused(h, before, nb, bad, n, HEDGER_ERR_FORMAT);
   free(bad);
@@ -282,6 +299,108 @@ static void test_persist_save_short_buffer_capacity(void** state) {
   hedger_destroy(h);
 }
 
+
+// Run tags, anchor weights and the current tag survive a save and load: the loaded instance's
+// points and greedy choices equal the source's bit for bit.
+static void test_persist_run_tags_round_trip(void** state) {
+  (void)state;
+  hedger_config_t c = persist_config();
+  c.greedy_method = HEDGER_GREEDY_STATE_MODEL;
+  c.greedy_pessimism = 2.0;
+  c.anchor_recency_runs = 3.0;
+  hedger_t* src = ht_create(&c);
+  uint64_t rs = 21;
+  for (uint32_t run = 1; run <= 4; ++run) {
+    assert_int_equal(hedger_set_run_tag(src, run * 10u), HEDGER_OK);
+    train(src, &rs, 40);
+  }
+  uint32_t weighted = 0;
+  assert_int_equal(hedger_weight_run(src, 20u, 3.5, &weighted), HEDGER_OK);
+  assert_true(weighted > 0);
+  size_t n;
+  uint8_t* buf = save_all(src, &n);
+  hedger_t* dst = ht_create(&c);
+  assert_int_equal(hedger_load(dst, buf, n), HEDGER_OK);
+  assert_int_equal(hedger_size(dst), hedger_size(src));
+  uint32_t seen_weighted = 0;
+  for (uint32_t i = 0; i < hedger_size(src); ++i) {
+    hedger_point_t a, b;
+    assert_int_equal(hedger_get_point(src, i, &a), HEDGER_OK);
+    assert_int_equal(hedger_get_point(dst, i, &b), HEDGER_OK);
+    assert_int_equal(a.run_tag, b.run_tag);
+    assert_true(a.anchor_weight == b.anchor_weight);
+    seen_weighted += b.anchor_weight == 3.5 ? 1u : 0u;
+  }
+  assert_int_equal(seen_weighted, weighted);
+  for (int q = 0; q < 50; ++q) {
+    const double s[2] = {ht_uniform(&rs, -1.0, 1.0), ht_uniform(&rs, -1.0, 1.0)};
+    double a1 = 0.0, v1 = 0.0, a2 = 1.0, v2 = 1.0;
+    const hedger_status_t s1 = hedger_greedy(src, s, &a1, &v1, NULL);
+    const hedger_status_t s2 = hedger_greedy(dst, s, &a2, &v2, NULL);
+    assert_int_equal(s1, s2);
+    assert_memory_equal(&a1, &a2, sizeof a1);
+    assert_memory_equal(&v1, &v2, sizeof v1);
+  }
+  // The current tag came along: an earlier one is refused, the same one accepted.
+  assert_int_equal(hedger_set_run_tag(dst, 39u), HEDGER_ERR_INVALID_ARG);
+  assert_int_equal(hedger_set_run_tag(dst, 40u), HEDGER_OK);
+  free(buf);
+  hedger_destroy(dst);
+  hedger_destroy(src);
+}
+
+// A version-1 buffer (before run tags) still loads: the same points and values, every tag 0 and
+// every anchor weight 1, so the greedy choices are those of an instance that never tagged.
+static void test_persist_version1_loads(void** state) {
+  (void)state;
+  hedger_config_t c = persist_config();
+  c.greedy_method = HEDGER_GREEDY_STATE_MODEL;
+  c.greedy_pessimism = 2.0;
+  hedger_t* src = ht_create(&c);
+  uint64_t rs = 23;
+  train(src, &rs, 150);
+  size_t n;
+  uint8_t* v2 = save_all(src, &n);
+  // Version 2 → 1: drop the header's run-tag words and each record's tag and weight.
+  const uint32_t d = 3, count = hedger_size(src);
+  const size_t rec2 = 8u * d + 20u, rec1 = 8u * d + 12u;
+  const size_t n1 = 80u + 8u * d + count * rec1 + 4u;
+  uint8_t* v1 = malloc(n1);
+  memcpy(v1, v2, 80);
+  memcpy(v1 + 80, v2 + 88, 8u * d);
+  for (uint32_t i = 0; i < count; ++i) memcpy(v1 + 80 + 8u * d + i * rec1, v2 + 88 + 8u * d + i * rec2, rec1);
+  put_u32(v1 + 4, 1u);
+  for (int i = 0; i < 8; ++i) v1[8 + i] = (uint8_t)((uint64_t)n1 >> (8 * i));
+  fix_crc(v1, n1);
+  hedger_t* dst = ht_create(&c);
+  assert_int_equal(hedger_load(dst, v1, n1), HEDGER_OK);
+  assert_int_equal(hedger_size(dst), count);
+  for (uint32_t i = 0; i < count; ++i) {
+    hedger_point_t a, b;
+    assert_int_equal(hedger_get_point(src, i, &a), HEDGER_OK);
+    assert_int_equal(hedger_get_point(dst, i, &b), HEDGER_OK);
+    assert_memory_equal(&a.value, &b.value, sizeof a.value);
+    assert_int_equal(b.run_tag, 0);
+    assert_true(b.anchor_weight == 1.0);
+  }
+  for (int q = 0; q < 50; ++q) {
+    const double s[2] = {ht_uniform(&rs, -1.0, 1.0), ht_uniform(&rs, -1.0, 1.0)};
+    double a1 = 0.0, v1v = 0.0, a2 = 1.0, v2v = 1.0;
+    assert_int_equal(hedger_greedy(src, s, &a1, &v1v, NULL), hedger_greedy(dst, s, &a2, &v2v, NULL));
+    assert_memory_equal(&a1, &a2, sizeof a1);
+  }
+  // Saved again, it is a version-2 buffer.
+  size_t n2;
+  uint8_t* again = save_all(dst, &n2);
+  assert_int_equal(n2, n);
+  assert_int_equal(again[4], HEDGER_FORMAT_VERSION);
+  free(again);
+  free(v1);
+  free(v2);
+  hedger_destroy(dst);
+  hedger_destroy(src);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_persist_round_trip_identical),
@@ -291,6 +410,8 @@ int main(void) {
       cmocka_unit_test(test_persist_config_mismatch_refused),
       cmocka_unit_test(test_persist_invalid_contents_refused),
       cmocka_unit_test(test_persist_save_short_buffer_capacity),
+      cmocka_unit_test(test_persist_run_tags_round_trip),
+      cmocka_unit_test(test_persist_version1_loads),
   };
   return cmocka_run_group_tests_name("hedger.persist", tests, NULL, NULL);
 }

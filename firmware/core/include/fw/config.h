@@ -210,6 +210,11 @@ typedef struct fw_config {
   bool advisor;                    ///< phase two: example policy acts where HEDGER knows nothing
   double example_noise_radps;      ///< phase one, example driver: std-dev of a dither segment's offset
   bool state_rotation;             ///< the state ends with the rotation the base executes [rad/s] (default)
+  bool pair_runs;                  ///< phase two, corridor: training runs in ranked pairs (see config.c)
+  double pair_gain_sigma;          ///< pair_runs: std-dev of the perturbation's gain on θ [rad/s per rad]
+  double pair_centring_sigma;      ///< pair_runs: std-dev of its term on (lateral fraction − 0.5) [rad/s]
+  double pair_tau_steps;           ///< pair_runs: scale of the weights' response to the steps' difference
+  double pair_recency_runs;        ///< pair_runs: imitation fades a point stored N runs ago by e^(−N/this)
 
   // Output.
   char lcm_url[FW_CONFIG_STR_MAX]; ///< LCM provider URL; "" = LCM's default; "none" = off

@@ -15,11 +15,11 @@
 /// Memory. Everything lives in one block provided by the caller (hedger_storage_size(),
 /// hedger_init()) or allocated once by hedger_create(). After init no function allocates;
 /// predict / greedy / update run in bounded time. Footprint (hedger_storage_size() is exact):
-///   per stored point  (24 D + 37) bytes + about 64 / 16 · 2 bytes of tree nodes
-///                     (store: coordinates 8D, value 8, sequence 8, flags 1, fresh index 4;
-///                      two kd-trees: coordinates 8D + id 4 each)
+///   per stored point  (24 D + 45) bytes + about 64 / 16 · 2 bytes of tree nodes
+///                     (store: coordinates 8D, value 8, sequence 8, flags 1, fresh index 4,
+///                      run tag 4, anchor weight 4; two kd-trees: coordinates 8D + id 4 each)
 ///   per fresh entry   8 D + 4 bytes;  per run record (2 state_dim + 3) · 8 bytes;  + ~1 KiB.
-/// D = 4 (3-D state + action): 139 bytes per stored point measured at 20k points.
+/// D = 4 (3-D state + action): 147 bytes per stored point measured at 20k points.
 ///
 /// Choices (hedger.md leaves them open; measured on the mountain-car test and the benchmark):
 /// - Bandwidth: fixed h in scaled units, not tied to the neighbourhood, so "unknown" means
@@ -97,10 +97,19 @@
 ///   docs/LEARNING.md records every alternative measured (lower pessimism, more data and
 ///   neighbours, exploration, held decisions, planning on the values, advantage weighting, one
 ///   teacher or a mixture, the obstacle task's gap) and the diagnosis behind these choices. The
-///   one method that moves phase two past the imitation ranks whole runs instead of actions:
-///   pairs of phase-two runs from one pose with opposite policy perturbations, each run's points
-///   weighted in the anchor by the pair's measured steps (not merged; the section "Ranking whole
-///   runs in phase two").
+///   one method that moves phase two past the imitation ranks whole runs instead of actions (next
+///   item).
+/// - Run tags and anchor weights (hedger_set_run_tag, hedger_weight_run, cfg.anchor_recency_runs):
+///   the caller ranks whole runs and the anchor follows the better ones; values, hulls and
+///   standard errors never see the weights. The firmware's pair_runs: phase-two runs in pairs
+///   from one pose with opposite policy perturbations and the same exploration noise; the faster
+///   run's points weigh 2 / (1 + e^(−d/τ)), τ = 1 step, the slower run's 2 minus that; runs fade
+///   with e^(−age / 150 run tags). Fig. 4 with 100 phase-two runs, seeds 11-20 (chosen on): final
+///   block −1.2 ± 0.4 steps against the same schedule without pairs, the curve falling through
+///   phase two (flat without); without the ranking (every weight 1) the same perturbations gave
+///   +34.1 ± 42.7 and 83 failed runs, fading alone +0.2 ± 0.2. Seeds 1-10: docs/RESULTS.md,
+///   ablation_pairs. Cost: 8 bytes per stored point; one O(fill) pass per weighted run, between
+///   runs.
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are
@@ -161,8 +170,9 @@ extern "C" {
 #define HEDGER_MAX_REPLAY_PASSES 64U
 /// Alignment (bytes) the storage given to hedger_init() must have.
 #define HEDGER_STORAGE_ALIGN 64U
-/// Version of the byte format written by hedger_save(). hedger_load() accepts only this version.
-#define HEDGER_FORMAT_VERSION 1U
+/// Version of the byte format written by hedger_save(). hedger_load() reads it and version 1
+/// (before run tags: its points load with tag 0 and anchor weight 1).
+#define HEDGER_FORMAT_VERSION 2U
 
 /// Result codes. 0 is success; 1 is an outcome, not an error; >= 2 are errors.
 typedef enum hedger_status {
@@ -306,6 +316,11 @@ typedef struct hedger_config {
                          ///< neighbours' average, kind LWA); 1 = no second attempt. Default 1.
   uint32_t local_model;  ///< a hedger_local_model_t value. Not part of a save (values stay valid
                          ///< under either model). Default HEDGER_LOCAL_LWR.
+  double anchor_recency_runs; ///< HEDGER_GREEDY_STATE_MODEL, >= 0 [run tags]: in the
+                         ///< neighbours' policy (the anchor) a point stored `age` run tags before
+                         ///< the current one (hedger_set_run_tag) has its weight multiplied by
+                         ///< e^(−age / anchor_recency_runs), so older runs fade from the
+                         ///< imitation (never from the values); 0 = no fading. Default 0.
 } hedger_config_t;
 
 /// One prediction.
@@ -375,6 +390,8 @@ typedef struct hedger_point {
   double action;
   double value;
   uint32_t flags;                     ///< HEDGER_POINT_* bits
+  uint32_t run_tag;                   ///< the run tag current when the point was stored
+  double anchor_weight;               ///< its weight in the neighbours' policy (hedger_weight_run)
 } hedger_point_t;
 
 /// Opaque instance. Internals are C++/Eigen.
@@ -477,6 +494,25 @@ hedger_status_t hedger_end_run(hedger_t* self, uint32_t* replayed) HEDGER_NOEXCE
 hedger_status_t hedger_end_run_begin(hedger_t* self, uint32_t* pending) HEDGER_NOEXCEPT;
 hedger_status_t hedger_end_run_step(hedger_t* self, uint32_t max_updates, uint32_t* remaining) HEDGER_NOEXCEPT;
 
+/// Run tags and anchor weights: ranking whole runs. Every stored point carries the run tag that
+/// was current when it was stored (merges keep the tag of the point merged into) and an anchor
+/// weight, 1 when stored. The weight multiplies the point's kernel weight in the neighbours'
+/// policy of HEDGER_GREEDY_STATE_MODEL (the anchor of the greedy search, a locally linear
+/// imitation of the stored actions) and nowhere else: values, hulls and standard errors do not
+/// see it. A caller that can rank its runs (two runs from one start, say, by their measured
+/// returns) weights the better run's points up and the worse run's down, and the imitation
+/// moves toward the better run. Both are saved (format version 2).
+///
+/// hedger_set_run_tag: points stored from now on carry `tag`, and `tag` is the current run for
+/// cfg.anchor_recency_runs. Tags must not decrease (INVALID_ARG). O(1).
+hedger_status_t hedger_set_run_tag(hedger_t* self, uint32_t tag) HEDGER_NOEXCEPT;
+
+/// Sets the anchor weight of every stored point tagged `tag` to `weight` (finite, [0, 16]);
+/// *points (may be NULL) receives how many. Counts as a change of the learned state (a sliced
+/// save under way must start again). O(fill): run it between runs, never in a tick.
+/// Errors: INVALID_ARG.
+hedger_status_t hedger_weight_run(hedger_t* self, uint32_t tag, double weight, uint32_t* points) HEDGER_NOEXCEPT;
+
 /// Stores a point directly with value q (seeding, tests, offline tools), through the same
 /// merge/evict rule as an update; no neighbour is pulled. flags: HEDGER_POINT_* bits. op (may be
 /// NULL) receives what the store did. O(evict_candidates · log n), no allocation.
@@ -506,11 +542,11 @@ size_t hedger_serialized_size(const hedger_t* self) HEDGER_NOEXCEPT;
 /// is invalid: size a save buffer once with it. O(1).
 size_t hedger_serialized_max_size(const hedger_config_t* cfg) HEDGER_NOEXCEPT;
 
-/// Writes the learned state (config, stored points with values and flags, rewards seen, the
-/// eviction generator's state) into buf: little-endian, versioned (HEDGER_FORMAT_VERSION),
-/// CRC-32 (IEEE 802.3) over all preceding bytes at the end. *written (may be NULL) receives the
-/// byte count. The run buffer and counters are not saved. O(n·D), no allocation, no file I/O
-/// (write the bytes atomically yourself: write, fsync, rename).
+/// Writes the learned state (config, stored points with values, flags, run tags and anchor weights,
+/// the current run tag, rewards seen, the eviction generator's state) into buf: little-endian,
+/// versioned (HEDGER_FORMAT_VERSION), CRC-32 (IEEE 802.3) over all preceding bytes at the end.
+/// *written (may be NULL) receives the byte count. The run buffer and counters are not saved.
+/// O(n·D), no allocation, no file I/O (write the bytes atomically yourself: write, fsync, rename).
 /// Errors: INVALID_ARG, CAPACITY (size < hedger_serialized_size(); nothing written).
 hedger_status_t hedger_save(const hedger_t* self, void* buf, size_t size, size_t* written) HEDGER_NOEXCEPT;
 
@@ -537,13 +573,13 @@ hedger_status_t hedger_save_begin(const hedger_t* self, void* buf, size_t size, 
 hedger_status_t hedger_save_step(const hedger_t* self, hedger_save_cursor_t* cursor, uint32_t max_points,
                                  size_t* written) HEDGER_NOEXCEPT;
 
-/// Replaces the learned state with the one in buf (from hedger_save()). Checks, in order: magic
-/// (FORMAT), version (VERSION), declared length vs size (TRUNCATED), CRC-32 (CHECKSUM), config
-/// compatibility (CONFIG_MISMATCH: state_dim, action bounds, input scales, gamma must be equal
-/// bit for bit, and the saved points must fit cfg.capacity), then contents (FORMAT: non-finite or
-/// out-of-range fields). Any failure leaves the instance unchanged. On success the run buffer is
-/// cleared and the kd-tree rebuilt at once: O(n log n), no allocation; not for inside a tick.
-/// Bytes after the declared length are ignored.
+/// Replaces the learned state with the one in buf (from hedger_save(), format version 2 or 1).
+/// Checks, in order: magic (FORMAT), version (VERSION), declared length vs size (TRUNCATED), CRC-32
+/// (CHECKSUM), config compatibility (CONFIG_MISMATCH: state_dim, action bounds, input scales, gamma
+/// must be equal bit for bit, and the saved points must fit cfg.capacity), then contents (FORMAT:
+/// non-finite or out-of-range fields). Any failure leaves the instance unchanged. On success the
+/// run buffer is cleared and the kd-tree rebuilt at once: O(n log n), no allocation; not for inside
+/// a tick. Bytes after the declared length are ignored.
 hedger_status_t hedger_load(hedger_t* self, const void* buf, size_t size) HEDGER_NOEXCEPT;
 
 /// A constant English description of a status ("ok", "invalid argument", ...). Never NULL.

@@ -387,6 +387,34 @@ static void test_config_validate_cross_key_rules(void** state) {
   assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
 }
 
+// pair_runs needs the corridor (its perturbation uses the target angle and lateral fraction),
+// HEDGER and the state-model greedy search (the weights steer that search's imitation): each
+// other combination is refused naming pair_runs, where it was set, and the key in the way.
+static void test_config_pair_runs_needs_corridor_hedger_state_model(void** state) {
+  (void)state;
+  fw_config_t c;
+  char err[FW_CONFIG_ERR_MAX];
+  fw_config_defaults(&c);
+  assert_false(c.pair_runs);
+  assert_int_equal(fw_config_set(&c, "pair_runs", "true", "robot.conf:3", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
+  const char* blockers[3][2] = {{"task", "obstacles"}, {"learner", "tabular"}, {"hedger_greedy_method", "per_action"}};
+  for (int i = 0; i < 3; ++i) {
+    fw_config_t d = c;
+    assert_int_equal(fw_config_set(&d, blockers[i][0], blockers[i][1], "robot.conf:9", err, sizeof err), 0);
+    assert_int_equal(fw_config_validate(&d, err, sizeof err), -1);
+    assert_non_null(strstr(err, "robot.conf:3: pair_runs needs"));
+    assert_non_null(strstr(err, "set at robot.conf:9"));
+    assert_non_null(strstr(err, "set pair_runs = false"));
+  }
+  // Out-of-range settings are refused by the key's own range.
+  assert_int_equal(fw_config_set(&c, "pair_tau_steps", "0", "--set", err, sizeof err), -1);
+  assert_non_null(strstr(err, "pair_tau_steps"));
+  assert_int_equal(fw_config_set(&c, "pair_recency_runs", "-1", "--set", err, sizeof err), -1);
+  assert_int_equal(fw_config_set(&c, "pair_gain_sigma", "0.1", "--set", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
+}
+
 // The program refuses joystick driving where no operator can drive: in lockstep, and with LCM
 // off; the message names both keys and where they were set. In-process users (fw_config_validate)
 // may still combine them (their tests post B21R_TELEOP themselves).
@@ -636,6 +664,7 @@ int main(int argc, char** argv) {
       cmocka_unit_test(test_config_reference_file_matches_defaults),
       cmocka_unit_test(test_config_extra_keys_go_to_the_handler),
       cmocka_unit_test(test_config_set_allocates_nothing),
+      cmocka_unit_test(test_config_pair_runs_needs_corridor_hedger_state_model),
       cmocka_unit_test(test_config_program_refuses_joystick_without_operator),
       cmocka_unit_test(test_config_learner_key),
   };

@@ -58,6 +58,48 @@ static void test_loop_learns_corridor_reaches_goal_from_all_poses(void** state) 
   harness_close(&g_h);
 }
 
+// pair_runs: phase two's training runs come in pairs from one start pose (the B21R_RUN start
+// poses of a pair are equal, those of different pairs differ), every pair's ranking reaches the
+// store between runs, and the same seed still gives the same experience stream.
+static void test_loop_pair_runs_share_start_and_rank(void** state) {
+  (void)state;
+  uint64_t hash[2];
+  for (int rep = 0; rep < 2; ++rep) {
+    fw_config_t c;
+    short_schedule(&c);
+    c.phase_one_runs = 10;
+    c.phase_two_runs = 6;
+    c.eval_every_runs = 10;
+    c.eval_starts = 2;
+    c.pair_runs = true;
+    assert_int_equal(harness_open(&g_h, &c, false, 9), 0);
+    harness_run(&g_h, 200000);
+    fw_loop_stats_t st;
+    fw_loop_get_stats(g_h.loop, &st);
+    assert_true(st.done);
+    assert_int_equal(st.training_runs, 16);
+    assert_int_equal(st.pairs_ranked, 3);
+    const b21r_run_t* two[6];
+    int n = 0;
+    for (int i = 0; i < g_h.runs && i < 64; ++i) {
+      const b21r_run_t* r = &g_h.run[i];
+      if (r->kind == B21R_RUN_T_KIND_TRAINING && r->phase == 2 && n < 6) two[n++] = r;
+    }
+    assert_int_equal(n, 6);
+    for (int p = 0; p < 3; ++p) {
+      const b21r_run_t* a = two[2 * p];
+      const b21r_run_t* b = two[2 * p + 1];
+      assert_true(a->start_x_m == b->start_x_m && a->start_y_m == b->start_y_m &&
+                  a->start_theta_rad == b->start_theta_rad);
+      if (p > 0) assert_true(a->start_x_m != two[2 * p - 2]->start_x_m);
+    }
+    assert_int_equal(g_h.exp_gaps, 0);
+    hash[rep] = g_h.exp_hash;
+    harness_close(&g_h);
+  }
+  assert_true(hash[0] == hash[1]);
+}
+
 // state_rotation: the state ends with the rotation the base executes, i.e. the command in force
 // while the step ran (the previous action, after the acceleration limit), so every transition's
 // s_next ends with its own action and its s with the run's previous action (0 at the start: the
@@ -346,6 +388,7 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_loop_learns_corridor_reaches_goal_from_all_poses),
+      cmocka_unit_test(test_loop_pair_runs_share_start_and_rank),
       cmocka_unit_test(test_loop_same_seed_bit_identical_experiences),
       cmocka_unit_test(test_loop_state_rotation_is_the_executed_command),
       cmocka_unit_test(test_loop_canopen_stream_independent_of_answer_lag),

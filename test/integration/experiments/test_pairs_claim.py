@@ -1,0 +1,123 @@
+#!/usr/bin/env python3
+# SPDX-License-Identifier: MIT
+"""experiments.pairs_claim: ranking whole runs moves phase two past the imitation. The Fig. 4
+set-up (tools/experiments/ablation_pairs.conf) with 60 phase-two runs, pair_runs off and on, from
+the same seeds 1-10 (two sessions at a time): the same start poses and noise. Failed runs count at
+the step limit; comparisons are paired by seed; one-sided t-tests at the 95 % level (Student-t
+0.95 quantile, 9 degrees of freedom: 1.833).
+
+Claims, each printed with its numbers; ASSERTED ones fail the test when they do not hold:
+  phase_one       the last phase-one block with pair_runs minus without (reported, not asserted:
+                  the fading of older runs acts in phase one too, within a few tenths of a step)
+  better          the final block with pair_runs is significantly shorter than without
+  falls           with pair_runs the final block is significantly shorter than the last phase-one
+                  block (the curve falls in phase two; without pairs it stays flat)
+  reaches         the final block with pair_runs reaches at least 9.5 of 10 poses on average
+  ranked          phase two was driven by pair runs: at least 99 % of its training steps are the
+                  learned policy's with the pair's perturbation (source exploration; the advisor
+                  only where no action is known)
+  best_gain       the final block with pair_runs is not significantly worse than the example policy at
+                  gain 2, the best of its training gains, from the same poses (reported, not asserted:
+                  level after 100 phase-two runs, behind after 60)
+  near_optimal    ... nor than the optimal controller (reported, not asserted: about 1 step behind)
+usage: test_pairs_claim.py B21R_EXPERIMENT ABLATION_PAIRS_CONFIG"""
+import concurrent.futures
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+
+SEEDS = list(range(1, 11))
+PHASE_TWO_RUNS = 60
+T95_ONE_SIDED_DF9 = 1.833
+ASSERTED = {"phase_one": False, "better": True, "falls": True, "reaches": True, "ranked": True,
+            "best_gain": False, "near_optimal": False}
+
+
+def run(exe, conf, seed, pairs, d):
+    out = os.path.join(d, "seed-%d-%s.json" % (seed, pairs))
+    cmd = [exe, "--config", conf, "--seed", str(seed), "--variant", "pair_runs=" + pairs,
+           "--set", "phase_two_runs=%d" % PHASE_TWO_RUNS, "--out", out]
+    p = subprocess.run(cmd, capture_output=True, text=True)
+    if p.returncode != 0:
+        raise RuntimeError("%s: exit status %d: %s" % (" ".join(cmd), p.returncode, p.stderr))
+    with open(out) as f:
+        return json.load(f)
+
+
+def mean(xs):
+    return sum(xs) / len(xs)
+
+
+def paired(a, b):
+    """Mean of a - b, its t statistic and its 95 % two-sided interval half-width (df 9)."""
+    d = [x - y for x, y in zip(a, b)]
+    n = len(d)
+    m = mean(d)
+    sd = math.sqrt(sum((x - m) ** 2 for x in d) / (n - 1))
+    se = sd / math.sqrt(n)
+    t = m / se if se > 0 else (math.inf if m > 0 else (-math.inf if m < 0 else 0.0))
+    return m, t, 2.262 * se  # Student-t 0.975 quantile, 9 degrees of freedom
+
+
+def main():
+    exe, conf = sys.argv[1:3]
+    jobs = [(s, v) for s in SEEDS for v in ("false", "true")]
+    with tempfile.TemporaryDirectory(prefix="b21r-pairs-") as d:
+        with concurrent.futures.ThreadPoolExecutor(max_workers=2) as pool:
+            try:
+                rs = list(pool.map(lambda j: run(exe, conf, j[0], j[1], d), jobs))
+            except RuntimeError as e:
+                print("FAIL:", e)
+                return 1
+    by = {(r["seed"], r["variant"]): r for r in rs}
+    p1 = {v: [] for v in ("false", "true")}
+    final = {v: [] for v in ("false", "true")}
+    successes, gain2, optimal, ranked_ok = [], [], [], True
+    for s in SEEDS:
+        for v in ("false", "true"):
+            blocks = by[(s, "pair_runs=" + v)]["learning"]["blocks"]
+            p1[v].append(mean([b for b in blocks if b["phase"] == 1][-1]["steps"]))
+            final[v].append(mean(blocks[-1]["steps"]))
+        on = by[(s, "pair_runs=true")]
+        successes.append(on["learning"]["blocks"][-1]["successes"])
+        gain2.append(mean(on["references"]["example@2"]["steps"]))
+        optimal.append(mean(on["references"]["optimal"]["steps"]))
+        src = on["learning"]["totals"]["phase_two_steps_by_source"]
+        ranked_ok = ranked_ok and sum(src.values()) > 0 and src["exploration"] >= 0.99 * sum(src.values())
+        print("seed %2d: after phase one %.1f; final without pairs %.1f, with pairs %.1f (%d/10); gain 2 %.1f, "
+              "optimal %.1f; phase-two steps by source %s" % (s, p1["true"][-1], final["false"][-1],
+                                                             final["true"][-1], successes[-1], gain2[-1],
+                                                             optimal[-1], src))
+    results = {}
+    m, t, h = paired(p1["true"], p1["false"])
+    results["phase_one"] = (abs(t) <= 2.262, "after phase one, with minus without pairs: %+.2f ± %.2f steps, t = %.2f"
+                            % (m, h, t))
+    m, t, h = paired(final["true"], final["false"])
+    results["better"] = (t < -T95_ONE_SIDED_DF9, "final block, with minus without pairs: %+.2f ± %.2f steps, t = %.2f"
+                         % (m, h, t))
+    m, t, h = paired(final["true"], p1["true"])
+    results["falls"] = (t < -T95_ONE_SIDED_DF9, "with pairs, final minus after phase one: %+.2f ± %.2f steps, t = %.2f"
+                        % (m, h, t))
+    ms = mean(successes)
+    results["reaches"] = (ms >= 9.5, "final block with pairs: %.1f of 10 poses reached on average" % ms)
+    results["ranked"] = (ranked_ok, "at least 99 % of every seed's phase-two training steps were pair runs' (source exploration)")
+    m, t, h = paired(final["true"], gain2)
+    results["best_gain"] = (t <= T95_ONE_SIDED_DF9, "final with pairs minus example@2: %+.2f ± %.2f steps, t = %.2f"
+                            % (m, h, t))
+    m, t, h = paired(final["true"], optimal)
+    results["near_optimal"] = (t <= T95_ONE_SIDED_DF9, "final with pairs minus optimal: %+.2f ± %.2f steps, t = %.2f"
+                               % (m, h, t))
+    failed = False
+    for name, (ok, text) in results.items():
+        status = "holds" if ok else ("FAILS" if ASSERTED[name] else "does not hold (reported, not asserted)")
+        print("%-15s %s: %s" % (name, status, text))
+        failed = failed or (ASSERTED[name] and not ok)
+    print("FAIL" if failed else "PASS")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
