@@ -293,7 +293,8 @@ static const key_desc_t k_keys[] = {
    "perturbation g * target angle + c * (lateral fraction - 0.5) to the greedy action (g, c drawn per pair), "
    "the second subtracts it, with the same exploration noise; the faster run's stored points then weigh "
    "more in the learned policy's imitation of its data, the slower run's less (docs/LEARNING.md, \"Ranking "
-   "whole runs in phase two\")"},
+   "whole runs in phase two\"). Emulator only (reposition = emulator): about a third of its phase-two training "
+   "runs end on a wall"},
   {NULL, "pair_gain_sigma", KIND_DOUBLE, OFF(pair_gain_sigma), 0, 4, false, false, NULL, "0.25",
    "pair_runs: standard deviation of the perturbation's gain g on the target angle [rad/s per rad]"},
   {NULL, "pair_centring_sigma", KIND_DOUBLE, OFF(pair_centring_sigma), 0, 8, false, false, NULL, "0.5",
@@ -996,6 +997,16 @@ static origin_buf_t origin_of(const fw_config_t* cfg, const char* key) {
 
 int fw_config_validate_program(const fw_config_t* cfg, char* err, size_t err_cap) {
   if (fw_config_validate(cfg, err, err_cap) != 0) {
+    return -1;
+  }
+  if (cfg->pair_runs && cfg->mode == FW_MODE_LEARN && cfg->reposition != FW_REPOSITION_EMULATOR) {
+    // Half of the pair runs drive a deliberately worse policy: in the emulator about a third of the
+    // phase-two training runs end on a wall (docs/LEARNING.md): not on a robot until a safety
+    // filter vets them.
+    fw_errfmt(err, err_cap,
+        "%s: pair_runs is for the emulator only (reposition = emulator; set at %s): its perturbed phase-two training runs "
+        "end on a wall in about a third of cases; set pair_runs = false on the robot",
+        origin_of(cfg, "pair_runs").text, origin_of(cfg, "reposition").text);
     return -1;
   }
   if (cfg->mode != FW_MODE_LEARN || cfg->phase_driver != FW_DRIVER_JOYSTICK) {

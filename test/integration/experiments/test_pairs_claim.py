@@ -20,6 +20,8 @@ Claims, each printed with its numbers; ASSERTED ones fail the test when they do 
                   gain 2, the best of its training gains, from the same poses (reported, not asserted:
                   level after 100 phase-two runs, behind after 60)
   near_optimal    ... nor than the optimal controller (reported, not asserted: about 1 step behind)
+  collisions      the price: phase-two training runs that end without the goal (on a wall), with and
+                  without pairs (reported, not asserted: about a third with pairs, under 1 % without)
 usage: test_pairs_claim.py B21R_EXPERIMENT ABLATION_PAIRS_CONFIG"""
 import concurrent.futures
 import json
@@ -33,7 +35,7 @@ SEEDS = list(range(1, 11))
 PHASE_TWO_RUNS = 60
 T95_ONE_SIDED_DF9 = 1.833
 ASSERTED = {"phase_one": False, "better": True, "falls": True, "reaches": True, "ranked": True,
-            "best_gain": False, "near_optimal": False}
+            "best_gain": False, "near_optimal": False, "collisions": False}
 
 
 def run(exe, conf, seed, pairs, d):
@@ -76,12 +78,16 @@ def main():
     p1 = {v: [] for v in ("false", "true")}
     final = {v: [] for v in ("false", "true")}
     successes, gain2, optimal, ranked_ok = [], [], [], True
+    missed = {"false": 0, "true": 0}
     for s in SEEDS:
         for v in ("false", "true"):
             blocks = by[(s, "pair_runs=" + v)]["learning"]["blocks"]
             p1[v].append(mean([b for b in blocks if b["phase"] == 1][-1]["steps"]))
             final[v].append(mean(blocks[-1]["steps"]))
         on = by[(s, "pair_runs=true")]
+        for v in ("false", "true"):
+            missed[v] += sum(1 for x in by[(s, "pair_runs=" + v)]["learning"]["runs"]
+                             if x["kind"] == "train" and x["phase"] == 2 and x["outcome"] != "goal")
         successes.append(on["learning"]["blocks"][-1]["successes"])
         gain2.append(mean(on["references"]["example@2"]["steps"]))
         optimal.append(mean(on["references"]["optimal"]["steps"]))
@@ -110,6 +116,9 @@ def main():
     m, t, h = paired(final["true"], optimal)
     results["near_optimal"] = (t <= T95_ONE_SIDED_DF9, "final with pairs minus optimal: %+.2f ± %.2f steps, t = %.2f"
                                % (m, h, t))
+    n2 = len(SEEDS) * PHASE_TWO_RUNS
+    results["collisions"] = (missed["true"] <= missed["false"], "phase-two training runs without the goal: with pairs "
+                             "%d of %d, without %d" % (missed["true"], n2, missed["false"]))
     failed = False
     for name, (ok, text) in results.items():
         status = "holds" if ok else ("FAILS" if ASSERTED[name] else "does not hold (reported, not asserted)")

@@ -413,6 +413,12 @@ static void test_config_pair_runs_needs_corridor_hedger_state_model(void** state
   assert_int_equal(fw_config_set(&c, "pair_recency_runs", "-1", "--set", err, sizeof err), -1);
   assert_int_equal(fw_config_set(&c, "pair_gain_sigma", "0.1", "--set", err, sizeof err), 0);
   assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
+  // The program runs it against the emulator only: its perturbed runs hit walls.
+  assert_int_equal(fw_config_validate_program(&c, err, sizeof err), -1);
+  assert_non_null(strstr(err, "robot.conf:3: pair_runs is for the emulator only"));
+  assert_int_equal(fw_config_set(&c, "reposition", "emulator", "--set", err, sizeof err), 0);
+  assert_int_equal(fw_config_set(&c, "emulator_control", "/tmp/sim.sock", "--set", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate_program(&c, err, sizeof err), 0);
 }
 
 // The program refuses joystick driving where no operator can drive: in lockstep, and with LCM
