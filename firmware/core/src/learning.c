@@ -290,13 +290,16 @@ static void save_slice(fw_loop_t* L) {
   }
 }
 
-// pair_runs: the anchor weights of the pair's two runs (run.c ranked them).
+// pair_runs: the anchor weights run.c decided at the end of a pair run (a first run's 0 until its
+// pair is ranked, or the ranked pair's two weights).
 static void weigh_pair(fw_loop_t* L) {
-  L->pair_weigh_pending = false;
-  for (int i = 0; i < 2; ++i) {
+  for (int32_t i = 0; i < L->pair_weigh_n; ++i) {
     (void)fw_learner_weight_run(&L->learner, L->pair_weigh_tag[i], L->pair_weigh_w[i]);
   }
-  L->pairs_ranked++;
+  if (L->pair_weigh_n == 2) {
+    L->pairs_ranked++;
+  }
+  L->pair_weigh_n = 0;
 }
 
 // One slice of the between-run work: at most learn_updates_per_tick replay updates, then (pair_runs)
@@ -318,7 +321,7 @@ static void between_runs_slice(fw_loop_t* L) {
       return;
     }
     L->learn_stage = FW_LEARN_SAVE;
-    if (L->pair_weigh_pending) {
+    if (L->pair_weigh_n > 0) {
       // A pair has ended: its ranking goes into the store in this slice (two O(fill) passes, the
       // robot standing) and is part of the checkpoint that follows.
       weigh_pair(L);
@@ -347,7 +350,7 @@ void fw_learning_finish_now(fw_loop_t* L) {
     fw_learner_end_run_begin(&L->learner);
   }
   (void)fw_learner_end_run_step(&L->learner, UINT32_MAX);
-  if (L->pair_weigh_pending) {
+  if (L->pair_weigh_n > 0) {
     weigh_pair(L);
   }
   if (L->learn_stage == FW_LEARN_SAVE && L->save_handle >= 0) {

@@ -234,12 +234,14 @@ struct fw_loop {
   int32_t pair_member;           // of the run under way; -1 = not a pair run
   double pair_gain;              // the pair's perturbation: gain on the target angle [rad/s per rad]
   double pair_centring;          // and factor on (lateral fraction - 0.5) [rad/s]
-  int32_t pair_first_steps;      // the first run's steps (a failed run: the step limit)
-  uint32_t pair_first_tag;       // the first run's tag (its run id)
+  int32_t pair_first_steps;      // the first run's steps
+  bool pair_first_goal;          // the first run reached the goal
+  uint32_t run_tag;              // run tag of the training run under way (its id, or later)
+  uint32_t pair_first_tag;       // the first run's tag
   features_pose_t pair_pose;     // the pair's start pose
   tasks_rng_t pair_explore_rng;  // explore_rng as the first run began: the second run's noise
-  bool pair_weigh_pending;       // weights to apply between runs
-  uint32_t pair_weigh_tag[2];    // (first, second) run tags
+  int32_t pair_weigh_n;          // weights to apply between runs (0: none)
+  uint32_t pair_weigh_tag[2];    // run tags
   double pair_weigh_w[2];        // and their anchor weights
   int32_t pairs_ranked;          // pairs whose weights were applied
 
@@ -378,6 +380,8 @@ bool fw_learner_predict(fw_learner_t* lr, const double* s, double a, double* q, 
 void fw_learner_end_run_begin(fw_learner_t* lr);
 // pair_runs: tags the points stored from now on with the run id (HEDGER only; false otherwise).
 bool fw_learner_set_run_tag(fw_learner_t* lr, uint32_t tag);
+// The learner's current run tag (0 without HEDGER): a resumed store may be ahead of the run ids.
+uint32_t fw_learner_run_tag(const fw_learner_t* lr);
 // pair_runs: the anchor weight of a tagged run's points (HEDGER only). O(store fill).
 bool fw_learner_weight_run(fw_learner_t* lr, uint32_t tag, double weight);
 uint32_t fw_learner_end_run_step(fw_learner_t* lr, uint32_t max_updates);

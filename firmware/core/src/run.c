@@ -62,7 +62,8 @@ static const char* run_kind_name(const fw_loop_t* L) {
 }
 
 // pair_runs: a phase-two training run that starts a pair draws its pose; the one that ends the
-// pair starts from the same pose, so that the two runs differ only by their perturbation.
+// pair starts from the same pose (and replays the same exploration noise), so that the two runs
+// differ mainly by their perturbation (the sensor noise of each run is its own).
 static bool pair_run_planned(const fw_loop_t* L, const fw_run_plan_t* plan) {
   return L->cfg.pair_runs && L->cfg.mode == FW_MODE_LEARN && plan->kind == FW_RUN_TRAINING && plan->phase == 2;
 }
@@ -89,8 +90,11 @@ static void pair_begin_run(fw_loop_t* L) {
   if (L->plan.kind != FW_RUN_TRAINING || L->cfg.mode != FW_MODE_LEARN || !L->cfg.pair_runs) {
     return;
   }
-  // Every training run's points carry its id, so that runs can be ranked and fade with age.
-  (void)fw_learner_set_run_tag(&L->learner, (uint32_t)L->run_id);
+  // Every training run's points carry its tag, so that runs can be ranked and fade with age: its
+  // id, or the learner's tag when a resumed store is ahead of the ids (tags never decrease).
+  const uint32_t current = fw_learner_run_tag(&L->learner);
+  L->run_tag = (uint32_t)L->run_id > current ? (uint32_t)L->run_id : current;
+  (void)fw_learner_set_run_tag(&L->learner, L->run_tag);
   if (L->plan.phase != 2) {
     return;
   }
@@ -104,27 +108,37 @@ static void pair_begin_run(fw_loop_t* L) {
   }
 }
 
-// pair_runs: the run under way ended (not aborted). After the first run the pair waits for its
-// second; after the second the faster run's points are weighted up, the slower run's down
-// (applied between runs by learning.c). An aborted run drops its pair.
-static void pair_finish_run(fw_loop_t* L, bool aborted, int32_t steps) {
+// pair_runs: the run under way ended. A perturbed run is not imitated until its pair is ranked:
+// the first run's points weigh 0 at once (so the second run does not imitate it either), and so
+// do the points of a run that was aborted or is left without its pair. After the second run the
+// pair is ranked: a run that missed the goal (a collision, the step limit) weighs 0; of two that
+// reached it, the faster weighs 2 / (1 + e^(-d / pair_tau_steps)) and the slower 2 minus that,
+// d = their difference in steps. learning.c applies the weights between runs.
+static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps) {
   if (L->pair_member < 0) {
     return;
   }
-  if (aborted) {
-    L->pair_next_member = 0;
-  } else if (L->pair_member == 0) {
+  if (aborted || L->pair_member == 0) {
+    L->pair_weigh_tag[0] = L->run_tag;
+    L->pair_weigh_w[0] = 0.0;
+    L->pair_weigh_n = 1;
     L->pair_first_steps = steps;
-    L->pair_first_tag = (uint32_t)L->run_id;
-    L->pair_next_member = 1;
+    L->pair_first_goal = goal;
+    L->pair_first_tag = L->run_tag;
+    L->pair_next_member = aborted ? 0 : 1;
   } else {
-    const double d = (double)(steps - L->pair_first_steps);  // > 0: the first run was faster
-    const double w_first = 2.0 / (1.0 + exp(-d / L->cfg.pair_tau_steps));
+    double w_first = L->pair_first_goal ? 2.0 : 0.0;
+    double w_second = goal ? 2.0 : 0.0;
+    if (L->pair_first_goal && goal) {
+      const double d = (double)(steps - L->pair_first_steps);  // > 0: the first run was faster
+      w_first = 2.0 / (1.0 + exp(-d / L->cfg.pair_tau_steps));
+      w_second = 2.0 - w_first;
+    }
     L->pair_weigh_tag[0] = L->pair_first_tag;
-    L->pair_weigh_tag[1] = (uint32_t)L->run_id;
     L->pair_weigh_w[0] = w_first;
-    L->pair_weigh_w[1] = 2.0 - w_first;
-    L->pair_weigh_pending = true;
+    L->pair_weigh_tag[1] = L->run_tag;
+    L->pair_weigh_w[1] = w_second;
+    L->pair_weigh_n = 2;
     L->pair_next_member = 0;
   }
   L->pair_member = -1;
@@ -248,7 +262,7 @@ static void finish_run(fw_loop_t* L, bool reached_goal, int8_t end_reason, int32
   const bool training = L->plan.kind == FW_RUN_TRAINING && L->cfg.mode == FW_MODE_LEARN;
   const int32_t steps = reached_goal ? L->actions_taken : (int32_t)fw_run_step_limit(L);
   record_run_end(L, end_reason, stop_reason, why);
-  pair_finish_run(L, aborted, steps);
+  pair_finish_run(L, aborted, reached_goal, steps);
   fw_eval_block_t block;
   const bool block_done = fw_schedule_finish_run(&L->sched, steps, reached_goal, aborted, &block);
   if (aborted) {

@@ -600,16 +600,25 @@ bool greedy_state_model(hedger& h, const double* x, double reach, GreedyResult& 
   SVec sa_t = SVec::Zero();
   const double recency = h.cfg.anchor_recency_runs;
   double wa[HEDGER_MAX_K];
-  double sw_anchor = 0.0;
+  double wmax = 0.0, wa_max = 0.0;
   for (uint32_t i = 0; i < n; ++i) {
     const uint32_t id = nbuf[i].id;
     wa[i] = w[i] * static_cast<double>(h.anchor_w[id]);
     if (recency > 0.0) wa[i] *= std::exp(-static_cast<double>(h.cur_tag - h.run_tag[id]) / recency);
-    sw_anchor += wa[i];
+    wmax = w[i] > wmax ? w[i] : wmax;
+    wa_max = wa[i] > wa_max ? wa[i] : wa_max;
   }
-  // A neighbourhood whose every point the caller weighted (nearly) zero has no preference left:
-  // the plain kernel weights, not a regression on nothing.
-  const double* wz = sw_anchor > 1e-9 * sw ? wa : w;
+  // The weights are relative: rescaled so that the largest equals the largest kernel weight,
+  // the ridge keeps its strength (a neighbourhood of faded or down-weighted points would
+  // otherwise see a ridge many times stronger and its anchor flattened towards the mean action).
+  // A neighbourhood in which every point was weighted (nearly) zero keeps the kernel weights: the
+  // caller ranked no alternative there. Unweighted, the factor is exactly 1 and nothing changes.
+  const double* wz = w;
+  if (wa_max > 1e-12 * wmax) {
+    const double f = wmax / wa_max;
+    for (uint32_t i = 0; i < n; ++i) wa[i] *= f;
+    wz = wa;
+  }
   for (uint32_t i = 0; i < n; ++i) {
     SVec z;
     for (int j = 0; j < D - 1; ++j) z[j] = rows[i][j];

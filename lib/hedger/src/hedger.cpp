@@ -483,6 +483,8 @@ hedger_status_t hedger_get_point(const hedger_t* self, uint32_t slot, hedger_poi
   return HEDGER_OK;
 }
 
+uint32_t hedger_run_tag(const hedger_t* self) HEDGER_NOEXCEPT { return live(self) ? self->cur_tag : 0u; }
+
 hedger_status_t hedger_set_run_tag(hedger_t* self, uint32_t tag) HEDGER_NOEXCEPT {
   if (!live(self) || tag < self->cur_tag) return HEDGER_ERR_INVALID_ARG;
   self->cur_tag = tag;
@@ -617,6 +619,7 @@ hedger_status_t hedger_load(hedger_t* self, const void* buf, size_t size) HEDGER
   const uint32_t count = get_u32(p + 24);
   if (sd != self->cfg.state_dim) return HEDGER_ERR_CONFIG_MISMATCH;
   const uint32_t d = sd + 1;
+  if (total < head + 8u * d + 4u) return HEDGER_ERR_FORMAT;  // the input scales must be inside
   if (!same_bits(get_f64(p + 32), self->cfg.action_min) || !same_bits(get_f64(p + 40), self->cfg.action_max) ||
       !same_bits(get_f64(p + 48), self->cfg.gamma)) {
     return HEDGER_ERR_CONFIG_MISMATCH;

@@ -82,6 +82,26 @@ static void test_anchor_follows_weighted_run(void** state) {
   hedger_destroy(h);
 }
 
+// The weights are relative: scaling every weight of a neighbourhood by the same factor (here
+// 1e-6, where the ridge would otherwise dominate and flatten the fit) leaves the choice as it is.
+static void test_anchor_weights_are_relative(void** state) {
+  (void)state;
+  const hedger_config_t c = anchor_config();
+  hedger_t* h = ht_create(&c);
+  uint64_t rs = 14;
+  store_two_runs(h, 1u, 2u, &rs);
+  const double s = 0.6;
+  assert_int_equal(hedger_weight_run(h, 1u, 1.5, NULL), HEDGER_OK);
+  assert_int_equal(hedger_weight_run(h, 2u, 0.5, NULL), HEDGER_OK);
+  const double big = greedy_at(h, s);
+  assert_int_equal(hedger_weight_run(h, 1u, 1.5e-6, NULL), HEDGER_OK);
+  assert_int_equal(hedger_weight_run(h, 2u, 0.5e-6, NULL), HEDGER_OK);
+  const double small = greedy_at(h, s);
+  assert_true(fabs(big - small) < 1e-6);
+  assert_true(big > 0.3 + 0.05);  // 0.5 s + half the offset: the up-weighted habit
+  hedger_destroy(h);
+}
+
 // anchor_recency_runs fades older runs: with the newer run 10 tags later and a recency of 2 run
 // tags, the anchor is the newer run's habit; without recency it lies between them.
 static void test_anchor_recency_fades_old_runs(void** state) {
@@ -128,7 +148,9 @@ static void test_anchor_tag_and_weight_contracts(void** state) {
   c.merge_radius = 0.05;
   hedger_t* h = ht_create(&c);
   const double s = 0.3;
+  assert_int_equal(hedger_run_tag(h), 0);
   assert_int_equal(hedger_set_run_tag(h, 7u), HEDGER_OK);
+  assert_int_equal(hedger_run_tag(h), 7);
   hedger_store_op_t op;
   assert_int_equal(hedger_insert(h, &s, 0.1, 1.0, 0, &op), HEDGER_OK);
   assert_int_equal(op, HEDGER_STORE_INSERTED);
@@ -169,6 +191,7 @@ static void test_anchor_tag_and_weight_contracts(void** state) {
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_anchor_follows_weighted_run),
+      cmocka_unit_test(test_anchor_weights_are_relative),
       cmocka_unit_test(test_anchor_recency_fades_old_runs),
       cmocka_unit_test(test_anchor_all_zero_weights_fall_back),
       cmocka_unit_test(test_anchor_tag_and_weight_contracts),

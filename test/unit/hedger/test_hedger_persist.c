@@ -342,6 +342,7 @@ static void test_persist_run_tags_round_trip(void** state) {
     assert_memory_equal(&v1, &v2, sizeof v1);
   }
   // The current tag came along: an earlier one is refused, the same one accepted.
+  assert_int_equal(hedger_run_tag(dst), 40);
   assert_int_equal(hedger_set_run_tag(dst, 39u), HEDGER_ERR_INVALID_ARG);
   assert_int_equal(hedger_set_run_tag(dst, 40u), HEDGER_OK);
   free(buf);

@@ -100,15 +100,15 @@
 ///   one method that moves phase two past the imitation ranks whole runs instead of actions (next
 ///   item).
 /// - Run tags and anchor weights (hedger_set_run_tag, hedger_weight_run, cfg.anchor_recency_runs):
-///   the caller ranks whole runs and the anchor follows the better ones; values, hulls and
-///   standard errors never see the weights. The firmware's pair_runs: phase-two runs in pairs
+///   the caller ranks whole runs and the anchor (and the action range tilted with it) follows
+///   the better ones; the value fits do not see the weights. The firmware's pair_runs: phase-two runs in pairs
 ///   from one pose with opposite policy perturbations and the same exploration noise; the faster
-///   run's points weigh 2 / (1 + e^(−d/τ)), τ = 1 step, the slower run's 2 minus that; runs fade
-///   with e^(−age / 150 run tags). Fig. 4 with 100 phase-two runs, seeds 11-20 (chosen on): final
-///   block −1.2 ± 0.4 steps against the same schedule without pairs, the curve falling through
-///   phase two (flat without); without the ranking (every weight 1) the same perturbations gave
-///   +34.1 ± 42.7 and 83 failed runs, fading alone +0.2 ± 0.2. Seeds 1-10: docs/RESULTS.md,
-///   ablation_pairs. Cost: 8 bytes per stored point; one O(fill) pass per weighted run, between
+///   run's points weigh 2 / (1 + e^(−d/τ)), τ = 1 step, the slower run's 2 minus that (a run
+///   that missed the goal, or is not yet ranked, 0); runs fade with e^(−age / 150 run tags). Fig. 4
+///   with 100 phase-two runs, seeds 11-20 (chosen on): final block −1.2 ± 0.5 steps against the
+///   same schedule without pairs, the curve falling through phase two (flat without); in a scratch
+///   build without the ranking (every weight 1) the same perturbations gave +34.1 ± 42.7 and 83
+///   failed runs, fading alone +0.2 ± 0.2. Seeds 1-10: docs/RESULTS.md, ablation_pairs. Cost: 8 bytes per stored point; one O(fill) pass per weighted run, between
 ///   runs. The firmware's perturbations, not these weights, end about a third of its phase-two
 ///   training runs on a wall: emulator only (docs/LEARNING.md).
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
@@ -321,7 +321,7 @@ typedef struct hedger_config {
                          ///< neighbours' policy (the anchor) a point stored `age` run tags before
                          ///< the current one (hedger_set_run_tag) has its weight multiplied by
                          ///< e^(−age / anchor_recency_runs), so older runs fade from the
-                         ///< imitation (never from the values); 0 = no fading. Default 0.
+                         ///< imitation (not from the value fits); 0 = no fading. Default 0.
 } hedger_config_t;
 
 /// One prediction.
@@ -499,18 +499,25 @@ hedger_status_t hedger_end_run_step(hedger_t* self, uint32_t max_updates, uint32
 /// was current when it was stored (merges keep the tag of the point merged into) and an anchor
 /// weight, 1 when stored. The weight multiplies the point's kernel weight in the neighbours'
 /// policy of HEDGER_GREEDY_STATE_MODEL (the anchor of the greedy search, a locally linear
-/// imitation of the stored actions) and nowhere else: values, hulls and standard errors do not
-/// see it. A caller that can rank its runs (two runs from one start, say, by their measured
-/// returns) weights the better run's points up and the worse run's down, and the imitation
-/// moves toward the better run. Both are saved (format version 2).
+/// imitation of the stored actions, and the action range tilted with it). Weights are relative
+/// within a neighbourhood; where every neighbour weighs (nearly) 0 the kernel weights are used.
+/// The value model is fitted without them, but the value of the action the greedy search picks
+/// enters the learning targets, so the values follow the steered policy. A caller that can rank
+/// its runs (two runs from one start, say, by their measured returns) weights the better run's
+/// points up and the worse run's down, and the imitation moves toward the better run. Both are
+/// saved (format version 2).
 ///
 /// hedger_set_run_tag: points stored from now on carry `tag`, and `tag` is the current run for
 /// cfg.anchor_recency_runs. Tags must not decrease (INVALID_ARG). O(1).
 hedger_status_t hedger_set_run_tag(hedger_t* self, uint32_t tag) HEDGER_NOEXCEPT;
 
+/// The current run tag (0 for an invalid instance): after a load, the tag the saved instance had.
+/// O(1).
+uint32_t hedger_run_tag(const hedger_t* self) HEDGER_NOEXCEPT;
+
 /// Sets the anchor weight of every stored point tagged `tag` to `weight` (finite, [0, 16]);
 /// *points (may be NULL) receives how many. Counts as a change of the learned state (a sliced
-/// save under way must start again). O(fill): run it between runs, never in a tick.
+/// save under way must start again). O(fill): between runs, never before a tick's command.
 /// Errors: INVALID_ARG.
 hedger_status_t hedger_weight_run(hedger_t* self, uint32_t tag, double weight, uint32_t* points) HEDGER_NOEXCEPT;
 
