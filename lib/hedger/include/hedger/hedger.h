@@ -100,17 +100,18 @@
 ///   one method that moves phase two past the imitation ranks whole runs instead of actions (next
 ///   item).
 /// - Run tags and anchor weights (hedger_set_run_tag, hedger_weight_run, cfg.anchor_recency_runs):
-///   the caller ranks whole runs and the anchor (and the action range tilted with it) follows
-///   the better ones; the value fits do not see the weights. The firmware's pair_runs: phase-two runs in pairs
-///   from one pose with opposite policy perturbations and the same exploration noise; the faster
-///   run's points weigh 2 / (1 + e^(−d/τ)), τ = 1 step, the slower run's 2 minus that (a run
+///   the caller ranks whole runs and the anchor (and the action range tilted with it) follows the
+///   better ones; the value fits do not see the weights. The firmware's pair_runs: phase-two runs
+///   in pairs from one pose with opposite policy perturbations and the same exploration noise; the
+///   faster run's points weigh 2 / (1 + e^(−d/τ)), τ = 1 step, the slower run's 2 minus that (a run
 ///   that missed the goal, or is not yet ranked, 0); runs fade with e^(−age / 150 run tags). Fig. 4
 ///   with 100 phase-two runs, seeds 11-20 (chosen on): final block −1.2 ± 0.5 steps against the
 ///   same schedule without pairs, the curve falling through phase two (flat without); in a scratch
 ///   build without the ranking (every weight 1) the same perturbations gave +34.1 ± 42.7 and 83
-///   failed runs, fading alone +0.2 ± 0.2. Seeds 1-10: docs/RESULTS.md, ablation_pairs. Cost: 8 bytes per stored point; one O(fill) pass per weighted run, between
-///   runs. The firmware's perturbations, not these weights, end about a third of its phase-two
-///   training runs on a wall: emulator only (docs/LEARNING.md).
+///   failed runs, fading alone +0.2 ± 0.2. Seeds 1-10: docs/RESULTS.md, ablation_pairs. Cost: 8
+///   bytes per stored point; one O(fill) pass per weighted run, between runs. The firmware's
+///   perturbations, not these weights, end about a third of its phase-two training runs on a wall:
+///   emulator only (docs/LEARNING.md).
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are
