@@ -87,7 +87,7 @@ static features_pose_t next_start_pose(fw_loop_t* L, const fw_run_plan_t* plan) 
 // same exploration noise, so the pair's difference in steps measures the perturbation).
 static void pair_begin_run(fw_loop_t* L) {
   L->pair_member = -1;
-  if (L->plan.kind != FW_RUN_TRAINING || L->cfg.mode != FW_MODE_LEARN || !L->cfg.pair_runs) {
+  if (!L->cfg.pair_runs || L->cfg.mode != FW_MODE_LEARN || L->plan.kind != FW_RUN_TRAINING) {
     return;
   }
   // Every training run's points carry its tag, so that runs can be ranked and fade with age: its
@@ -95,7 +95,7 @@ static void pair_begin_run(fw_loop_t* L) {
   const uint32_t current = fw_learner_run_tag(&L->learner);
   L->run_tag = (uint32_t)L->run_id > current ? (uint32_t)L->run_id : current;
   (void)fw_learner_set_run_tag(&L->learner, L->run_tag);
-  if (L->plan.phase != 2) {
+  if (!pair_run_planned(L, &L->plan)) {
     return;
   }
   L->pair_member = L->pair_next_member;
@@ -122,10 +122,10 @@ static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps
     L->pair_weigh_tag[0] = L->run_tag;
     L->pair_weigh_w[0] = 0.0;
     L->pair_weigh_n = 1;
-    L->pair_first_steps = steps;
+    L->pair_next_member = aborted ? 0 : 1;
+    L->pair_first_steps = steps;  // read only when the pair goes on (pair_next_member = 1)
     L->pair_first_goal = goal;
     L->pair_first_tag = L->run_tag;
-    L->pair_next_member = aborted ? 0 : 1;
   } else {
     double w_first = L->pair_first_goal ? 2.0 : 0.0;
     double w_second = goal ? 2.0 : 0.0;
@@ -467,7 +467,7 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
     source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
     if (!evaluating && L->pair_member >= 0) {
       // A pair run: the learned policy with the pair's perturbation, within the action bounds.
-      a = fmin(fmax(a + pair_offset(L), -L->omega_max), L->omega_max);
+      a = tasks_clamp_omega(a + pair_offset(L), L->omega_max);
       source = B21R_EXPERIENCE_T_SOURCE_EXPLORATION;
     }
     if (!evaluating && explore_offset(L, L->cfg.explore_sigma_radps, &offset)) {

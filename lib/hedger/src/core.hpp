@@ -593,7 +593,7 @@ bool greedy_state_model(hedger& h, const double* x, double reach, GreedyResult& 
   // the robot turned too gently (measured: the first 2 s of a run from the corridor's start poses).
   // Each point's kernel weight is multiplied by its anchor weight (hedger_weight_run: runs the
   // caller ranked) and, with cfg.anchor_recency_runs, by its run's age, so the imitation can
-  // follow the better of the runs it has seen; the value model above never sees either.
+  // follow the better of the runs it has seen; the value model above is fitted without either.
   using SVec = Eigen::Matrix<double, D, 1>;
   using SMat = Eigen::Matrix<double, D, D>;
   SMat sa_m = SMat::Zero();

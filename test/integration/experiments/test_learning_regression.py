@@ -31,14 +31,14 @@ Claims, each printed with its numbers; ASSERTED ones fail the test when they do 
 usage: test_learning_regression.py B21R_EXPERIMENT FIG4_CONFIG"""
 import concurrent.futures
 import json
-import math
 import os
 import subprocess
 import sys
 import tempfile
 
+from paired_stats import T95_ONE_SIDED_DF9, T975_DF9, mean, paired
+
 SEEDS = list(range(1, 11))
-T95_ONE_SIDED_DF9 = 1.833
 ASSERTED = {"learns": True, "improves": True, "keeps": True, "reaches": True, "within_3pct": True,
             "beats_examples": False, "best_gain": False, "near_optimal": False}
 
@@ -51,21 +51,6 @@ def run(exe, conf, seed, d):
         raise RuntimeError("%s: exit status %d: %s" % (" ".join(cmd), p.returncode, p.stderr))
     with open(out) as f:
         return json.load(f)
-
-
-def mean(xs):
-    return sum(xs) / len(xs)
-
-
-def paired(a, b):
-    """Mean of a - b, its t statistic and its 95 % two-sided interval half-width (df 9)."""
-    d = [x - y for x, y in zip(a, b)]
-    n = len(d)
-    m = mean(d)
-    sd = math.sqrt(sum((x - m) ** 2 for x in d) / (n - 1))
-    se = sd / math.sqrt(n)
-    t = m / se if se > 0 else (math.inf if m > 0 else (-math.inf if m < 0 else 0.0))
-    return m, t, 2.262 * se  # Student-t 0.975 quantile, 9 degrees of freedom
 
 
 def main():
@@ -119,7 +104,7 @@ def main():
     ms = mean(successes)
     results["reaches"] = (ms >= 9.5, "final block: %.1f of 10 poses reached on average" % ms)
     m, t, h = paired(excess, [0.0] * len(excess))
-    results["within_3pct"] = (len(excess) == len(rs) and m + h * T95_ONE_SIDED_DF9 / 2.262 < 3.0,
+    results["within_3pct"] = (len(excess) == len(rs) and m + h * T95_ONE_SIDED_DF9 / T975_DF9 < 3.0,
                               "final block, successful runs: excess over optimal from the same poses %+.2f %% ± %.2f %%"
                               % (m, h))
     m, t, h = paired(final, example)

@@ -25,15 +25,15 @@ Claims, each printed with its numbers; ASSERTED ones fail the test when they do 
 usage: test_pairs_claim.py B21R_EXPERIMENT ABLATION_PAIRS_CONFIG"""
 import concurrent.futures
 import json
-import math
 import os
 import subprocess
 import sys
 import tempfile
 
+from paired_stats import T95_ONE_SIDED_DF9, T975_DF9, mean, paired
+
 SEEDS = list(range(1, 11))
 PHASE_TWO_RUNS = 60
-T95_ONE_SIDED_DF9 = 1.833
 ASSERTED = {"phase_one": False, "better": True, "falls": True, "reaches": True, "ranked": True,
             "best_gain": False, "near_optimal": False, "collisions": False}
 
@@ -47,21 +47,6 @@ def run(exe, conf, seed, pairs, d):
         raise RuntimeError("%s: exit status %d: %s" % (" ".join(cmd), p.returncode, p.stderr))
     with open(out) as f:
         return json.load(f)
-
-
-def mean(xs):
-    return sum(xs) / len(xs)
-
-
-def paired(a, b):
-    """Mean of a - b, its t statistic and its 95 % two-sided interval half-width (df 9)."""
-    d = [x - y for x, y in zip(a, b)]
-    n = len(d)
-    m = mean(d)
-    sd = math.sqrt(sum((x - m) ** 2 for x in d) / (n - 1))
-    se = sd / math.sqrt(n)
-    t = m / se if se > 0 else (math.inf if m > 0 else (-math.inf if m < 0 else 0.0))
-    return m, t, 2.262 * se  # Student-t 0.975 quantile, 9 degrees of freedom
 
 
 def main():
@@ -99,7 +84,7 @@ def main():
                                                              optimal[-1], src))
     results = {}
     m, t, h = paired(p1["true"], p1["false"])
-    results["phase_one"] = (abs(t) <= 2.262, "after phase one, with minus without pairs: %+.2f ± %.2f steps, t = %.2f"
+    results["phase_one"] = (abs(t) <= T975_DF9, "after phase one, with minus without pairs: %+.2f ± %.2f steps, t = %.2f"
                             % (m, h, t))
     m, t, h = paired(final["true"], final["false"])
     results["better"] = (t < -T95_ONE_SIDED_DF9, "final block, with minus without pairs: %+.2f ± %.2f steps, t = %.2f"
