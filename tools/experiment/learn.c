@@ -396,6 +396,8 @@ static void write_learning(json_writer_t* w, const session_t* S, double dt_s) {
   json_int(w, "runs_aborted", S->final.runs_aborted);
   json_int(w, "safety_stops", S->final.safety_stops);
   json_int(w, "held_ticks", S->final.held_ticks);
+  json_int(w, "pairs_ranked", S->final.pairs_ranked);
+  json_int(w, "pair_safety_overrides", S->final.pair_safety_overrides);
   json_end_object(w);
   char hex[24];
   snprintf(hex, sizeof hex, "%016llx", (unsigned long long)S->phase_one_digest);

@@ -293,8 +293,7 @@ static const key_desc_t k_keys[] = {
    "perturbation g * target angle + c * (lateral fraction - 0.5) to the greedy action (g, c drawn per pair), "
    "the second subtracts it, with the same exploration noise; the faster run's stored points then weigh "
    "more in the learned policy's imitation of its data, the slower run's less (docs/LEARNING.md, \"Ranking "
-   "whole runs in phase two\"). Emulator only (reposition = emulator): about a third of its phase-two training "
-   "runs end on a wall"},
+   "whole runs in phase two\"); pair_safety vets every perturbed command"},
   {NULL, "pair_gain_sigma", KIND_DOUBLE, OFF(pair_gain_sigma), 0, 4, false, false, NULL, "0.25",
    "pair_runs: standard deviation of the perturbation's gain g on the target angle [rad/s per rad]"},
   {NULL, "pair_centring_sigma", KIND_DOUBLE, OFF(pair_centring_sigma), 0, 8, false, false, NULL, "0.5",
@@ -306,6 +305,16 @@ static const key_desc_t k_keys[] = {
   {NULL, "pair_recency_runs", KIND_DOUBLE, OFF(pair_recency_runs), 0, 1e6, false, false, NULL, "150",
    "pair_runs: in that imitation a point stored N runs ago (evaluation runs counted) weighs exp(-N / "
    "pair_recency_runs), in both phases (0 = no fading)"},
+  {NULL, "pair_safety", KIND_BOOL, OFF(pair_safety), 0, 0, false, false, NULL, "true",
+   "pair_runs: a safety filter vets every perturbed command before it is sent: a kinematic rollout (the command "
+   "for one period, then the recovery law 2 x target angle, under the velocity and acceleration limits) must keep "
+   "pair_safety_margin_m between the robot's skirt and both walls for pair_safety_horizon_s; otherwise the greedy "
+   "action goes if it passes, else the recovery law's (source advisor)"},
+  {NULL, "pair_safety_margin_m", KIND_DOUBLE, OFF(pair_safety_margin_m), 0, 0.5, false, false, NULL, "0.1",
+   "pair_safety: least predicted clearance between the skirt and a wall a command must keep [m] (covers sensing "
+   "error and actuation lag the rollout leaves out)"},
+  {NULL, "pair_safety_horizon_s", KIND_DOUBLE, OFF(pair_safety_horizon_s), 0.1, 20, false, false, NULL, "3",
+   "pair_safety: length of the rollout [s] (the recovery law settles in about 3 s)"},
 
   {"Output", "lcm_url", KIND_STRING, OFF(lcm_url), 0, 0, false, false, NULL, "",
    "LCM provider (\"\" = LCM's default or $LCM_DEFAULT_URL; \"none\" = no LCM)"},
@@ -999,14 +1008,14 @@ int fw_config_validate_program(const fw_config_t* cfg, char* err, size_t err_cap
   if (fw_config_validate(cfg, err, err_cap) != 0) {
     return -1;
   }
-  if (cfg->pair_runs && cfg->mode == FW_MODE_LEARN && cfg->reposition != FW_REPOSITION_EMULATOR) {
-    // Half of the pair runs drive a deliberately worse policy: in the emulator about a third of the
-    // phase-two training runs end on a wall (docs/LEARNING.md): not on a robot until a safety
-    // filter vets them.
+  if (cfg->pair_runs && !cfg->pair_safety && cfg->mode == FW_MODE_LEARN && cfg->reposition != FW_REPOSITION_EMULATOR) {
+    // Half of the pair runs drive a deliberately worse policy: without the safety filter about a
+    // third of the phase-two training runs end on a wall in the emulator (docs/LEARNING.md).
     fw_errfmt(err, err_cap,
-        "%s: pair_runs is for the emulator only (reposition = emulator; set at %s): its perturbed phase-two training runs "
-        "end on a wall in about a third of cases; set pair_runs = false on the robot",
-        origin_of(cfg, "pair_runs").text, origin_of(cfg, "reposition").text);
+        "%s: pair_runs without its safety filter is for the emulator only (pair_safety = false set at %s; reposition "
+        "= emulator needed, set at %s): unvetted, about a third of its perturbed phase-two training runs end on a "
+        "wall; set pair_safety = true on the robot",
+        origin_of(cfg, "pair_runs").text, origin_of(cfg, "pair_safety").text, origin_of(cfg, "reposition").text);
     return -1;
   }
   if (cfg->mode != FW_MODE_LEARN || cfg->phase_driver != FW_DRIVER_JOYSTICK) {

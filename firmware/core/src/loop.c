@@ -693,6 +693,7 @@ void fw_loop_get_stats(const fw_loop_t* L, fw_loop_stats_t* out) {
   out->learn_ticks = L->learn_ticks;
   out->checkpoints_submitted = L->checkpoints_submitted;
   out->pairs_ranked = L->pairs_ranked;
+  out->pair_safety_overrides = L->pair_safety_overrides;
   const fw_timing_t* t = &L->timing;
   out->tick_max_ever_us = t->max_ever_us;
   out->tick_overruns = t->overruns;

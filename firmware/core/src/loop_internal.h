@@ -244,6 +244,8 @@ struct fw_loop {
   uint32_t pair_weigh_tag[2];    // run tags
   double pair_weigh_w[2];        // and their anchor weights
   int32_t pairs_ranked;          // pairs whose weights were applied
+  int64_t pair_safety_overrides; // pair-run commands the safety filter replaced
+  bool pair_run_vetoed;          // the safety filter replaced a command of the run under way
 
   // Run state.
   int32_t mode;                // b21r_status_t MODE_*

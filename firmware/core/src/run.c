@@ -5,6 +5,8 @@
 #include <math.h>
 #include <string.h>
 
+#include "tasks/recovery.h"
+
 bool fw_run_is_corridor(const fw_loop_t* L) { return L->cfg.task == FW_TASK_CORRIDOR; }
 
 uint32_t fw_run_step_limit(const fw_loop_t* L) { return tasks_episode_step_limit(&L->ep); }
@@ -87,6 +89,7 @@ static features_pose_t next_start_pose(fw_loop_t* L, const fw_run_plan_t* plan) 
 // same exploration noise, so the pair's difference in steps measures the perturbation).
 static void pair_begin_run(fw_loop_t* L) {
   L->pair_member = -1;
+  L->pair_run_vetoed = false;
   if (!L->cfg.pair_runs || L->cfg.mode != FW_MODE_LEARN || L->plan.kind != FW_RUN_TRAINING) {
     return;
   }
@@ -113,11 +116,15 @@ static void pair_begin_run(fw_loop_t* L) {
 // do the points of a run that was aborted or is left without its pair. After the second run the
 // pair is ranked: a run that missed the goal (a collision, the step limit) weighs 0; of two that
 // reached it, the faster weighs 2 / (1 + e^(-d / pair_tau_steps)) and the slower 2 minus that,
-// d = their difference in steps. learning.c applies the weights between runs.
+// d = their difference in steps. A run the safety filter had to correct (pair_vet) counts as one
+// that missed the goal: its perturbation was predicted to reach a wall, and a policy that learns
+// from its corrected points would lean on a filter that evaluations and greedy runs do not have.
+// learning.c applies the weights between runs.
 static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps) {
   if (L->pair_member < 0) {
     return;
   }
+  goal = goal && !L->pair_run_vetoed;
   if (aborted || L->pair_member == 0) {
     L->pair_weigh_tag[0] = L->run_tag;
     L->pair_weigh_w[0] = 0.0;
@@ -149,6 +156,30 @@ static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps
 static double pair_offset(const fw_loop_t* L) {
   const double sign = L->pair_member == 0 ? 1.0 : -1.0;
   return sign * (L->pair_gain * L->s[2] + L->pair_centring * (L->s[1] - 0.5));
+}
+
+// pair_safety: a pair run's command a goes only if the recovery rollout (tasks/recovery.h) keeps
+// pair_safety_margin_m to both walls; otherwise the learned policy's own action, if it does, and
+// else the recovery law's. The first correction vetoes the run's perturbation (pair_run_vetoed).
+// Runs before the command is sent: two rollouts at most (30 steps each at the defaults).
+static void pair_vet(fw_loop_t* L, double greedy_action, double* a, int8_t* source) {
+  const tasks_corridor_spec_t* spec = &L->ep.corridor;
+  const features_corridor_t* f = &L->ep.corridor_state;
+  const double margin = L->cfg.pair_safety_margin_m;
+  const double horizon = L->cfg.pair_safety_horizon_s;
+  if (tasks_corridor_recovery_clearance_m(spec, &L->limits, L->dt_s, f, L->cmd_v, L->cmd_w, *a, horizon) >= margin) {
+    return;
+  }
+  L->pair_safety_overrides++;
+  L->pair_run_vetoed = true;
+  if (tasks_corridor_recovery_clearance_m(spec, &L->limits, L->dt_s, f, L->cmd_v, L->cmd_w, greedy_action,
+                                          horizon) >= margin) {
+    *a = greedy_action;
+    *source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
+    return;
+  }
+  *a = tasks_corridor_recovery_action(spec, f);
+  *source = B21R_EXPERIENCE_T_SOURCE_ADVISOR;
 }
 
 // The id begin_run gives the next run (B21R_RUN.run_id), as the start-pose request passes it on.
@@ -465,14 +496,19 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
   } else if (greedy_known) {
     a = greedy_action;
     source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
-    if (!evaluating && L->pair_member >= 0) {
+    if (!evaluating && L->pair_member >= 0 && !L->pair_run_vetoed) {
       // A pair run: the learned policy with the pair's perturbation, within the action bounds.
+      // Once the safety filter has corrected it the run counts as failed: the learned policy
+      // drives the rest of the way, which ends it sooner than the perturbation would.
       a = tasks_clamp_omega(a + pair_offset(L), L->omega_max);
       source = B21R_EXPERIENCE_T_SOURCE_EXPLORATION;
     }
     if (!evaluating && explore_offset(L, L->cfg.explore_sigma_radps, &offset)) {
       a += offset;
       source = B21R_EXPERIENCE_T_SOURCE_EXPLORATION;
+    }
+    if (!evaluating && L->pair_member >= 0 && L->cfg.pair_safety) {
+      pair_vet(L, greedy_action, &a, &source);
     }
   } else if (!evaluating && L->cfg.advisor) {
     a = advice;  // the learner knows no action here: the example policy advises

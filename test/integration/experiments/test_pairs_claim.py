@@ -13,15 +13,19 @@ Claims, each printed with its numbers; ASSERTED ones fail the test when they do 
   falls           with pair_runs the final block is significantly shorter than the last phase-one
                   block (the curve falls in phase two; without pairs it stays flat)
   reaches         the final block with pair_runs reaches at least 9.5 of 10 poses on average
-  ranked          phase two was driven by pair runs: at least 99 % of its training steps are the
-                  learned policy's with the pair's perturbation (source exploration; the advisor
-                  only where no action is known)
+  ranked          phase two was driven by ranked pair runs: every pair was ranked, and at least
+                  95 % of phase-two training steps are the learned policy's (with the pair's
+                  perturbation: source exploration, or after a safety correction without it:
+                  greedy); the safety filter's recovery law and the advisor drive the rest
+  safe            the safety filter keeps the perturbed runs off the walls: no more phase-two
+                  training runs end without the goal with pairs than without them
   best_gain       the final block with pair_runs is not significantly worse than the example policy at
                   gain 2, the best of its training gains, from the same poses (reported, not asserted:
                   level after 100 phase-two runs, behind after 60)
   near_optimal    ... nor than the optimal controller (reported, not asserted: about 1 step behind)
-  collisions      the price: phase-two training runs that end without the goal (on a wall), with and
-                  without pairs (reported, not asserted: about a third with pairs, under 1 % without)
+  vetoed          pair runs whose perturbation the safety filter corrected (each counts as failed in
+                  its pair's ranking; the learned policy drives the rest of the run) and the
+                  training time with and without pairs (reported)
 usage: test_pairs_claim.py B21R_EXPERIMENT ABLATION_PAIRS_CONFIG"""
 import concurrent.futures
 import json
@@ -35,7 +39,7 @@ from paired_stats import T95_ONE_SIDED_DF9, T975_DF9, mean, paired
 SEEDS = list(range(1, 11))
 PHASE_TWO_RUNS = 60
 ASSERTED = {"phase_one": False, "better": True, "falls": True, "reaches": True, "ranked": True,
-            "best_gain": False, "near_optimal": False, "collisions": False}
+            "safe": True, "best_gain": False, "near_optimal": False, "vetoed": False}
 
 
 def run(exe, conf, seed, pairs, d):
@@ -63,6 +67,7 @@ def main():
     p1 = {v: [] for v in ("false", "true")}
     final = {v: [] for v in ("false", "true")}
     successes, gain2, optimal, ranked_ok = [], [], [], True
+    vetoed, overrides, train_s = 0, 0, {"false": 0.0, "true": 0.0}
     missed = {"false": 0, "true": 0}
     for s in SEEDS:
         for v in ("false", "true"):
@@ -76,8 +81,16 @@ def main():
         successes.append(on["learning"]["blocks"][-1]["successes"])
         gain2.append(mean(on["references"]["example@2"]["steps"]))
         optimal.append(mean(on["references"]["optimal"]["steps"]))
-        src = on["learning"]["totals"]["phase_two_steps_by_source"]
-        ranked_ok = ranked_ok and sum(src.values()) > 0 and src["exploration"] >= 0.99 * sum(src.values())
+        totals = on["learning"]["totals"]
+        src = totals["phase_two_steps_by_source"]
+        learned = src["exploration"] + src["greedy"]
+        ranked_ok = (ranked_ok and totals["pairs_ranked"] == PHASE_TWO_RUNS // 2 and sum(src.values()) > 0
+                     and learned >= 0.95 * sum(src.values()))
+        vetoed += sum(1 for x in on["learning"]["runs"] if x["kind"] == "train" and x["phase"] == 2
+                      and x["sources"]["exploration"] < x["steps"])
+        overrides += totals["pair_safety_overrides"]
+        for v in ("false", "true"):
+            train_s[v] += by[(s, "pair_runs=" + v)]["learning"]["totals"]["training_time_s"]
         print("seed %2d: after phase one %.1f; final without pairs %.1f, with pairs %.1f (%d/10); gain 2 %.1f, "
               "optimal %.1f; phase-two steps by source %s" % (s, p1["true"][-1], final["false"][-1],
                                                              final["true"][-1], successes[-1], gain2[-1],
@@ -94,7 +107,8 @@ def main():
                         % (m, h, t))
     ms = mean(successes)
     results["reaches"] = (ms >= 9.5, "final block with pairs: %.1f of 10 poses reached on average" % ms)
-    results["ranked"] = (ranked_ok, "at least 99 % of every seed's phase-two training steps were pair runs' (source exploration)")
+    results["ranked"] = (ranked_ok, "every seed ranked %d pairs, and at least 95 %% of its phase-two training steps "
+                         "were the learned policy's (exploration or greedy)" % (PHASE_TWO_RUNS // 2))
     m, t, h = paired(final["true"], gain2)
     results["best_gain"] = (t <= T95_ONE_SIDED_DF9, "final with pairs minus example@2: %+.2f ± %.2f steps, t = %.2f"
                             % (m, h, t))
@@ -102,8 +116,13 @@ def main():
     results["near_optimal"] = (t <= T95_ONE_SIDED_DF9, "final with pairs minus optimal: %+.2f ± %.2f steps, t = %.2f"
                                % (m, h, t))
     n2 = len(SEEDS) * PHASE_TWO_RUNS
-    results["collisions"] = (missed["true"] <= missed["false"], "phase-two training runs without the goal: with pairs "
-                             "%d of %d, without %d" % (missed["true"], n2, missed["false"]))
+    results["safe"] = (missed["true"] <= missed["false"], "phase-two training runs without the goal: with pairs "
+                       "%d of %d, without %d" % (missed["true"], n2, missed["false"]))
+    results["vetoed"] = (True, "pair runs the perturbed policy did not drive throughout (safety corrections, or no "
+                         "action known): %d of %d (%d commands replaced by the filter); training time (both phases) "
+                         "with pairs %.2f h, without %.2f h" % (vetoed, n2, overrides,
+                                                                          train_s["true"] / 3600.0,
+                                                                          train_s["false"] / 3600.0))
     failed = False
     for name, (ok, text) in results.items():
         status = "holds" if ok else ("FAILS" if ASSERTED[name] else "does not hold (reported, not asserted)")

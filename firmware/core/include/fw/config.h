@@ -215,6 +215,9 @@ typedef struct fw_config {
   double pair_centring_sigma;      ///< pair_runs: std-dev of its term on (lateral fraction − 0.5) [rad/s]
   double pair_tau_steps;           ///< pair_runs: scale of the weights' response to the steps' difference
   double pair_recency_runs;        ///< pair_runs: imitation fades a point stored N runs ago by e^(−N/this)
+  bool pair_safety;                ///< pair_runs: a kinematic rollout vets each perturbed command
+  double pair_safety_margin_m;     ///< pair_safety: least predicted skirt-to-wall clearance [m]
+  double pair_safety_horizon_s;    ///< pair_safety: rollout length [s]
 
   // Output.
   char lcm_url[FW_CONFIG_STR_MAX]; ///< LCM provider URL; "" = LCM's default; "none" = off

@@ -112,6 +112,7 @@ typedef struct fw_loop_stats {
   int64_t learn_ticks;           ///< ticks that did between-run learning work (replay, checkpoint)
   int64_t checkpoints_submitted; ///< checkpoints handed to the writer (between runs and at shutdown)
   int32_t pairs_ranked;          ///< pair_runs: pairs whose ranking reached the store (anchor weights)
+  int64_t pair_safety_overrides; ///< pair_safety: perturbed commands replaced (greedy or recovery law)
   // Deadline accounting (fw/timing.h; real time only, except the compute time).
   int32_t tick_max_ever_us;      ///< longest tick compute time since start [µs]
   int64_t tick_overruns;         ///< ticks that ended after the next scheduled start

@@ -413,9 +413,19 @@ static void test_config_pair_runs_needs_corridor_hedger_state_model(void** state
   assert_int_equal(fw_config_set(&c, "pair_recency_runs", "-1", "--set", err, sizeof err), -1);
   assert_int_equal(fw_config_set(&c, "pair_gain_sigma", "0.1", "--set", err, sizeof err), 0);
   assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
-  // The program runs it against the emulator only: its perturbed runs hit walls.
+  assert_int_equal(fw_config_set(&c, "pair_safety_margin_m", "-0.1", "--set", err, sizeof err), -1);
+  assert_non_null(strstr(err, "pair_safety_margin_m"));
+  assert_int_equal(fw_config_set(&c, "pair_safety_horizon_s", "0", "--set", err, sizeof err), -1);
+  assert_non_null(strstr(err, "pair_safety_horizon_s"));
+  // With its safety filter (the default) the program runs it on the robot (reposition = operator);
+  // without, against the emulator only: unvetted perturbed runs hit walls.
+  assert_true(c.pair_safety);
+  assert_int_equal(fw_config_validate_program(&c, err, sizeof err), 0);
+  assert_int_equal(fw_config_set(&c, "pair_safety", "false", "robot.conf:4", err, sizeof err), 0);
   assert_int_equal(fw_config_validate_program(&c, err, sizeof err), -1);
-  assert_non_null(strstr(err, "robot.conf:3: pair_runs is for the emulator only"));
+  assert_non_null(strstr(err, "robot.conf:3: pair_runs without its safety filter is for the emulator only"));
+  assert_non_null(strstr(err, "pair_safety = false set at robot.conf:4"));
+  assert_non_null(strstr(err, "set pair_safety = true on the robot"));
   assert_int_equal(fw_config_set(&c, "reposition", "emulator", "--set", err, sizeof err), 0);
   assert_int_equal(fw_config_set(&c, "emulator_control", "/tmp/sim.sock", "--set", err, sizeof err), 0);
   assert_int_equal(fw_config_validate_program(&c, err, sizeof err), 0);

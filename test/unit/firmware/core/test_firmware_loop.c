@@ -100,6 +100,51 @@ static void test_loop_pair_runs_share_start_and_rank(void** state) {
   assert_true(hash[0] == hash[1]);
 }
 
+// pair_safety: with perturbations far wilder than the defaults (gain sd 2, centring sd 4), pair
+// runs without the filter end on a wall; with it none does, the filter's corrections show as
+// greedy or advisor steps of the pair runs, and every pair is still ranked.
+static void test_loop_pair_safety_keeps_pair_runs_off_the_walls(void** state) {
+  (void)state;
+  int collisions[2] = {0, 0};
+  int64_t overrides[2] = {0, 0};
+  int32_t corrected_steps[2] = {0, 0};
+  for (int on = 0; on <= 1; ++on) {
+    fw_config_t c;
+    short_schedule(&c);
+    c.phase_one_runs = 10;
+    c.phase_two_runs = 12;
+    c.eval_every_runs = 30;
+    c.eval_starts = 1;
+    c.pair_runs = true;
+    c.pair_gain_sigma = 2.0;
+    c.pair_centring_sigma = 4.0;
+    c.pair_safety = on == 1;
+    assert_int_equal(harness_open(&g_h, &c, false, 11), 0);
+    harness_run(&g_h, 400000);
+    fw_loop_stats_t st;
+    fw_loop_get_stats(g_h.loop, &st);
+    assert_true(st.done);
+    assert_int_equal(st.pairs_ranked, 6);
+    overrides[on] = st.pair_safety_overrides;
+    for (int i = 0; i < g_h.runs && i < 64; ++i) {
+      const b21r_run_t* r = &g_h.run[i];
+      if (r->kind == B21R_RUN_T_KIND_TRAINING && r->phase == 2) {
+        collisions[on] += r->end_reason == B21R_RUN_T_END_COLLISION;
+        corrected_steps[on] += r->steps_by_source[B21R_EXPERIENCE_T_SOURCE_GREEDY] +
+                               r->steps_by_source[B21R_EXPERIENCE_T_SOURCE_ADVISOR];
+      }
+    }
+    harness_close(&g_h);
+  }
+  print_message("phase-two training runs on a wall: %d without the filter, %d with it (%lld commands replaced, "
+                "%d corrected steps)\n", collisions[0], collisions[1], (long long)overrides[1], corrected_steps[1]);
+  assert_true(collisions[0] >= 2);
+  assert_int_equal(collisions[1], 0);
+  assert_int_equal(overrides[0], 0);
+  assert_true(overrides[1] > 0);
+  assert_true(corrected_steps[1] >= overrides[1]);  // (plus the advisor's where nothing is known)
+}
+
 // state_rotation: the state ends with the rotation the base executes, i.e. the command in force
 // while the step ran (the previous action, after the acceleration limit), so every transition's
 // s_next ends with its own action and its s with the run's previous action (0 at the start: the
@@ -389,6 +434,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_loop_learns_corridor_reaches_goal_from_all_poses),
       cmocka_unit_test(test_loop_pair_runs_share_start_and_rank),
+      cmocka_unit_test(test_loop_pair_safety_keeps_pair_runs_off_the_walls),
       cmocka_unit_test(test_loop_same_seed_bit_identical_experiences),
       cmocka_unit_test(test_loop_state_rotation_is_the_executed_command),
       cmocka_unit_test(test_loop_canopen_stream_independent_of_answer_lag),

@@ -1,0 +1,217 @@
+// SPDX-License-Identifier: MIT
+// The corridor's recovery rollout (tasks/recovery.h): what it predicts matches an independent
+// integration of the same commands (sim/kinematic.h at fine sub-steps), it ranks commands the
+// way the geometry does, it is symmetric, it stops at the goal, and it refuses what it cannot
+// predict.
+#include <b21r_test/alloc_counter.h>
+#include <features/features.h>
+#include <sim/kinematic.h>
+#include <tasks/episode.h>
+#include <tasks/recovery.h>
+#include <tasks/tasks.h>
+
+#include <math.h>
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <string.h>
+
+#include <cmocka.h>
+
+static tasks_corridor_spec_t g_spec;
+static tasks_command_limits_t g_lim;
+
+static int setup(void** state) {
+  (void)state;
+  tasks_corridor_spec_default(&g_spec);
+  tasks_command_limits_default(&g_lim);
+  return 0;
+}
+
+// The features of an exact pose (what a perfect laser reports): y lateral offset [m], psi heading
+// to the corridor axis [rad], x from the start wall [m].
+static features_corridor_t at_pose(double x, double y, double psi) {
+  features_corridor_t f;
+  memset(&f, 0, sizeof f);
+  f.valid = 1;
+  f.end_distance_m = g_spec.length_m - x;
+  f.offset_m = y;
+  f.heading_rad = psi;
+  f.lateral_frac = 0.5 - y / g_spec.width_m;
+  f.target_angle_rad = -psi - atan2(y, g_spec.lookahead_m);
+  return f;
+}
+
+static bool refused(double c) { return isinf(c) && c < 0.0; }
+
+static double clearance(const features_corridor_t* f, double v0, double w0, double w, double horizon_s) {
+  return tasks_corridor_recovery_clearance_m(&g_spec, &g_lim, g_spec.dt_s, f, v0, w0, w, horizon_s);
+}
+
+// The same scenario integrated independently: the controller's commands each period (the vetted
+// one, then the recovery law's from the true pose), each clamped as the controller clamps it, and
+// a synchro-drive body at 100 sub-steps per period whose axes follow the commands under the same
+// acceleration limits (so they ramp over the period). Returns the least clearance seen at the
+// periods' ends, the instants the rollout predicts.
+static double integrated(double x, double y, double psi, double v0, double w0, double w, double horizon_s) {
+  const double dt = g_spec.dt_s;
+  const int sub = 100;
+  sim_kin_limits_t kl = {g_lim.max_translation_accel_mps2, g_lim.max_rotation_accel_radps2};
+  sim_kin_state_t s;
+  sim_kin_reset(&s, x, y, psi);
+  s.v_mps = v0;
+  s.omega_radps = w0;
+  double v_prev = v0;
+  double w_prev = w0;
+  double least = INFINITY;
+  const int n = (int)ceil(horizon_s / dt - 1e-9);
+  for (int k = 0; k < n; ++k) {
+    const features_corridor_t f = at_pose(s.x_m, s.y_m, s.theta_rad);
+    double v_cmd = tasks_corridor_speed_mps(&g_spec, &f);
+    double w_cmd = k == 0 ? w : tasks_corridor_recovery_action(&g_spec, &f);
+    (void)tasks_command_clamp(&g_lim, dt, v_prev, w_prev, &v_cmd, &w_cmd);
+    sim_kin_run(&s, &kl, v_cmd, w_cmd, dt / sub, (uint64_t)sub);
+    v_prev = v_cmd;
+    w_prev = w_cmd;
+    least = fmin(least, 0.5 * g_spec.width_m - g_spec.robot_radius_m - fabs(s.y_m));
+    if (g_spec.length_m - s.x_m <= g_spec.goal_distance_m) {
+      break;
+    }
+  }
+  return least;
+}
+
+// Centred and straight at cruising speed, holding course: the clearance stays what it is, the
+// free half-width 1.0 - 0.26 = 0.74 m.
+static void test_recovery_centred_straight_keeps_half_width(void** state) {
+  (void)state;
+  const features_corridor_t f = at_pose(2.0, 0.0, 0.0);
+  assert_true(fabs(clearance(&f, g_spec.v_centre_mps, 0.0, 0.0, 3.0) - 0.74) < 1e-12);
+}
+
+// Over a grid of poses (offsets to 0.6 m, headings to 1.1 rad either way), previous commands and
+// vetted commands, the prediction is within 1 cm of the independent integration: the margin
+// the controller keeps (0.1 m by default) is for sensing and latency, not for the model.
+static void test_recovery_matches_independent_integration(void** state) {
+  (void)state;
+  double worst = 0.0;
+  int n = 0;
+  for (double y = -0.6; y <= 0.6001; y += 0.2) {
+    for (double psi = -1.1; psi <= 1.1001; psi += 0.275) {
+      for (double w0 = -0.5; w0 <= 0.5001; w0 += 0.5) {
+        for (double w = -1.0; w <= 1.0001; w += 0.25) {
+          const features_corridor_t f = at_pose(3.0, y, psi);
+          const double p = clearance(&f, 0.4, w0, w, 3.0);
+          const double q = integrated(3.0, y, psi, 0.4, w0, w, 3.0);
+          worst = fmax(worst, fabs(p - q));
+          n++;
+        }
+      }
+    }
+  }
+  print_message("rollout vs integration over %d cases: largest difference %.4f m\n", n, worst);
+  assert_true(worst < 0.01);
+}
+
+// Near the left wall, heading towards it and already turning further left (the previous command
+// +1 rad/s; the acceleration limit slows the turn away): keeping that turn is predicted to touch
+// the wall, reversing it is not, and the clearance falls as the command turns further left.
+static void test_recovery_ranks_commands_by_the_geometry(void** state) {
+  (void)state;
+  const features_corridor_t f = at_pose(3.0, 0.5, 0.6);
+  double prev = INFINITY;
+  for (double w = -1.0; w <= 1.0001; w += 0.25) {
+    const double c = clearance(&f, 0.6, 1.0, w, 3.0);
+    assert_true(c <= prev);
+    prev = c;
+  }
+  assert_true(clearance(&f, 0.6, 1.0, 1.0, 3.0) < 0.0);
+  assert_true(clearance(&f, 0.6, 1.0, -1.0, 3.0) > 0.0);
+}
+
+// Mirroring the pose, the previous command and the vetted command about the centre line gives
+// the same clearance (to rounding).
+static void test_recovery_is_mirror_symmetric(void** state) {
+  (void)state;
+  for (double y = -0.5; y <= 0.5001; y += 0.25) {
+    for (double psi = -0.9; psi <= 0.9001; psi += 0.3) {
+      for (double w = -1.0; w <= 1.0001; w += 0.5) {
+        const features_corridor_t a = at_pose(2.0, y, psi);
+        const features_corridor_t b = at_pose(2.0, -y, -psi);
+        assert_true(fabs(clearance(&a, 0.5, 0.2, w, 3.0) - clearance(&b, 0.5, -0.2, -w, 3.0)) < 1e-12);
+      }
+    }
+  }
+}
+
+// The run ends at the goal: the same pose and commands that touch the wall 6 m from the goal are
+// safe 5 cm before it, where the run ends after one period.
+static void test_recovery_stops_at_the_goal(void** state) {
+  (void)state;
+  const double x_near = g_spec.length_m - g_spec.goal_distance_m - 0.05;
+  const features_corridor_t near_goal = at_pose(x_near, 0.5, 0.6);
+  const features_corridor_t far = at_pose(3.0, 0.5, 0.6);
+  assert_true(clearance(&near_goal, 0.6, 1.0, 1.0, 3.0) > 0.0);
+  assert_true(clearance(&far, 0.6, 1.0, 1.0, 3.0) < 0.0);
+}
+
+// A longer horizon never predicts more clearance; the horizon is kept within [dt, 20 s].
+static void test_recovery_horizon(void** state) {
+  (void)state;
+  const features_corridor_t f = at_pose(2.0, 0.3, 0.4);
+  double prev = INFINITY;
+  for (double h = 0.1; h <= 6.0; h += 0.5) {
+    const double c = clearance(&f, 0.5, 0.0, 0.5, h);
+    assert_true(c <= prev);
+    prev = c;
+  }
+  assert_true(clearance(&f, 0.5, 0.0, 0.5, 0.0) == clearance(&f, 0.5, 0.0, 0.5, g_spec.dt_s));
+  assert_true(clearance(&f, 0.5, 0.0, 0.5, 1e6) == clearance(&f, 0.5, 0.0, 0.5, 20.0));
+}
+
+// Nothing can be predicted from invalid features or a non-finite input: -INFINITY, so nothing
+// passes; the recovery law then holds course. No call allocates.
+static void test_recovery_refuses_what_it_cannot_predict(void** state) {
+  (void)state;
+  features_corridor_t f = at_pose(2.0, 0.0, 0.0);
+  alloc_counter_begin();
+  assert_true(refused(clearance(&f, 0.5, 0.0, NAN, 3.0)));
+  assert_true(refused(clearance(&f, NAN, 0.0, 0.0, 3.0)));
+  assert_true(refused(clearance(&f, 0.5, INFINITY, 0.0, 3.0)));
+  assert_true(refused(clearance(&f, 0.5, 0.0, 0.0, NAN)));
+  assert_true(refused(tasks_corridor_recovery_clearance_m(&g_spec, &g_lim, 0.0, &f, 0.5, 0.0, 0.0, 3.0)));
+  assert_true(refused(tasks_corridor_recovery_clearance_m(&g_spec, &g_lim, 0.1, NULL, 0.5, 0.0, 0.0, 3.0)));
+  f.offset_m = NAN;
+  assert_true(refused(clearance(&f, 0.5, 0.0, 0.0, 3.0)));
+  f = at_pose(2.0, 0.3, 0.2);
+  f.valid = 0;
+  assert_true(refused(clearance(&f, 0.5, 0.0, 0.0, 3.0)));
+  assert_true(tasks_corridor_recovery_action(&g_spec, &f) == 0.0);
+  assert_true(tasks_corridor_recovery_action(&g_spec, NULL) == 0.0);
+  assert_int_equal(alloc_counter_end(), 0);
+}
+
+// The recovery law is the example policy at gain 2 on the target angle, within the action bound.
+static void test_recovery_action_is_the_gain_two_law(void** state) {
+  (void)state;
+  const features_corridor_t f = at_pose(2.0, 0.2, 0.1);
+  assert_true(tasks_corridor_recovery_action(&g_spec, &f) == 2.0 * f.target_angle_rad);
+  const features_corridor_t g = at_pose(2.0, 0.6, 1.0);
+  assert_true(tasks_corridor_recovery_action(&g_spec, &g) == -g_spec.omega_max_radps);
+}
+
+int main(void) {
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test_setup(test_recovery_centred_straight_keeps_half_width, setup),
+      cmocka_unit_test_setup(test_recovery_matches_independent_integration, setup),
+      cmocka_unit_test_setup(test_recovery_ranks_commands_by_the_geometry, setup),
+      cmocka_unit_test_setup(test_recovery_is_mirror_symmetric, setup),
+      cmocka_unit_test_setup(test_recovery_stops_at_the_goal, setup),
+      cmocka_unit_test_setup(test_recovery_horizon, setup),
+      cmocka_unit_test_setup(test_recovery_refuses_what_it_cannot_predict, setup),
+      cmocka_unit_test_setup(test_recovery_action_is_the_gain_two_law, setup),
+  };
+  return cmocka_run_group_tests(tests, NULL, NULL);
+}
