@@ -398,6 +398,10 @@ static void write_learning(json_writer_t* w, const session_t* S, double dt_s) {
   json_int(w, "held_ticks", S->final.held_ticks);
   json_int(w, "pairs_ranked", S->final.pairs_ranked);
   json_int(w, "pair_safety_overrides", S->final.pair_safety_overrides);
+  json_int(w, "pair_runs_vetoed", S->final.pair_runs_vetoed);
+  json_int(w, "pair_runs_missed", S->final.pair_runs_missed);
+  json_int(w, "pair_safety_short", S->final.pair_safety_short);
+  json_int(w, "pair_safety_held", S->final.pair_safety_held);
   json_end_object(w);
   char hex[24];
   snprintf(hex, sizeof hex, "%016llx", (unsigned long long)S->phase_one_digest);

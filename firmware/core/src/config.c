@@ -1018,6 +1018,19 @@ int fw_config_validate_program(const fw_config_t* cfg, char* err, size_t err_cap
         origin_of(cfg, "pair_runs").text, origin_of(cfg, "pair_safety").text, origin_of(cfg, "reposition").text);
     return -1;
   }
+  if (cfg->pair_runs && cfg->mode == FW_MODE_LEARN && cfg->reposition != FW_REPOSITION_EMULATOR &&
+      (cfg->pair_safety_margin_m < FW_PAIR_SAFETY_ROBOT_MARGIN_M || cfg->pair_safety_horizon_s < FW_PAIR_SAFETY_ROBOT_HORIZON_S)) {
+    // The filter has been measured in the emulator only (in lockstep, between walls at the nominal
+    // width): the robot's sensing error and latency need at least the default margin and horizon.
+    fw_errfmt(err, err_cap,
+        "%s: pair_runs on the robot (reposition set at %s) needs pair_safety_margin_m >= %.2f (set at %s) and "
+        "pair_safety_horizon_s >= %.1f (set at %s): the safety filter has been measured in the emulator only; raise "
+        "them or set pair_runs = false",
+        origin_of(cfg, "pair_runs").text, origin_of(cfg, "reposition").text, FW_PAIR_SAFETY_ROBOT_MARGIN_M,
+        origin_of(cfg, "pair_safety_margin_m").text, FW_PAIR_SAFETY_ROBOT_HORIZON_S,
+        origin_of(cfg, "pair_safety_horizon_s").text);
+    return -1;
+  }
   if (cfg->mode != FW_MODE_LEARN || cfg->phase_driver != FW_DRIVER_JOYSTICK) {
     return 0;
   }

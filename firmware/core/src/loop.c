@@ -419,10 +419,13 @@ static void decide(fw_loop_t* L, fw_safety_event_t ev, const sensed_t* in, comma
       fw_run_step(L, 0, &cmd->v_mps, &cmd->w_radps);
       cmd->stopping = !fw_run_running(L);
     } else {
-      // No new scan (or features unusable) this tick: hold the command, learn nothing.
+      // No new scan (or features unusable) this tick: hold the command (a pair run: its recovery
+      // law, dead-reckoned), learn nothing.
       L->held_ticks++;
-      cmd->v_mps = L->cmd_v;
-      cmd->w_radps = L->cmd_w;
+      if (!fw_run_pair_hold(L, &cmd->v_mps, &cmd->w_radps)) {
+        cmd->v_mps = L->cmd_v;
+        cmd->w_radps = L->cmd_w;
+      }
       cmd->stopping = false;
     }
   }
@@ -694,6 +697,10 @@ void fw_loop_get_stats(const fw_loop_t* L, fw_loop_stats_t* out) {
   out->checkpoints_submitted = L->checkpoints_submitted;
   out->pairs_ranked = L->pairs_ranked;
   out->pair_safety_overrides = L->pair_safety_overrides;
+  out->pair_safety_short = L->pair_safety_short;
+  out->pair_runs_vetoed = L->pair_runs_vetoed;
+  out->pair_runs_missed = L->pair_runs_missed;
+  out->pair_safety_held = L->pair_safety_held;
   const fw_timing_t* t = &L->timing;
   out->tick_max_ever_us = t->max_ever_us;
   out->tick_overruns = t->overruns;

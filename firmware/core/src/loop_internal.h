@@ -246,6 +246,14 @@ struct fw_loop {
   int32_t pairs_ranked;          // pairs whose weights were applied
   int64_t pair_safety_overrides; // pair-run commands the safety filter replaced
   bool pair_run_vetoed;          // the safety filter replaced a command of the run under way
+  int32_t pair_runs_vetoed;      // pair runs the filter corrected
+  int32_t pair_runs_missed;      // pair runs ranked as having missed the goal (vetoed ones included)
+  int64_t pair_safety_short;     // corrections where even the recovery law missed the margin
+  int64_t pair_safety_held;      // periods without a scan in which the recovery law drove
+  features_corridor_t pair_model;  // pair run: the state at the last decision (dead reckoning)
+  double pair_model_v;           // and the command in force before it [m/s]
+  double pair_model_w;           // [rad/s]
+  bool pair_model_ok;            // pair_model holds this run's last decision
 
   // Run state.
   int32_t mode;                // b21r_status_t MODE_*
@@ -361,6 +369,10 @@ void fw_run_begin_repositioning(fw_loop_t* L);
 bool fw_run_reposition(fw_loop_t* L, bool state_ok, double* v, double* w);
 /// One step of a running run (a new, usable state this tick); contact = the bumper fired.
 void fw_run_step(fw_loop_t* L, uint8_t contact, double* v, double* w);
+// pair_safety, a period without a new scan in a pair run: the recovery law's command at the
+// state dead-reckoned from the last decision (what the filter's rollout assumed), instead of
+// holding the vetted command. False (hold as usual) outside pair runs. O(1).
+bool fw_run_pair_hold(fw_loop_t* L, double* v, double* w);
 /// Ends a running run that has no terminal state: end_reason B21R_RUN_T_END_*, stop_reason the
 /// fw_stop_reason_t of a safety stop (else 0), why a static string (kept by B21R_RUN).
 void fw_run_abort(fw_loop_t* L, int8_t end_reason, int32_t stop_reason, const char* why);

@@ -90,6 +90,7 @@ static features_pose_t next_start_pose(fw_loop_t* L, const fw_run_plan_t* plan) 
 static void pair_begin_run(fw_loop_t* L) {
   L->pair_member = -1;
   L->pair_run_vetoed = false;
+  L->pair_model_ok = false;
   if (!L->cfg.pair_runs || L->cfg.mode != FW_MODE_LEARN || L->plan.kind != FW_RUN_TRAINING) {
     return;
   }
@@ -125,6 +126,8 @@ static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps
     return;
   }
   goal = goal && !L->pair_run_vetoed;
+  L->pair_runs_vetoed += L->pair_run_vetoed ? 1 : 0;
+  L->pair_runs_missed += goal ? 0 : 1;
   if (aborted || L->pair_member == 0) {
     L->pair_weigh_tag[0] = L->run_tag;
     L->pair_weigh_w[0] = 0.0;
@@ -159,10 +162,11 @@ static double pair_offset(const fw_loop_t* L) {
 }
 
 // pair_safety: a pair run's command a goes only if the recovery rollout (tasks/recovery.h) keeps
-// pair_safety_margin_m to both walls; otherwise the learned policy's own action, if it does, and
-// else the recovery law's. The first correction vetoes the run's perturbation (pair_run_vetoed).
-// Runs before the command is sent: two rollouts at most (30 steps each at the defaults).
-static void pair_vet(fw_loop_t* L, double greedy_action, double* a, int8_t* source) {
+// pair_safety_margin_m to both walls; otherwise the learned policy's own action (when one is
+// known), if it does, and else the recovery law's. The first correction vetoes the run (it counts
+// as failed in its pair and its perturbation ends): whatever failed the check, the run needed the
+// filter. Runs before the command is sent: two rollouts at most (30 periods each at the defaults).
+static void pair_vet(fw_loop_t* L, bool greedy_known, double greedy_action, double* a, int8_t* source) {
   const tasks_corridor_spec_t* spec = &L->ep.corridor;
   const features_corridor_t* f = &L->ep.corridor_state;
   const double margin = L->cfg.pair_safety_margin_m;
@@ -172,14 +176,44 @@ static void pair_vet(fw_loop_t* L, double greedy_action, double* a, int8_t* sour
   }
   L->pair_safety_overrides++;
   L->pair_run_vetoed = true;
-  if (tasks_corridor_recovery_clearance_m(spec, &L->limits, L->dt_s, f, L->cmd_v, L->cmd_w, greedy_action,
-                                          horizon) >= margin) {
+  if (greedy_known && tasks_corridor_recovery_clearance_m(spec, &L->limits, L->dt_s, f, L->cmd_v, L->cmd_w,
+                                                          greedy_action, horizon) >= margin) {
     *a = greedy_action;
     *source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
     return;
   }
   *a = tasks_corridor_recovery_action(spec, f);
   *source = B21R_EXPERIENCE_T_SOURCE_ADVISOR;
+  if (tasks_corridor_recovery_clearance_m(spec, &L->limits, L->dt_s, f, L->cmd_v, L->cmd_w, *a, horizon) < margin) {
+    L->pair_safety_short++;  // even the recovery law is predicted to come closer than the margin
+  }
+}
+
+// pair_safety: the state at the last decision of a pair run and the command in force before it,
+// for dead reckoning through periods without a new scan (fw_run_pair_hold).
+static void pair_keep_model(fw_loop_t* L) {
+  L->pair_model = L->ep.corridor_state;
+  L->pair_model_v = L->cmd_v;
+  L->pair_model_w = L->cmd_w;
+  L->pair_model_ok = true;
+}
+
+bool fw_run_pair_hold(fw_loop_t* L, double* v_cmd, double* w_cmd) {
+  if (L->pair_member < 0 || !L->cfg.pair_safety || !L->pair_model_ok) {
+    return false;
+  }
+  features_corridor_t next;
+  if (!tasks_corridor_recovery_predict(&L->ep.corridor, &L->limits, L->dt_s, &L->pair_model, L->pair_model_v,
+                                       L->pair_model_w, L->cmd_v, L->cmd_w, &next)) {
+    return false;
+  }
+  L->pair_model = next;
+  L->pair_model_v = L->cmd_v;
+  L->pair_model_w = L->cmd_w;
+  *v_cmd = tasks_corridor_speed_mps(&L->ep.corridor, &next);
+  *w_cmd = tasks_corridor_recovery_action(&L->ep.corridor, &next);
+  L->pair_safety_held++;
+  return true;
 }
 
 // The id begin_run gives the next run (B21R_RUN.run_id), as the start-pose request passes it on.
@@ -507,15 +541,16 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
       a += offset;
       source = B21R_EXPERIENCE_T_SOURCE_EXPLORATION;
     }
-    if (!evaluating && L->pair_member >= 0 && L->cfg.pair_safety) {
-      pair_vet(L, greedy_action, &a, &source);
-    }
   } else if (!evaluating && L->cfg.advisor) {
     a = advice;  // the learner knows no action here: the example policy advises
     source = B21R_EXPERIENCE_T_SOURCE_ADVISOR;
   } else {
     a = 0.0;  // nothing known: hold course (evaluations measure the learned policy alone)
     source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
+  }
+  if (!evaluating && L->pair_member >= 0 && L->cfg.pair_safety) {
+    pair_vet(L, greedy_known, greedy_action, &a, &source);  // every command of a pair run
+    pair_keep_model(L);
   }
   *w_cmd = a;
   *v_cmd = tasks_episode_speed_mps(&L->ep);

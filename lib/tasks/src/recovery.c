@@ -3,13 +3,67 @@
 #include "tasks/recovery.h"
 
 #include <math.h>
-
+#include <stdbool.h>
+#include <stddef.h>
 
 // The longest rollout: 20 s is several times the recovery law's settling time (about 3 s).
 #define RECOVERY_MAX_HORIZON_S 20.0
+// Control periods below this are refused (the step count would not be bounded).
+#define RECOVERY_MIN_DT_S 1e-3
+// The coast after the goal ends when both axes stand; bounded in any case by this many periods.
+#define RECOVERY_MAX_COAST_STEPS 200
+
+// The model's state: the pose in the corridor frame and the axes' velocities.
+typedef struct model {
+  double y;      // lateral offset from the (measured) centre line, + = left [m]
+  double psi;    // heading to the corridor axis, CCW [rad]
+  double ahead;  // distance to the end wall [m]
+  double v;      // translation velocity [m/s]
+  double w;      // rotation velocity [rad/s]
+} model_t;
+
+static double wrap_pi(double a) { return atan2(sin(a), cos(a)); }
+
+// The width the walls are at: the measured one where it is smaller than the nominal one (the
+// features' offset is measured from the measured centre line), never more than nominal.
+static double wall_width_m(const tasks_corridor_spec_t* spec, const features_corridor_t* f) {
+  const double w = f->width_m;
+  return isfinite(w) && w > 2.0 * spec->robot_radius_m ? fmin(w, spec->width_m) : spec->width_m;
+}
+
+static bool inputs_ok(const tasks_corridor_spec_t* spec, const tasks_command_limits_t* lim, double dt_s,
+                      const features_corridor_t* f) {
+  return spec != NULL && lim != NULL && f != NULL && f->valid != 0U && dt_s >= RECOVERY_MIN_DT_S &&
+         isfinite(dt_s) && isfinite(f->offset_m) && isfinite(f->heading_rad) && isfinite(f->end_distance_m);
+}
+
+// The features the speed policy and the recovery law see at the model's pose.
+static features_corridor_t features_at(const tasks_corridor_spec_t* spec, const features_corridor_t* f,
+                                       double width_m, const model_t* m) {
+  features_corridor_t at = *f;
+  at.offset_m = m->y;
+  at.heading_rad = wrap_pi(m->psi);
+  at.end_distance_m = m->ahead;
+  at.lateral_frac = fmin(1.0, fmax(0.0, (0.5 * width_m - m->y) / width_m));
+  at.target_angle_rad = wrap_pi(-m->psi - atan2(m->y, spec->lookahead_m));
+  return at;
+}
+
+// One control period: the command (clamped from the one in force) and the axes' linear ramp to
+// it; the heading at the period's middle, psi + dt (3 w_prev + w_cmd) / 8, gives the direction.
+static void step(const tasks_command_limits_t* lim, double dt_s, double v_cmd, double w_cmd, model_t* m) {
+  (void)tasks_command_clamp(lim, dt_s, m->v, m->w, &v_cmd, &w_cmd);
+  const double psi_mid = m->psi + dt_s * (3.0 * m->w + w_cmd) / 8.0;
+  const double ds = 0.5 * (m->v + v_cmd) * dt_s;
+  m->y += ds * sin(psi_mid);
+  m->ahead -= ds * cos(psi_mid);
+  m->psi += 0.5 * (m->w + w_cmd) * dt_s;
+  m->v = v_cmd;
+  m->w = w_cmd;
+}
 
 double tasks_corridor_recovery_action(const tasks_corridor_spec_t* spec, const features_corridor_t* f) {
-  if (f == NULL || f->valid == 0U || !isfinite(f->target_angle_rad)) {
+  if (spec == NULL || f == NULL || f->valid == 0U || !isfinite(f->target_angle_rad)) {
     return 0.0;
   }
   return tasks_clamp_omega(TASKS_CORRIDOR_RECOVERY_GAIN * f->target_angle_rad, spec->omega_max_radps);
@@ -18,45 +72,44 @@ double tasks_corridor_recovery_action(const tasks_corridor_spec_t* spec, const f
 double tasks_corridor_recovery_clearance_m(const tasks_corridor_spec_t* spec, const tasks_command_limits_t* lim,
                                            double dt_s, const features_corridor_t* f, double prev_v_mps,
                                            double prev_omega_radps, double omega_radps, double horizon_s) {
-  if (f == NULL || f->valid == 0U || !(dt_s > 0.0) || !isfinite(f->offset_m) || !isfinite(f->heading_rad) ||
-      !isfinite(f->end_distance_m) || !isfinite(prev_v_mps) || !isfinite(prev_omega_radps) ||
+  if (!inputs_ok(spec, lim, dt_s, f) || !isfinite(prev_v_mps) || !isfinite(prev_omega_radps) ||
       !isfinite(omega_radps) || !isfinite(horizon_s)) {
     return -INFINITY;
   }
-  const double half_free = 0.5 * spec->width_m - spec->robot_radius_m;  // |y| where the skirt touches
+  const double width = wall_width_m(spec, f);
+  const double half_free = 0.5 * width - spec->robot_radius_m;  // |y| where the skirt touches
   const double h = fmin(fmax(horizon_s, dt_s), RECOVERY_MAX_HORIZON_S);
-  const int32_t n = (int32_t)ceil(h / dt_s - 1e-9);
-  double y = f->offset_m;
-  double psi = f->heading_rad;
-  double ahead = f->end_distance_m;
-  double v = prev_v_mps;
-  double w = prev_omega_radps;
+  const int32_t n = (int32_t)ceil(h / dt_s - 1e-9);  // <= 20 / 1e-3
+  model_t m = {f->offset_m, f->heading_rad, f->end_distance_m, prev_v_mps, prev_omega_radps};
   double least = INFINITY;
-  for (int32_t k = 0; k < n; ++k) {
-    // The features the speed policy and the recovery law see at the predicted pose.
-    features_corridor_t at = *f;
-    at.offset_m = y;
-    at.heading_rad = psi;
-    at.lateral_frac = 0.5 - y / spec->width_m;
-    at.target_angle_rad = -psi - atan2(y, spec->lookahead_m);
-    double v_cmd = tasks_corridor_speed_mps(spec, &at);
-    double w_cmd = k == 0 ? omega_radps : tasks_corridor_recovery_action(spec, &at);
-    (void)tasks_command_clamp(lim, dt_s, v, w, &v_cmd, &w_cmd);
-    // The base ramps each axis from the previous command to the new one over the period (the
-    // clamp keeps the step within its acceleration limit): the mean velocities drive the step,
-    // and the heading at the period's middle, psi + dt (3 w_prev + w_cmd) / 8, gives its
-    // direction (second order in the heading change).
-    const double psi_mid = psi + dt_s * (3.0 * w + w_cmd) / 8.0;
-    const double ds = 0.5 * (v + v_cmd) * dt_s;
-    y += ds * sin(psi_mid);
-    ahead -= ds * cos(psi_mid);
-    psi += 0.5 * (w + w_cmd) * dt_s;
-    v = v_cmd;
-    w = w_cmd;
-    least = fmin(least, half_free - fabs(y));
-    if (ahead <= spec->goal_distance_m) {
-      break;  // the run ends at the goal
-    }
+  bool at_goal = false;
+  for (int32_t k = 0; k < n && !at_goal; ++k) {
+    const features_corridor_t at = features_at(spec, f, width, &m);
+    step(lim, dt_s, tasks_corridor_speed_mps(spec, &at), k == 0 ? omega_radps : tasks_corridor_recovery_action(spec, &at),
+         &m);
+    least = fmin(least, half_free - fabs(m.y));
+    at_goal = m.ahead <= spec->goal_distance_m;
+  }
+  // The run ends at the goal and the base is told to stop: it coasts to a stand under its
+  // acceleration limits, on its heading, and may still reach a wall.
+  for (int32_t k = 0; at_goal && k < RECOVERY_MAX_COAST_STEPS && (fabs(m.v) > 0.0 || fabs(m.w) > 0.0); ++k) {
+    step(lim, dt_s, 0.0, 0.0, &m);
+    least = fmin(least, half_free - fabs(m.y));
   }
   return least;
+}
+
+int tasks_corridor_recovery_predict(const tasks_corridor_spec_t* spec, const tasks_command_limits_t* lim, double dt_s,
+                                    const features_corridor_t* f, double prev_v_mps, double prev_omega_radps,
+                                    double v_mps, double omega_radps, features_corridor_t* out) {
+  if (out == NULL || !inputs_ok(spec, lim, dt_s, f) || !isfinite(prev_v_mps) || !isfinite(prev_omega_radps) ||
+      !isfinite(v_mps) || !isfinite(omega_radps)) {
+    return 0;
+  }
+  const double width = wall_width_m(spec, f);
+  model_t m = {f->offset_m, f->heading_rad, f->end_distance_m, prev_v_mps, prev_omega_radps};
+  step(lim, dt_s, v_mps, omega_radps, &m);
+  m.ahead = fmax(0.0, m.ahead);
+  *out = features_at(spec, f, width, &m);
+  return 1;
 }

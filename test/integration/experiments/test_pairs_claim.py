@@ -17,8 +17,9 @@ Claims, each printed with its numbers; ASSERTED ones fail the test when they do 
                   95 % of phase-two training steps are the learned policy's (with the pair's
                   perturbation: source exploration, or after a safety correction without it:
                   greedy); the safety filter's recovery law and the advisor drive the rest
-  safe            the safety filter keeps the perturbed runs off the walls: no more phase-two
-                  training runs end without the goal with pairs than without them
+  safe            the safety filter keeps the perturbed runs off the walls: no phase-two training
+                  run with pairs ends in a collision (without pairs the greedy policy's own runs
+                  hit a wall now and then: printed)
   best_gain       the final block with pair_runs is not significantly worse than the example policy at
                   gain 2, the best of its training gains, from the same poses (reported, not asserted:
                   level after 100 phase-two runs, behind after 60)
@@ -69,6 +70,7 @@ def main():
     successes, gain2, optimal, ranked_ok = [], [], [], True
     vetoed, overrides, train_s = 0, 0, {"false": 0.0, "true": 0.0}
     missed = {"false": 0, "true": 0}
+    collided = {"false": 0, "true": 0}
     for s in SEEDS:
         for v in ("false", "true"):
             blocks = by[(s, "pair_runs=" + v)]["learning"]["blocks"]
@@ -76,8 +78,9 @@ def main():
             final[v].append(mean(blocks[-1]["steps"]))
         on = by[(s, "pair_runs=true")]
         for v in ("false", "true"):
-            missed[v] += sum(1 for x in by[(s, "pair_runs=" + v)]["learning"]["runs"]
-                             if x["kind"] == "train" and x["phase"] == 2 and x["outcome"] != "goal")
+            two = [x for x in by[(s, "pair_runs=" + v)]["learning"]["runs"] if x["kind"] == "train" and x["phase"] == 2]
+            missed[v] += sum(1 for x in two if x["outcome"] != "goal")
+            collided[v] += sum(1 for x in two if x["outcome"] == "collision")
         successes.append(on["learning"]["blocks"][-1]["successes"])
         gain2.append(mean(on["references"]["example@2"]["steps"]))
         optimal.append(mean(on["references"]["optimal"]["steps"]))
@@ -86,8 +89,7 @@ def main():
         learned = src["exploration"] + src["greedy"]
         ranked_ok = (ranked_ok and totals["pairs_ranked"] == PHASE_TWO_RUNS // 2 and sum(src.values()) > 0
                      and learned >= 0.95 * sum(src.values()))
-        vetoed += sum(1 for x in on["learning"]["runs"] if x["kind"] == "train" and x["phase"] == 2
-                      and x["sources"]["exploration"] < x["steps"])
+        vetoed += totals["pair_runs_vetoed"]
         overrides += totals["pair_safety_overrides"]
         for v in ("false", "true"):
             train_s[v] += by[(s, "pair_runs=" + v)]["learning"]["totals"]["training_time_s"]
@@ -116,10 +118,11 @@ def main():
     results["near_optimal"] = (t <= T95_ONE_SIDED_DF9, "final with pairs minus optimal: %+.2f ± %.2f steps, t = %.2f"
                                % (m, h, t))
     n2 = len(SEEDS) * PHASE_TWO_RUNS
-    results["safe"] = (missed["true"] <= missed["false"], "phase-two training runs without the goal: with pairs "
-                       "%d of %d, without %d" % (missed["true"], n2, missed["false"]))
-    results["vetoed"] = (True, "pair runs the perturbed policy did not drive throughout (safety corrections, or no "
-                         "action known): %d of %d (%d commands replaced by the filter); training time (both phases) "
+    results["safe"] = (collided["true"] == 0, "phase-two training runs ending in a collision: with pairs %d of %d "
+                       "(without the goal: %d), without pairs %d (%d)" % (collided["true"], n2, missed["true"],
+                                                                         collided["false"], missed["false"]))
+    results["vetoed"] = (True, "pair runs the safety filter corrected (ranked as failed): %d of %d (%d commands "
+                         "replaced); training time (both phases) "
                          "with pairs %.2f h, without %.2f h" % (vetoed, n2, overrides,
                                                                           train_s["true"] / 3600.0,
                                                                           train_s["false"] / 3600.0))

@@ -54,7 +54,9 @@ static double clearance(const features_corridor_t* f, double v0, double w0, doub
 // one, then the recovery law's from the true pose), each clamped as the controller clamps it, and
 // a synchro-drive body at 100 sub-steps per period whose axes follow the commands under the same
 // acceleration limits (so they ramp over the period). Returns the least clearance seen at the
-// periods' ends, the instants the rollout predicts.
+// periods' ends, the instants the rollout predicts. This checks the rollout's integration of its
+// own model (the controller's limits, nominal width, no coast: the poses are far from the goal);
+// a base slower than the limits, or a measured width, is the margin's business.
 static double integrated(double x, double y, double psi, double v0, double w0, double w, double horizon_s) {
   const double dt = g_spec.dt_s;
   const int sub = 100;
@@ -115,20 +117,21 @@ static void test_recovery_matches_independent_integration(void** state) {
   assert_true(worst < 0.01);
 }
 
-// Near the left wall, heading towards it and already turning further left (the previous command
-// +1 rad/s; the acceleration limit slows the turn away): keeping that turn is predicted to touch
-// the wall, reversing it is not, and the clearance falls as the command turns further left.
+// Near the left wall and heading towards it: within the band the acceleration limit lets the
+// command reach from the one in force (0 +- 0.286 rad/s), turning further left is predicted to
+// touch the wall and turning right is not, and the clearance falls strictly as the command turns
+// further left.
 static void test_recovery_ranks_commands_by_the_geometry(void** state) {
   (void)state;
-  const features_corridor_t f = at_pose(3.0, 0.5, 0.6);
+  const features_corridor_t f = at_pose(3.0, 0.5, 0.9);
   double prev = INFINITY;
-  for (double w = -1.0; w <= 1.0001; w += 0.25) {
-    const double c = clearance(&f, 0.6, 1.0, w, 3.0);
-    assert_true(c <= prev);
+  for (double w = -0.28; w <= 0.2801; w += 0.07) {
+    const double c = clearance(&f, 0.6, 0.0, w, 3.0);
+    assert_true(c < prev);
     prev = c;
   }
-  assert_true(clearance(&f, 0.6, 1.0, 1.0, 3.0) < 0.0);
-  assert_true(clearance(&f, 0.6, 1.0, -1.0, 3.0) > 0.0);
+  assert_true(clearance(&f, 0.6, 0.0, 0.28, 3.0) < 0.0);
+  assert_true(clearance(&f, 0.6, 0.0, -0.28, 3.0) > 0.0);
 }
 
 // Mirroring the pose, the previous command and the vetted command about the centre line gives
@@ -146,15 +149,68 @@ static void test_recovery_is_mirror_symmetric(void** state) {
   }
 }
 
-// The run ends at the goal: the same pose and commands that touch the wall 6 m from the goal are
-// safe 5 cm before it, where the run ends after one period.
-static void test_recovery_stops_at_the_goal(void** state) {
+// The run ends at the goal, where the base is told to stop and coasts to a stand: a pose that
+// reaches the goal before it would reach the wall is safe, the same pose far from the goal is
+// not, and the coast counts: arriving at the goal while heading for a wall, the clearance left
+// once the base stands is smaller than at the goal.
+static void test_recovery_stops_at_the_goal_after_the_coast(void** state) {
   (void)state;
-  const double x_near = g_spec.length_m - g_spec.goal_distance_m - 0.05;
-  const features_corridor_t near_goal = at_pose(x_near, 0.5, 0.6);
+  const double x_goal = g_spec.length_m - g_spec.goal_distance_m;
+  const features_corridor_t near_goal = at_pose(x_goal - 0.05, 0.3, 0.3);
   const features_corridor_t far = at_pose(3.0, 0.5, 0.6);
-  assert_true(clearance(&near_goal, 0.6, 1.0, 1.0, 3.0) > 0.0);
+  assert_true(clearance(&near_goal, 0.6, 0.0, 0.0, 3.0) > 0.0);
   assert_true(clearance(&far, 0.6, 1.0, 1.0, 3.0) < 0.0);
+  // At the goal condition at once: one period, then the coast from 0.6 m/s (about 0.26 m at
+  // 0.7 m/s^2) at 0.6 rad towards the left wall.
+  const features_corridor_t at_goal = at_pose(x_goal + 0.01, 0.4, 0.6);
+  const double c = clearance(&at_goal, 0.6, 0.0, 0.0, 3.0);
+  const double after_one_period = 0.74 - (0.4 + 0.06 * sin(0.6));
+  print_message("at the goal: %.3f m after one period, %.3f m once standing\n", after_one_period, c);
+  assert_true(c < after_one_period - 0.1);
+}
+
+// The walls are where the features measured them: a measured width below the nominal one moves
+// them in (the offset is measured from the measured centre line), one above it does not move
+// them out.
+static void test_recovery_uses_the_measured_width(void** state) {
+  (void)state;
+  features_corridor_t f = at_pose(2.0, 0.0, 0.0);
+  f.width_m = 1.8;
+  assert_true(fabs(clearance(&f, g_spec.v_centre_mps, 0.0, 0.0, 3.0) - 0.64) < 1e-12);
+  f.width_m = 2.3;
+  assert_true(fabs(clearance(&f, g_spec.v_centre_mps, 0.0, 0.0, 3.0) - 0.74) < 1e-12);
+}
+
+// Dead reckoning moves the features one period as the rollout does: chained predictions with the
+// recovery law reproduce the rollout's clearance, and a prediction that holds course while
+// centred and straight moves only the end distance.
+static void test_recovery_predict_follows_the_rollout(void** state) {
+  (void)state;
+  const features_corridor_t f0 = at_pose(3.0, 0.3, 0.5);
+  features_corridor_t f = f0;
+  double v = 0.5;
+  double w = 0.2;
+  double least = INFINITY;
+  for (int k = 0; k < 30; ++k) {
+    const double w_cmd = k == 0 ? 0.4 : tasks_corridor_recovery_action(&g_spec, &f);
+    double v_cmd = tasks_corridor_speed_mps(&g_spec, &f);
+    double w_sent = w_cmd;
+    double v_sent = v_cmd;
+    (void)tasks_command_clamp(&g_lim, g_spec.dt_s, v, w, &v_sent, &w_sent);
+    features_corridor_t next;
+    assert_int_equal(tasks_corridor_recovery_predict(&g_spec, &g_lim, g_spec.dt_s, &f, v, w, v_cmd, w_cmd, &next), 1);
+    f = next;
+    v = v_sent;
+    w = w_sent;
+    least = fmin(least, 0.74 - fabs(f.offset_m));
+  }
+  assert_true(fabs(least - clearance(&f0, 0.5, 0.2, 0.4, 3.0)) < 1e-9);
+  const features_corridor_t c = at_pose(2.0, 0.0, 0.0);
+  features_corridor_t n;
+  assert_int_equal(tasks_corridor_recovery_predict(&g_spec, &g_lim, 0.1, &c, 0.6, 0.0, 0.6, 0.0, &n), 1);
+  assert_true(n.offset_m == 0.0 && n.heading_rad == 0.0 && fabs(n.end_distance_m - (c.end_distance_m - 0.06)) < 1e-12);
+  assert_int_equal(tasks_corridor_recovery_predict(&g_spec, &g_lim, 0.1, &c, 0.6, 0.0, NAN, 0.0, &n), 0);
+  assert_int_equal(tasks_corridor_recovery_predict(&g_spec, &g_lim, 0.1, &c, 0.6, 0.0, 0.6, 0.0, NULL), 0);
 }
 
 // A longer horizon never predicts more clearance; the horizon is kept within [dt, 20 s].
@@ -182,7 +238,10 @@ static void test_recovery_refuses_what_it_cannot_predict(void** state) {
   assert_true(refused(clearance(&f, 0.5, INFINITY, 0.0, 3.0)));
   assert_true(refused(clearance(&f, 0.5, 0.0, 0.0, NAN)));
   assert_true(refused(tasks_corridor_recovery_clearance_m(&g_spec, &g_lim, 0.0, &f, 0.5, 0.0, 0.0, 3.0)));
+  assert_true(refused(tasks_corridor_recovery_clearance_m(&g_spec, &g_lim, 1e-12, &f, 0.5, 0.0, 0.0, 3.0)));
   assert_true(refused(tasks_corridor_recovery_clearance_m(&g_spec, &g_lim, 0.1, NULL, 0.5, 0.0, 0.0, 3.0)));
+  assert_true(refused(tasks_corridor_recovery_clearance_m(NULL, &g_lim, 0.1, &f, 0.5, 0.0, 0.0, 3.0)));
+  assert_true(refused(tasks_corridor_recovery_clearance_m(&g_spec, NULL, 0.1, &f, 0.5, 0.0, 0.0, 3.0)));
   f.offset_m = NAN;
   assert_true(refused(clearance(&f, 0.5, 0.0, 0.0, 3.0)));
   f = at_pose(2.0, 0.3, 0.2);
@@ -190,6 +249,7 @@ static void test_recovery_refuses_what_it_cannot_predict(void** state) {
   assert_true(refused(clearance(&f, 0.5, 0.0, 0.0, 3.0)));
   assert_true(tasks_corridor_recovery_action(&g_spec, &f) == 0.0);
   assert_true(tasks_corridor_recovery_action(&g_spec, NULL) == 0.0);
+  assert_true(tasks_corridor_recovery_action(NULL, &f) == 0.0);
   assert_int_equal(alloc_counter_end(), 0);
 }
 
@@ -208,7 +268,9 @@ int main(void) {
       cmocka_unit_test_setup(test_recovery_matches_independent_integration, setup),
       cmocka_unit_test_setup(test_recovery_ranks_commands_by_the_geometry, setup),
       cmocka_unit_test_setup(test_recovery_is_mirror_symmetric, setup),
-      cmocka_unit_test_setup(test_recovery_stops_at_the_goal, setup),
+      cmocka_unit_test_setup(test_recovery_stops_at_the_goal_after_the_coast, setup),
+      cmocka_unit_test_setup(test_recovery_uses_the_measured_width, setup),
+      cmocka_unit_test_setup(test_recovery_predict_follows_the_rollout, setup),
       cmocka_unit_test_setup(test_recovery_horizon, setup),
       cmocka_unit_test_setup(test_recovery_refuses_what_it_cannot_predict, setup),
       cmocka_unit_test_setup(test_recovery_action_is_the_gain_two_law, setup),

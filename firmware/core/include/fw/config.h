@@ -43,6 +43,11 @@ extern "C" {
 /// further source is cited as "an earlier setting".
 #define FW_CONFIG_MAX_SOURCES 8U
 
+/// pair_runs on the robot (reposition = operator) needs at least this safety margin [m] and
+/// rollout horizon [s] (the filter's defaults; fw_config_validate_program refuses less).
+#define FW_PAIR_SAFETY_ROBOT_MARGIN_M 0.1
+#define FW_PAIR_SAFETY_ROBOT_HORIZON_S 3.0
+
 /// Learning task (ARCHITECTURE.md, "The experiments of the paper").
 typedef enum fw_task { FW_TASK_CORRIDOR = 0, FW_TASK_OBSTACLES = 1 } fw_task_t;
 /// Wire protocol of the base.

@@ -111,8 +111,14 @@ typedef struct fw_loop_stats {
   bool last_run_goal;
   int64_t learn_ticks;           ///< ticks that did between-run learning work (replay, checkpoint)
   int64_t checkpoints_submitted; ///< checkpoints handed to the writer (between runs and at shutdown)
-  int32_t pairs_ranked;          ///< pair_runs: pairs whose ranking reached the store (anchor weights)
-  int64_t pair_safety_overrides; ///< pair_safety: perturbed commands replaced (greedy or recovery law)
+  int32_t pairs_ranked;          ///< pair_runs: pairs ranked into the store (anchor weights)
+  /// pair_safety: pair-run commands the filter replaced (the perturbed policy's, or after a
+  /// veto the learned policy's with its exploration noise), by the greedy or the recovery law
+  int64_t pair_safety_overrides;
+  int32_t pair_runs_vetoed;      ///< pair_safety: pair runs the filter corrected (ranked as failed)
+  int32_t pair_runs_missed;      ///< pair runs ranked as having missed the goal (vetoed included)
+  int64_t pair_safety_short;     ///< of those, where the recovery law too missed the margin
+  int64_t pair_safety_held;      ///< periods without a scan where the dead-reckoned law drove
   // Deadline accounting (fw/timing.h; real time only, except the compute time).
   int32_t tick_max_ever_us;      ///< longest tick compute time since start [µs]
   int64_t tick_overruns;         ///< ticks that ended after the next scheduled start

@@ -4,23 +4,30 @@
 /// pair_runs, firmware/core/src/run.c).
 ///
 /// The question asked is the one a safety filter with a backup controller asks: if this command
-/// is sent now and a known recovery law drives from the next tick on, does the robot's skirt keep
-/// a margin to both side walls? A command that passes keeps the robot in states from which the
-/// recovery law is predicted to be safe, so a policy may be perturbed freely as long as every
+/// is sent now and a known recovery law drives from the next period on, does the robot's skirt
+/// keep a margin to both side walls? A command that passes keeps the robot in states from which
+/// the recovery law is predicted to be safe, so a policy may be perturbed freely as long as every
 /// command passes; where one does not, the caller sends a command that does (or the recovery
-/// law's own, TASKS_CORRIDOR_RECOVERY_GAIN x target angle).
+/// law's own, TASKS_CORRIDOR_RECOVERY_GAIN x target angle). Between two decisions (a period
+/// without a new scan) the caller keeps that promise by sending the recovery law's command at
+/// the state tasks_corridor_recovery_predict dead-reckons.
 ///
 /// Model (the corridor frame of features/corridor.h): a unicycle, y' = v sin(psi),
-/// x' = v cos(psi), psi' = omega, from the features' offset, heading and end distance. Every
-/// command, the vetted one and the recovery law's, goes through tasks_command_clamp from the
-/// previous command (velocity and acceleration limits), with the translation speed of the task's
-/// speed policy (tasks_corridor_speed_mps) at the predicted lateral position, and the base ramps
-/// each axis linearly to it over the control period dt_s (as a base at that acceleration limit
-/// does). What the model leaves out (sensing error, latency, slip) the caller's margin covers.
-/// The rollout stops at the horizon or where the goal condition holds (the run ends there).
+/// x' = v cos(psi), psi' = omega, from the features' offset, heading and end distance, between
+/// walls at the measured width (never more than the nominal one: the offset is measured from
+/// the measured centre line). Every command, the vetted one and the recovery law's, goes
+/// through tasks_command_clamp from the previous command (velocity and acceleration limits),
+/// with the translation speed of the task's speed policy (tasks_corridor_speed_mps) at the
+/// predicted pose, and each axis is taken to ramp linearly to its command over the period (an
+/// approximation: a base at those limits gets there at the period's end or sooner). Where the
+/// goal condition holds the run ends: the base is told to stop and coasts to a stand under the
+/// same limits, which the rollout follows. What the model leaves out the caller's margin must
+/// cover: sensing error (offset about 0.02 m, heading about 0.025 rad), latency between the
+/// scan and the command, a base that accelerates or brakes more slowly than the limits, slip.
 ///
-/// Pure, no allocation; cost O(horizon_s / dt_s) with one atan2, one sin and one cos per step
-/// (3 s at 10 Hz: about 1.5 us; firmware.bench prints it beside the median tick).
+/// Pure, no allocation, thread-safe. Cost O(horizon_s / dt_s) plus the coast after the goal
+/// (at most 200 periods), one atan2, two sin and one cos per period: 3 s at 10 Hz take about
+/// 1.5 us (firmware.bench prints it beside the median tick).
 #ifndef B21R_TASKS_RECOVERY_H
 #define B21R_TASKS_RECOVERY_H
 
@@ -38,18 +45,34 @@ extern "C" {
 #define TASKS_CORRIDOR_RECOVERY_GAIN TASKS_PROPORTIONAL_CORRIDOR_GAIN_MAX
 
 /// The recovery law's rotation command at features f: TASKS_CORRIDOR_RECOVERY_GAIN x
-/// f->target_angle_rad, within +-spec->omega_max_radps [rad/s]. 0 when f is not valid. O(1).
-double tasks_corridor_recovery_action(const tasks_corridor_spec_t* spec, const features_corridor_t* f);
+/// f->target_angle_rad, within +-spec->omega_max_radps [rad/s]. 0 when an argument is NULL or f
+/// is not valid. O(1).
+double tasks_corridor_recovery_action(const tasks_corridor_spec_t* spec,
+                                      const features_corridor_t* f);
 
-/// The smallest predicted clearance [m] between the robot's skirt (spec->robot_radius_m) and the
-/// nearer side wall over the rollout: omega_radps is commanded for one period, then the recovery
-/// law for the rest of horizon_s (both clamped by lim from prev_v_mps, prev_omega_radps, the
-/// command sent last). Negative: contact is predicted. -INFINITY when f is not valid or an input
-/// is not finite (nothing can be predicted, so nothing is vetted). horizon_s is clamped to
-/// [dt_s, 20 s]; dt_s must be > 0. Pure; O(horizon_s / dt_s).
-double tasks_corridor_recovery_clearance_m(const tasks_corridor_spec_t* spec, const tasks_command_limits_t* lim,
-                                           double dt_s, const features_corridor_t* f, double prev_v_mps,
-                                           double prev_omega_radps, double omega_radps, double horizon_s);
+/// The smallest predicted clearance [m] between the robot's skirt (spec->robot_radius_m) and
+/// the nearer side wall over the rollout: omega_radps is commanded for one period of dt_s, then
+/// the recovery law for the rest of horizon_s (horizon clamped to [dt_s, 20 s]), then, if the
+/// goal is reached, the coast to a stand. Commands are clamped by lim from prev_v_mps and
+/// prev_omega_radps, the command in force. Negative: contact is predicted. -INFINITY when an
+/// argument is NULL, f is not valid, dt_s < 1e-3 s or an input is not finite (nothing can be
+/// predicted, so nothing passes). Pure; O(horizon_s / dt_s), at most 20,200 periods.
+double tasks_corridor_recovery_clearance_m(const tasks_corridor_spec_t* spec,
+                                           const tasks_command_limits_t* lim, double dt_s,
+                                           const features_corridor_t* f, double prev_v_mps,
+                                           double prev_omega_radps, double omega_radps,
+                                           double horizon_s);
+
+/// Dead reckoning with the rollout's model: the features one period of dt_s after f, when the
+/// command (v_mps, omega_radps) is sent with (prev_v_mps, prev_omega_radps) in force (clamped
+/// by lim as the controller clamps it). *out is f with offset, heading, end distance, lateral
+/// fraction and target angle moved. Returns 1, or 0 (out untouched) for the inputs for which
+/// tasks_corridor_recovery_clearance_m returns -INFINITY. O(1).
+int tasks_corridor_recovery_predict(const tasks_corridor_spec_t* spec,
+                                    const tasks_command_limits_t* lim, double dt_s,
+                                    const features_corridor_t* f, double prev_v_mps,
+                                    double prev_omega_radps, double v_mps, double omega_radps,
+                                    features_corridor_t* out);
 
 #ifdef __cplusplus
 }

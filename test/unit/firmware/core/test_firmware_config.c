@@ -421,6 +421,17 @@ static void test_config_pair_runs_needs_corridor_hedger_state_model(void** state
   // without, against the emulator only: unvetted perturbed runs hit walls.
   assert_true(c.pair_safety);
   assert_int_equal(fw_config_validate_program(&c, err, sizeof err), 0);
+  // ... but not with a thinner margin or a shorter rollout than the measured defaults.
+  fw_config_t thin = c;
+  assert_int_equal(fw_config_set(&thin, "pair_safety_margin_m", "0.05", "robot.conf:5", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate(&thin, err, sizeof err), 0);
+  assert_int_equal(fw_config_validate_program(&thin, err, sizeof err), -1);
+  assert_non_null(strstr(err, "robot.conf:3: pair_runs on the robot"));
+  assert_non_null(strstr(err, "pair_safety_margin_m >= 0.10 (set at robot.conf:5)"));
+  fw_config_t short_horizon = c;
+  assert_int_equal(fw_config_set(&short_horizon, "pair_safety_horizon_s", "2", "robot.conf:6", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate_program(&short_horizon, err, sizeof err), -1);
+  assert_non_null(strstr(err, "pair_safety_horizon_s >= 3.0 (set at robot.conf:6)"));
   assert_int_equal(fw_config_set(&c, "pair_safety", "false", "robot.conf:4", err, sizeof err), 0);
   assert_int_equal(fw_config_validate_program(&c, err, sizeof err), -1);
   assert_non_null(strstr(err, "robot.conf:3: pair_runs without its safety filter is for the emulator only"));
