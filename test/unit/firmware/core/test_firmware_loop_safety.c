@@ -107,6 +107,59 @@ static void test_loop_laser_silence_stops_within_one_tick(void** state) {
   harness_close(&g_h);
 }
 
+// pair_safety between scans: outside pair runs a period without a new scan holds the command; in
+// a pair run it does not hold the vetted (perturbed) command, the recovery law drives from the
+// dead-reckoned state (what the filter's rollout assumed). Silences shorter than the laser's
+// limit, so the runs go on.
+static void pair_runs_real_time(fw_config_t* c) {
+  c->lockstep = false;
+  c->phase_one_runs = 4;
+  c->phase_two_runs = 20;
+  c->pair_runs = true;
+}
+
+static void test_loop_pair_run_between_scans_recovery_law_drives(void** state) {
+  (void)state;
+  open_running(false, pair_runs_real_time);
+  fw_loop_stats_t st;
+  // Phase one: the example's run holds its command through two silent periods.
+  const double w_held = g_h.fake.w_cmd;
+  g_h.fake.laser_drop_ticks = 2;
+  harness_run(&g_h, 2);
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_true(g_h.fake.w_cmd == w_held);
+  assert_int_equal(st.pair_safety_held, 0);
+  assert_int_equal(st.stop_reason, FW_STOP_NONE);
+  // Into the first phase-two run (a pair run), 30 steps on.
+  int guard = 0;
+  do {
+    harness_run(&g_h, 1);
+    fw_loop_get_stats(g_h.loop, &st);
+    assert_true(++guard < 200000);
+  } while (!(st.training_runs >= 4 && st.mode == B21R_STATUS_T_MODE_RUNNING));
+  const int32_t runs0 = st.runs_finished;
+  const int64_t steps0 = st.steps;
+  while (st.steps - steps0 < 30) {
+    harness_run(&g_h, 1);
+    fw_loop_get_stats(g_h.loop, &st);
+  }
+  assert_int_equal(st.runs_finished, runs0);  // the same run
+  assert_int_equal(st.phase, 2);
+  const int64_t held0 = st.pair_safety_held;
+  const int64_t ticks_held0 = st.held_ticks;
+  g_h.fake.laser_drop_ticks = 2;
+  harness_run(&g_h, 2);
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.held_ticks - ticks_held0, 2);
+  assert_int_equal(st.pair_safety_held - held0, 2);
+  assert_int_equal(st.stop_reason, FW_STOP_NONE);
+  assert_true(isfinite(g_h.fake.w_cmd) && fabs(g_h.fake.w_cmd) <= 1.0);
+  harness_run(&g_h, 20);
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.stop_reason, FW_STOP_NONE);
+  harness_close(&g_h);
+}
+
 // In lockstep a tick never runs without the period's data: a laser that stays silent for
 // lockstep_timeout_s (the emulator died) stops the robot and ends the loop, naming the device.
 static void test_loop_lockstep_silence_ends_loop(void** state) {
@@ -570,6 +623,7 @@ static void test_loop_late_start_and_missed_periods_counted(void** state) {
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_loop_laser_silence_stops_within_one_tick),
+      cmocka_unit_test(test_loop_pair_run_between_scans_recovery_law_drives),
       cmocka_unit_test(test_loop_lockstep_silence_ends_loop),
       cmocka_unit_test(test_loop_base_silence_stops_within_one_tick),
       cmocka_unit_test(test_loop_bumper_stops_and_ends_run_as_collision),
