@@ -254,6 +254,7 @@ struct fw_loop {
   double pair_model_v;           // and the command in force before it [m/s]
   double pair_model_w;           // [rad/s]
   bool pair_model_ok;            // pair_model holds this run's last decision
+  int32_t pair_model_periods;    // periods dead-reckoned since that decision
 
   // Run state.
   int32_t mode;                // b21r_status_t MODE_*

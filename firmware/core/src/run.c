@@ -165,7 +165,8 @@ static double pair_offset(const fw_loop_t* L) {
 // pair_safety_margin_m to both walls; otherwise the learned policy's own action (when one is
 // known), if it does, and else the recovery law's. The first correction vetoes the run (it counts
 // as failed in its pair and its perturbation ends): whatever failed the check, the run needed the
-// filter. Runs before the command is sent: two rollouts at most (30 periods each at the defaults).
+// filter. Runs before the command is sent: three rollouts at most (30 periods each at the
+// defaults).
 static void pair_vet(fw_loop_t* L, bool greedy_known, double greedy_action, double* a, int8_t* source) {
   const tasks_corridor_spec_t* spec = &L->ep.corridor;
   const features_corridor_t* f = &L->ep.corridor_state;
@@ -196,10 +197,14 @@ static void pair_keep_model(fw_loop_t* L) {
   L->pair_model_v = L->cmd_v;
   L->pair_model_w = L->cmd_w;
   L->pair_model_ok = true;
+  L->pair_model_periods = 0;
 }
 
 bool fw_run_pair_hold(fw_loop_t* L, double* v_cmd, double* w_cmd) {
-  if (L->pair_member < 0 || !L->cfg.pair_safety || !L->pair_model_ok) {
+  // Dead reckoning drifts: beyond the rollout's horizon (features unusable while scans arrive;
+  // a silent laser stops the robot sooner) the command is held as outside pair runs.
+  if (L->pair_member < 0 || !L->cfg.pair_safety || !L->pair_model_ok ||
+      (double)L->pair_model_periods * L->dt_s >= L->cfg.pair_safety_horizon_s) {
     return false;
   }
   features_corridor_t next;
@@ -210,8 +215,12 @@ bool fw_run_pair_hold(fw_loop_t* L, double* v_cmd, double* w_cmd) {
   L->pair_model = next;
   L->pair_model_v = L->cmd_v;
   L->pair_model_w = L->cmd_w;
+  L->pair_model_periods++;
   *v_cmd = tasks_corridor_speed_mps(&L->ep.corridor, &next);
   *w_cmd = tasks_corridor_recovery_action(&L->ep.corridor, &next);
+  // The recovery law drove this period: the action the next transition records is its command
+  // (act() keeps the command sent), so it is recorded, and counted, as the advisor's.
+  L->prev_source = B21R_EXPERIENCE_T_SOURCE_ADVISOR;
   L->pair_safety_held++;
   return true;
 }

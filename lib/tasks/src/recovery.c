@@ -10,8 +10,6 @@
 #define RECOVERY_MAX_HORIZON_S 20.0
 // Control periods below this are refused (the step count would not be bounded).
 #define RECOVERY_MIN_DT_S 1e-3
-// The coast after the goal ends when both axes stand; bounded in any case by this many periods.
-#define RECOVERY_MAX_COAST_STEPS 200
 
 // The model's state: the pose in the corridor frame and the axes' velocities.
 typedef struct model {
@@ -28,7 +26,7 @@ static double wrap_pi(double a) { return atan2(sin(a), cos(a)); }
 // features' offset is measured from the measured centre line), never more than nominal.
 static double wall_width_m(const tasks_corridor_spec_t* spec, const features_corridor_t* f) {
   const double w = f->width_m;
-  return isfinite(w) && w > 2.0 * spec->robot_radius_m ? fmin(w, spec->width_m) : spec->width_m;
+  return isfinite(w) && w > 0.0 ? fmin(w, spec->width_m) : spec->width_m;
 }
 
 static bool inputs_ok(const tasks_corridor_spec_t* spec, const tasks_command_limits_t* lim, double dt_s,
@@ -80,6 +78,7 @@ double tasks_corridor_recovery_clearance_m(const tasks_corridor_spec_t* spec, co
   const double half_free = 0.5 * width - spec->robot_radius_m;  // |y| where the skirt touches
   const double h = fmin(fmax(horizon_s, dt_s), RECOVERY_MAX_HORIZON_S);
   const int32_t n = (int32_t)ceil(h / dt_s - 1e-9);  // <= 20 / 1e-3
+  const int32_t n_max = (int32_t)ceil(RECOVERY_MAX_HORIZON_S / dt_s);
   model_t m = {f->offset_m, f->heading_rad, f->end_distance_m, prev_v_mps, prev_omega_radps};
   double least = INFINITY;
   bool at_goal = false;
@@ -91,8 +90,12 @@ double tasks_corridor_recovery_clearance_m(const tasks_corridor_spec_t* spec, co
     at_goal = m.ahead <= spec->goal_distance_m;
   }
   // The run ends at the goal and the base is told to stop: it coasts to a stand under its
-  // acceleration limits, on its heading, and may still reach a wall.
-  for (int32_t k = 0; at_goal && k < RECOVERY_MAX_COAST_STEPS && (fabs(m.v) > 0.0 || fabs(m.w) > 0.0); ++k) {
+  // acceleration limits, on its heading, and may still reach a wall. A base that would not stand
+  // within 20 s (a limit near 0) cannot be predicted.
+  for (int32_t k = 0; at_goal && (fabs(m.v) > 0.0 || fabs(m.w) > 0.0); ++k) {
+    if (k == n_max) {
+      return -INFINITY;
+    }
     step(lim, dt_s, 0.0, 0.0, &m);
     least = fmin(least, half_free - fabs(m.y));
   }

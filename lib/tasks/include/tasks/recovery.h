@@ -26,8 +26,8 @@
 /// scan and the command, a base that accelerates or brakes more slowly than the limits, slip.
 ///
 /// Pure, no allocation, thread-safe. Cost O(horizon_s / dt_s) plus the coast after the goal
-/// (at most 200 periods), one atan2, two sin and one cos per period: 3 s at 10 Hz take about
-/// 1.5 us (firmware.bench prints it beside the median tick).
+/// (at most 20 s of periods), three atan2, sin and cos per period: 3 s at 10 Hz take about
+/// 2 us (firmware.bench prints it beside the median tick).
 #ifndef B21R_TASKS_RECOVERY_H
 #define B21R_TASKS_RECOVERY_H
 
@@ -55,8 +55,9 @@ double tasks_corridor_recovery_action(const tasks_corridor_spec_t* spec,
 /// the recovery law for the rest of horizon_s (horizon clamped to [dt_s, 20 s]), then, if the
 /// goal is reached, the coast to a stand. Commands are clamped by lim from prev_v_mps and
 /// prev_omega_radps, the command in force. Negative: contact is predicted. -INFINITY when an
-/// argument is NULL, f is not valid, dt_s < 1e-3 s or an input is not finite (nothing can be
-/// predicted, so nothing passes). Pure; O(horizon_s / dt_s), at most 20,200 periods.
+/// argument is NULL, f is not valid, dt_s < 1e-3 s, an input is not finite or the coast would
+/// last over 20 s (nothing can be predicted, so nothing passes). Pure; O(horizon_s / dt_s), at
+/// most 40,000 periods.
 double tasks_corridor_recovery_clearance_m(const tasks_corridor_spec_t* spec,
                                            const tasks_command_limits_t* lim, double dt_s,
                                            const features_corridor_t* f, double prev_v_mps,
@@ -65,9 +66,9 @@ double tasks_corridor_recovery_clearance_m(const tasks_corridor_spec_t* spec,
 
 /// Dead reckoning with the rollout's model: the features one period of dt_s after f, when the
 /// command (v_mps, omega_radps) is sent with (prev_v_mps, prev_omega_radps) in force (clamped
-/// by lim as the controller clamps it). *out is f with offset, heading, end distance, lateral
-/// fraction and target angle moved. Returns 1, or 0 (out untouched) for the inputs for which
-/// tasks_corridor_recovery_clearance_m returns -INFINITY. O(1).
+/// by lim as the controller clamps it). *out is f with offset, heading, end distance (not below
+/// 0), lateral fraction and target angle moved. Returns 1, or 0 (out untouched) for the inputs
+/// for which tasks_corridor_recovery_clearance_m returns -INFINITY at once. O(1).
 int tasks_corridor_recovery_predict(const tasks_corridor_spec_t* spec,
                                     const tasks_command_limits_t* lim, double dt_s,
                                     const features_corridor_t* f, double prev_v_mps,

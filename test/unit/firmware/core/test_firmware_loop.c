@@ -149,6 +149,47 @@ static void test_loop_pair_safety_keeps_pair_runs_off_the_walls(void** state) {
   assert_true(st[1].pair_safety_overrides <= 6 * (int64_t)st[1].pair_runs_vetoed);
 }
 
+// pair_safety vets every command of a pair run, also where the learner knows no action yet: with
+// an empty store, no advisor (nothing known: hold course) and pair runs from the first phase-two
+// run, runs that hold course from starts heading for a wall end on it without the filter; with
+// it none does, and the filter's corrections come from the recovery law (source advisor).
+static void test_loop_pair_safety_vets_unknown_actions(void** state) {
+  (void)state;
+  int collisions[2] = {0, 0};
+  int advisor_steps[2] = {0, 0};
+  fw_loop_stats_t st[2];
+  for (int on = 0; on <= 1; ++on) {
+    fw_config_t c;
+    short_schedule(&c);
+    c.phase_one_runs = 0;
+    c.phase_two_runs = 6;
+    c.eval_every_runs = 30;
+    c.eval_starts = 1;
+    c.advisor = false;
+    c.pair_runs = true;
+    c.pair_safety = on == 1;
+    assert_int_equal(harness_open(&g_h, &c, false, 5), 0);
+    harness_run(&g_h, 200000);
+    fw_loop_get_stats(g_h.loop, &st[on]);
+    assert_true(st[on].done);
+    for (int i = 0; i < g_h.runs && i < 64; ++i) {
+      const b21r_run_t* r = &g_h.run[i];
+      if (r->kind == B21R_RUN_T_KIND_TRAINING) {
+        collisions[on] += r->end_reason == B21R_RUN_T_END_COLLISION;
+        advisor_steps[on] += r->steps_by_source[B21R_EXPERIENCE_T_SOURCE_ADVISOR];
+      }
+    }
+    harness_close(&g_h);
+  }
+  print_message("training runs on a wall: %d without the filter, %d with it (%lld commands replaced, %d advisor "
+                "steps)\n", collisions[0], collisions[1], (long long)st[1].pair_safety_overrides, advisor_steps[1]);
+  assert_true(collisions[0] >= 1);
+  assert_int_equal(advisor_steps[0], 0);
+  assert_int_equal(collisions[1], 0);
+  assert_true(st[1].pair_safety_overrides > 0);
+  assert_true(advisor_steps[1] > 0);
+}
+
 // state_rotation: the state ends with the rotation the base executes, i.e. the command in force
 // while the step ran (the previous action, after the acceleration limit), so every transition's
 // s_next ends with its own action and its s with the run's previous action (0 at the start: the
@@ -439,6 +480,7 @@ int main(void) {
       cmocka_unit_test(test_loop_learns_corridor_reaches_goal_from_all_poses),
       cmocka_unit_test(test_loop_pair_runs_share_start_and_rank),
       cmocka_unit_test(test_loop_pair_safety_keeps_pair_runs_off_the_walls),
+      cmocka_unit_test(test_loop_pair_safety_vets_unknown_actions),
       cmocka_unit_test(test_loop_same_seed_bit_identical_experiences),
       cmocka_unit_test(test_loop_state_rotation_is_the_executed_command),
       cmocka_unit_test(test_loop_canopen_stream_independent_of_answer_lag),
