@@ -20,7 +20,8 @@ typedef struct model {
   double w;      // rotation velocity [rad/s]
 } model_t;
 
-static double wrap_pi(double a) { return atan2(sin(a), cos(a)); }
+// To [-pi, pi] (the rollout's heading stays within 20 s x the rotation limit of its start).
+static double wrap_pi(double a) { return remainder(a, 2.0 * 3.14159265358979323846); }
 
 // The width the walls are at: the measured one where it is smaller than the nominal one (the
 // features' offset is measured from the measured centre line), never more than nominal.

@@ -26,8 +26,8 @@
 /// scan and the command, a base that accelerates or brakes more slowly than the limits, slip.
 ///
 /// Pure, no allocation, thread-safe. Cost O(horizon_s / dt_s) plus the coast after the goal
-/// (at most 20 s of periods), three atan2, sin and cos per period: 3 s at 10 Hz take about
-/// 2 us (firmware.bench prints it beside the median tick).
+/// (at most 20 s of periods), one atan2, one sin, one cos and two remainder per period: 3 s at
+/// 10 Hz take a few microseconds (firmware.bench prints it beside the median tick).
 #ifndef B21R_TASKS_RECOVERY_H
 #define B21R_TASKS_RECOVERY_H
 
