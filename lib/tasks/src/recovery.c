@@ -73,7 +73,7 @@ double tasks_corridor_recovery_clearance_m(const tasks_corridor_spec_t* spec, co
                                            double prev_omega_radps, double omega_radps, double horizon_s) {
   if (!inputs_ok(spec, lim, dt_s, f) || !isfinite(prev_v_mps) || !isfinite(prev_omega_radps) ||
       !isfinite(omega_radps) || !isfinite(horizon_s)) {
-    return -INFINITY;
+    return -HUGE_VAL;
   }
   const double width = wall_width_m(spec, f);
   const double half_free = 0.5 * width - spec->robot_radius_m;  // |y| where the skirt touches
@@ -81,7 +81,7 @@ double tasks_corridor_recovery_clearance_m(const tasks_corridor_spec_t* spec, co
   const int32_t n = (int32_t)ceil(h / dt_s - 1e-9);  // <= 20 / 1e-3
   const int32_t n_max = (int32_t)ceil(RECOVERY_MAX_HORIZON_S / dt_s);
   model_t m = {f->offset_m, f->heading_rad, f->end_distance_m, prev_v_mps, prev_omega_radps};
-  double least = INFINITY;
+  double least = HUGE_VAL;
   bool at_goal = false;
   for (int32_t k = 0; k < n && !at_goal; ++k) {
     const features_corridor_t at = features_at(spec, f, width, &m);
@@ -95,7 +95,7 @@ double tasks_corridor_recovery_clearance_m(const tasks_corridor_spec_t* spec, co
   // within 20 s (a limit near 0) cannot be predicted.
   for (int32_t k = 0; at_goal && (fabs(m.v) > 0.0 || fabs(m.w) > 0.0); ++k) {
     if (k == n_max) {
-      return -INFINITY;
+      return -HUGE_VAL;
     }
     step(lim, dt_s, 0.0, 0.0, &m);
     least = fmin(least, half_free - fabs(m.y));
