@@ -167,25 +167,26 @@ static double pair_offset(const fw_loop_t* L) {
 // as failed in its pair and its perturbation ends): whatever failed the check, the run needed the
 // filter. Runs before the command is sent: three rollouts at most (30 periods each at the
 // defaults).
+// pair_safety: the recovery rollout from this tick's state keeps the margin after command a.
+static bool pair_passes(const fw_loop_t* L, double a) {
+  return tasks_corridor_recovery_clearance_m(&L->ep.corridor, &L->limits, L->dt_s, &L->ep.corridor_state, L->cmd_v,
+                                             L->cmd_w, a, L->cfg.pair_safety_horizon_s) >= L->cfg.pair_safety_margin_m;
+}
+
 static void pair_vet(fw_loop_t* L, bool greedy_known, double greedy_action, double* a, int8_t* source) {
-  const tasks_corridor_spec_t* spec = &L->ep.corridor;
-  const features_corridor_t* f = &L->ep.corridor_state;
-  const double margin = L->cfg.pair_safety_margin_m;
-  const double horizon = L->cfg.pair_safety_horizon_s;
-  if (tasks_corridor_recovery_clearance_m(spec, &L->limits, L->dt_s, f, L->cmd_v, L->cmd_w, *a, horizon) >= margin) {
+  if (pair_passes(L, *a)) {
     return;
   }
   L->pair_safety_overrides++;
   L->pair_run_vetoed = true;
-  if (greedy_known && tasks_corridor_recovery_clearance_m(spec, &L->limits, L->dt_s, f, L->cmd_v, L->cmd_w,
-                                                          greedy_action, horizon) >= margin) {
+  if (greedy_known && pair_passes(L, greedy_action)) {
     *a = greedy_action;
     *source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
     return;
   }
-  *a = tasks_corridor_recovery_action(spec, f);
+  *a = tasks_corridor_recovery_action(&L->ep.corridor, &L->ep.corridor_state);
   *source = B21R_EXPERIENCE_T_SOURCE_ADVISOR;
-  if (tasks_corridor_recovery_clearance_m(spec, &L->limits, L->dt_s, f, L->cmd_v, L->cmd_w, *a, horizon) < margin) {
+  if (!pair_passes(L, *a)) {
     L->pair_safety_short++;  // even the recovery law is predicted to come closer than the margin
   }
 }

@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: MIT
-"""paired_stats: the statistics the experiment claim tests share (10 seeds, paired by seed):
-means, paired differences with their t statistic and 95 % interval, and the Student-t quantiles
-for 9 degrees of freedom."""
+"""paired_stats: what the experiment claim tests share (10 seeds, paired by seed): means, paired
+differences with their t statistic and 95 % interval, the Student-t quantiles for 9 degrees of
+freedom, and the report of the claims with the test's verdict."""
 import math
 
 T95_ONE_SIDED_DF9 = 1.833  # Student-t 0.95 quantile, 9 degrees of freedom (one-sided 95 % tests)
@@ -21,3 +21,16 @@ def paired(a, b):
     se = sd / math.sqrt(n)
     t = m / se if se > 0 else (math.inf if m > 0 else (-math.inf if m < 0 else 0.0))
     return m, t, T975_DF9 * se
+
+
+def report(results, asserted):
+    """Prints each claim (results: name -> (holds, text)) with its status, then PASS or FAIL; the
+    test fails when a claim that asserted[name] marks as asserted does not hold. Returns the exit
+    status (0 or 1)."""
+    failed = False
+    for name, (ok, text) in results.items():
+        status = "holds" if ok else ("FAILS" if asserted[name] else "does not hold (reported, not asserted)")
+        print("%-15s %s: %s" % (name, status, text))
+        failed = failed or (asserted[name] and not ok)
+    print("FAIL" if failed else "PASS")
+    return 1 if failed else 0

@@ -36,7 +36,7 @@ import subprocess
 import sys
 import tempfile
 
-from paired_stats import T95_ONE_SIDED_DF9, T975_DF9, mean, paired
+from paired_stats import T95_ONE_SIDED_DF9, T975_DF9, mean, paired, report
 
 SEEDS = list(range(1, 11))
 ASSERTED = {"learns": True, "improves": True, "keeps": True, "reaches": True, "within_3pct": True,
@@ -115,13 +115,7 @@ def main():
                             "%+.1f ± %.1f steps, t = %.2f" % (best, len(gains[0]), m, h, t))
     m, t, h = paired(final, optimal)
     results["near_optimal"] = (t <= T95_ONE_SIDED_DF9, "final minus optimal: %+.1f ± %.1f steps, t = %.2f" % (m, h, t))
-    failed = False
-    for name, (ok, text) in results.items():
-        status = "holds" if ok else ("FAILS" if ASSERTED[name] else "does not hold (reported, not asserted)")
-        print("%-15s %s: %s" % (name, status, text))
-        failed = failed or (ASSERTED[name] and not ok)
-    print("FAIL" if failed else "PASS")
-    return 1 if failed else 0
+    return report(results, ASSERTED)
 
 
 if __name__ == "__main__":

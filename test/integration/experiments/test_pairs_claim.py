@@ -35,7 +35,7 @@ import subprocess
 import sys
 import tempfile
 
-from paired_stats import T95_ONE_SIDED_DF9, T975_DF9, mean, paired
+from paired_stats import T95_ONE_SIDED_DF9, T975_DF9, mean, paired, report
 
 SEEDS = list(range(1, 11))
 PHASE_TWO_RUNS = 60
@@ -126,13 +126,7 @@ def main():
                          "with pairs %.2f h, without %.2f h" % (vetoed, n2, overrides,
                                                                           train_s["true"] / 3600.0,
                                                                           train_s["false"] / 3600.0))
-    failed = False
-    for name, (ok, text) in results.items():
-        status = "holds" if ok else ("FAILS" if ASSERTED[name] else "does not hold (reported, not asserted)")
-        print("%-15s %s: %s" % (name, status, text))
-        failed = failed or (ASSERTED[name] and not ok)
-    print("FAIL" if failed else "PASS")
-    return 1 if failed else 0
+    return report(results, ASSERTED)
 
 
 if __name__ == "__main__":

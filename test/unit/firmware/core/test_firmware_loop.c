@@ -100,6 +100,32 @@ static void test_loop_pair_runs_share_start_and_rank(void** state) {
   assert_true(hash[0] == hash[1]);
 }
 
+// One pair_safety session to its end: its statistics, and its phase-two training runs that ended
+// on a wall and their advisor steps (from the B21R_RUN records).
+typedef struct pair_session {
+  fw_loop_stats_t st;
+  int collisions;
+  int advisor_steps;
+} pair_session_t;
+
+static pair_session_t run_pair_session(const fw_config_t* c, uint64_t fake_seed, int64_t max_ticks) {
+  pair_session_t out;
+  memset(&out, 0, sizeof out);
+  assert_int_equal(harness_open(&g_h, c, false, fake_seed), 0);
+  harness_run(&g_h, max_ticks);
+  fw_loop_get_stats(g_h.loop, &out.st);
+  assert_true(out.st.done);
+  for (int i = 0; i < g_h.runs && i < 64; ++i) {
+    const b21r_run_t* r = &g_h.run[i];
+    if (r->kind == B21R_RUN_T_KIND_TRAINING && r->phase == 2) {
+      out.collisions += r->end_reason == B21R_RUN_T_END_COLLISION;
+      out.advisor_steps += r->steps_by_source[B21R_EXPERIENCE_T_SOURCE_ADVISOR];
+    }
+  }
+  harness_close(&g_h);
+  return out;
+}
+
 // pair_safety: with perturbations far wilder than the defaults (gain sd 2, centring sd 4) and no
 // per-step exploration noise, pair runs without the filter end on a wall; with it none does.
 // Every run the filter corrected is ranked as one that missed the goal, and after its first
@@ -108,8 +134,7 @@ static void test_loop_pair_runs_share_start_and_rank(void** state) {
 // pair is still ranked.
 static void test_loop_pair_safety_keeps_pair_runs_off_the_walls(void** state) {
   (void)state;
-  int collisions[2] = {0, 0};
-  fw_loop_stats_t st[2];
+  pair_session_t ps[2];
   for (int on = 0; on <= 1; ++on) {
     fw_config_t c;
     short_schedule(&c);
@@ -122,31 +147,23 @@ static void test_loop_pair_safety_keeps_pair_runs_off_the_walls(void** state) {
     c.pair_centring_sigma = 4.0;
     c.explore_sigma_radps = 0.0;
     c.pair_safety = on == 1;
-    assert_int_equal(harness_open(&g_h, &c, false, 11), 0);
-    harness_run(&g_h, 400000);
-    fw_loop_get_stats(g_h.loop, &st[on]);
-    assert_true(st[on].done);
-    assert_int_equal(st[on].pairs_ranked, 6);
-    for (int i = 0; i < g_h.runs && i < 64; ++i) {
-      const b21r_run_t* r = &g_h.run[i];
-      if (r->kind == B21R_RUN_T_KIND_TRAINING && r->phase == 2) {
-        collisions[on] += r->end_reason == B21R_RUN_T_END_COLLISION;
-      }
-    }
-    harness_close(&g_h);
+    ps[on] = run_pair_session(&c, 11, 400000);
+    assert_int_equal(ps[on].st.pairs_ranked, 6);
   }
+  const fw_loop_stats_t* off = &ps[0].st;
+  const fw_loop_stats_t* with = &ps[1].st;
   print_message("phase-two training runs on a wall: %d without the filter, %d with it; with it %d runs corrected "
                 "(%lld commands), %d ranked as missing the goal\n",
-                collisions[0], collisions[1], st[1].pair_runs_vetoed, (long long)st[1].pair_safety_overrides,
-                st[1].pair_runs_missed);
-  assert_true(collisions[0] >= 2);
-  assert_true(st[0].pair_runs_missed >= collisions[0]);  // (and the step limit's)
-  assert_int_equal(st[0].pair_runs_vetoed, 0);
-  assert_int_equal(collisions[1], 0);
-  assert_true(st[1].pair_runs_vetoed >= 2);
-  assert_int_equal(st[1].pair_runs_missed, st[1].pair_runs_vetoed);
-  assert_true(st[1].pair_safety_overrides >= st[1].pair_runs_vetoed);
-  assert_true(st[1].pair_safety_overrides <= 6 * (int64_t)st[1].pair_runs_vetoed);
+                ps[0].collisions, ps[1].collisions, with->pair_runs_vetoed, (long long)with->pair_safety_overrides,
+                with->pair_runs_missed);
+  assert_true(ps[0].collisions >= 2);
+  assert_true(off->pair_runs_missed >= ps[0].collisions);  // (and the step limit's)
+  assert_int_equal(off->pair_runs_vetoed, 0);
+  assert_int_equal(ps[1].collisions, 0);
+  assert_true(with->pair_runs_vetoed >= 2);
+  assert_int_equal(with->pair_runs_missed, with->pair_runs_vetoed);
+  assert_true(with->pair_safety_overrides >= with->pair_runs_vetoed);
+  assert_true(with->pair_safety_overrides <= 6 * (int64_t)with->pair_runs_vetoed);
 }
 
 // pair_safety vets every command of a pair run, also where the learner knows no action yet: with
@@ -155,9 +172,7 @@ static void test_loop_pair_safety_keeps_pair_runs_off_the_walls(void** state) {
 // it none does, and the filter's corrections come from the recovery law (source advisor).
 static void test_loop_pair_safety_vets_unknown_actions(void** state) {
   (void)state;
-  int collisions[2] = {0, 0};
-  int advisor_steps[2] = {0, 0};
-  fw_loop_stats_t st[2];
+  pair_session_t ps[2];
   for (int on = 0; on <= 1; ++on) {
     fw_config_t c;
     short_schedule(&c);
@@ -168,26 +183,16 @@ static void test_loop_pair_safety_vets_unknown_actions(void** state) {
     c.advisor = false;
     c.pair_runs = true;
     c.pair_safety = on == 1;
-    assert_int_equal(harness_open(&g_h, &c, false, 5), 0);
-    harness_run(&g_h, 200000);
-    fw_loop_get_stats(g_h.loop, &st[on]);
-    assert_true(st[on].done);
-    for (int i = 0; i < g_h.runs && i < 64; ++i) {
-      const b21r_run_t* r = &g_h.run[i];
-      if (r->kind == B21R_RUN_T_KIND_TRAINING) {
-        collisions[on] += r->end_reason == B21R_RUN_T_END_COLLISION;
-        advisor_steps[on] += r->steps_by_source[B21R_EXPERIENCE_T_SOURCE_ADVISOR];
-      }
-    }
-    harness_close(&g_h);
+    ps[on] = run_pair_session(&c, 5, 200000);
   }
   print_message("training runs on a wall: %d without the filter, %d with it (%lld commands replaced, %d advisor "
-                "steps)\n", collisions[0], collisions[1], (long long)st[1].pair_safety_overrides, advisor_steps[1]);
-  assert_true(collisions[0] >= 1);
-  assert_int_equal(advisor_steps[0], 0);
-  assert_int_equal(collisions[1], 0);
-  assert_true(st[1].pair_safety_overrides > 0);
-  assert_true(advisor_steps[1] > 0);
+                "steps)\n", ps[0].collisions, ps[1].collisions, (long long)ps[1].st.pair_safety_overrides,
+                ps[1].advisor_steps);
+  assert_true(ps[0].collisions >= 1);
+  assert_int_equal(ps[0].advisor_steps, 0);
+  assert_int_equal(ps[1].collisions, 0);
+  assert_true(ps[1].st.pair_safety_overrides > 0);
+  assert_true(ps[1].advisor_steps > 0);
 }
 
 // state_rotation: the state ends with the rotation the base executes, i.e. the command in force
