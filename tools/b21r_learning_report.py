@@ -33,7 +33,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from b21r_log import read_log, runs_from_experiences  # noqa: E402
+from b21r_log import read_log, runs_from_experiences, runs_from_records  # noqa: E402
 
 # Student-t quantiles for 9 degrees of freedom (10 poses): 0.95 one-sided, 0.975 two-sided.
 T95_ONE_SIDED_DF9 = 1.833
@@ -139,6 +139,13 @@ def main():
     for r in runs:
         r["sources"] = {SOURCE_NAMES.get(k, str(k)): n for k, n in r["sources"].items()}
     train = [r for r in runs if not r["evaluating"]]
+    # B21R_RUN says which training runs were ranked pairs (pair_runs) and which the safety filter
+    # corrected. A log without B21R_RUN of this layout (read_log skips other fingerprints) reads as
+    # no pairs. Run ids repeat after a controller restart: the last record of an id is taken.
+    pair_of = {r["run_id"]: (r["pair_member"], r["pair_vetoed"])
+               for r in runs_from_records([m for _, _, m in read_log(args.log, {"B21R_RUN"})])}
+    for r in train:
+        r["pair_member"], r["pair_vetoed"] = pair_of.get(r["run_id"], (-1, False))
     p1 = [r for r in train if r["phase"] == 1]
     p1_goal = [r["steps"] for r in p1 if r["goal"]]
     best_example = min(p1_goal) if p1_goal else None
@@ -173,7 +180,8 @@ def main():
     verdicts = claims(blocks, optimal, examples, train)
     # Who drove each training run (the controller's experience sources).
     drivers = [{"run_id": r["run_id"], "phase": r["phase"], "steps": r["steps"], "goal": r["goal"],
-                "sources": r["sources"]} for r in train]
+                "sources": r["sources"], "pair_member": r["pair_member"], "pair_vetoed": r["pair_vetoed"]}
+               for r in train]
     switch_after = next((b["training_runs"] for b in blocks if b["phase"] == 2), None)
     p2_blocks = [b for b in blocks if b["phase"] == 2]
     summary = {
@@ -256,6 +264,14 @@ def main():
         tot = sum(agg.values())
         lines.append("phase %d training steps by driver: %s" % (phase, ", ".join(
             "%s %d (%.1f %%)" % (src, n, 100.0 * n / tot) for src, n in sorted(agg.items()))))
+    in_pairs = [r for r in train if r["pair_member"] >= 0]
+    if in_pairs:
+        lines.append("phase two in ranked pairs (pair_runs): %d of %d phase-two training runs; each pair starts twice from one "
+                     "pose, the learned policy plus then minus a perturbation (counted as exploration above); %d "
+                     "runs corrected by the safety filter (ranked as failed; the recovery law's steps count as "
+                     "advisor), %d reached the goal" %
+                     (len(in_pairs), sum(1 for r in train if r["phase"] == 2),
+                      sum(1 for r in in_pairs if r["pair_vetoed"]), sum(1 for r in in_pairs if r["goal"])))
     lines.append("claims (paired over the same poses, 95 %; this seed only, see docs/RESULTS.md for 10 seeds):")
     for c, ok, n in verdicts:
         lines.append("  %-3s %s: %s" % ("yes" if ok else "NO", c, n))

@@ -158,6 +158,17 @@ int main(int argc, char** argv) {
       printf("b21r-train: %llu experiences of evaluation runs left out (--include-eval learns them too)\n",
              (unsigned long long)s.skipped_eval);
     }
+    if (s.pairs_ranked > 0) {
+      printf("b21r-train: %llu pairs of phase-two runs ranked from B21R_RUN (pair_runs)\n",
+             (unsigned long long)s.pairs_ranked);
+    }
+    if (s.phase_two_unranked > 0) {
+      fprintf(stderr,
+              "b21r-train: warning: the learner ranks pair runs under this configuration (pair_runs), but %llu phase-two experiences come from "
+              "logs without B21R_RUN records (an experience log): their pair runs, if any, are learned unranked; "
+              "give the controller's full log (log_file) to rank them\n",
+              (unsigned long long)s.phase_two_unranked);
+    }
     if (s.seq_gaps > 0 || s.refused > 0 || s.undecodable > 0) {
       fprintf(stderr,
               "b21r-train: warning: %llu gaps in the experiences' seq (the recording lost messages), %llu experiences "

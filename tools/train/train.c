@@ -10,6 +10,7 @@
 #include <fw/pubq.h>
 
 #include <b21r/b21r_experience_t.h>
+#include <b21r/b21r_run_t.h>
 #include <lcm/eventlog.h>
 
 #include <errno.h>
@@ -28,6 +29,16 @@ struct trainer {
   bool in_run;
   bool run_learned;      // at least one experience of it went through hedger_update
   int32_t run_id;
+  // The learner configured for pairs (fw_config_pair_learner): the run tag of the training run
+  // under way (the controller's rule: its id, or the store's tag when that is ahead), and the
+  // pair's first run until it is ranked.
+  bool pairs;
+  uint32_t run_tag;
+  bool pair_first_goal;
+  int32_t pair_first_steps;
+  uint32_t pair_first_tag;
+  bool log_has_run_records;  // the log being read has B21R_RUN (a full log)
+  uint64_t log_phase_two;    // phase-two training experiences learned from the log being read
   int64_t next_seq;      // expected seq of the next experience (-1: none yet in this log)
   double progress_next_s;
   double started_s;
@@ -66,6 +77,7 @@ trainer_t* trainer_create(const fw_config_t* cfg, const train_options_t* opt, ch
     free(t);
     return NULL;
   }
+  t->pairs = fw_config_pair_learner(cfg);
   t->next_seq = -1;
   t->started_s = now_s();
   t->progress_next_s = t->started_s + t->opt.progress_period_s;
@@ -164,6 +176,11 @@ static int learn(trainer_t* t, const b21r_experience_t* e, const char* path, cha
     end_run(t);
     t->in_run = true;
     t->run_id = e->run_id;
+    if (t->pairs && !e->evaluating) {
+      const uint32_t current = hedger_run_tag(t->hedger);
+      t->run_tag = (uint32_t)e->run_id > current ? (uint32_t)e->run_id : current;
+      (void)hedger_set_run_tag(t->hedger, t->run_tag);
+    }
   }
   if (e->evaluating && !t->opt.include_eval) {
     t->stats.skipped_eval++;
@@ -174,10 +191,39 @@ static int learn(trainer_t* t, const b21r_experience_t* e, const char* path, cha
   if (hs == HEDGER_OK) {
     t->stats.used++;
     t->run_learned = true;
+    t->log_phase_two += e->phase == 2 ? 1U : 0U;
   } else {
     t->stats.refused++;
   }
   return 0;
+}
+
+// pair_runs: a B21R_RUN record of a pair run (it follows the run's last experience). As in the
+// controller, the run's replay comes first, then its weights: a first run weighs 0 until its pair
+// is ranked, an aborted run 0 (its pair starts again), and the second run ranks the pair.
+static void rank_pair_run(trainer_t* t, const b21r_run_t* r) {
+  t->log_has_run_records = true;
+  if (!t->pairs || r->kind != B21R_RUN_T_KIND_TRAINING || r->pair_member < 0 || !t->in_run ||
+      r->run_id != t->run_id) {
+    return;
+  }
+  end_run(t);
+  const bool aborted = r->end_reason == B21R_RUN_T_END_SAFETY_STOP || r->end_reason == B21R_RUN_T_END_SHUTDOWN;
+  const bool goal = r->end_reason == B21R_RUN_T_END_GOAL && !r->pair_vetoed;
+  if (aborted || r->pair_member == 0) {
+    (void)hedger_weight_run(t->hedger, t->run_tag, 0.0, NULL);
+    t->pair_first_goal = goal;
+    t->pair_first_steps = r->steps;
+    t->pair_first_tag = t->run_tag;
+    return;
+  }
+  double w_first = 0.0;
+  double w_second = 0.0;
+  fw_pair_weights(t->pair_first_goal, t->pair_first_steps, goal, r->steps, t->cfg.pair_tau_steps, &w_first,
+                  &w_second);
+  (void)hedger_weight_run(t->hedger, t->pair_first_tag, w_first, NULL);
+  (void)hedger_weight_run(t->hedger, t->run_tag, w_second, NULL);
+  t->stats.pairs_ranked++;
 }
 
 int trainer_add_log(trainer_t* t, const char* path, char* err, size_t err_cap) {
@@ -188,6 +234,8 @@ int trainer_add_log(trainer_t* t, const char* path, char* err, size_t err_cap) {
   }
   end_run(t);  // a log starts with a run of its own
   t->next_seq = -1;
+  t->log_has_run_records = false;
+  t->log_phase_two = 0;
   const double t0 = now_s();
   uint64_t events_here = 0;
   int rc = 0;
@@ -207,6 +255,12 @@ int trainer_add_log(trainer_t* t, const char* path, char* err, size_t err_cap) {
         rc = learn(t, &e, path, err, err_cap);
         b21r_experience_t_decode_cleanup(&e);
       }
+    } else if (strcmp(ev->channel, "B21R_RUN") == 0) {
+      b21r_run_t r;
+      if (b21r_run_t_decode(ev->data, 0, ev->datalen, &r) >= 0) {
+        rank_pair_run(t, &r);
+        b21r_run_t_decode_cleanup(&r);
+      }
     }
     lcm_eventlog_free_event(ev);
     if (rc != 0) {
@@ -215,6 +269,9 @@ int trainer_add_log(trainer_t* t, const char* path, char* err, size_t err_cap) {
     report_progress(t, path, false);
   }
   lcm_eventlog_destroy(log);
+  if (t->pairs && !t->log_has_run_records) {
+    t->stats.phase_two_unranked += t->log_phase_two;
+  }
   t->stats.seconds += now_s() - t0;
   if (rc == 0 && events_here == 0) {
     FILE* f = fopen(path, "rb");

@@ -51,6 +51,12 @@ typedef struct train_stats {
   uint64_t seq_gaps;          ///< gaps in the experiences' seq (lost messages in the recording)
   uint64_t runs;              ///< runs ended (hedger_end_run calls)
   uint64_t replayed;          ///< updates done by backward replay at run ends
+  /// the learner configured for pairs: pairs of phase-two training runs ranked from the log's B21R_RUN
+  /// records (a full log, log_file; an experience log has none), as the controller ranked them
+  uint64_t pairs_ranked;
+  /// the same: phase-two training experiences of logs without B21R_RUN records; whether
+  /// they came from pair runs cannot be told, so any pair among them is not ranked (weight 1)
+  uint64_t phase_two_unranked;
   double seconds;             ///< wall time spent reading and training
 } train_stats_t;
 
@@ -65,10 +71,13 @@ trainer_t* trainer_create(const fw_config_t* cfg, const train_options_t* opt, ch
 int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t err_cap);
 
 /// Trains on one LCM event log, streamed in file order. A run ends where the run id changes, the
-/// controller restarted (seq back to 0), or the log ends. Call it once per log (and again for
-/// further passes over the data). Returns 0, or -1 with a message naming the file: unreadable,
-/// not an LCM log, or experiences of another task / state dimension than cfg (the fix is
-/// named); the experiences before the error have been learned.
+/// controller restarted (seq back to 0), or the log ends. Where cfg configures the learner for
+/// pairs (fw_config_pair_learner: the default for the corridor), every training run's points
+/// carry its run tag as in the controller, and each pair of phase-two runs is ranked from the
+/// B21R_RUN records of a full log (fw_pair_weights) after the second run's replay. Call it once
+/// per log (and again for further passes over the data). Returns 0, or -1 with a message naming
+/// the file: unreadable, not an LCM log, or experiences of another task / state dimension than
+/// cfg (the fix is named); the experiences before the error have been learned.
 int trainer_add_log(trainer_t* t, const char* path, char* err, size_t err_cap);
 
 /// Ends the run under way (if any) as the controller does between runs. Call it after the last

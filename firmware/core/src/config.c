@@ -74,6 +74,8 @@ static const choice_t k_rt_scheduler[] = {
     {"other", FW_RT_OTHER}, {"fifo", FW_RT_FIFO}, {"rr", FW_RT_RR}, {NULL, 0}};
 static const choice_t k_learner[] = {
     {"hedger", FW_LEARNER_HEDGER}, {"lwa", FW_LEARNER_LWA}, {"tabular", FW_LEARNER_TABULAR}, {NULL, 0}};
+static const choice_t k_pair_runs[] = {
+    {"auto", FW_PAIR_RUNS_AUTO}, {"true", FW_PAIR_RUNS_ON}, {"false", FW_PAIR_RUNS_OFF}, {NULL, 0}};
 static const choice_t k_switch[] = {
     {"runs", FW_SWITCH_RUNS}, {"operator", FW_SWITCH_OPERATOR}, {"auto", FW_SWITCH_AUTO}, {NULL, 0}};
 
@@ -288,12 +290,17 @@ static const key_desc_t k_keys[] = {
   {NULL, "state_rotation", KIND_BOOL, OFF(state_rotation), 0, 0, false, false, NULL, "true",
    "the learner's state ends with the rotation the base executes, the last command sent [rad/s]: the "
    "acceleration limit ties the next rotation to it (false = the paper's task features alone)"},
-  {NULL, "pair_runs", KIND_BOOL, OFF(pair_runs), 0, 0, false, false, NULL, "false",
-   "phase two, corridor task: training runs come in pairs from one start pose; the first adds a policy "
-   "perturbation g * target angle + c * (lateral fraction - 0.5) to the greedy action (g, c drawn per pair), "
-   "the second subtracts it, with the same exploration noise; the faster run's stored points then weigh "
-   "more in the learned policy's imitation of its data, the slower run's less (docs/LEARNING.md, \"Ranking "
-   "whole runs in phase two\"); pair_safety vets every perturbed command"},
+  {NULL, "pair_runs", KIND_ENUM, OFF(pair_runs_mode), 0, 0, false, false, k_pair_runs, "auto",
+   "phase two: training runs come in pairs from one start pose; the first adds a policy perturbation "
+   "g * target angle + c * (lateral fraction - 0.5) to the greedy action (g, c drawn per pair), the second "
+   "subtracts it, with the same exploration noise; the faster run's stored points then weigh more in the "
+   "learned policy's imitation of its data, the slower run's less (docs/LEARNING.md, \"Ranking whole runs in "
+   "phase two\"); pair_safety vets every perturbed command. auto = on for task = corridor with learner = "
+   "hedger, hedger_greedy_method = state_model and reposition = emulator (where it was measured to help), "
+   "off elsewhere (the learner still tags its runs and fades old points, as with pairs, wherever the "
+   "corridor, hedger and state_model apply, so a learned state acts alike on the robot); true = on "
+   "(corridor, hedger, state_model only; on the robot only with pair_safety at least at its default margin "
+   "and horizon)"},
   {NULL, "pair_gain_sigma", KIND_DOUBLE, OFF(pair_gain_sigma), 0, 4, false, false, NULL, "0.25",
    "pair_runs: standard deviation of the perturbation's gain g on the target angle [rad/s per rad]"},
   {NULL, "pair_centring_sigma", KIND_DOUBLE, OFF(pair_centring_sigma), 0, 8, false, false, NULL, "0.5",
@@ -1004,11 +1011,24 @@ static origin_buf_t origin_of(const fw_config_t* cfg, const char* key) {
   return o;
 }
 
+bool fw_config_pair_learner(const fw_config_t* cfg) {
+  if (cfg->pair_runs_mode == FW_PAIR_RUNS_ON) {
+    return true;  // fw_config_validate refuses it outside the corridor, HEDGER and state_model
+  }
+  return cfg->pair_runs_mode == FW_PAIR_RUNS_AUTO && cfg->task == FW_TASK_CORRIDOR &&
+         cfg->learner == FW_LEARNER_HEDGER && cfg->hedger_greedy_method == (int32_t)HEDGER_GREEDY_STATE_MODEL;
+}
+
+bool fw_config_pair_runs_active(const fw_config_t* cfg) {
+  return fw_config_pair_learner(cfg) &&
+         (cfg->pair_runs_mode == FW_PAIR_RUNS_ON || cfg->reposition == FW_REPOSITION_EMULATOR);
+}
+
 int fw_config_validate_program(const fw_config_t* cfg, char* err, size_t err_cap) {
   if (fw_config_validate(cfg, err, err_cap) != 0) {
     return -1;
   }
-  if (cfg->pair_runs && !cfg->pair_safety && cfg->mode == FW_MODE_LEARN && cfg->reposition != FW_REPOSITION_EMULATOR) {
+  if (fw_config_pair_runs_active(cfg) && !cfg->pair_safety && cfg->mode == FW_MODE_LEARN && cfg->reposition != FW_REPOSITION_EMULATOR) {
     // Half of the pair runs drive a deliberately worse policy: without the safety filter about a
     // third of the phase-two training runs end on a wall in the emulator (docs/LEARNING.md).
     fw_errfmt(err, err_cap,
@@ -1018,14 +1038,14 @@ int fw_config_validate_program(const fw_config_t* cfg, char* err, size_t err_cap
         origin_of(cfg, "pair_runs").text, origin_of(cfg, "pair_safety").text, origin_of(cfg, "reposition").text);
     return -1;
   }
-  if (cfg->pair_runs && cfg->mode == FW_MODE_LEARN && cfg->reposition != FW_REPOSITION_EMULATOR &&
+  if (fw_config_pair_runs_active(cfg) && cfg->mode == FW_MODE_LEARN && cfg->reposition != FW_REPOSITION_EMULATOR &&
       (cfg->pair_safety_margin_m < FW_PAIR_SAFETY_ROBOT_MARGIN_M || cfg->pair_safety_horizon_s < FW_PAIR_SAFETY_ROBOT_HORIZON_S)) {
     // The filter has been measured in the emulator only (in lockstep, between walls at the nominal
     // width): the robot's sensing error and latency need at least the default margin and horizon.
     fw_errfmt(err, err_cap,
         "%s: pair_runs on the robot (reposition set at %s) needs pair_safety_margin_m >= %.2f (set at %s) and "
         "pair_safety_horizon_s >= %.1f (set at %s): the safety filter has been measured in the emulator only; raise "
-        "them or set pair_runs = false",
+        "them or set pair_runs = auto (off on the robot) or false",
         origin_of(cfg, "pair_runs").text, origin_of(cfg, "reposition").text, FW_PAIR_SAFETY_ROBOT_MARGIN_M,
         origin_of(cfg, "pair_safety_margin_m").text, FW_PAIR_SAFETY_ROBOT_HORIZON_S,
         origin_of(cfg, "pair_safety_horizon_s").text);
@@ -1094,12 +1114,13 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
         cfg->state_rotation ? ", the last one the executed rotation of state_rotation" : "");
     return -1;
   }
-  if (cfg->pair_runs && (cfg->task != FW_TASK_CORRIDOR || cfg->learner != FW_LEARNER_HEDGER ||
+  if (cfg->pair_runs_mode == FW_PAIR_RUNS_ON && (cfg->task != FW_TASK_CORRIDOR || cfg->learner != FW_LEARNER_HEDGER ||
                          cfg->hedger_greedy_method != (int32_t)HEDGER_GREEDY_STATE_MODEL)) {
     fw_errfmt(err, err_cap,
         "%s: pair_runs needs task = corridor (set at %s: its perturbation uses the target angle and the lateral "
         "fraction), learner = hedger (set at %s) and hedger_greedy_method = state_model (set at %s: the "
-        "weights steer that search's imitation); set pair_runs = false or change those keys",
+        "weights steer that search's imitation); set pair_runs = auto (on only where it applies) or false, or change "
+        "those keys",
         origin_of(cfg, "pair_runs").text, origin_of(cfg, "task").text, origin_of(cfg, "learner").text,
         origin_of(cfg, "hedger_greedy_method").text);
     return -1;

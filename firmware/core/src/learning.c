@@ -90,7 +90,7 @@ void fw_learning_config(const fw_loop_t* L, hedger_config_t* hc) {
   const double task_reach = fw_run_is_corridor(L) ? 8.0 : 3.0;
   hc->greedy_reach = L->cfg.hedger_greedy_reach > 0.0 ? L->cfg.hedger_greedy_reach : task_reach;
   hc->local_model = L->cfg.learner == FW_LEARNER_LWA ? HEDGER_LOCAL_LWA : HEDGER_LOCAL_LWR;
-  hc->anchor_recency_runs = L->cfg.pair_runs ? L->cfg.pair_recency_runs : 0.0;
+  hc->anchor_recency_runs = fw_config_pair_learner(&L->cfg) ? L->cfg.pair_recency_runs : 0.0;
 }
 
 // ---- checkpoints --------------------------------------------------------------------------

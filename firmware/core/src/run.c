@@ -67,7 +67,7 @@ static const char* run_kind_name(const fw_loop_t* L) {
 // pair starts from the same pose (and replays the same exploration noise), so that the two runs
 // differ mainly by their perturbation (the sensor noise of each run is its own).
 static bool pair_run_planned(const fw_loop_t* L, const fw_run_plan_t* plan) {
-  return L->cfg.pair_runs && L->cfg.mode == FW_MODE_LEARN && plan->kind == FW_RUN_TRAINING && plan->phase == 2;
+  return fw_config_pair_runs_active(&L->cfg) && L->cfg.mode == FW_MODE_LEARN && plan->kind == FW_RUN_TRAINING && plan->phase == 2;
 }
 
 static features_pose_t next_start_pose(fw_loop_t* L, const fw_run_plan_t* plan) {
@@ -91,7 +91,7 @@ static void pair_begin_run(fw_loop_t* L) {
   L->pair_member = -1;
   L->pair_run_vetoed = false;
   L->pair_model_ok = false;
-  if (!L->cfg.pair_runs || L->cfg.mode != FW_MODE_LEARN || L->plan.kind != FW_RUN_TRAINING) {
+  if (!fw_config_pair_learner(&L->cfg) || L->cfg.mode != FW_MODE_LEARN || L->plan.kind != FW_RUN_TRAINING) {
     return;
   }
   // Every training run's points carry its tag, so that runs can be ranked and fade with age: its
@@ -109,6 +109,17 @@ static void pair_begin_run(fw_loop_t* L) {
     L->pair_explore_rng = L->explore_rng;
   } else {
     L->explore_rng = L->pair_explore_rng;
+  }
+}
+
+void fw_pair_weights(bool first_goal, int32_t first_steps, bool second_goal, int32_t second_steps,
+                     double tau_steps, double* w_first, double* w_second) {
+  *w_first = first_goal ? 2.0 : 0.0;
+  *w_second = second_goal ? 2.0 : 0.0;
+  if (first_goal && second_goal) {
+    const double d = (double)(second_steps - first_steps);  // > 0: the first run was faster
+    *w_first = 2.0 / (1.0 + exp(-d / tau_steps));
+    *w_second = 2.0 - *w_first;
   }
 }
 
@@ -137,13 +148,9 @@ static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps
     L->pair_first_goal = goal;
     L->pair_first_tag = L->run_tag;
   } else {
-    double w_first = L->pair_first_goal ? 2.0 : 0.0;
-    double w_second = goal ? 2.0 : 0.0;
-    if (L->pair_first_goal && goal) {
-      const double d = (double)(steps - L->pair_first_steps);  // > 0: the first run was faster
-      w_first = 2.0 / (1.0 + exp(-d / L->cfg.pair_tau_steps));
-      w_second = 2.0 - w_first;
-    }
+    double w_first = 0.0;
+    double w_second = 0.0;
+    fw_pair_weights(L->pair_first_goal, L->pair_first_steps, goal, steps, L->cfg.pair_tau_steps, &w_first, &w_second);
     L->pair_weigh_tag[0] = L->pair_first_tag;
     L->pair_weigh_w[0] = w_first;
     L->pair_weigh_tag[1] = L->run_tag;
@@ -329,6 +336,8 @@ static void record_run_end(fw_loop_t* L, int8_t end_reason, int32_t stop_reason,
   for (int i = 0; i < 5; ++i) {
     r->steps_by_source[i] = L->run_steps_by_source[i];
   }
+  r->pair_member = (int8_t)L->pair_member;  // still the run's: pair_finish_run comes after
+  r->pair_vetoed = L->pair_run_vetoed;
   L->run_end_ready = true;
 }
 

@@ -13,7 +13,8 @@
 // Last, the cost of pair_safety's recovery rollout (tasks/recovery.h; a pair-run tick makes at most
 // three) against the median tick at 20k samples measured above.
 // Arguments: `--set key=value` (repeatable) measures another setting, e.g. a larger hedger_k_max
-// or pair_runs=true (the tick with the pair runs' safety filter).
+// or pair_runs=false (the tick without the pair runs' safety filter, which the default
+// pair_runs = auto runs here: the harness's corridor is the emulator's).
 #define _POSIX_C_SOURCE 200809L
 #include "fw/checkpoint.h"
 #include "loop_harness.h"

@@ -4,7 +4,10 @@
 controller resumes phase two from its checkpoint (emulator, lockstep).
 Claims checked:
 1. Offline training from the session's experience log reproduces the learned state the
-   controller itself ended phase one with, bit for bit (same HEDGER calls, same settings).
+   controller itself ended phase one with, bit for bit (same HEDGER calls, same settings); and
+   from the phase-two session's full log, where pair_runs = auto ran phase two in ranked pairs,
+   the state the controller ended phase two with (B21R_RUN gives the pairs; an experience log
+   cannot, and the trainer warns).
 2. The controller, started with the offline checkpoint and the session's configuration, resumes
    in phase two (not one phase-one example run: phase two's policy drives, the greedy action or
    the advisor), and the evaluation block after its phase-two runs, where the learned policy
@@ -14,6 +17,7 @@ Claims checked:
 Also: two logs, --passes 2 and --init from the first pass's checkpoint give the same state.
 usage: test_offline_train.py CONTROLLER SIM WORLD TRAIN"""
 import os
+import shutil
 import struct
 import subprocess
 import sys
@@ -76,10 +80,13 @@ def main():
         fwtest.note("claim 1: the offline learned state equals the controller's after phase one, bit for bit")
 
         # Claim 2: phase two from the offline checkpoint.
+        before_two = os.path.join(d, "before-phase-two.ckpt")
+        explog2 = os.path.join(d, "phase2-experiences.lcmlog")
+        shutil.copyfile(offline, before_two)
         sim = fwtest.Sim(sim_exe, world, d, "phase2", seed=4)
         rc, err, log = fwtest.run_controller(controller, sim, d, "phase2",
                                              dict(SESSION, phase_two_runs=5, eval_every_runs=5, eval_starts=10,
-                                                  checkpoint_file=offline), timeout=600)
+                                                  checkpoint_file=offline, experience_log_file=explog2), timeout=600)
         if rc != 0 or "resumed from %s (phase 2, 0 training runs" % offline not in err:
             fwtest.fail("the controller did not resume phase two from the offline checkpoint (exit %d):\n%s" % (rc, err))
         exps2 = [m for _, _, m in read_log(log, {"B21R_EXPERIENCE"})]
@@ -100,6 +107,29 @@ def main():
             fwtest.fail("phase two from the offline checkpoint reached the goal from %d of %d poses" %
                         (e.successes, e.n_starts))
         sim.close()
+
+        # Claim 1 for phase two: from the full log (B21R_RUN says which runs were pairs and which the
+        # safety filter corrected) the trainer ranks the pairs as the controller did, bit for bit.
+        runs2 = [m for _, _, m in read_log(log, {"B21R_RUN"}) if m.kind == 0]
+        if [r.pair_member for r in runs2] != [0, 1, 0, 1, 0]:
+            fwtest.fail("pair_runs = auto in the emulated corridor: expected phase two in pairs, got pair_member %s" %
+                        [r.pair_member for r in runs2])
+        ranked = os.path.join(d, "ranked.ckpt")
+        out, _ = train(trainer, ["--init", before_two, "--out", ranked, log])
+        if "2 pairs of phase-two runs ranked" not in out:
+            fwtest.fail("b21r-train did not rank the 2 pairs of the phase-two log:\n%s" % out)
+        if sections(ranked)[1] != sections(offline)[1]:
+            fwtest.fail("the offline learned state differs from the controller's own after phase two (pairs ranked)")
+        # An experience log cannot say which runs were pairs: the trainer learns them unranked and
+        # says so (and the state then differs from the controller's).
+        unranked = os.path.join(d, "unranked.ckpt")
+        _, err2 = train(trainer, ["--init", before_two, "--out", unranked, explog2])
+        if "learned unranked" not in err2 or "log_file" not in err2:
+            fwtest.fail("an experience log of pair runs: expected the warning, got:\n%s" % err2)
+        if sections(unranked)[1] == sections(offline)[1]:
+            fwtest.fail("unranked pairs gave the ranked state")
+        fwtest.note("claim 1, phase two: the trainer ranks the pairs of the full log as the controller did, bit for "
+                    "bit; from an experience log it warns")
 
         # Several logs, in order: the second pass learns the same data again (twice the updates).
         twice = os.path.join(d, "twice.ckpt")

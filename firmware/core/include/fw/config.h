@@ -93,6 +93,16 @@ typedef enum fw_eval_policy {
   FW_EVAL_HUMAN = 3,     ///< the simulated sloppy human driver (phase_one_driver = human's examples)
 } fw_eval_policy_t;
 
+/// Whether phase two's training runs come in ranked pairs (config pair_runs; run.c).
+typedef enum fw_pair_runs {
+  FW_PAIR_RUNS_OFF = 0,   ///< "false": every phase-two training run is the learned policy's own
+  FW_PAIR_RUNS_ON = 1,    ///< "true": pairs wherever allowed (fw_config_validate refuses the rest)
+  /// "auto": pairs where they were measured to help, the corridor in the (lockstep) emulator
+  /// (task = corridor, learner = hedger, hedger_greedy_method = state_model, reposition =
+  /// emulator); elsewhere off. See fw_config_pair_learner() and fw_config_pair_runs_active().
+  FW_PAIR_RUNS_AUTO = 2,
+} fw_pair_runs_t;
+
 /// Scheduling policy of the process (config rt_scheduler; POSIX sched_setscheduler).
 typedef enum fw_rt_scheduler {
   FW_RT_OTHER = 0,  ///< SCHED_OTHER: the normal time-sharing scheduler
@@ -215,7 +225,9 @@ typedef struct fw_config {
   bool advisor;                    ///< phase two: example policy acts where HEDGER knows nothing
   double example_noise_radps;      ///< phase one, example driver: std-dev of a dither segment's offset
   bool state_rotation;             ///< the state ends with the rotation the base executes [rad/s] (default)
-  bool pair_runs;                  ///< phase two, corridor: training runs in ranked pairs (see config.c)
+  /// key pair_runs, fw_pair_runs_t (AUTO = 2: never test it as a bool); read through
+  /// fw_config_pair_learner() and fw_config_pair_runs_active()
+  int32_t pair_runs_mode;
   double pair_gain_sigma;          ///< pair_runs: std-dev of the perturbation's gain on θ [rad/s per rad]
   double pair_centring_sigma;      ///< pair_runs: std-dev of its term on (lateral fraction − 0.5) [rad/s]
   double pair_tau_steps;           ///< pair_runs: scale of the weights' response to the steps' difference
@@ -295,6 +307,19 @@ void fw_config_origin(const fw_config_t* cfg, const char* key, char* out, size_t
 /// Writes the documentation of every key (default, allowed values, meaning) to out, in the
 /// config file format, so the output is itself a valid config file.
 void fw_config_print_reference(FILE* out);
+
+/// Whether the learner is configured for ranked pairs under cfg: pair_runs = true, or pair_runs =
+/// auto with task = corridor, learner = hedger and hedger_greedy_method = state_model, wherever it
+/// runs. Then every training run's points carry their run tag and the imitation fades old points
+/// (pair_recency_runs), in every phase and mode, so a learned state behaves the same on the
+/// emulator and on the robot. Pure, O(1).
+bool fw_config_pair_learner(const fw_config_t* cfg);
+
+/// Whether phase two's training runs come in ranked pairs under cfg (callers also check mode =
+/// learn): fw_config_pair_learner, and pair_runs = true or reposition = emulator. pair_runs =
+/// auto leaves the pairs off on the robot: the pair's second run needs the first one's start pose
+/// again, and the safety filter's margin is measured in the lockstep emulator only. Pure, O(1).
+bool fw_config_pair_runs_active(const fw_config_t* cfg);
 
 /// Writes the current value of every key to out in the config file format.
 void fw_config_print(const fw_config_t* cfg, FILE* out);

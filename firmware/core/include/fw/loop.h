@@ -134,6 +134,14 @@ typedef struct fw_loop_stats {
 fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_loop_outputs_t* out, char* err,
                           size_t err_cap);
 
+/// pair_runs: the anchor weights of a ranked pair's two runs (run.c; b21r-train uses the same
+/// rule on a log). A run that missed the goal (collision, step limit, or corrected by the safety
+/// filter) weighs 0 and a run that reached it 2; of two that reached it, the faster weighs
+/// 2 / (1 + e^(-d / tau_steps)) and the slower 2 minus that, d = second_steps - first_steps.
+/// tau_steps > 0. Pure, O(1).
+void fw_pair_weights(bool first_goal, int32_t first_steps, bool second_goal, int32_t second_steps,
+                     double tau_steps, double* w_first, double* w_second);
+
 /// The learner's configuration the loop derives from cfg (state dimension, action bounds, input
 /// scales, capacity, ...), for offline tools that build compatible HEDGER states or read
 /// checkpoints (learner = lwa: local_model = HEDGER_LOCAL_LWA; learner = tabular uses no HEDGER,

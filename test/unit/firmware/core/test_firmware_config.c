@@ -387,16 +387,56 @@ static void test_config_validate_cross_key_rules(void** state) {
   assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
 }
 
-// pair_runs needs the corridor (its perturbation uses the target angle and lateral fraction),
-// HEDGER and the state-model greedy search (the weights steer that search's imitation): each
-// other combination is refused naming pair_runs, where it was set, and the key in the way.
+// pair_runs = auto (the default) turns the pairs on only where they were measured to help: the
+// corridor with HEDGER's state-model search in the emulator. Anywhere else it is off, silently:
+// no combination of keys is refused because of it, the robot's gates included. The learner's
+// side of it (run tags, fading) does not depend on where it runs.
+static void test_config_pair_runs_auto_only_in_the_emulated_corridor(void** state) {
+  (void)state;
+  fw_config_t c;
+  char err[FW_CONFIG_ERR_MAX];
+  fw_config_defaults(&c);
+  assert_int_equal(c.pair_runs_mode, FW_PAIR_RUNS_AUTO);
+  assert_int_equal(c.reposition, FW_REPOSITION_OPERATOR);
+  assert_false(fw_config_pair_runs_active(&c));  // the robot: no pair runs ...
+  assert_true(fw_config_pair_learner(&c));        // ... but the learner is the emulator's
+  // So no robot gate of the pairs applies, however thin the (unused) filter's settings.
+  assert_int_equal(fw_config_set(&c, "pair_safety", "false", "robot.conf:4", err, sizeof err), 0);
+  assert_int_equal(fw_config_set(&c, "pair_safety_margin_m", "0.05", "robot.conf:5", err, sizeof err), 0);
+  assert_int_equal(fw_config_set(&c, "pair_safety_horizon_s", "1", "robot.conf:6", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate_program(&c, err, sizeof err), 0);
+  assert_int_equal(fw_config_set(&c, "reposition", "emulator", "--set", err, sizeof err), 0);
+  assert_int_equal(fw_config_set(&c, "emulator_control", "/tmp/sim.sock", "--set", err, sizeof err), 0);
+  assert_true(fw_config_pair_runs_active(&c));
+  assert_int_equal(fw_config_validate_program(&c, err, sizeof err), 0);
+  const char* elsewhere[3][2] = {{"task", "obstacles"}, {"learner", "tabular"}, {"hedger_greedy_method", "per_action"}};
+  for (int i = 0; i < 3; ++i) {
+    fw_config_t d = c;
+    assert_int_equal(fw_config_set(&d, elsewhere[i][0], elsewhere[i][1], "--set", err, sizeof err), 0);
+    assert_false(fw_config_pair_runs_active(&d));
+    assert_false(fw_config_pair_learner(&d));
+    assert_int_equal(fw_config_validate(&d, err, sizeof err), 0);
+  }
+  fw_config_t off = c;
+  assert_int_equal(fw_config_set(&off, "pair_runs", "false", "--set", err, sizeof err), 0);
+  assert_false(fw_config_pair_runs_active(&off));
+  assert_false(fw_config_pair_learner(&off));
+  assert_int_equal(fw_config_set(&off, "pair_runs", "yes", "--set", err, sizeof err), -1);
+  assert_non_null(strstr(err, "pair_runs"));
+  assert_non_null(strstr(err, "auto"));
+}
+
+// pair_runs = true needs the corridor (its perturbation uses the target angle and lateral
+// fraction), HEDGER and the state-model greedy search (the weights steer that search's
+// imitation): each other combination is refused naming pair_runs, where it was set, and the key
+// in the way.
 static void test_config_pair_runs_needs_corridor_hedger_state_model(void** state) {
   (void)state;
   fw_config_t c;
   char err[FW_CONFIG_ERR_MAX];
   fw_config_defaults(&c);
-  assert_false(c.pair_runs);
   assert_int_equal(fw_config_set(&c, "pair_runs", "true", "robot.conf:3", err, sizeof err), 0);
+  assert_true(fw_config_pair_runs_active(&c));
   assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
   const char* blockers[3][2] = {{"task", "obstacles"}, {"learner", "tabular"}, {"hedger_greedy_method", "per_action"}};
   for (int i = 0; i < 3; ++i) {
@@ -405,7 +445,7 @@ static void test_config_pair_runs_needs_corridor_hedger_state_model(void** state
     assert_int_equal(fw_config_validate(&d, err, sizeof err), -1);
     assert_non_null(strstr(err, "robot.conf:3: pair_runs needs"));
     assert_non_null(strstr(err, "set at robot.conf:9"));
-    assert_non_null(strstr(err, "set pair_runs = false"));
+    assert_non_null(strstr(err, "set pair_runs = auto"));
   }
   // Out-of-range settings are refused by the key's own range.
   assert_int_equal(fw_config_set(&c, "pair_tau_steps", "0", "--set", err, sizeof err), -1);
@@ -691,6 +731,7 @@ int main(int argc, char** argv) {
       cmocka_unit_test(test_config_reference_file_matches_defaults),
       cmocka_unit_test(test_config_extra_keys_go_to_the_handler),
       cmocka_unit_test(test_config_set_allocates_nothing),
+      cmocka_unit_test(test_config_pair_runs_auto_only_in_the_emulated_corridor),
       cmocka_unit_test(test_config_pair_runs_needs_corridor_hedger_state_model),
       cmocka_unit_test(test_config_program_refuses_joystick_without_operator),
       cmocka_unit_test(test_config_learner_key),

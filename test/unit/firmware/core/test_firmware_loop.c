@@ -71,7 +71,7 @@ static void test_loop_pair_runs_share_start_and_rank(void** state) {
     c.phase_two_runs = 6;
     c.eval_every_runs = 10;
     c.eval_starts = 2;
-    c.pair_runs = true;
+    c.pair_runs_mode = FW_PAIR_RUNS_ON;
     assert_int_equal(harness_open(&g_h, &c, false, 9), 0);
     harness_run(&g_h, 200000);
     fw_loop_stats_t st;
@@ -83,9 +83,16 @@ static void test_loop_pair_runs_share_start_and_rank(void** state) {
     int n = 0;
     for (int i = 0; i < g_h.runs && i < 64; ++i) {
       const b21r_run_t* r = &g_h.run[i];
-      if (r->kind == B21R_RUN_T_KIND_TRAINING && r->phase == 2 && n < 6) two[n++] = r;
+      if (r->kind == B21R_RUN_T_KIND_TRAINING && r->phase == 2 && n < 6) {
+        two[n++] = r;
+      } else {
+        assert_int_equal(r->pair_member, -1);  // phase one and evaluations: no pair
+      }
     }
     assert_int_equal(n, 6);
+    for (int i = 0; i < 6; ++i) {
+      assert_int_equal(two[i]->pair_member, i % 2);  // B21R_RUN says which run of its pair it was
+    }
     for (int p = 0; p < 3; ++p) {
       const b21r_run_t* a = two[2 * p];
       const b21r_run_t* b = two[2 * p + 1];
@@ -100,12 +107,41 @@ static void test_loop_pair_runs_share_start_and_rank(void** state) {
   assert_true(hash[0] == hash[1]);
 }
 
+// pair_runs = auto, the default, runs pairs in the emulated corridor only with HEDGER's
+// state-model search: with the per-action search no run is a pair run and no pair is ranked.
+static void test_loop_pair_runs_auto_off_where_it_does_not_apply(void** state) {
+  (void)state;
+  for (int method = 0; method <= 1; ++method) {
+    fw_config_t c;
+    short_schedule(&c);
+    c.phase_one_runs = 4;
+    c.phase_two_runs = 4;
+    c.eval_every_runs = 10;
+    c.eval_starts = 1;
+    assert_int_equal(c.pair_runs_mode, FW_PAIR_RUNS_AUTO);
+    c.hedger_greedy_method = method == 0 ? (int32_t)HEDGER_GREEDY_PER_ACTION : (int32_t)HEDGER_GREEDY_STATE_MODEL;
+    assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
+    harness_run(&g_h, 200000);
+    fw_loop_stats_t st;
+    fw_loop_get_stats(g_h.loop, &st);
+    assert_true(st.done);
+    int paired = 0;
+    for (int i = 0; i < g_h.runs && i < 64; ++i) {
+      paired += g_h.run[i].pair_member >= 0 ? 1 : 0;
+    }
+    assert_int_equal(paired, method == 0 ? 0 : 4);
+    assert_int_equal(st.pairs_ranked, method == 0 ? 0 : 2);
+    harness_close(&g_h);
+  }
+}
+
 // One pair_safety session to its end: its statistics, and its phase-two training runs that ended
 // on a wall and their advisor steps (from the B21R_RUN records).
 typedef struct pair_session {
   fw_loop_stats_t st;
   int collisions;
   int advisor_steps;
+  int vetoed;  // B21R_RUN records marked pair_vetoed
 } pair_session_t;
 
 static pair_session_t run_pair_session(const fw_config_t* c, uint64_t fake_seed, int64_t max_ticks) {
@@ -120,6 +156,7 @@ static pair_session_t run_pair_session(const fw_config_t* c, uint64_t fake_seed,
     if (r->kind == B21R_RUN_T_KIND_TRAINING && r->phase == 2) {
       out.collisions += r->end_reason == B21R_RUN_T_END_COLLISION;
       out.advisor_steps += r->steps_by_source[B21R_EXPERIENCE_T_SOURCE_ADVISOR];
+      out.vetoed += r->pair_vetoed ? 1 : 0;
     }
   }
   harness_close(&g_h);
@@ -142,7 +179,7 @@ static void test_loop_pair_safety_keeps_pair_runs_off_the_walls(void** state) {
     c.phase_two_runs = 12;
     c.eval_every_runs = 30;
     c.eval_starts = 1;
-    c.pair_runs = true;
+    c.pair_runs_mode = FW_PAIR_RUNS_ON;
     c.pair_gain_sigma = 2.0;
     c.pair_centring_sigma = 4.0;
     c.explore_sigma_radps = 0.0;
@@ -161,6 +198,8 @@ static void test_loop_pair_safety_keeps_pair_runs_off_the_walls(void** state) {
   assert_int_equal(off->pair_runs_vetoed, 0);
   assert_int_equal(ps[1].collisions, 0);
   assert_true(with->pair_runs_vetoed >= 2);
+  assert_int_equal(ps[1].vetoed, with->pair_runs_vetoed);  // each corrected run's B21R_RUN says so
+  assert_int_equal(ps[0].vetoed, 0);
   assert_int_equal(with->pair_runs_missed, with->pair_runs_vetoed);
   assert_true(with->pair_safety_overrides >= with->pair_runs_vetoed);
   assert_true(with->pair_safety_overrides <= 6 * (int64_t)with->pair_runs_vetoed);
@@ -181,7 +220,7 @@ static void test_loop_pair_safety_vets_unknown_actions(void** state) {
     c.eval_every_runs = 30;
     c.eval_starts = 1;
     c.advisor = false;
-    c.pair_runs = true;
+    c.pair_runs_mode = FW_PAIR_RUNS_ON;
     c.pair_safety = on == 1;
     ps[on] = run_pair_session(&c, 5, 200000);
   }
@@ -484,6 +523,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_loop_learns_corridor_reaches_goal_from_all_poses),
       cmocka_unit_test(test_loop_pair_runs_share_start_and_rank),
+      cmocka_unit_test(test_loop_pair_runs_auto_off_where_it_does_not_apply),
       cmocka_unit_test(test_loop_pair_safety_keeps_pair_runs_off_the_walls),
       cmocka_unit_test(test_loop_pair_safety_vets_unknown_actions),
       cmocka_unit_test(test_loop_same_seed_bit_identical_experiences),

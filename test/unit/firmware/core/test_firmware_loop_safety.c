@@ -115,7 +115,7 @@ static void pair_runs_real_time(fw_config_t* c) {
   c->lockstep = false;
   c->phase_one_runs = 4;
   c->phase_two_runs = 20;
-  c->pair_runs = true;
+  c->pair_runs_mode = FW_PAIR_RUNS_ON;
 }
 
 static void test_loop_pair_run_between_scans_recovery_law_drives(void** state) {
