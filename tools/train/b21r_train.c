@@ -169,6 +169,13 @@ int main(int argc, char** argv) {
               "give the controller's full log (log_file) to rank them\n",
               (unsigned long long)s.phase_two_unranked);
     }
+    if (s.pairs_unmatched > 0 || s.run_records_undecodable > 0) {
+      fprintf(stderr,
+              "b21r-train: warning: %llu pair runs left unranked (their first run's B21R_RUN is missing from the "
+              "log); %llu B21R_RUN records of another layout skipped (a controller older than pair_member: its "
+              "pairs cannot be ranked)\n",
+              (unsigned long long)s.pairs_unmatched, (unsigned long long)s.run_records_undecodable);
+    }
     if (s.seq_gaps > 0 || s.refused > 0 || s.undecodable > 0) {
       fprintf(stderr,
               "b21r-train: warning: %llu gaps in the experiences' seq (the recording lost messages), %llu experiences "

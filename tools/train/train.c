@@ -33,7 +33,9 @@ struct trainer {
   // under way (the controller's rule: its id, or the store's tag when that is ahead), and the
   // pair's first run until it is ranked.
   bool pairs;
+  bool pairs_ran;            // cfg runs pairs in phase two (fw_config_pair_runs_active)
   uint32_t run_tag;
+  bool pair_first_valid;     // a pair's first run was seen and its pair is not ranked yet
   bool pair_first_goal;
   int32_t pair_first_steps;
   uint32_t pair_first_tag;
@@ -78,6 +80,7 @@ trainer_t* trainer_create(const fw_config_t* cfg, const train_options_t* opt, ch
     return NULL;
   }
   t->pairs = fw_config_pair_learner(cfg);
+  t->pairs_ran = fw_config_pair_runs_active(cfg);
   t->next_seq = -1;
   t->started_s = now_s();
   t->progress_next_s = t->started_s + t->opt.progress_period_s;
@@ -177,8 +180,7 @@ static int learn(trainer_t* t, const b21r_experience_t* e, const char* path, cha
     t->in_run = true;
     t->run_id = e->run_id;
     if (t->pairs && !e->evaluating) {
-      const uint32_t current = hedger_run_tag(t->hedger);
-      t->run_tag = (uint32_t)e->run_id > current ? (uint32_t)e->run_id : current;
+      t->run_tag = fw_pair_run_tag(e->run_id, hedger_run_tag(t->hedger));
       (void)hedger_set_run_tag(t->hedger, t->run_tag);
     }
   }
@@ -202,7 +204,6 @@ static int learn(trainer_t* t, const b21r_experience_t* e, const char* path, cha
 // controller, the run's replay comes first, then its weights: a first run weighs 0 until its pair
 // is ranked, an aborted run 0 (its pair starts again), and the second run ranks the pair.
 static void rank_pair_run(trainer_t* t, const b21r_run_t* r) {
-  t->log_has_run_records = true;
   if (!t->pairs || r->kind != B21R_RUN_T_KIND_TRAINING || r->pair_member < 0 || !t->in_run ||
       r->run_id != t->run_id) {
     return;
@@ -212,11 +213,19 @@ static void rank_pair_run(trainer_t* t, const b21r_run_t* r) {
   const bool goal = r->end_reason == B21R_RUN_T_END_GOAL && !r->pair_vetoed;
   if (aborted || r->pair_member == 0) {
     (void)hedger_weight_run(t->hedger, t->run_tag, 0.0, NULL);
+    t->pair_first_valid = !aborted;
     t->pair_first_goal = goal;
     t->pair_first_steps = r->steps;
     t->pair_first_tag = t->run_tag;
     return;
   }
+  if (!t->pair_first_valid) {
+    // The first run's record is missing (a recording that lost it): the pair cannot be ranked,
+    // and this run stays unweighted rather than be ranked against another pair's first run.
+    t->stats.pairs_unmatched++;
+    return;
+  }
+  t->pair_first_valid = false;
   double w_first = 0.0;
   double w_second = 0.0;
   fw_pair_weights(t->pair_first_goal, t->pair_first_steps, goal, r->steps, t->cfg.pair_tau_steps, &w_first,
@@ -256,10 +265,13 @@ int trainer_add_log(trainer_t* t, const char* path, char* err, size_t err_cap) {
         b21r_experience_t_decode_cleanup(&e);
       }
     } else if (strcmp(ev->channel, "B21R_RUN") == 0) {
+      t->log_has_run_records = true;
       b21r_run_t r;
       if (b21r_run_t_decode(ev->data, 0, ev->datalen, &r) >= 0) {
         rank_pair_run(t, &r);
         b21r_run_t_decode_cleanup(&r);
+      } else {
+        t->stats.run_records_undecodable++;  // another layout: a controller older than pair_member
       }
     }
     lcm_eventlog_free_event(ev);
@@ -269,7 +281,7 @@ int trainer_add_log(trainer_t* t, const char* path, char* err, size_t err_cap) {
     report_progress(t, path, false);
   }
   lcm_eventlog_destroy(log);
-  if (t->pairs && !t->log_has_run_records) {
+  if (t->pairs_ran && !t->log_has_run_records) {
     t->stats.phase_two_unranked += t->log_phase_two;
   }
   t->stats.seconds += now_s() - t0;

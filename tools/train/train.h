@@ -6,9 +6,12 @@
 /// The trainer feeds the logs' B21R_EXPERIENCE messages, in file order, through exactly the calls
 /// the controller makes online (hedger_update per experience, hedger_end_run after each run, so
 /// the backward replay of hedger_replay too), with the HEDGER settings the controller derives from
-/// the same configuration (fw_loop_learner_config). Training from the log of a session therefore
-/// gives the learned state that session ended with, bit for bit; training from several logs
-/// gives the state of one controller that had lived through them all in order.
+/// the same configuration (fw_loop_learner_config), the run tags of pair_runs and, from a full log
+/// (its B21R_RUN records), the ranking of its pairs. Training from the log of a session therefore
+/// gives the learned state that session ended with, bit for bit (with pairs: from its full log);
+/// training from several logs gives the state of one controller that had lived through them all
+/// in order (run tags keep increasing where run ids start again). With include_eval an
+/// evaluation run's points carry the tag, and so the pair weight, of the training run before it.
 ///
 /// By default only the experiences the controller learned from are used (training runs; not
 /// evaluation runs, where learning is off); train_options_t.include_eval adds those too.
@@ -54,9 +57,12 @@ typedef struct train_stats {
   /// the learner configured for pairs: pairs of phase-two training runs ranked from the log's B21R_RUN
   /// records (a full log, log_file; an experience log has none), as the controller ranked them
   uint64_t pairs_ranked;
-  /// the same: phase-two training experiences of logs without B21R_RUN records; whether
-  /// they came from pair runs cannot be told, so any pair among them is not ranked (weight 1)
+  /// cfg runs pairs (fw_config_pair_runs_active): phase-two training experiences of logs without
+  /// B21R_RUN records; whether they came from pair runs cannot be told, so any pair among them is
+  /// not ranked (weight 1)
   uint64_t phase_two_unranked;
+  uint64_t pairs_unmatched;          ///< second runs of a pair whose first run's record is missing
+  uint64_t run_records_undecodable;  ///< B21R_RUN records of another layout (an older controller)
   double seconds;             ///< wall time spent reading and training
 } train_stats_t;
 

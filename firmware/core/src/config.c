@@ -1034,7 +1034,7 @@ int fw_config_validate_program(const fw_config_t* cfg, char* err, size_t err_cap
     fw_errfmt(err, err_cap,
         "%s: pair_runs without its safety filter is for the emulator only (pair_safety = false set at %s; reposition "
         "= emulator needed, set at %s): unvetted, about a third of its perturbed phase-two training runs end on a "
-        "wall; set pair_safety = true on the robot",
+        "wall; set pair_safety = true on the robot, or pair_runs = auto (off on the robot)",
         origin_of(cfg, "pair_runs").text, origin_of(cfg, "pair_safety").text, origin_of(cfg, "reposition").text);
     return -1;
   }

@@ -95,9 +95,9 @@ static void pair_begin_run(fw_loop_t* L) {
     return;
   }
   // Every training run's points carry its tag, so that runs can be ranked and fade with age: its
-  // id, or the learner's tag when a resumed store is ahead of the ids (tags never decrease).
-  const uint32_t current = fw_learner_run_tag(&L->learner);
-  L->run_tag = (uint32_t)L->run_id > current ? (uint32_t)L->run_id : current;
+  // id, or one past the learner's tag when a resumed store is ahead of the ids (fw_pair_run_tag:
+  // tags increase from run to run, so no two runs share one).
+  L->run_tag = fw_pair_run_tag(L->run_id, fw_learner_run_tag(&L->learner));
   (void)fw_learner_set_run_tag(&L->learner, L->run_tag);
   if (!pair_run_planned(L, &L->plan)) {
     return;
@@ -110,6 +110,13 @@ static void pair_begin_run(fw_loop_t* L) {
   } else {
     L->explore_rng = L->pair_explore_rng;
   }
+}
+
+uint32_t fw_pair_run_tag(int32_t run_id, uint32_t current) {
+  if (run_id >= 0 && (uint32_t)run_id > current) {
+    return (uint32_t)run_id;
+  }
+  return current < UINT32_MAX ? current + 1U : current;
 }
 
 void fw_pair_weights(bool first_goal, int32_t first_steps, bool second_goal, int32_t second_steps,

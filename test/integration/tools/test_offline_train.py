@@ -120,10 +120,11 @@ def main():
             fwtest.fail("b21r-train did not rank the 2 pairs of the phase-two log:\n%s" % out)
         if sections(ranked)[1] != sections(offline)[1]:
             fwtest.fail("the offline learned state differs from the controller's own after phase two (pairs ranked)")
-        # An experience log cannot say which runs were pairs: the trainer learns them unranked and
-        # says so (and the state then differs from the controller's).
+        # An experience log cannot say which runs were pairs: under a configuration that runs pairs
+        # (the session's, here given as pair_runs = true: the same learner as auto) the trainer
+        # learns them unranked and says so (and the state then differs from the controller's).
         unranked = os.path.join(d, "unranked.ckpt")
-        _, err2 = train(trainer, ["--init", before_two, "--out", unranked, explog2])
+        _, err2 = train(trainer, ["--set", "pair_runs=true", "--init", before_two, "--out", unranked, explog2])
         if "learned unranked" not in err2 or "log_file" not in err2:
             fwtest.fail("an experience log of pair runs: expected the warning, got:\n%s" % err2)
         if sections(unranked)[1] == sections(offline)[1]:

@@ -97,7 +97,7 @@ typedef enum fw_eval_policy {
 typedef enum fw_pair_runs {
   FW_PAIR_RUNS_OFF = 0,   ///< "false": every phase-two training run is the learned policy's own
   FW_PAIR_RUNS_ON = 1,    ///< "true": pairs wherever allowed (fw_config_validate refuses the rest)
-  /// "auto": pairs where they were measured to help, the corridor in the (lockstep) emulator
+  /// "auto": pairs where they were measured to help (in lockstep), the corridor in the emulator
   /// (task = corridor, learner = hedger, hedger_greedy_method = state_model, reposition =
   /// emulator); elsewhere off. See fw_config_pair_learner() and fw_config_pair_runs_active().
   FW_PAIR_RUNS_AUTO = 2,
@@ -310,9 +310,9 @@ void fw_config_print_reference(FILE* out);
 
 /// Whether the learner is configured for ranked pairs under cfg: pair_runs = true, or pair_runs =
 /// auto with task = corridor, learner = hedger and hedger_greedy_method = state_model, wherever it
-/// runs. Then every training run's points carry their run tag and the imitation fades old points
-/// (pair_recency_runs), in every phase and mode, so a learned state behaves the same on the
-/// emulator and on the robot. Pure, O(1).
+/// runs. Then every training run's points carry their run tag (mode = learn, both phases) and the
+/// imitation fades old points (pair_recency_runs; in evaluations too), so a learned state behaves
+/// the same on the emulator and on the robot. Pure, O(1).
 bool fw_config_pair_learner(const fw_config_t* cfg);
 
 /// Whether phase two's training runs come in ranked pairs under cfg (callers also check mode =

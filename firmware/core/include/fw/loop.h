@@ -138,9 +138,17 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
 /// rule on a log). A run that missed the goal (collision, step limit, or corrected by the safety
 /// filter) weighs 0 and a run that reached it 2; of two that reached it, the faster weighs
 /// 2 / (1 + e^(-d / tau_steps)) and the slower 2 minus that, d = second_steps - first_steps.
-/// tau_steps > 0. Pure, O(1).
+/// Callers pass goal = reached && !vetoed, and weigh an aborted run 0 themselves. tau_steps > 0.
+/// Pure, O(1).
 void fw_pair_weights(bool first_goal, int32_t first_steps, bool second_goal, int32_t second_steps,
                      double tau_steps, double* w_first, double* w_second);
+
+/// pair_runs: the run tag of a training run with id run_id when the store's current tag is
+/// `current` (run.c; b21r-train uses the same rule): its id while ids run ahead of the tags, else
+/// current + 1 (saturating), so tags always increase from run to run, also where ids start again
+/// below the tags (a controller resumed from a b21r-train checkpoint, a trainer's second pass).
+/// Pure, O(1).
+uint32_t fw_pair_run_tag(int32_t run_id, uint32_t current);
 
 /// The learner's configuration the loop derives from cfg (state dimension, action bounds, input
 /// scales, capacity, ...), for offline tools that build compatible HEDGER states or read

@@ -107,11 +107,29 @@ static void test_loop_pair_runs_share_start_and_rank(void** state) {
   assert_true(hash[0] == hash[1]);
 }
 
+// Run tags increase from run to run: a run's id while the ids run ahead of the store's tag, else
+// one past the tag (a resume from a b21r-train checkpoint starts its ids again at 0).
+static void test_pair_run_tag_always_increases(void** state) {
+  (void)state;
+  assert_int_equal(fw_pair_run_tag(40, 30), 40);
+  assert_int_equal(fw_pair_run_tag(31, 30), 31);
+  assert_int_equal(fw_pair_run_tag(30, 30), 31);
+  assert_int_equal(fw_pair_run_tag(5, 30), 31);
+  assert_int_equal(fw_pair_run_tag(0, 0), 1);
+  assert_int_equal(fw_pair_run_tag(-1, 0), 1);
+  assert_true(fw_pair_run_tag(3, UINT32_MAX) == UINT32_MAX);
+}
+
 // pair_runs = auto, the default, runs pairs in the emulated corridor only with HEDGER's
-// state-model search: with the per-action search no run is a pair run and no pair is ranked.
+// state-model search: with the per-action search, or on the robot (reposition = operator), no run
+// is a pair run and no pair is ranked. On the robot the learner still tags and fades its runs as
+// with pairs (the experience stream differs from pair_runs = false's), so that a learned state
+// acts alike there and in the emulator.
 static void test_loop_pair_runs_auto_off_where_it_does_not_apply(void** state) {
   (void)state;
-  for (int method = 0; method <= 1; ++method) {
+  enum { PER_ACTION, ROBOT, ROBOT_PAIRS_OFF, EMULATOR, N_CASES };
+  uint64_t hash[N_CASES];
+  for (int k = 0; k < N_CASES; ++k) {
     fw_config_t c;
     short_schedule(&c);
     c.phase_one_runs = 4;
@@ -119,20 +137,25 @@ static void test_loop_pair_runs_auto_off_where_it_does_not_apply(void** state) {
     c.eval_every_runs = 10;
     c.eval_starts = 1;
     assert_int_equal(c.pair_runs_mode, FW_PAIR_RUNS_AUTO);
-    c.hedger_greedy_method = method == 0 ? (int32_t)HEDGER_GREEDY_PER_ACTION : (int32_t)HEDGER_GREEDY_STATE_MODEL;
+    c.hedger_greedy_method = k == PER_ACTION ? (int32_t)HEDGER_GREEDY_PER_ACTION : (int32_t)HEDGER_GREEDY_STATE_MODEL;
+    c.reposition = k == ROBOT || k == ROBOT_PAIRS_OFF ? FW_REPOSITION_OPERATOR : FW_REPOSITION_EMULATOR;
+    c.pair_runs_mode = k == ROBOT_PAIRS_OFF ? FW_PAIR_RUNS_OFF : FW_PAIR_RUNS_AUTO;
     assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
     harness_run(&g_h, 200000);
     fw_loop_stats_t st;
     fw_loop_get_stats(g_h.loop, &st);
     assert_true(st.done);
+    assert_int_equal(st.training_runs, 8);
     int paired = 0;
     for (int i = 0; i < g_h.runs && i < 64; ++i) {
       paired += g_h.run[i].pair_member >= 0 ? 1 : 0;
     }
-    assert_int_equal(paired, method == 0 ? 0 : 4);
-    assert_int_equal(st.pairs_ranked, method == 0 ? 0 : 2);
+    assert_int_equal(paired, k == EMULATOR ? 4 : 0);
+    assert_int_equal(st.pairs_ranked, k == EMULATOR ? 2 : 0);
+    hash[k] = g_h.exp_hash;
     harness_close(&g_h);
   }
+  assert_true(hash[ROBOT] != hash[ROBOT_PAIRS_OFF]);  // tags and fading act on the robot too
 }
 
 // One pair_safety session to its end: its statistics, and its phase-two training runs that ended
@@ -522,6 +545,7 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_loop_learns_corridor_reaches_goal_from_all_poses),
+      cmocka_unit_test(test_pair_run_tag_always_increases),
       cmocka_unit_test(test_loop_pair_runs_share_start_and_rank),
       cmocka_unit_test(test_loop_pair_runs_auto_off_where_it_does_not_apply),
       cmocka_unit_test(test_loop_pair_safety_keeps_pair_runs_off_the_walls),
