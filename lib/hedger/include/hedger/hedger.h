@@ -110,8 +110,9 @@
 ///   build without the ranking (every weight 1) the same perturbations gave +34.1 ± 42.7 and 83
 ///   failed runs, fading alone +0.2 ± 0.2. Seeds 1-10: docs/RESULTS.md, ablation_pairs. Cost: 8
 ///   bytes per stored point; one O(fill) pass per weighted run, between runs. The firmware's
-///   perturbations, not these weights, end about a third of its phase-two training runs on a wall:
-///   emulator only (docs/LEARNING.md).
+///   perturbations, not these weights, would end about a third of its phase-two training runs on
+///   a wall; its safety filter (pair_safety) vets every perturbed command, and pair_runs = auto
+///   runs the pairs in the emulated corridor only (docs/LEARNING.md).
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are
