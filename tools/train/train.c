@@ -30,15 +30,12 @@ struct trainer {
   bool run_learned;      // at least one experience of it went through hedger_update
   int32_t run_id;
   // The learner configured for pairs (fw_config_pair_learner): the run tag of the training run
-  // under way (the controller's rule: its id, or the store's tag when that is ahead), and the
-  // pair's first run until it is ranked.
+  // under way (fw_pair_run_tag, the controller's rule), and the pair's first run until it is
+  // ranked (fw_pair_ranker_end, the controller's ranking).
   bool pairs;
   bool pairs_ran;            // cfg runs pairs in phase two (fw_config_pair_runs_active)
   uint32_t run_tag;
-  bool pair_first_valid;     // a pair's first run was seen and its pair is not ranked yet
-  bool pair_first_goal;
-  int32_t pair_first_steps;
-  uint32_t pair_first_tag;
+  fw_pair_ranker_t ranker;
   bool log_has_run_records;  // the log being read has B21R_RUN (a full log)
   uint64_t log_phase_two;    // phase-two training experiences learned from the log being read
   int64_t next_seq;      // expected seq of the next experience (-1: none yet in this log)
@@ -211,28 +208,20 @@ static void rank_pair_run(trainer_t* t, const b21r_run_t* r) {
   end_run(t);
   const bool aborted = r->end_reason == B21R_RUN_T_END_SAFETY_STOP || r->end_reason == B21R_RUN_T_END_SHUTDOWN;
   const bool goal = r->end_reason == B21R_RUN_T_END_GOAL && !r->pair_vetoed;
-  if (aborted || r->pair_member == 0) {
-    (void)hedger_weight_run(t->hedger, t->run_tag, 0.0, NULL);
-    t->pair_first_valid = !aborted;
-    t->pair_first_goal = goal;
-    t->pair_first_steps = r->steps;
-    t->pair_first_tag = t->run_tag;
-    return;
+  uint32_t tags[2];
+  double weights[2];
+  const int32_t n = fw_pair_ranker_end(&t->ranker, r->pair_member, aborted, goal, r->steps, t->run_tag,
+                                       t->cfg.pair_tau_steps, tags, weights);
+  for (int32_t i = 0; i < n; ++i) {
+    (void)hedger_weight_run(t->hedger, tags[i], weights[i], NULL);
   }
-  if (!t->pair_first_valid) {
+  if (n == 2) {
+    t->stats.pairs_ranked++;
+  } else if (n == 0) {
     // The first run's record is missing (a recording that lost it): the pair cannot be ranked,
     // and this run stays unweighted rather than be ranked against another pair's first run.
     t->stats.pairs_unmatched++;
-    return;
   }
-  t->pair_first_valid = false;
-  double w_first = 0.0;
-  double w_second = 0.0;
-  fw_pair_weights(t->pair_first_goal, t->pair_first_steps, goal, r->steps, t->cfg.pair_tau_steps, &w_first,
-                  &w_second);
-  (void)hedger_weight_run(t->hedger, t->pair_first_tag, w_first, NULL);
-  (void)hedger_weight_run(t->hedger, t->run_tag, w_second, NULL);
-  t->stats.pairs_ranked++;
 }
 
 int trainer_add_log(trainer_t* t, const char* path, char* err, size_t err_cap) {

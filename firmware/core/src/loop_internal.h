@@ -234,10 +234,8 @@ struct fw_loop {
   int32_t pair_member;           // of the run under way; -1 = not a pair run
   double pair_gain;              // the pair's perturbation: gain on the target angle [rad/s per rad]
   double pair_centring;          // and factor on (lateral fraction - 0.5) [rad/s]
-  int32_t pair_first_steps;      // the first run's steps
-  bool pair_first_goal;          // the first run reached the goal
   uint32_t run_tag;              // run tag of the training run under way (its id, or later)
-  uint32_t pair_first_tag;       // the first run's tag
+  fw_pair_ranker_t pair_ranker;  // the pair's first run until the pair is ranked
   features_pose_t pair_pose;     // the pair's start pose
   tasks_rng_t pair_explore_rng;  // explore_rng as the first run began: the second run's noise
   int32_t pair_weigh_n;          // weights to apply between runs (0: none)

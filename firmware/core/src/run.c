@@ -119,15 +119,31 @@ uint32_t fw_pair_run_tag(int32_t run_id, uint32_t current) {
   return current < UINT32_MAX ? current + 1U : current;
 }
 
-void fw_pair_weights(bool first_goal, int32_t first_steps, bool second_goal, int32_t second_steps,
-                     double tau_steps, double* w_first, double* w_second) {
-  *w_first = first_goal ? 2.0 : 0.0;
-  *w_second = second_goal ? 2.0 : 0.0;
-  if (first_goal && second_goal) {
-    const double d = (double)(second_steps - first_steps);  // > 0: the first run was faster
-    *w_first = 2.0 / (1.0 + exp(-d / tau_steps));
-    *w_second = 2.0 - *w_first;
+int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, int32_t member, bool aborted, bool goal, int32_t steps, uint32_t tag,
+                           double tau_steps, uint32_t tags[2], double weights[2]) {
+  if (aborted || member == 0) {
+    r->first_pending = !aborted;
+    r->first_goal = goal;
+    r->first_steps = steps;
+    r->first_tag = tag;
+    tags[0] = tag;
+    weights[0] = 0.0;
+    return 1;
   }
+  if (!r->first_pending) {
+    return 0;
+  }
+  r->first_pending = false;
+  tags[0] = r->first_tag;
+  tags[1] = tag;
+  weights[0] = r->first_goal ? 2.0 : 0.0;
+  weights[1] = goal ? 2.0 : 0.0;
+  if (r->first_goal && goal) {
+    const double d = (double)(steps - r->first_steps);  // > 0: the first run was faster
+    weights[0] = 2.0 / (1.0 + exp(-d / tau_steps));
+    weights[1] = 2.0 - weights[0];
+  }
+  return 2;
 }
 
 // pair_runs: the run under way ended. A perturbed run is not imitated until its pair is ranked:
@@ -146,25 +162,9 @@ static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps
   goal = goal && !L->pair_run_vetoed;
   L->pair_runs_vetoed += L->pair_run_vetoed ? 1 : 0;
   L->pair_runs_missed += goal ? 0 : 1;
-  if (aborted || L->pair_member == 0) {
-    L->pair_weigh_tag[0] = L->run_tag;
-    L->pair_weigh_w[0] = 0.0;
-    L->pair_weigh_n = 1;
-    L->pair_next_member = aborted ? 0 : 1;
-    L->pair_first_steps = steps;  // read only when the pair goes on (pair_next_member = 1)
-    L->pair_first_goal = goal;
-    L->pair_first_tag = L->run_tag;
-  } else {
-    double w_first = 0.0;
-    double w_second = 0.0;
-    fw_pair_weights(L->pair_first_goal, L->pair_first_steps, goal, steps, L->cfg.pair_tau_steps, &w_first, &w_second);
-    L->pair_weigh_tag[0] = L->pair_first_tag;
-    L->pair_weigh_w[0] = w_first;
-    L->pair_weigh_tag[1] = L->run_tag;
-    L->pair_weigh_w[1] = w_second;
-    L->pair_weigh_n = 2;
-    L->pair_next_member = 0;
-  }
+  L->pair_weigh_n = fw_pair_ranker_end(&L->pair_ranker, L->pair_member, aborted, goal, steps, L->run_tag,
+                                       L->cfg.pair_tau_steps, L->pair_weigh_tag, L->pair_weigh_w);
+  L->pair_next_member = aborted || L->pair_member == 1 ? 0 : 1;
   L->pair_member = -1;
 }
 

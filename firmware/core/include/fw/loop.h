@@ -134,14 +134,27 @@ typedef struct fw_loop_stats {
 fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_loop_outputs_t* out, char* err,
                           size_t err_cap);
 
-/// pair_runs: the anchor weights of a ranked pair's two runs (run.c; b21r-train uses the same
-/// rule on a log). A run that missed the goal (collision, step limit, or corrected by the safety
-/// filter) weighs 0 and a run that reached it 2; of two that reached it, the faster weighs
-/// 2 / (1 + e^(-d / tau_steps)) and the slower 2 minus that, d = second_steps - first_steps.
-/// Callers pass goal = reached && !vetoed, and weigh an aborted run 0 themselves. tau_steps > 0.
-/// Pure, O(1).
-void fw_pair_weights(bool first_goal, int32_t first_steps, bool second_goal, int32_t second_steps,
-                     double tau_steps, double* w_first, double* w_second);
+/// pair_runs: the ranking of pairs as their runs end, kept by the controller (run.c) and by
+/// b21r-train on a log's B21R_RUN records, so that both weigh the same runs alike.
+typedef struct fw_pair_ranker {
+  bool first_pending;    ///< a pair's first run ended and the pair is not ranked yet
+  bool first_goal;       ///< that run reached the goal (and was not corrected by the filter)
+  int32_t first_steps;   ///< its steps
+  uint32_t first_tag;    ///< its run tag
+} fw_pair_ranker_t;
+
+/// A pair run ended: member 0 or 1 (the run of its pair), aborted (safety stop, shutdown: its
+/// pair starts again), goal = it reached the goal and the safety filter did not correct it,
+/// steps, and tag, the run's tag. Writes the anchor weights to apply between runs into
+/// tags[]/weights[] and returns how many:
+/// - 1 for a first or an aborted run: it weighs 0 (a perturbed run is not imitated unranked);
+/// - 2 when a second run ranks its pair: a run that missed the goal weighs 0 and one that reached
+///   it 2; of two that reached it, the faster weighs 2 / (1 + e^(-d / tau_steps)) and the slower
+///   2 minus that, d = the two runs' difference in steps;
+/// - 0 for a second run whose first run never ended here (a log that lost its record).
+/// tau_steps > 0. O(1).
+int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, int32_t member, bool aborted, bool goal, int32_t steps, uint32_t tag,
+                           double tau_steps, uint32_t tags[2], double weights[2]);
 
 /// pair_runs: the run tag of a training run with id run_id when the store's current tag is
 /// `current` (run.c; b21r-train uses the same rule): its id while ids run ahead of the tags, else

@@ -120,6 +120,38 @@ static void test_pair_run_tag_always_increases(void** state) {
   assert_true(fw_pair_run_tag(3, UINT32_MAX) == UINT32_MAX);
 }
 
+// One pair-runs session to its end: its statistics, its phase-two training runs that ended on a
+// wall and their advisor steps, and its pair runs (from the B21R_RUN records).
+typedef struct pair_session {
+  fw_loop_stats_t st;
+  int collisions;
+  int advisor_steps;
+  int vetoed;         // B21R_RUN records marked pair_vetoed
+  int paired;         // B21R_RUN records of pair runs (any phase, any kind)
+  uint64_t exp_hash;  // the session's experience stream
+} pair_session_t;
+
+static pair_session_t run_pair_session(const fw_config_t* c, uint64_t fake_seed, int64_t max_ticks) {
+  pair_session_t out;
+  memset(&out, 0, sizeof out);
+  assert_int_equal(harness_open(&g_h, c, false, fake_seed), 0);
+  harness_run(&g_h, max_ticks);
+  fw_loop_get_stats(g_h.loop, &out.st);
+  assert_true(out.st.done);
+  out.exp_hash = g_h.exp_hash;
+  for (int i = 0; i < g_h.runs && i < 64; ++i) {
+    const b21r_run_t* r = &g_h.run[i];
+    out.paired += r->pair_member >= 0 ? 1 : 0;
+    if (r->kind == B21R_RUN_T_KIND_TRAINING && r->phase == 2) {
+      out.collisions += r->end_reason == B21R_RUN_T_END_COLLISION;
+      out.advisor_steps += r->steps_by_source[B21R_EXPERIENCE_T_SOURCE_ADVISOR];
+      out.vetoed += r->pair_vetoed ? 1 : 0;
+    }
+  }
+  harness_close(&g_h);
+  return out;
+}
+
 // pair_runs = auto, the default, runs pairs in the emulated corridor only with HEDGER's
 // state-model search: with the per-action search, or on the robot (reposition = operator), no run
 // is a pair run and no pair is ranked. On the robot the learner still tags and fades its runs as
@@ -128,7 +160,7 @@ static void test_pair_run_tag_always_increases(void** state) {
 static void test_loop_pair_runs_auto_off_where_it_does_not_apply(void** state) {
   (void)state;
   enum { PER_ACTION, ROBOT, ROBOT_PAIRS_OFF, EMULATOR, N_CASES };
-  uint64_t hash[N_CASES];
+  pair_session_t ps[N_CASES];
   for (int k = 0; k < N_CASES; ++k) {
     fw_config_t c;
     short_schedule(&c);
@@ -140,50 +172,12 @@ static void test_loop_pair_runs_auto_off_where_it_does_not_apply(void** state) {
     c.hedger_greedy_method = k == PER_ACTION ? (int32_t)HEDGER_GREEDY_PER_ACTION : (int32_t)HEDGER_GREEDY_STATE_MODEL;
     c.reposition = k == ROBOT || k == ROBOT_PAIRS_OFF ? FW_REPOSITION_OPERATOR : FW_REPOSITION_EMULATOR;
     c.pair_runs_mode = k == ROBOT_PAIRS_OFF ? FW_PAIR_RUNS_OFF : FW_PAIR_RUNS_AUTO;
-    assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
-    harness_run(&g_h, 200000);
-    fw_loop_stats_t st;
-    fw_loop_get_stats(g_h.loop, &st);
-    assert_true(st.done);
-    assert_int_equal(st.training_runs, 8);
-    int paired = 0;
-    for (int i = 0; i < g_h.runs && i < 64; ++i) {
-      paired += g_h.run[i].pair_member >= 0 ? 1 : 0;
-    }
-    assert_int_equal(paired, k == EMULATOR ? 4 : 0);
-    assert_int_equal(st.pairs_ranked, k == EMULATOR ? 2 : 0);
-    hash[k] = g_h.exp_hash;
-    harness_close(&g_h);
+    ps[k] = run_pair_session(&c, 3, 200000);
+    assert_int_equal(ps[k].st.training_runs, 8);
+    assert_int_equal(ps[k].paired, k == EMULATOR ? 4 : 0);
+    assert_int_equal(ps[k].st.pairs_ranked, k == EMULATOR ? 2 : 0);
   }
-  assert_true(hash[ROBOT] != hash[ROBOT_PAIRS_OFF]);  // tags and fading act on the robot too
-}
-
-// One pair_safety session to its end: its statistics, and its phase-two training runs that ended
-// on a wall and their advisor steps (from the B21R_RUN records).
-typedef struct pair_session {
-  fw_loop_stats_t st;
-  int collisions;
-  int advisor_steps;
-  int vetoed;  // B21R_RUN records marked pair_vetoed
-} pair_session_t;
-
-static pair_session_t run_pair_session(const fw_config_t* c, uint64_t fake_seed, int64_t max_ticks) {
-  pair_session_t out;
-  memset(&out, 0, sizeof out);
-  assert_int_equal(harness_open(&g_h, c, false, fake_seed), 0);
-  harness_run(&g_h, max_ticks);
-  fw_loop_get_stats(g_h.loop, &out.st);
-  assert_true(out.st.done);
-  for (int i = 0; i < g_h.runs && i < 64; ++i) {
-    const b21r_run_t* r = &g_h.run[i];
-    if (r->kind == B21R_RUN_T_KIND_TRAINING && r->phase == 2) {
-      out.collisions += r->end_reason == B21R_RUN_T_END_COLLISION;
-      out.advisor_steps += r->steps_by_source[B21R_EXPERIENCE_T_SOURCE_ADVISOR];
-      out.vetoed += r->pair_vetoed ? 1 : 0;
-    }
-  }
-  harness_close(&g_h);
-  return out;
+  assert_true(ps[ROBOT].exp_hash != ps[ROBOT_PAIRS_OFF].exp_hash);  // tags and fading act on the robot too
 }
 
 // pair_safety: with perturbations far wilder than the defaults (gain sd 2, centring sd 4) and no
