@@ -142,8 +142,10 @@ def main():
     # B21R_RUN says which training runs were ranked pairs (pair_runs) and which the safety filter
     # corrected. A log without B21R_RUN of this layout (read_log skips other fingerprints) reads as
     # no pairs. Run ids repeat after a controller restart: the last record of an id is taken.
-    pair_of = {r["run_id"]: (r["pair_member"], r["pair_vetoed"])
-               for r in runs_from_records([m for _, _, m in read_log(args.log, {"B21R_RUN"})])}
+    run_records = runs_from_records([m for _, _, m in read_log(args.log, {"B21R_RUN"})])
+    pair_of = {r["run_id"]: (r["pair_member"], r["pair_vetoed"]) for r in run_records}
+    # The learned policy's shift (pair_runs) in force in the last evaluation run: what was evaluated.
+    final_shift = next((r["shift"] for r in reversed(run_records) if r["evaluating"]), None)
     for r in train:
         r["pair_member"], r["pair_vetoed"] = pair_of.get(r["run_id"], (-1, False))
     p1 = [r for r in train if r["phase"] == 1]
@@ -187,6 +189,7 @@ def main():
     summary = {
         "blocks": blocks,
         "training_runs": len(train),
+        "shift": list(final_shift) if final_shift is not None else None,
         "phase_one_runs": len(p1),
         "phase_two_runs": len(train) - len(p1),
         "phase_two_first_block_after_runs": switch_after,
@@ -249,7 +252,7 @@ def main():
     for gain, b in sorted(examples.items()):
         lines.append("example policy (gain %s): %d/%d reached, %.1f steps (failures at the limit)" %
                      (gain, b["successes"], b["n_starts"], mean_all(b)))
-    lines.append("evaluation blocks (learning off, %d fixed start poses; greedy policy only):" % blocks[0]["n_starts"])
+    lines.append("evaluation blocks (learning off, %d fixed start poses; the learned policy only, no exploration):" % blocks[0]["n_starts"])
     for b in blocks:
         lines.append("  block %2d after %3d training runs, phase %d: %2d/%d reached, %.1f steps counting failures "
                      "at the limit, %s over reached" %
@@ -272,6 +275,9 @@ def main():
                      "advisor), %d reached the goal" %
                      (len(in_pairs), sum(1 for r in train if r["phase"] == 2),
                       sum(1 for r in in_pairs if r["pair_vetoed"]), sum(1 for r in in_pairs if r["goal"])))
+        if final_shift is not None:
+            lines.append("the learned policy in the last evaluation block: the greedy action plus the shift the pairs "
+                         "learned, %+.3f x target angle %+.3f x (lateral fraction - 0.5) [rad/s]" % final_shift)
     lines.append("claims (paired over the same poses, 95 %; this seed only, see docs/RESULTS.md for 10 seeds):")
     for c, ok, n in verdicts:
         lines.append("  %-3s %s: %s" % ("yes" if ok else "NO", c, n))

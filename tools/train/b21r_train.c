@@ -159,8 +159,9 @@ int main(int argc, char** argv) {
              (unsigned long long)s.skipped_eval);
     }
     if (s.pairs_ranked > 0) {
-      printf("b21r-train: %llu pairs of phase-two runs ranked from B21R_RUN (pair_runs)\n",
-             (unsigned long long)s.pairs_ranked);
+      printf("b21r-train: %llu pairs of phase-two runs ranked from B21R_RUN (pair_runs); the learned policy's "
+             "shift: %.4f rad/s per rad of target angle, %.4f rad/s per corridor width\n",
+             (unsigned long long)s.pairs_ranked, s.shift_gain, s.shift_centring);
     }
     if (s.phase_two_unranked > 0) {
       fprintf(stderr,
@@ -175,6 +176,18 @@ int main(int argc, char** argv) {
               "log); %llu B21R_RUN records of another layout skipped (a controller older than pair_member: its "
               "pairs cannot be ranked)\n",
               (unsigned long long)s.pairs_unmatched, (unsigned long long)s.run_records_undecodable);
+    }
+    if (s.run_records_invalid > 0) {
+      fprintf(stderr,
+              "b21r-train: warning: %llu pair-run B21R_RUN records with a non-finite perturbation or shift (a "
+              "damaged log) were not ranked\n",
+              (unsigned long long)s.run_records_invalid);
+    }
+    if (s.shift_taken_from_log > 0) {
+      printf("b21r-train: the learned policy's shift follows the log's records (%llu pair runs drove with another "
+             "shift than the one learned so far here: logs of separate sessions, a second pass, or an --init that "
+             "held these pairs already)\n",
+             (unsigned long long)s.shift_taken_from_log);
     }
     if (s.seq_gaps > 0 || s.refused > 0 || s.undecodable > 0) {
       fprintf(stderr,

@@ -4,6 +4,7 @@
 #include "train.h"
 
 #include <fw/checkpoint.h>
+#include <fw/progress.h>
 #include <fw/errfmt.h>
 #include <fw/io.h>
 #include <fw/loop.h>
@@ -14,6 +15,7 @@
 #include <lcm/eventlog.h>
 
 #include <errno.h>
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -94,7 +96,12 @@ void trainer_destroy(trainer_t* t) {
 
 hedger_t* trainer_hedger(trainer_t* t) { return t->hedger; }
 
-train_stats_t trainer_stats(const trainer_t* t) { return t->stats; }
+train_stats_t trainer_stats(const trainer_t* t) {
+  train_stats_t s = t->stats;
+  s.shift_gain = t->ranker.shift_gain;
+  s.shift_centring = t->ranker.shift_centring;
+  return s;
+}
 
 int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t err_cap) {
   size_t meta_size = 0;
@@ -113,8 +120,18 @@ int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t er
     fw_errfmt(err, err_cap, "%s: cannot allocate %zu bytes", path, meta_size + payload_size);
   } else if (fw_checkpoint_read(path, meta, meta_size + 1U, &meta_size, payload, payload_size + 1U, &payload_size,
                                 err, err_cap) == 1) {
-    const hedger_status_t hs = hedger_load(t->hedger, payload, payload_size);
-    if (hs == HEDGER_OK) {
+    // The controller's section carries the learned policy's shift (pair_runs): validated before
+    // the learner is touched; training then continues from that shift as the controller would.
+    fw_progress_t g;
+    char why[FW_PROGRESS_WHY_MAX];
+    hedger_status_t hs = HEDGER_OK;
+    if (fw_progress_decode((const uint8_t*)meta, meta_size, &g, why, sizeof why) != 0) {
+      fw_errfmt(err, err_cap, "%s is corrupt (controller section: %s); give a checkpoint the controller or "
+          "b21r-train wrote", path, why);
+    } else if ((hs = hedger_load(t->hedger, payload, payload_size)) == HEDGER_OK) {
+      t->ranker.shift_gain = g.shift_gain;
+      t->ranker.shift_centring = g.shift_centring;
+      t->ranker.shift_pairs = g.shift_pairs;
       rc = 0;
     } else {
       fw_errfmt(err, err_cap,
@@ -197,21 +214,42 @@ static int learn(trainer_t* t, const b21r_experience_t* e, const char* path, cha
   return 0;
 }
 
+// Exact comparison of two finite doubles (the log's copies are bit-exact).
+static bool differs(double a, double b) { return a < b || a > b; }
+
 // pair_runs: a B21R_RUN record of a pair run (it follows the run's last experience). As in the
 // controller, the run's replay comes first, then its weights: a first run weighs 0 until its pair
-// is ranked, an aborted run 0 (its pair starts again), and the second run ranks the pair.
+// is ranked, an aborted run 0 (its pair starts again), and the second run ranks the pair and
+// moves the learned policy's shift (fw_pair_ranker_end, the controller's rule).
 static void rank_pair_run(trainer_t* t, const b21r_run_t* r) {
   if (!t->pairs || r->kind != B21R_RUN_T_KIND_TRAINING || r->pair_member < 0 || !t->in_run ||
       r->run_id != t->run_id) {
     return;
   }
   end_run(t);
+  // The pair's perturbation and the shift in force come from the log: a record with values the
+  // controller cannot have written (non-finite, or a shift beyond its bound) ranks nothing.
+  if (!isfinite(r->pair_gain) || !isfinite(r->pair_centring) || !(fabs(r->shift_gain) <= FW_PAIR_SHIFT_MAX) ||
+      !(fabs(r->shift_centring) <= FW_PAIR_SHIFT_MAX)) {
+    t->stats.run_records_invalid++;
+    return;
+  }
+  // The shift the controller drove with is the log's, exactly: the trainer takes it (another
+  // session's log, a second pass over the same log or an --init that already holds these pairs
+  // would otherwise move it again) and counts where its own differed.
+  if (differs(r->shift_gain, t->ranker.shift_gain) || differs(r->shift_centring, t->ranker.shift_centring) ||
+      r->shift_pairs < 0 || (uint32_t)r->shift_pairs != t->ranker.shift_pairs) {
+    t->stats.shift_taken_from_log++;
+    t->ranker.shift_gain = r->shift_gain;
+    t->ranker.shift_centring = r->shift_centring;
+    t->ranker.shift_pairs = r->shift_pairs > 0 ? (uint32_t)r->shift_pairs : 0U;
+  }
   const bool aborted = r->end_reason == B21R_RUN_T_END_SAFETY_STOP || r->end_reason == B21R_RUN_T_END_SHUTDOWN;
   const bool goal = r->end_reason == B21R_RUN_T_END_GOAL && !r->pair_vetoed;
   uint32_t tags[2];
   double weights[2];
-  const int32_t n = fw_pair_ranker_end(&t->ranker, r->pair_member, aborted, goal, r->steps, t->run_tag,
-                                       t->cfg.pair_tau_steps, tags, weights);
+  const int32_t n = fw_pair_ranker_end(&t->ranker, &t->cfg, r->pair_member, aborted, goal, r->steps, t->run_tag,
+                                       r->pair_gain, r->pair_centring, tags, weights);
   for (int32_t i = 0; i < n; ++i) {
     (void)hedger_weight_run(t->hedger, tags[i], weights[i], NULL);
   }
@@ -440,6 +478,17 @@ int trainer_write_checkpoint(trainer_t* t, const char* path, bool overwrite, cha
     fw_errfmt(err, err_cap, "%s: cannot build the controller's section of the checkpoint: %s", path, why);
     return -1;
   }
+  // The controller's section with the shift the pairs learned (fw/progress.h).
+  fw_progress_t g;
+  if (fw_progress_decode(meta, meta_size, &g, why, sizeof why) != 0) {
+    free(meta);
+    fw_errfmt(err, err_cap, "%s: the controller's section of the checkpoint is invalid: %s", path, why);
+    return -1;
+  }
+  g.shift_gain = t->ranker.shift_gain;
+  g.shift_centring = t->ranker.shift_centring;
+  g.shift_pairs = t->ranker.shift_pairs;
+  (void)fw_progress_encode(&g, meta);
   const size_t cap = hedger_serialized_size(t->hedger);
   void* payload = malloc(cap);
   size_t written = 0;

@@ -63,7 +63,13 @@ typedef struct train_stats {
   uint64_t phase_two_unranked;
   uint64_t pairs_unmatched;          ///< second runs of a pair whose first run's record is missing
   uint64_t run_records_undecodable;  ///< B21R_RUN records of another layout (an older controller)
+  uint64_t run_records_invalid;      ///< pair-run records with a non-finite perturbation or shift: not ranked
+  /// pair records whose shift in force differed from the trainer's (it then takes the log's):
+  /// logs of different sessions, a second pass, an --init that already held the log's pairs
+  uint64_t shift_taken_from_log;
   double seconds;             ///< wall time spent reading and training
+  double shift_gain;          ///< the learned policy's shift a after training (fw_pair_ranker_t)
+  double shift_centring;      ///< and b; both go into the checkpoint written
 } train_stats_t;
 
 typedef struct trainer trainer_t;

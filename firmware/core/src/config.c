@@ -293,8 +293,8 @@ static const key_desc_t k_keys[] = {
   {NULL, "pair_runs", KIND_ENUM, OFF(pair_runs_mode), 0, 0, false, false, k_pair_runs, "auto",
    "phase two: training runs come in pairs from one start pose; the first adds a policy perturbation "
    "g * target angle + c * (lateral fraction - 0.5) to the greedy action (g, c drawn per pair), the second "
-   "subtracts it, with the same exploration noise; the faster run's stored points then weigh more in the "
-   "learned policy's imitation of its data, the slower run's less (docs/LEARNING.md, \"Ranking whole runs in "
+   "subtracts it, with the same exploration noise; the pair's difference in steps then moves the learned "
+   "policy's shift toward the faster run (pair_shift_rate; docs/LEARNING.md, \"Ranking whole runs in "
    "phase two\"); pair_safety vets every perturbed command. auto = on for task = corridor with learner = "
    "hedger, hedger_greedy_method = state_model and reposition = emulator (where it was measured to help), "
    "off elsewhere (the learner still tags its runs and fades old points, as with pairs, wherever the "
@@ -306,9 +306,22 @@ static const key_desc_t k_keys[] = {
   {NULL, "pair_centring_sigma", KIND_DOUBLE, OFF(pair_centring_sigma), 0, 8, false, false, NULL, "0.5",
    "pair_runs: standard deviation of the perturbation's factor c on the lateral fraction's offset from the "
    "centre line [rad/s per corridor width]"},
+  {NULL, "pair_shift_rate", KIND_DOUBLE, OFF(pair_shift_rate), 0, 4, false, false, NULL, "1",
+   "pair_runs: the learned policy is the greedy action plus a shift a * target angle + b * (lateral fraction - "
+   "0.5) that the pairs move: each ranked pair adds pair_shift_rate * tanh(d / pair_shift_tau_steps) times its "
+   "perturbation (g, c) to (a, b), d = the second run's steps minus the first's (a failed run counts as the "
+   "slower), and phase two's runs then weigh 0 in the imitation; 0 = the pairs do not move the shift (one "
+   "loaded from a checkpoint still applies): the faster run's points weigh more in the imitation instead "
+   "(pair_tau_steps)"},
+  {NULL, "pair_shift_tau_steps", KIND_DOUBLE, OFF(pair_shift_tau_steps), 0.01, 1000, false, false, NULL, "2",
+   "pair_runs: the difference in steps at which a pair moves the shift by 0.76 of pair_shift_rate times its "
+   "perturbation"},
+  {NULL, "pair_shift_decay_pairs", KIND_DOUBLE, OFF(pair_shift_decay_pairs), 0, 1e6, false, false, NULL, "30",
+   "pair_runs: after n pairs have moved the shift its rate is pair_shift_rate * K / (K + n), K = this, so that "
+   "the shift settles instead of wandering with the pairs' noise (0 = constant rate)"},
   {NULL, "pair_tau_steps", KIND_DOUBLE, OFF(pair_tau_steps), 0.01, 1000, false, false, NULL, "1",
-   "pair_runs: the faster run's points weigh 2 / (1 + exp(-d / pair_tau_steps)), the slower run's 2 minus "
-   "that, d = the two runs' difference in steps (a failed run counts at the step limit)"},
+   "pair_runs with pair_shift_rate = 0: the faster run's points weigh 2 / (1 + exp(-d / pair_tau_steps)), the "
+   "slower run's 2 minus that, d = the two runs' difference in steps (a failed run counts at the step limit)"},
   {NULL, "pair_recency_runs", KIND_DOUBLE, OFF(pair_recency_runs), 0, 1e6, false, false, NULL, "150",
    "pair_runs: in that imitation a point stored N runs ago (evaluation runs counted) weighs exp(-N / "
    "pair_recency_runs), in both phases (0 = no fading)"},
@@ -1119,7 +1132,7 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
     fw_errfmt(err, err_cap,
         "%s: pair_runs needs task = corridor (set at %s: its perturbation uses the target angle and the lateral "
         "fraction), learner = hedger (set at %s) and hedger_greedy_method = state_model (set at %s: the "
-        "weights steer that search's imitation); set pair_runs = auto (on only where it applies) or false, or change "
+        "pairs steer that search's policy); set pair_runs = auto (on only where it applies) or false, or change "
         "those keys",
         origin_of(cfg, "pair_runs").text, origin_of(cfg, "task").text, origin_of(cfg, "learner").text,
         origin_of(cfg, "hedger_greedy_method").text);

@@ -228,14 +228,15 @@ struct fw_loop {
   tasks_start_cycle_t start_cycle;
   int32_t explore_steps_left;  // of the exploration segment under way
   double explore_offset;       // its action offset [rad/s]
-  // pair_runs (phase two, corridor): the pair under way (run.c); its weights are applied between
-  // runs, after the second run's replay (learning.c).
+  // pair_runs (phase two, corridor): the pair under way (run.c); its anchor weights are applied
+  // between runs, after the second run's replay (learning.c), and its ranking moves the shift.
   int32_t pair_next_member;      // 0: the next phase-two training run starts a pair; 1: it ends one
   int32_t pair_member;           // of the run under way; -1 = not a pair run
   double pair_gain;              // the pair's perturbation: gain on the target angle [rad/s per rad]
   double pair_centring;          // and factor on (lateral fraction - 0.5) [rad/s]
   uint32_t run_tag;              // run tag of the training run under way (its id, or later)
-  fw_pair_ranker_t pair_ranker;  // the pair's first run until the pair is ranked
+  fw_pair_ranker_t pair_ranker;  // the pair's first run until it is ranked; the learned policy's
+                                 // shift (learned state: checkpointed, fw/progress.h)
   features_pose_t pair_pose;     // the pair's start pose
   tasks_rng_t pair_explore_rng;  // explore_rng as the first run began: the second run's noise
   int32_t pair_weigh_n;          // weights to apply between runs (0: none)

@@ -3,6 +3,7 @@
 #include "fw/progress.h"
 
 #include "fw/config.h"
+#include "fw/loop.h"
 #include "le_bytes.h"
 #include "fw/errfmt.h"
 
@@ -14,7 +15,7 @@
 #include <string.h>
 
 #define MAGIC "FWMETA01"
-#define USED_BYTES 56U
+#define USED_BYTES 76U
 
 size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]) {
   const fw_schedule_progress_t* g = &p->schedule;
@@ -31,6 +32,9 @@ size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]
   fw_put_f64(out + 40, g->example_steps_sum);
   fw_put_u32(out + 48, (uint32_t)g->best_example_steps);
   fw_put_u32(out + 52, (uint32_t)p->run_id + 1U);
+  fw_put_f64(out + 56, p->shift_gain);
+  fw_put_f64(out + 64, p->shift_centring);
+  fw_put_u32(out + 72, p->shift_pairs);
   return FW_PROGRESS_BYTES;
 }
 
@@ -81,13 +85,15 @@ int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why
   }
   g->phase = (int32_t)phase;
   int32_t run_id_plus_1 = 0;
+  int32_t shift_pairs = 0;
   if (!counter(b, 20, "training runs", &g->training_runs, why, cap) ||
       !counter(b, 24, "phase-one runs", &g->phase_one_runs, why, cap) ||
       !counter(b, 28, "phase-two runs", &g->phase_two_runs, why, cap) ||
       !counter(b, 32, "evaluation blocks", &g->eval_blocks, why, cap) ||
       !counter(b, 36, "successful phase-one runs", &g->example_runs, why, cap) ||
       !counter(b, 48, "shortest phase-one run", &g->best_example_steps, why, cap) ||
-      !counter(b, 52, "run id + 1", &run_id_plus_1, why, cap)) {
+      !counter(b, 52, "run id + 1", &run_id_plus_1, why, cap) ||
+      !counter(b, 72, "pairs that moved the shift", &shift_pairs, why, cap)) {
     return -1;
   }
   g->example_steps_sum = fw_get_f64(b + 40);
@@ -121,6 +127,14 @@ int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why
     return -1;
   }
   p.run_id = run_id_plus_1 - 1;
+  p.shift_gain = fw_get_f64(b + 56);
+  p.shift_centring = fw_get_f64(b + 64);
+  p.shift_pairs = (uint32_t)shift_pairs;
+  if (!(fabs(p.shift_gain) <= FW_PAIR_SHIFT_MAX) || !(fabs(p.shift_centring) <= FW_PAIR_SHIFT_MAX)) {
+    fw_errfmt(why, cap, "learned policy shift (%.17g, %.17g), expected finite values within +-%g", p.shift_gain,
+        p.shift_centring, FW_PAIR_SHIFT_MAX);
+    return -1;
+  }
   *out = p;
   return 0;
 }

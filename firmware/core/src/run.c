@@ -119,8 +119,9 @@ uint32_t fw_pair_run_tag(int32_t run_id, uint32_t current) {
   return current < UINT32_MAX ? current + 1U : current;
 }
 
-int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, int32_t member, bool aborted, bool goal, int32_t steps, uint32_t tag,
-                           double tau_steps, uint32_t tags[2], double weights[2]) {
+int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, int32_t member, bool aborted, bool goal,
+                           int32_t steps, uint32_t tag, double gain, double centring, uint32_t tags[2],
+                           double weights[2]) {
   if (aborted || member == 0) {
     r->first_pending = !aborted;
     r->first_goal = goal;
@@ -136,25 +137,50 @@ int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, int32_t member, bool aborted, bo
   r->first_pending = false;
   tags[0] = r->first_tag;
   tags[1] = tag;
+  const double d = (double)steps - (double)r->first_steps;  // > 0: the first run was faster
+  if (cfg->pair_shift_rate > 0.0) {
+    weights[0] = 0.0;
+    weights[1] = 0.0;
+    double u = 0.0;
+    if (r->first_goal && goal) {
+      u = tanh(d / cfg->pair_shift_tau_steps);
+    } else if (r->first_goal != goal) {
+      u = r->first_goal ? 1.0 : -1.0;
+    }
+    const double k = cfg->pair_shift_decay_pairs;
+    const double rate = k > 0.0 ? cfg->pair_shift_rate * k / (k + (double)r->shift_pairs) : cfg->pair_shift_rate;
+    r->shift_pairs += r->shift_pairs < UINT32_MAX ? 1U : 0U;
+    const double step_gain = rate * u * gain;
+    const double step_centring = rate * u * centring;
+    if (isfinite(step_gain) && isfinite(step_centring)) {  // (a damaged log's record: no step)
+      r->shift_gain = fmin(FW_PAIR_SHIFT_MAX, fmax(-FW_PAIR_SHIFT_MAX, r->shift_gain + step_gain));
+      r->shift_centring = fmin(FW_PAIR_SHIFT_MAX, fmax(-FW_PAIR_SHIFT_MAX, r->shift_centring + step_centring));
+    }
+    return 2;
+  }
   weights[0] = r->first_goal ? 2.0 : 0.0;
   weights[1] = goal ? 2.0 : 0.0;
   if (r->first_goal && goal) {
-    const double d = (double)(steps - r->first_steps);  // > 0: the first run was faster
-    weights[0] = 2.0 / (1.0 + exp(-d / tau_steps));
+    weights[0] = 2.0 / (1.0 + exp(-d / cfg->pair_tau_steps));
     weights[1] = 2.0 - weights[0];
   }
   return 2;
 }
 
+double fw_pair_shift_at(const fw_pair_ranker_t* r, const double* s) {
+  return r->shift_gain * s[2] + r->shift_centring * (s[1] - 0.5);
+}
+
 // pair_runs: the run under way ended. A perturbed run is not imitated until its pair is ranked:
 // the first run's points weigh 0 at once (so the second run does not imitate it either), and so
 // do the points of a run that was aborted or is left without its pair. After the second run the
-// pair is ranked: a run that missed the goal (a collision, the step limit) weighs 0; of two that
-// reached it, the faster weighs 2 / (1 + e^(-d / pair_tau_steps)) and the slower 2 minus that,
-// d = their difference in steps. A run the safety filter had to correct (pair_vet) counts as one
-// that missed the goal: its perturbation was predicted to reach a wall, and a policy that learns
-// from its corrected points would lean on a filter that evaluations and greedy runs do not have.
-// learning.c applies the weights between runs.
+// pair is ranked (fw_pair_ranker_end): by default it moves the learned policy's shift toward the
+// faster run and both runs keep weight 0, so the imitation stays the teachers' and the shift
+// alone carries what phase two found (imitating the shifted runs as well would add the shift
+// twice). A run the safety filter had to correct (pair_vet) counts as one that missed the goal:
+// its perturbation was predicted to reach a wall, and a policy that learns from it would lean on
+// a filter that evaluations and greedy runs do not have. The shift is O(1) arithmetic and acts
+// from the next run; learning.c applies the weights between runs.
 static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps) {
   if (L->pair_member < 0) {
     return;
@@ -162,8 +188,8 @@ static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps
   goal = goal && !L->pair_run_vetoed;
   L->pair_runs_vetoed += L->pair_run_vetoed ? 1 : 0;
   L->pair_runs_missed += goal ? 0 : 1;
-  L->pair_weigh_n = fw_pair_ranker_end(&L->pair_ranker, L->pair_member, aborted, goal, steps, L->run_tag,
-                                       L->cfg.pair_tau_steps, L->pair_weigh_tag, L->pair_weigh_w);
+  L->pair_weigh_n = fw_pair_ranker_end(&L->pair_ranker, &L->cfg, L->pair_member, aborted, goal, steps, L->run_tag,
+                                       L->pair_gain, L->pair_centring, L->pair_weigh_tag, L->pair_weigh_w);
   L->pair_next_member = aborted || L->pair_member == 1 ? 0 : 1;
   L->pair_member = -1;
 }
@@ -345,6 +371,12 @@ static void record_run_end(fw_loop_t* L, int8_t end_reason, int32_t stop_reason,
   }
   r->pair_member = (int8_t)L->pair_member;  // still the run's: pair_finish_run comes after
   r->pair_vetoed = L->pair_run_vetoed;
+  r->pair_gain = L->pair_member >= 0 ? L->pair_gain : 0.0;
+  r->pair_centring = L->pair_member >= 0 ? L->pair_centring : 0.0;
+  r->shift_gain = L->pair_ranker.shift_gain;  // pair_finish_run, which may move it, comes after
+  r->shift_centring = L->pair_ranker.shift_centring;
+  r->shift_pairs = (int32_t)(L->pair_ranker.shift_pairs <= (uint32_t)INT32_MAX ? L->pair_ranker.shift_pairs
+                                                                                : (uint32_t)INT32_MAX);
   L->run_end_ready = true;
 }
 
@@ -533,6 +565,11 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
   if (learned_policy) {
     double value = 0.0;
     greedy_known = fw_learner_greedy(&L->learner, L->s, &greedy_action, &value);
+    if (greedy_known && fw_run_is_corridor(L)) {
+      // The learned policy: HEDGER's greedy action plus the shift the ranked pairs learned (0
+      // until a pair is ranked). The value stays the greedy action's (the learning target).
+      greedy_action = tasks_clamp_omega(greedy_action + fw_pair_shift_at(&L->pair_ranker, L->s), L->omega_max);
+    }
     if (L->pending.active) {
       L->pending.need_greedy = false;
       L->pending.q_next = value;  // the default value (0) when no action is known

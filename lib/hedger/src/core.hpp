@@ -618,6 +618,8 @@ bool greedy_state_model(hedger& h, const double* x, double reach, GreedyResult& 
     const double f = wmax / wa_max;
     for (uint32_t i = 0; i < n; ++i) wa[i] *= f;
     wz = wa;
+  } else {
+    ++h.counters.anchor_unweighted;
   }
   for (uint32_t i = 0; i < n; ++i) {
     SVec z;

@@ -3,7 +3,7 @@
 """experiments.learning_regression: the paper's Fig. 4 experiment at full size, as a regression
 test of learning. Corridor (10 m), proportional examples in phase one (30 runs), the learned
 policy with exploration in phase two (35 runs), an evaluation block (the 10 fixed start poses,
-learning off, greedy policy only) before the first training run and every 5 training runs; the
+learning off, the learned policy without exploration) before the first training run and every 5 training runs; the
 example policy (its nominal gain) and the optimal controller are evaluated from the same 10 poses.
 10 seeds (1-10), two at a time. Failed runs count at the step limit. Comparisons are paired by
 seed; one-sided t-tests at the 95 % level (Student-t 0.95 quantile, 9 degrees of freedom: 1.833).
@@ -17,17 +17,22 @@ Claims, each printed with its numbers; ASSERTED ones fail the test when they do 
   keeps           phase two does not make it significantly worse (final block vs end of phase one)
   reaches         reliability: the final block reaches the goal from at least 9.5 of 10 poses on
                   average (a collision is a failed run)
-  within_3pct     path quality: over the final block's successful runs, the excess over the optimal
+  within_1pct     path quality: over the final block's successful runs, the excess over the optimal
                   controller from the same poses (paired pose by pose), upper 95 % bound, is below
-                  3 % (measured: about 2 %). Failures are the business of `reaches`: counted at the
-                  step limit here, one collision in 100 runs alone would add about 6 %.
+                  1 % (measured: 0.17 %, upper bound 0.3 %; 1.3 % before the ranked pairs moved the
+                  policy's shift, so a broken shift fails it). Failures are the business of
+                  `reaches`: counted at the step limit here, one collision in 100 runs alone would
+                  add about 6 %.
   beats_examples  the paper's Fig. 4 claim: the final block is significantly better than the
-                  example policy from the same poses (not reproduced; reported, not asserted)
+                  example policy (its nominal gain) from the same poses
   best_gain       issue 10's form of it: after phase one the learned policy is not significantly
                   worse than the example policy at its best gain among the example references the
                   experiment evaluates (example, example@GAIN), same poses (reported, not asserted)
   near_optimal    the paper's claim for phase two: the final block is not significantly worse than
-                  the optimal controller (not reproduced; reported, not asserted)
+                  the optimal controller from the same poses (reported, not asserted: at the edge
+                  after 35 phase-two runs. These sessions, with an evaluation block before training,
+                  measured +0.2 ± 0.2 steps, t = 2.77; the sweep's, without it, +0.0 ± 0.1, p = 0.30;
+                  experiments.pairs_claim asserts it after 60 phase-two runs)
 usage: test_learning_regression.py B21R_EXPERIMENT FIG4_CONFIG"""
 import concurrent.futures
 import json
@@ -39,8 +44,8 @@ import tempfile
 from paired_stats import T95_ONE_SIDED_DF9, T975_DF9, mean, paired, report
 
 SEEDS = list(range(1, 11))
-ASSERTED = {"learns": True, "improves": True, "keeps": True, "reaches": True, "within_3pct": True,
-            "beats_examples": False, "best_gain": False, "near_optimal": False}
+ASSERTED = {"learns": True, "improves": True, "keeps": True, "reaches": True, "within_1pct": True,
+            "beats_examples": True, "best_gain": False, "near_optimal": False}
 
 
 def run(exe, conf, seed, d):
@@ -111,7 +116,7 @@ def main():
     ms = mean(successes)
     results["reaches"] = (ms >= 9.5, "final block: %.1f of 10 poses reached on average" % ms)
     m, t, h = paired(excess, [0.0] * len(excess))
-    results["within_3pct"] = (len(excess) == len(rs) and m + h * T95_ONE_SIDED_DF9 / T975_DF9 < 3.0,
+    results["within_1pct"] = (len(excess) == len(rs) and m + h * T95_ONE_SIDED_DF9 / T975_DF9 < 1.0,
                               "final block, successful runs: excess over optimal from the same poses %+.2f %% ± %.2f %%"
                               % (m, h))
     m, t, h = paired(final, example)

@@ -120,6 +120,16 @@ def main():
             fwtest.fail("b21r-train did not rank the 2 pairs of the phase-two log:\n%s" % out)
         if sections(ranked)[1] != sections(offline)[1]:
             fwtest.fail("the offline learned state differs from the controller's own after phase two (pairs ranked)")
+        # The learned policy's shift and its pair count (controller section, bytes 56-75:
+        # fw/progress.h) are the same
+        # too, moved by the ranked pairs, and B21R_RUN's last record shows it before the last pair.
+        shift_online = struct.unpack_from("<ddI", sections(offline)[0], 56)
+        shift_offline = struct.unpack_from("<ddI", sections(ranked)[0], 56)
+        if shift_online != shift_offline or shift_online[:2] == (0.0, 0.0) or shift_online[2] != 2:
+            fwtest.fail("the learned policy's shift: controller %r, b21r-train %r (expected equal and moved by the "
+                        "pairs)" % (shift_online, shift_offline))
+        if "shift: %.4f rad/s per rad of target angle, %.4f" % shift_online[:2] not in out:
+            fwtest.fail("b21r-train did not report the shift %r:\n%s" % (shift_online, out))
         # An experience log cannot say which runs were pairs: under a configuration that runs pairs
         # (the session's, here given as pair_runs = true: the same learner as auto) the trainer
         # learns them unranked and says so (and the state then differs from the controller's).
@@ -129,8 +139,27 @@ def main():
             fwtest.fail("an experience log of pair runs: expected the warning, got:\n%s" % err2)
         if sections(unranked)[1] == sections(offline)[1]:
             fwtest.fail("unranked pairs gave the ranked state")
+        if (struct.unpack_from("<ddI", sections(unranked)[0], 56)
+                != struct.unpack_from("<ddI", sections(before_two)[0], 56)):
+            fwtest.fail("an experience log moved the shift: it has no pair records to move it with")
+        # --init carries the shift: training on from the controller's checkpoint after phase two
+        # keeps its shift (an experience log has no pairs to move it).
+        carried = os.path.join(d, "carried.ckpt")
+        train(trainer, ["--set", "pair_runs=true", "--init", offline, "--out", carried, explog2])
+        if struct.unpack_from("<ddI", sections(carried)[0], 56) != shift_online:
+            fwtest.fail("b21r-train --init lost the checkpoint's shift %r: wrote %r" %
+                        (shift_online, struct.unpack_from("<ddI", sections(carried)[0], 56)))
+        # A second pass over the full log takes the shift from its records instead of moving it
+        # again, and says so.
+        pairs_twice = os.path.join(d, "pairs-twice.ckpt")
+        out2, _ = train(trainer, ["--init", before_two, "--passes", "2", "--out", pairs_twice, log])
+        if (struct.unpack_from("<ddI", sections(pairs_twice)[0], 56) != shift_online
+                or "follows the log's records" not in out2):
+            fwtest.fail("two passes over the phase-two log: expected the controller's shift %r and the note, got %r:\n%s"
+                        % (shift_online, struct.unpack_from("<ddI", sections(pairs_twice)[0], 56), out2))
         fwtest.note("claim 1, phase two: the trainer ranks the pairs of the full log as the controller did, bit for "
-                    "bit; from an experience log it warns")
+                    "bit, and reaches its shift (%.4f, %.4f, 2 pairs); from an experience log it warns" %
+                    shift_online[:2])
 
         # Several logs, in order: the second pass learns the same data again (twice the updates).
         twice = os.path.join(d, "twice.ckpt")

@@ -7,7 +7,8 @@
 ///  0  8  magic "B21RCKPT"
 ///  8  4  format version
 /// 12  4  header size (48)
-/// 16  8  meta size   M   (controller state: phase, run counters; fw_loop's own encoding)
+/// 16  8  meta size   M   (controller state: phase, run counters, the learned policy's shift;
+///                         fw_loop's own encoding, fw/progress.h)
 /// 24  8  payload size P  (the learner's own versioned, checksummed save format)
 /// 32  4  CRC-32 of meta
 /// 36  4  CRC-32 of payload

@@ -232,6 +232,13 @@ typedef struct fw_config {
   double pair_centring_sigma;      ///< pair_runs: std-dev of its term on (lateral fraction − 0.5) [rad/s]
   double pair_tau_steps;           ///< pair_runs: scale of the weights' response to the steps' difference
   double pair_recency_runs;        ///< pair_runs: imitation fades a point stored N runs ago by e^(−N/this)
+  /// pair_runs: each ranked pair moves the learned policy's shift (fw_pair_ranker_t) by this times
+  /// tanh(d / pair_shift_tau_steps) times the pair's perturbation, toward the faster run; 0 = no
+  /// shift (the ranked runs weigh in the imitation instead)
+  double pair_shift_rate;
+  double pair_shift_tau_steps;     ///< pair_runs: steps' difference d at which the shift's step is 0.76 of the rate's
+  /// pair_runs: the rate falls as K / (K + n) after n pairs moved the shift (0 = constant)
+  double pair_shift_decay_pairs;
   bool pair_safety;                ///< pair_runs: a kinematic rollout vets each perturbed command
   double pair_safety_margin_m;     ///< pair_safety: least predicted skirt-to-wall clearance [m]
   double pair_safety_horizon_s;    ///< pair_safety: rollout length [s]

@@ -111,7 +111,12 @@ typedef struct fw_loop_stats {
   bool last_run_goal;
   int64_t learn_ticks;           ///< ticks that did between-run learning work (replay, checkpoint)
   int64_t checkpoints_submitted; ///< checkpoints handed to the writer (between runs and at shutdown)
-  int32_t pairs_ranked;          ///< pair_runs: pairs ranked into the store (anchor weights)
+  int32_t pairs_ranked;          ///< pair_runs: pairs ranked (into the shift, or the anchor weights)
+  double shift_gain;             ///< pair_runs: the learned policy's shift a (fw_pair_ranker_t)
+  double shift_centring;         ///< and b
+  /// greedy searches whose anchor found every neighbour weighted 0 (HEDGER's anchor_unweighted:
+  /// with the shift, a state only phase two's runs reached; there the imitation copies shifted actions)
+  uint64_t anchor_unweighted;
   /// pair_safety: pair-run commands the filter replaced (the perturbed policy's, or after a
   /// veto the learned policy's with its exploration noise), by the greedy or the recovery law
   int64_t pair_safety_overrides;
@@ -134,27 +139,55 @@ typedef struct fw_loop_stats {
 fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_loop_outputs_t* out, char* err,
                           size_t err_cap);
 
+/// pair_runs: bound on each component of the learned policy's shift (fw_pair_ranker_t): |a| in
+/// rad/s per rad of target angle, |b| in rad/s per corridor width. Above what the corridor needs
+/// (with the falling rate the pairs settle at |a| 1-2, |b| 1.4-2.7 after 50 pairs, seeds 11-20): a
+/// limit on runaway, not a tuning (with a constant rate b reached it once in 50 pairs).
+#define FW_PAIR_SHIFT_MAX 4.0
+
 /// pair_runs: the ranking of pairs as their runs end, kept by the controller (run.c) and by
-/// b21r-train on a log's B21R_RUN records, so that both weigh the same runs alike.
+/// b21r-train on a log's B21R_RUN records, so that both weigh the same runs alike and reach the
+/// same shift. The shift is part of the learned state: the learned policy is HEDGER's greedy
+/// action plus a θ + b (lateral fraction − 0.5) (fw_pair_shift_at), and checkpoints keep (a, b)
+/// and its pair count (fw/progress.h); b21r-train takes all three from each pair record's copy.
 typedef struct fw_pair_ranker {
   bool first_pending;    ///< a pair's first run ended and the pair is not ranked yet
   bool first_goal;       ///< that run reached the goal (and was not corrected by the filter)
   int32_t first_steps;   ///< its steps
   uint32_t first_tag;    ///< its run tag
+  double shift_gain;     ///< the shift's a [rad/s per rad], |a| <= FW_PAIR_SHIFT_MAX
+  double shift_centring; ///< the shift's b [rad/s per corridor width], |b| <= FW_PAIR_SHIFT_MAX
+  uint32_t shift_pairs;  ///< pairs that have moved the shift (pair_shift_decay_pairs)
 } fw_pair_ranker_t;
 
 /// A pair run ended: member 0 or 1 (the run of its pair), aborted (safety stop, shutdown: its
 /// pair starts again), goal = it reached the goal and the safety filter did not correct it,
-/// steps, and tag, the run's tag. Writes the anchor weights to apply between runs into
-/// tags[]/weights[] and returns how many:
+/// steps, tag, the run's tag, and (gain, centring) = the pair's perturbation (g, c: the first run
+/// drove with +, the second with −). Settings from cfg: pair_shift_rate, pair_shift_tau_steps,
+/// pair_tau_steps. Writes the anchor weights to apply between runs into tags[]/weights[] and
+/// returns how many:
 /// - 1 for a first or an aborted run: it weighs 0 (a perturbed run is not imitated unranked);
-/// - 2 when a second run ranks its pair: a run that missed the goal weighs 0 and one that reached
-///   it 2; of two that reached it, the faster weighs 2 / (1 + e^(-d / tau_steps)) and the slower
-///   2 minus that, d = the two runs' difference in steps;
+/// - 2 when a second run ranks its pair. With pair_shift_rate > 0 both runs weigh 0 and the pair
+///   moves the shift: (a, b) += rate · u · (g, c), rate = pair_shift_rate · K / (K + n) after n
+///   pairs (K = pair_shift_decay_pairs; 0: the rate stays), u = tanh(d / pair_shift_tau_steps), d = the
+///   second run's steps minus the first's; u = +1 when only the first reached the goal, −1 when
+///   only the second did, 0 when neither did; each component is then clamped to
+///   ±FW_PAIR_SHIFT_MAX (a non-finite step, from a damaged log record, is not taken). The step is
+///   a finite-difference estimate of the direction that shortens the runs, from two runs with the
+///   same start and the same exploration noise; the falling rate lets the shift settle where the
+///   pairs' noise alone would keep it wandering. With
+///   pair_shift_rate = 0 the shift stays and the ranking goes into the imitation instead: a run
+///   that missed the goal weighs 0 and one that reached it 2; of two that reached it, the faster
+///   weighs 2 / (1 + e^(−d / pair_tau_steps)) and the slower 2 minus that;
 /// - 0 for a second run whose first run never ended here (a log that lost its record).
-/// tau_steps > 0. O(1).
-int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, int32_t member, bool aborted, bool goal, int32_t steps, uint32_t tag,
-                           double tau_steps, uint32_t tags[2], double weights[2]);
+/// O(1).
+int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, int32_t member, bool aborted, bool goal,
+                           int32_t steps, uint32_t tag, double gain, double centring, uint32_t tags[2],
+                           double weights[2]);
+
+/// The learned policy's shift at a corridor state s (s[1] lateral fraction, s[2] target angle
+/// [rad]): a s[2] + b (s[1] − 0.5) [rad/s]. Pure, O(1).
+double fw_pair_shift_at(const fw_pair_ranker_t* r, const double* s);
 
 /// pair_runs: the run tag of a training run with id run_id when the store's current tag is
 /// `current` (run.c; b21r-train uses the same rule): its id while ids run ahead of the tags, else

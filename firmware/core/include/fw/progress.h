@@ -10,8 +10,13 @@
 /// 24  4  phase-one runs                      28  4  phase-two runs
 /// 32  4  evaluation blocks                   36  4  successful phase-one runs
 /// 40  8  their summed steps (IEEE-754 double) 48  4  shortest of them (0 = none)
-/// 52  4  run id + 1 (0 = no run started)     56 40  reserved, 0
+/// 52  4  run id + 1 (0 = no run started)
+/// 56  8  the learned policy's shift a (IEEE-754 double) [rad/s per rad of target angle]
+/// 64  8  its b [rad/s per corridor width]    72  4  pairs that have moved it
+/// 76 20  reserved, 0
 /// ```
+/// The shift (fw_pair_ranker_t, pair_runs) is part of the learned policy, so it travels with the
+/// learned state. Files written before it have zeros there: no shift, the policy they learned.
 /// Decoding validates every field against the ranges below, so a section with a valid CRC but
 /// impossible contents (a bug, or bytes written by something else) is refused like a corrupt
 /// file instead of steering the schedule. Ranges (fw_progress_decode):
@@ -20,8 +25,12 @@
 /// - training runs = phase-one runs + phase-two runs; phase-two runs = 0 in phase 1;
 /// - successful phase-one runs <= phase-one runs; with none, their sum and shortest are 0;
 ///   otherwise the sum is a whole number with shortest × runs <= sum <= runs × INT32_MAX;
-/// - run id + 1 >= training runs (every training run started as a run).
-/// Reserved bytes must be 0 (room for later fields under a new magic).
+/// - run id + 1 >= training runs (every training run started as a run);
+/// - the shift's a and b finite, each within ±FW_PAIR_SHIFT_MAX (fw/loop.h); its pairs in
+///   [0, INT32_MAX].
+/// Reserved bytes must be 0: later fields that read as "none" when 0 (as the shift did) may take
+/// them under the same magic; others need a new magic. A controller older than the shift refuses a
+/// file with one (reserved byte 56 not 0) rather than drive without it.
 ///
 /// Pure functions: no I/O, no allocation, O(1).
 #ifndef FW_PROGRESS_H
@@ -47,6 +56,9 @@ typedef struct fw_progress {
   uint32_t state_dim;               ///< its state dimension
   fw_schedule_progress_t schedule;  ///< schedule progress (fw/schedule.h)
   int32_t run_id;                   ///< last run started, -1 = none
+  double shift_gain;                ///< the learned policy's shift a (fw_pair_ranker_t)
+  double shift_centring;            ///< and b
+  uint32_t shift_pairs;             ///< pairs that have moved it (its step size falls with them)
 } fw_progress_t;
 
 /// Writes p into out[0..FW_PROGRESS_BYTES). Returns FW_PROGRESS_BYTES. Does not validate: a

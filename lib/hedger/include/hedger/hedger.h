@@ -101,18 +101,20 @@
 ///   item).
 /// - Run tags and anchor weights (hedger_set_run_tag, hedger_weight_run, cfg.anchor_recency_runs):
 ///   the caller ranks whole runs and the anchor (and the action range tilted with it) follows the
-///   better ones; the value fits do not see the weights. The firmware's pair_runs: phase-two runs
-///   in pairs from one pose with opposite policy perturbations and the same exploration noise; the
-///   faster run's points weigh 2 / (1 + e^(−d/τ)), τ = 1 step, the slower run's 2 minus that (a run
-///   that missed the goal, or is not yet ranked, 0); runs fade with e^(−age / 150 run tags). Fig. 4
-///   with 100 phase-two runs, seeds 11-20 (chosen on): final block −1.2 ± 0.5 steps against the
-///   same schedule without pairs, the curve falling through phase two (flat without); in a scratch
-///   build without the ranking (every weight 1) the same perturbations gave +34.1 ± 42.7 and 83
-///   failed runs, fading alone +0.2 ± 0.2. Seeds 1-10: docs/RESULTS.md, ablation_pairs. Cost: 8
-///   bytes per stored point; one O(fill) pass per weighted run, between runs. The firmware's
-///   perturbations, not these weights, would end about a third of its phase-two training runs on
-///   a wall; its safety filter (pair_safety) vets every perturbed command, and pair_runs = auto
-///   runs the pairs in the emulated corridor only (docs/LEARNING.md).
+///   better ones; the value fits do not see the weights. The firmware's pair_runs runs phase two
+///   in pairs from one pose with opposite policy perturbations and the same exploration noise. By
+///   default (pair_shift_rate > 0) it learns the ranking outside HEDGER, as a shift added to the
+///   greedy action, and weighs phase two's runs 0 here, so the anchor stays the teachers'
+///   imitation (a neighbourhood of phase-two points only falls back to the kernel weights:
+///   counted in anchor_unweighted). With pair_shift_rate = 0 the ranking comes here instead: the
+///   faster run's points weigh 2 / (1 + e^(−d/τ)), τ = 1 step, the slower run's 2 minus that (a
+///   run that missed the goal, or is not yet ranked, 0); runs fade with e^(−age / 150 run tags).
+///   That moves the anchor only as far as the ranked runs outweigh the older data: Fig. 4 with
+///   100 phase-two runs, seeds 11-20, final block −1.2 ± 0.5 steps against no pairs, while the
+///   shift reaches the optimal controller's level within 20 phase-two runs (docs/LEARNING.md,
+///   docs/RESULTS.md: ablation_pairs, ablation_pair_shift). In a scratch build without the
+///   ranking (every weight 1) the same perturbations gave +34.1 ± 42.7 and 83 failed runs. Cost: 8
+///   bytes per stored point; one O(fill) pass per weighted run, between runs.
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are
@@ -367,6 +369,9 @@ typedef struct hedger_counters_s {
   uint64_t greedy_all_unknown;  ///< ... that found no known action
   uint64_t greedy_state_model;  ///< ... answered by the state model (HEDGER_GREEDY_STATE_MODEL)
   uint64_t greedy_reached;      ///< ... of which with the widened kernel (greedy_reach)
+  /// state-model searches whose neighbours all weighed (nearly) 0 in the anchor (hedger_weight_run,
+  /// anchor_recency_runs), so that the anchor used the plain kernel weights
+  uint64_t anchor_unweighted;
   uint64_t updates;             ///< successful training updates (including replayed ones)
   uint64_t replayed_updates;    ///< updates performed by backward replay
   uint64_t run_overflows;       ///< experiences dropped from a full run buffer (the oldest go first)

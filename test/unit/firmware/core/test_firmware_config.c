@@ -451,6 +451,13 @@ static void test_config_pair_runs_needs_corridor_hedger_state_model(void** state
   assert_int_equal(fw_config_set(&c, "pair_tau_steps", "0", "--set", err, sizeof err), -1);
   assert_non_null(strstr(err, "pair_tau_steps"));
   assert_int_equal(fw_config_set(&c, "pair_recency_runs", "-1", "--set", err, sizeof err), -1);
+  assert_int_equal(fw_config_set(&c, "pair_shift_rate", "-0.5", "--set", err, sizeof err), -1);
+  assert_non_null(strstr(err, "pair_shift_rate"));
+  assert_int_equal(fw_config_set(&c, "pair_shift_rate", "4.5", "--set", err, sizeof err), -1);
+  assert_int_equal(fw_config_set(&c, "pair_shift_tau_steps", "0", "--set", err, sizeof err), -1);
+  assert_non_null(strstr(err, "pair_shift_tau_steps"));
+  assert_int_equal(fw_config_set(&c, "pair_shift_rate", "0", "--set", err, sizeof err), 0);  // the imitation weights
+  assert_true(c.pair_shift_rate == 0.0);
   assert_int_equal(fw_config_set(&c, "pair_gain_sigma", "0.1", "--set", err, sizeof err), 0);
   assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
   assert_int_equal(fw_config_set(&c, "pair_safety_margin_m", "-0.1", "--set", err, sizeof err), -1);

@@ -9,6 +9,7 @@
 
 #include <b21r_test/alloc_counter.h>
 
+#include <math.h>
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -93,6 +94,27 @@ static void test_loop_pair_runs_share_start_and_rank(void** state) {
     for (int i = 0; i < 6; ++i) {
       assert_int_equal(two[i]->pair_member, i % 2);  // B21R_RUN says which run of its pair it was
     }
+    // B21R_RUN carries each pair's perturbation and the shift in force; the shift moves by the
+    // ranker's rule after each pair (fw_pair_ranker_end, tested alone below) and nowhere else.
+    double shift[2] = {0.0, 0.0};
+    for (int p = 0; p < 3; ++p) {
+      const b21r_run_t* a = two[2 * p];
+      const b21r_run_t* b = two[2 * p + 1];
+      assert_true(a->pair_gain == b->pair_gain && a->pair_centring == b->pair_centring);
+      assert_true(a->pair_gain != 0.0 && a->pair_centring != 0.0);
+      assert_true(a->shift_gain == shift[0] && a->shift_centring == shift[1]);
+      assert_true(b->shift_gain == shift[0] && b->shift_centring == shift[1]);
+      const bool ga = a->end_reason == B21R_RUN_T_END_GOAL && !a->pair_vetoed;
+      const bool gb = b->end_reason == B21R_RUN_T_END_GOAL && !b->pair_vetoed;
+      const double u = ga && gb ? tanh((double)(b->steps - a->steps) / c.pair_shift_tau_steps)
+                                : (ga == gb ? 0.0 : (ga ? 1.0 : -1.0));
+      assert_int_equal(a->shift_pairs, p);
+      const double rate = c.pair_shift_rate * c.pair_shift_decay_pairs / (c.pair_shift_decay_pairs + (double)p);
+      shift[0] += rate * u * a->pair_gain;
+      shift[1] += rate * u * a->pair_centring;
+    }
+    assert_true(st.shift_gain == shift[0] && st.shift_centring == shift[1]);
+    assert_true(shift[0] != 0.0 || shift[1] != 0.0);
     for (int p = 0; p < 3; ++p) {
       const b21r_run_t* a = two[2 * p];
       const b21r_run_t* b = two[2 * p + 1];
@@ -118,6 +140,73 @@ static void test_pair_run_tag_always_increases(void** state) {
   assert_int_equal(fw_pair_run_tag(0, 0), 1);
   assert_int_equal(fw_pair_run_tag(-1, 0), 1);
   assert_true(fw_pair_run_tag(3, UINT32_MAX) == UINT32_MAX);
+}
+
+// The ranker's rule for the learned policy's shift: the faster run's side of the perturbation by
+// tanh(d / tau) times the rate, a run that missed the goal loses, two that missed move nothing,
+// the bound holds, both runs weigh 0; with rate 0 the old imitation weights and no shift.
+static void test_pair_ranker_moves_the_shift(void** state) {
+  (void)state;
+  fw_config_t c;
+  fw_config_defaults(&c);
+  assert_true(c.pair_shift_rate == 1.0 && c.pair_shift_tau_steps == 2.0 && c.pair_shift_decay_pairs == 30.0);
+  c.pair_shift_decay_pairs = 0.0;  // a constant rate first; the falling one at the end
+  fw_pair_ranker_t r;
+  memset(&r, 0, sizeof r);
+  uint32_t tags[2];
+  double w[2];
+  // First run (+perturbation) 140 steps, second (−) 142: the first was faster by 2.
+  assert_int_equal(fw_pair_ranker_end(&r, &c, 0, false, true, 140, 7, 0.2, -0.4, tags, w), 1);
+  assert_true(w[0] == 0.0 && tags[0] == 7);
+  assert_int_equal(fw_pair_ranker_end(&r, &c, 1, false, true, 142, 8, 0.2, -0.4, tags, w), 2);
+  assert_true(tags[0] == 7 && tags[1] == 8 && w[0] == 0.0 && w[1] == 0.0);
+  assert_true(fabs(r.shift_gain - 0.2 * tanh(1.0)) < 1e-15 && fabs(r.shift_centring + 0.4 * tanh(1.0)) < 1e-15);
+  const double a1 = r.shift_gain;
+  const double b1 = r.shift_centring;
+  // The first run missed the goal (or the filter corrected it): the second's side, in full.
+  (void)fw_pair_ranker_end(&r, &c, 0, false, false, 300, 9, 0.5, 1.0, tags, w);
+  (void)fw_pair_ranker_end(&r, &c, 1, false, true, 150, 10, 0.5, 1.0, tags, w);
+  assert_true(r.shift_gain == a1 - 0.5 && r.shift_centring == b1 - 1.0);
+  // Both missed: nothing is learned.
+  (void)fw_pair_ranker_end(&r, &c, 0, false, false, 300, 11, 0.5, 1.0, tags, w);
+  (void)fw_pair_ranker_end(&r, &c, 1, false, false, 300, 12, 0.5, 1.0, tags, w);
+  assert_true(r.shift_gain == a1 - 0.5 && r.shift_centring == b1 - 1.0);
+  // A second run without its first (an aborted first run) ranks nothing and moves nothing.
+  (void)fw_pair_ranker_end(&r, &c, 0, true, false, 20, 13, 3.0, 3.0, tags, w);
+  assert_int_equal(fw_pair_ranker_end(&r, &c, 1, false, true, 140, 14, 3.0, 3.0, tags, w), 0);
+  assert_true(r.shift_gain == a1 - 0.5);
+  // The bound: at most FW_PAIR_SHIFT_MAX per component.
+  c.pair_shift_rate = 4.0;
+  for (int i = 0; i < 4; ++i) {
+    (void)fw_pair_ranker_end(&r, &c, 0, false, true, 100, 20U + 2U * (uint32_t)i, 2.0, -2.0, tags, w);
+    (void)fw_pair_ranker_end(&r, &c, 1, false, true, 200, 21U + 2U * (uint32_t)i, 2.0, -2.0, tags, w);
+  }
+  assert_true(r.shift_gain == FW_PAIR_SHIFT_MAX && r.shift_centring == -FW_PAIR_SHIFT_MAX);
+  // Rate 0: the ranking weighs the runs in the imitation and the shift stays.
+  c.pair_shift_rate = 0.0;
+  (void)fw_pair_ranker_end(&r, &c, 0, false, true, 140, 40, 0.2, 0.4, tags, w);
+  (void)fw_pair_ranker_end(&r, &c, 1, false, true, 141, 41, 0.2, 0.4, tags, w);
+  assert_true(fabs(w[0] - 2.0 / (1.0 + exp(-1.0 / c.pair_tau_steps))) < 1e-15 && fabs(w[0] + w[1] - 2.0) < 1e-15);
+  assert_true(r.shift_gain == FW_PAIR_SHIFT_MAX && r.shift_centring == -FW_PAIR_SHIFT_MAX);
+  // The falling rate: after n pairs a pair moves the shift by rate * K / (K + n) of its side.
+  fw_pair_ranker_t q;
+  memset(&q, 0, sizeof q);
+  c.pair_shift_rate = 1.0;
+  c.pair_shift_decay_pairs = 30.0;
+  q.shift_pairs = 90;
+  (void)fw_pair_ranker_end(&q, &c, 0, false, false, 300, 50, 0.4, -0.8, tags, w);
+  (void)fw_pair_ranker_end(&q, &c, 1, false, true, 150, 51, 0.4, -0.8, tags, w);
+  assert_true(fabs(q.shift_gain + 0.4 * 0.25) < 1e-15 && fabs(q.shift_centring - 0.8 * 0.25) < 1e-15);
+  assert_int_equal(q.shift_pairs, 91);
+  // A non-finite perturbation (a damaged log record) moves nothing.
+  (void)fw_pair_ranker_end(&q, &c, 0, false, true, 140, 52, NAN, 0.5, tags, w);
+  (void)fw_pair_ranker_end(&q, &c, 1, false, true, 150, 53, NAN, 0.5, tags, w);
+  assert_true(fabs(q.shift_gain + 0.4 * 0.25) < 1e-15 && fabs(q.shift_centring - 0.8 * 0.25) < 1e-15);
+  // The shift at a state: a * target angle + b * (lateral fraction - 0.5).
+  r.shift_gain = 0.5;
+  r.shift_centring = -2.0;
+  const double s[3] = {5.0, 0.75, 0.2};
+  assert_true(fabs(fw_pair_shift_at(&r, s) - (0.5 * 0.2 - 2.0 * 0.25)) < 1e-15);
 }
 
 // One pair-runs session to its end: its statistics, its phase-two training runs that ended on a
@@ -492,10 +581,53 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
 
   // The good file back: it loads again.
   assert_int_equal(fw_checkpoint_write(c.checkpoint_file, meta, ms, payload, ps, err, sizeof err), 0);
-  free(payload);
   assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
   assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), 1);
   harness_close(&g_h);
+
+  // The learned policy's shift is learned state: a file carrying one (a, b) resumes with it, and
+  // an evaluation of the learned policy drives with it (its B21R_RUN says so, and the actions
+  // differ from those of the same file without the shift); with it out of range the file is refused.
+  uint64_t eval_hash[2];
+  for (int with_shift = 0; with_shift <= 1; ++with_shift) {
+    fw_progress_t gs;
+    assert_int_equal(fw_progress_decode(meta, ms, &gs, NULL, 0), 0);
+    gs.shift_gain = with_shift ? 0.75 : 0.0;
+    gs.shift_centring = with_shift ? -1.25 : 0.0;
+    uint8_t shifted[FW_PROGRESS_BYTES];
+    (void)fw_progress_encode(&gs, shifted);
+    assert_int_equal(fw_checkpoint_write(c.checkpoint_file, shifted, sizeof shifted, payload, ps, err, sizeof err), 0);
+    fw_config_t ce = c;
+    ce.mode = FW_MODE_EVALUATE;
+    ce.evaluate_policy = FW_EVAL_LEARNED;
+    ce.eval_starts = 2;
+    assert_int_equal(harness_open(&g_h, &ce, false, 3), 0);
+    assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), 1);
+    fw_loop_get_stats(g_h.loop, &st);
+    assert_true(st.shift_gain == gs.shift_gain && st.shift_centring == gs.shift_centring);
+    harness_run(&g_h, 100000);
+    fw_loop_get_stats(g_h.loop, &st);
+    assert_true(st.done);
+    assert_int_equal(g_h.runs, 2);
+    for (int i = 0; i < g_h.runs; ++i) {
+      assert_true(g_h.run[i].shift_gain == gs.shift_gain && g_h.run[i].shift_centring == gs.shift_centring);
+    }
+    eval_hash[with_shift] = g_h.exp_hash;
+    harness_close(&g_h);
+    if (with_shift) {
+      gs.shift_gain = FW_PAIR_SHIFT_MAX * 1.5;
+      (void)fw_progress_encode(&gs, shifted);
+      assert_int_equal(fw_checkpoint_write(c.checkpoint_file, shifted, sizeof shifted, payload, ps, err, sizeof err),
+                       0);
+      assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
+      assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), -1);
+      assert_non_null(strstr(err, "learned policy shift"));
+      harness_close(&g_h);
+    }
+  }
+  assert_true(eval_hash[0] != eval_hash[1]);
+  assert_int_equal(fw_checkpoint_write(c.checkpoint_file, meta, ms, payload, ps, err, sizeof err), 0);
+  free(payload);
 
   // Learned with the executed rotation in the state (the default), loaded without it: refused
   // with the setting that continues it, and nothing loaded.
@@ -540,6 +672,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_loop_learns_corridor_reaches_goal_from_all_poses),
       cmocka_unit_test(test_pair_run_tag_always_increases),
+      cmocka_unit_test(test_pair_ranker_moves_the_shift),
       cmocka_unit_test(test_loop_pair_runs_share_start_and_rank),
       cmocka_unit_test(test_loop_pair_runs_auto_off_where_it_does_not_apply),
       cmocka_unit_test(test_loop_pair_safety_keeps_pair_runs_off_the_walls),

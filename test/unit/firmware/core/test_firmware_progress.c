@@ -27,6 +27,9 @@ static fw_progress_t sample(void) {
   p.schedule.example_steps_sum = 27.0 * 130.0 + 17.0;
   p.schedule.best_example_steps = 126;
   p.run_id = 130;
+  p.shift_gain = 0.8125;
+  p.shift_centring = -1.5;
+  p.shift_pairs = 17;
   return p;
 }
 
@@ -64,7 +67,11 @@ static void test_progress_round_trip_and_layout(void** state) {
   assert_int_equal(b[16], 2);   // phase
   assert_int_equal(b[20], 42);  // training runs
   assert_int_equal(b[52], 131); // run id + 1
-  for (size_t i = 56; i < FW_PROGRESS_BYTES; ++i) {
+  double shift[2];
+  memcpy(shift, b + 56, sizeof shift);  // little-endian doubles (the hosts this runs on)
+  assert_true(shift[0] == 0.8125 && shift[1] == -1.5);
+  assert_int_equal(b[72], 17);  // pairs that moved the shift
+  for (size_t i = 76; i < FW_PROGRESS_BYTES; ++i) {
     assert_int_equal(b[i], 0);
   }
   fw_progress_t q;
@@ -111,6 +118,18 @@ static void test_progress_out_of_range_refused(void** state) {
   q = p;
   q.schedule.example_runs = 0;
   expect_refused(&q, 8, 1, "phase-one statistics");  // no successful run but a sum and a shortest
+  // The learned policy's shift: finite and within +-FW_PAIR_SHIFT_MAX (an older file's zeros are
+  // no shift, tested by the fresh round trip above).
+  const double bad_shift[] = {NAN, INFINITY, -INFINITY, 4.0000001, -4.5};
+  for (size_t i = 0; i < sizeof bad_shift / sizeof bad_shift[0]; ++i) {
+    q = p;
+    q.shift_gain = bad_shift[i];
+    expect_refused(&q, 8, 1, "learned policy shift");
+    q = p;
+    q.shift_centring = bad_shift[i];
+    expect_refused(&q, 8, 1, "learned policy shift");
+  }
+  expect_refused(&p, 72, 0x80000000U, "pairs that moved the shift");
   // Reserved bytes, size and magic.
   uint8_t b[FW_PROGRESS_BYTES];
   (void)fw_progress_encode(&p, b);
@@ -129,6 +148,8 @@ static void test_progress_out_of_range_refused(void** state) {
   q = p;
   q.schedule.eval_blocks = INT32_MAX;
   q.run_id = INT32_MAX - 1;
+  q.shift_gain = 4.0;
+  q.shift_centring = -4.0;
   (void)fw_progress_encode(&q, b);
   assert_int_equal(fw_progress_decode(b, sizeof b, &out, why, sizeof why), 0);
   assert_int_equal(out.run_id, INT32_MAX - 1);
