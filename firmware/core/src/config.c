@@ -323,7 +323,7 @@ static const key_desc_t k_keys[] = {
    "pair_runs with pair_shift_rate = 0: the faster run's points weigh 2 / (1 + exp(-d / pair_tau_steps)), the "
    "slower run's 2 minus that, d = the two runs' difference in steps (a failed run counts at the step limit)"},
   {NULL, "pair_recency_runs", KIND_DOUBLE, OFF(pair_recency_runs), 0, 1e6, false, false, NULL, "150",
-   "pair_runs: in that imitation a point stored N runs ago (evaluation runs counted) weighs exp(-N / "
+   "pair_runs: in the imitation (the anchor) a point stored N runs ago (evaluation runs counted) weighs exp(-N / "
    "pair_recency_runs), in both phases (0 = no fading)"},
   {NULL, "pair_safety", KIND_BOOL, OFF(pair_safety), 0, 0, false, false, NULL, "true",
    "pair_runs: a safety filter vets every perturbed command before it is sent: a kinematic rollout (the command "

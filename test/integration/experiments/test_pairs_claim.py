@@ -15,11 +15,11 @@ Claims, each printed with its numbers; ASSERTED ones fail the test when they do 
   falls           with pair_runs the final block is significantly shorter than the last phase-one
                   block (the curve falls in phase two; without pairs it stays flat)
   reaches         the final block with pair_runs reaches at least 9.5 of 10 poses on average
-  ranked          phase two was driven by ranked pair runs: every pair was ranked, and at least
+  ranked          (the shift variant) phase two was driven by ranked pair runs: every pair was ranked, and at least
                   95 % of phase-two training steps are the learned policy's (with the pair's
                   perturbation: source exploration, or after a safety correction without it:
                   greedy); the safety filter's recovery law and the advisor drive the rest
-  safe            the safety filter keeps the perturbed runs off the walls: no phase-two training
+  safe            (the shift variant) the safety filter keeps the perturbed runs off the walls: no phase-two training
                   run with pairs ends in a collision (without pairs the greedy policy's own runs
                   hit a wall now and then: printed)
   shift           the shift beats the imitation weights: the final block with the shift is
