@@ -2,7 +2,6 @@
 // libFuzzer target: the checkpoint's controller section (fw/progress.h). Every accepted section
 // satisfies the documented ranges and re-encodes to the same bytes; every refusal has a reason.
 #include "fw/config.h"
-#include "fw/loop.h"
 #include "fw/progress.h"
 #include "fuzz_util.h"
 
@@ -28,9 +27,9 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   FUZZ_CHECK(isfinite(g->example_steps_sum) && g->example_steps_sum >= 0.0);
   FUZZ_CHECK(g->best_example_steps >= 0);
   FUZZ_CHECK(p.run_id >= -1 && (int64_t)p.run_id + 1 >= g->training_runs);
-  FUZZ_CHECK(isfinite(p.shift_gain) && fabs(p.shift_gain) <= FW_PAIR_SHIFT_MAX);
-  FUZZ_CHECK(isfinite(p.shift_centring) && fabs(p.shift_centring) <= FW_PAIR_SHIFT_MAX);
-  FUZZ_CHECK(p.shift_pairs <= (uint32_t)INT32_MAX);
+  FUZZ_CHECK(isfinite(p.shift.gain) && fabs(p.shift.gain) <= FW_PAIR_SHIFT_MAX);
+  FUZZ_CHECK(isfinite(p.shift.centring) && fabs(p.shift.centring) <= FW_PAIR_SHIFT_MAX);
+  FUZZ_CHECK(p.shift.pairs <= (uint32_t)INT32_MAX);
   uint8_t again[FW_PROGRESS_BYTES];
   FUZZ_CHECK(fw_progress_encode(&p, again) == FW_PROGRESS_BYTES);
   FUZZ_CHECK(memcmp(again, data, FW_PROGRESS_BYTES) == 0);

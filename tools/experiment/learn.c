@@ -402,8 +402,8 @@ static void write_learning(json_writer_t* w, const session_t* S, double dt_s) {
   json_int(w, "pair_runs_missed", S->final.pair_runs_missed);
   json_int(w, "pair_safety_short", S->final.pair_safety_short);
   json_int(w, "pair_safety_held", S->final.pair_safety_held);
-  json_num(w, "shift_gain", S->final.shift_gain);
-  json_num(w, "shift_centring", S->final.shift_centring);
+  json_num(w, "shift_gain", S->final.shift.gain);
+  json_num(w, "shift_centring", S->final.shift.centring);
   json_int(w, "anchor_unweighted", (int64_t)S->final.anchor_unweighted);
   json_end_object(w);
   char hex[24];

@@ -161,7 +161,7 @@ int main(int argc, char** argv) {
     if (s.pairs_ranked > 0) {
       printf("b21r-train: %llu pairs of phase-two runs ranked from B21R_RUN (pair_runs); the learned policy's "
              "shift: %.4f rad/s per rad of target angle, %.4f rad/s per corridor width\n",
-             (unsigned long long)s.pairs_ranked, s.shift_gain, s.shift_centring);
+             (unsigned long long)s.pairs_ranked, s.shift.gain, s.shift.centring);
     }
     if (s.phase_two_unranked > 0) {
       fprintf(stderr,

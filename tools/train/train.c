@@ -98,8 +98,7 @@ hedger_t* trainer_hedger(trainer_t* t) { return t->hedger; }
 
 train_stats_t trainer_stats(const trainer_t* t) {
   train_stats_t s = t->stats;
-  s.shift_gain = t->ranker.shift_gain;
-  s.shift_centring = t->ranker.shift_centring;
+  s.shift = t->ranker.shift;
   return s;
 }
 
@@ -129,9 +128,7 @@ int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t er
       fw_errfmt(err, err_cap, "%s is corrupt (controller section: %s); give a checkpoint the controller or "
           "b21r-train wrote", path, why);
     } else if ((hs = hedger_load(t->hedger, payload, payload_size)) == HEDGER_OK) {
-      t->ranker.shift_gain = g.shift_gain;
-      t->ranker.shift_centring = g.shift_centring;
-      t->ranker.shift_pairs = g.shift_pairs;
+      t->ranker.shift = g.shift;
       rc = 0;
     } else {
       fw_errfmt(err, err_cap,
@@ -229,20 +226,21 @@ static void rank_pair_run(trainer_t* t, const b21r_run_t* r) {
   end_run(t);
   // The pair's perturbation and the shift in force come from the log: a record with values the
   // controller cannot have written (non-finite, or a shift beyond its bound) ranks nothing.
-  if (!isfinite(r->pair_gain) || !isfinite(r->pair_centring) || !(fabs(r->shift_gain) <= FW_PAIR_SHIFT_MAX) ||
-      !(fabs(r->shift_centring) <= FW_PAIR_SHIFT_MAX)) {
+  if (!isfinite(r->pair_gain) || !isfinite(r->pair_centring) ||
+      !fw_pair_shift_valid(r->shift_gain, r->shift_centring)) {
     t->stats.run_records_invalid++;
     return;
   }
   // The shift the controller drove with is the log's, exactly: the trainer takes it (another
   // session's log, a second pass over the same log or an --init that already holds these pairs
   // would otherwise move it again) and counts where its own differed.
-  if (differs(r->shift_gain, t->ranker.shift_gain) || differs(r->shift_centring, t->ranker.shift_centring) ||
-      r->shift_pairs < 0 || (uint32_t)r->shift_pairs != t->ranker.shift_pairs) {
+  fw_pair_shift_t* shift = &t->ranker.shift;
+  if (differs(r->shift_gain, shift->gain) || differs(r->shift_centring, shift->centring) || r->shift_pairs < 0 ||
+      (uint32_t)r->shift_pairs != shift->pairs) {
     t->stats.shift_taken_from_log++;
-    t->ranker.shift_gain = r->shift_gain;
-    t->ranker.shift_centring = r->shift_centring;
-    t->ranker.shift_pairs = r->shift_pairs > 0 ? (uint32_t)r->shift_pairs : 0U;
+    shift->gain = r->shift_gain;
+    shift->centring = r->shift_centring;
+    shift->pairs = r->shift_pairs > 0 ? (uint32_t)r->shift_pairs : 0U;
   }
   const bool aborted = r->end_reason == B21R_RUN_T_END_SAFETY_STOP || r->end_reason == B21R_RUN_T_END_SHUTDOWN;
   const bool goal = r->end_reason == B21R_RUN_T_END_GOAL && !r->pair_vetoed;
@@ -485,9 +483,7 @@ int trainer_write_checkpoint(trainer_t* t, const char* path, bool overwrite, cha
     fw_errfmt(err, err_cap, "%s: the controller's section of the checkpoint is invalid: %s", path, why);
     return -1;
   }
-  g.shift_gain = t->ranker.shift_gain;
-  g.shift_centring = t->ranker.shift_centring;
-  g.shift_pairs = t->ranker.shift_pairs;
+  g.shift = t->ranker.shift;
   (void)fw_progress_encode(&g, meta);
   const size_t cap = hedger_serialized_size(t->hedger);
   void* payload = malloc(cap);

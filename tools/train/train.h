@@ -22,6 +22,7 @@
 #define B21R_TOOLS_TRAIN_H
 
 #include <fw/config.h>
+#include <fw/progress.h>
 #include <hedger/hedger.h>
 
 #include <stdbool.h>
@@ -68,8 +69,7 @@ typedef struct train_stats {
   /// logs of different sessions, a second pass, an --init that already held the log's pairs
   uint64_t shift_taken_from_log;
   double seconds;             ///< wall time spent reading and training
-  double shift_gain;          ///< the learned policy's shift a after training (fw_pair_ranker_t)
-  double shift_centring;      ///< and b; both go into the checkpoint written
+  fw_pair_shift_t shift;      ///< the learned policy's shift after training; it goes into the checkpoint written
 } train_stats_t;
 
 typedef struct trainer trainer_t;

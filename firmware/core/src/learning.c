@@ -98,8 +98,7 @@ void fw_learning_config(const fw_loop_t* L, hedger_config_t* hc) {
 static size_t encode_meta(const fw_loop_t* L, uint8_t* p) {
   const fw_progress_t g = {
       .task = L->cfg.task, .state_dim = L->state_dim, .schedule = L->sched.p, .run_id = L->run_id,
-      .shift_gain = L->pair_ranker.shift_gain, .shift_centring = L->pair_ranker.shift_centring,
-      .shift_pairs = L->pair_ranker.shift_pairs};
+      .shift = L->pair_ranker.shift};
   return fw_progress_encode(&g, p);
 }
 
@@ -218,9 +217,7 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
   const fw_schedule_config_t sc = L->sched.cfg;  // a copy: init clears the schedule first
   fw_schedule_init(&L->sched, &sc, &g.schedule);
   L->run_id = g.run_id;
-  L->pair_ranker.shift_gain = g.shift_gain;  // the learned policy's shift goes with its state
-  L->pair_ranker.shift_centring = g.shift_centring;
-  L->pair_ranker.shift_pairs = g.shift_pairs;
+  L->pair_ranker.shift = g.shift;  // the learned policy's shift goes with its state
   return 1;
 }
 

@@ -696,8 +696,7 @@ void fw_loop_get_stats(const fw_loop_t* L, fw_loop_stats_t* out) {
   out->learn_ticks = L->learn_ticks;
   out->checkpoints_submitted = L->checkpoints_submitted;
   out->pairs_ranked = L->pairs_ranked;
-  out->shift_gain = L->pair_ranker.shift_gain;
-  out->shift_centring = L->pair_ranker.shift_centring;
+  out->shift = L->pair_ranker.shift;
   out->anchor_unweighted = L->learner.hedger != NULL ? hedger_counters(L->learner.hedger)->anchor_unweighted : 0U;
   out->pair_safety_overrides = L->pair_safety_overrides;
   out->pair_safety_short = L->pair_safety_short;

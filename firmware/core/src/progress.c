@@ -3,7 +3,6 @@
 #include "fw/progress.h"
 
 #include "fw/config.h"
-#include "fw/loop.h"
 #include "le_bytes.h"
 #include "fw/errfmt.h"
 
@@ -32,10 +31,14 @@ size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]
   fw_put_f64(out + 40, g->example_steps_sum);
   fw_put_u32(out + 48, (uint32_t)g->best_example_steps);
   fw_put_u32(out + 52, (uint32_t)p->run_id + 1U);
-  fw_put_f64(out + 56, p->shift_gain);
-  fw_put_f64(out + 64, p->shift_centring);
-  fw_put_u32(out + 72, p->shift_pairs);
+  fw_put_f64(out + 56, p->shift.gain);
+  fw_put_f64(out + 64, p->shift.centring);
+  fw_put_u32(out + 72, p->shift.pairs);
   return FW_PROGRESS_BYTES;
+}
+
+bool fw_pair_shift_valid(double gain, double centring) {
+  return fabs(gain) <= FW_PAIR_SHIFT_MAX && fabs(centring) <= FW_PAIR_SHIFT_MAX;  // false for NaN too
 }
 
 static bool is_zero(double x) { return x >= 0.0 && x <= 0.0; }
@@ -127,12 +130,12 @@ int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why
     return -1;
   }
   p.run_id = run_id_plus_1 - 1;
-  p.shift_gain = fw_get_f64(b + 56);
-  p.shift_centring = fw_get_f64(b + 64);
-  p.shift_pairs = (uint32_t)shift_pairs;
-  if (!(fabs(p.shift_gain) <= FW_PAIR_SHIFT_MAX) || !(fabs(p.shift_centring) <= FW_PAIR_SHIFT_MAX)) {
-    fw_errfmt(why, cap, "learned policy shift (%.17g, %.17g), expected finite values within +-%g", p.shift_gain,
-        p.shift_centring, FW_PAIR_SHIFT_MAX);
+  p.shift.gain = fw_get_f64(b + 56);
+  p.shift.centring = fw_get_f64(b + 64);
+  p.shift.pairs = (uint32_t)shift_pairs;
+  if (!fw_pair_shift_valid(p.shift.gain, p.shift.centring)) {
+    fw_errfmt(why, cap, "learned policy shift (%.17g, %.17g), expected finite values within +-%g", p.shift.gain,
+        p.shift.centring, FW_PAIR_SHIFT_MAX);
     return -1;
   }
   *out = p;

@@ -148,13 +148,14 @@ int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, int32_t 
       u = r->first_goal ? 1.0 : -1.0;
     }
     const double k = cfg->pair_shift_decay_pairs;
-    const double rate = k > 0.0 ? cfg->pair_shift_rate * k / (k + (double)r->shift_pairs) : cfg->pair_shift_rate;
-    r->shift_pairs += r->shift_pairs < UINT32_MAX ? 1U : 0U;
+    fw_pair_shift_t* sh = &r->shift;
+    const double rate = k > 0.0 ? cfg->pair_shift_rate * k / (k + (double)sh->pairs) : cfg->pair_shift_rate;
+    sh->pairs += sh->pairs < UINT32_MAX ? 1U : 0U;
     const double step_gain = rate * u * gain;
     const double step_centring = rate * u * centring;
     if (isfinite(step_gain) && isfinite(step_centring)) {  // (a damaged log's record: no step)
-      r->shift_gain = fmin(FW_PAIR_SHIFT_MAX, fmax(-FW_PAIR_SHIFT_MAX, r->shift_gain + step_gain));
-      r->shift_centring = fmin(FW_PAIR_SHIFT_MAX, fmax(-FW_PAIR_SHIFT_MAX, r->shift_centring + step_centring));
+      sh->gain = fmin(FW_PAIR_SHIFT_MAX, fmax(-FW_PAIR_SHIFT_MAX, sh->gain + step_gain));
+      sh->centring = fmin(FW_PAIR_SHIFT_MAX, fmax(-FW_PAIR_SHIFT_MAX, sh->centring + step_centring));
     }
     return 2;
   }
@@ -168,7 +169,7 @@ int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, int32_t 
 }
 
 double fw_pair_shift_at(const fw_pair_ranker_t* r, const double* s) {
-  return r->shift_gain * s[2] + r->shift_centring * (s[1] - 0.5);
+  return r->shift.gain * s[2] + r->shift.centring * (s[1] - 0.5);
 }
 
 // pair_runs: the run under way ended. A perturbed run is not imitated until its pair is ranked:
@@ -373,10 +374,10 @@ static void record_run_end(fw_loop_t* L, int8_t end_reason, int32_t stop_reason,
   r->pair_vetoed = L->pair_run_vetoed;
   r->pair_gain = L->pair_member >= 0 ? L->pair_gain : 0.0;
   r->pair_centring = L->pair_member >= 0 ? L->pair_centring : 0.0;
-  r->shift_gain = L->pair_ranker.shift_gain;  // pair_finish_run, which may move it, comes after
-  r->shift_centring = L->pair_ranker.shift_centring;
-  r->shift_pairs = (int32_t)(L->pair_ranker.shift_pairs <= (uint32_t)INT32_MAX ? L->pair_ranker.shift_pairs
-                                                                                : (uint32_t)INT32_MAX);
+  const fw_pair_shift_t* shift = &L->pair_ranker.shift;  // pair_finish_run, which may move it, comes after
+  r->shift_gain = shift->gain;
+  r->shift_centring = shift->centring;
+  r->shift_pairs = (int32_t)(shift->pairs <= (uint32_t)INT32_MAX ? shift->pairs : (uint32_t)INT32_MAX);
   L->run_end_ready = true;
 }
 

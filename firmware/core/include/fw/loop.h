@@ -42,6 +42,7 @@
 #include "fw/checkpoint.h"
 #include "fw/config.h"
 #include "fw/io.h"
+#include "fw/progress.h"
 #include "fw/publisher.h"
 #include "fw/pubq.h"
 #include "fw/safety.h"
@@ -112,8 +113,7 @@ typedef struct fw_loop_stats {
   int64_t learn_ticks;           ///< ticks that did between-run learning work (replay, checkpoint)
   int64_t checkpoints_submitted; ///< checkpoints handed to the writer (between runs and at shutdown)
   int32_t pairs_ranked;          ///< pair_runs: pairs ranked (into the shift, or the anchor weights)
-  double shift_gain;             ///< pair_runs: the learned policy's shift a (fw_pair_ranker_t)
-  double shift_centring;         ///< and b
+  fw_pair_shift_t shift;         ///< pair_runs: the learned policy's shift (fw_pair_ranker_t)
   /// greedy searches whose anchor found every neighbour weighted 0 (HEDGER's anchor_unweighted:
   /// with the shift, a state only phase two's runs reached; there the imitation copies shifted actions)
   uint64_t anchor_unweighted;
@@ -139,12 +139,6 @@ typedef struct fw_loop_stats {
 fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_loop_outputs_t* out, char* err,
                           size_t err_cap);
 
-/// pair_runs: bound on each component of the learned policy's shift (fw_pair_ranker_t): |a| in
-/// rad/s per rad of target angle, |b| in rad/s per corridor width. Above what the corridor needs
-/// (with the falling rate the pairs settle at |a| 1-2, |b| 1.4-2.7 after 50 pairs, seeds 11-20): a
-/// limit on runaway, not a tuning (with a constant rate b reached it once in 50 pairs).
-#define FW_PAIR_SHIFT_MAX 4.0
-
 /// pair_runs: the ranking of pairs as their runs end, kept by the controller (run.c) and by
 /// b21r-train on a log's B21R_RUN records, so that both weigh the same runs alike and reach the
 /// same shift. The shift is part of the learned state: the learned policy is HEDGER's greedy
@@ -155,9 +149,7 @@ typedef struct fw_pair_ranker {
   bool first_goal;       ///< that run reached the goal (and was not corrected by the filter)
   int32_t first_steps;   ///< its steps
   uint32_t first_tag;    ///< its run tag
-  double shift_gain;     ///< the shift's a [rad/s per rad], |a| <= FW_PAIR_SHIFT_MAX
-  double shift_centring; ///< the shift's b [rad/s per corridor width], |b| <= FW_PAIR_SHIFT_MAX
-  uint32_t shift_pairs;  ///< pairs that have moved the shift (pair_shift_decay_pairs)
+  fw_pair_shift_t shift; ///< the learned policy's shift (fw/progress.h)
 } fw_pair_ranker_t;
 
 /// A pair run ended: member 0 or 1 (the run of its pair), aborted (safety stop, shutdown: its

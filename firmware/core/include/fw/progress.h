@@ -26,8 +26,8 @@
 /// - successful phase-one runs <= phase-one runs; with none, their sum and shortest are 0;
 ///   otherwise the sum is a whole number with shortest × runs <= sum <= runs × INT32_MAX;
 /// - run id + 1 >= training runs (every training run started as a run);
-/// - the shift's a and b finite, each within ±FW_PAIR_SHIFT_MAX (fw/loop.h); its pairs in
-///   [0, INT32_MAX].
+/// - the shift's a and b finite, each within ±FW_PAIR_SHIFT_MAX (fw_pair_shift_valid); its pairs
+///   in [0, INT32_MAX].
 /// Reserved bytes must be 0: later fields that read as "none" when 0 (as the shift did) may take
 /// them under the same magic; others need a new magic. A controller older than the shift refuses a
 /// file with one (reserved byte 56 not 0) rather than drive without it.
@@ -38,6 +38,7 @@
 
 #include "fw/schedule.h"
 
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -50,15 +51,32 @@ extern "C" {
 /// Capacity of fw_progress_decode()'s reason text, including the NUL.
 #define FW_PROGRESS_WHY_MAX 160U
 
+/// pair_runs: bound on each component of the learned policy's shift: |a| in rad/s per rad of
+/// target angle, |b| in rad/s per corridor width. Above what the corridor needs (with the falling
+/// rate the pairs settle at |a| 1-2, |b| 1.4-2.7 after 50 pairs, seeds 11-20): a limit on runaway,
+/// not a tuning (with a constant rate b reached it once in 50 pairs).
+#define FW_PAIR_SHIFT_MAX 4.0
+
+/// pair_runs: the learned policy's shift, moved by the ranked pairs (fw_pair_ranker_t, fw/loop.h)
+/// and kept by checkpoints (here, because this section carries it): the learned policy is HEDGER's
+/// greedy action plus gain θ + centring (lateral fraction − 0.5) [rad/s].
+typedef struct fw_pair_shift {
+  double gain;       ///< a [rad/s per rad], |a| <= FW_PAIR_SHIFT_MAX
+  double centring;   ///< b [rad/s per corridor width], |b| <= FW_PAIR_SHIFT_MAX
+  uint32_t pairs;    ///< pairs that have moved it (its step size falls with them: pair_shift_decay_pairs)
+} fw_pair_shift_t;
+
+/// True when a and b are finite and within ±FW_PAIR_SHIFT_MAX (a shift the controller can have
+/// learned). Pure, O(1).
+bool fw_pair_shift_valid(double gain, double centring);
+
 /// What a checkpoint records besides the learned state.
 typedef struct fw_progress {
   int32_t task;                     ///< fw_task_t the learned state belongs to
   uint32_t state_dim;               ///< its state dimension
   fw_schedule_progress_t schedule;  ///< schedule progress (fw/schedule.h)
   int32_t run_id;                   ///< last run started, -1 = none
-  double shift_gain;                ///< the learned policy's shift a (fw_pair_ranker_t)
-  double shift_centring;            ///< and b
-  uint32_t shift_pairs;             ///< pairs that have moved it (its step size falls with them)
+  fw_pair_shift_t shift;            ///< the learned policy's shift
 } fw_progress_t;
 
 /// Writes p into out[0..FW_PROGRESS_BYTES). Returns FW_PROGRESS_BYTES. Does not validate: a

@@ -387,6 +387,11 @@ static void test_config_validate_cross_key_rules(void** state) {
   assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
 }
 
+// One key each that takes a configuration outside the pairs: the corridor task, HEDGER and its
+// state-model greedy search are what pair_runs needs.
+static const char* const k_outside_pairs[3][2] = {
+    {"task", "obstacles"}, {"learner", "tabular"}, {"hedger_greedy_method", "per_action"}};
+
 // pair_runs = auto (the default) turns the pairs on only where they were measured to help: the
 // corridor with HEDGER's state-model search in the emulator. Anywhere else it is off, silently:
 // no combination of keys is refused because of it, the robot's gates included. The learner's
@@ -409,10 +414,9 @@ static void test_config_pair_runs_auto_only_in_the_emulated_corridor(void** stat
   assert_int_equal(fw_config_set(&c, "emulator_control", "/tmp/sim.sock", "--set", err, sizeof err), 0);
   assert_true(fw_config_pair_runs_active(&c));
   assert_int_equal(fw_config_validate_program(&c, err, sizeof err), 0);
-  const char* elsewhere[3][2] = {{"task", "obstacles"}, {"learner", "tabular"}, {"hedger_greedy_method", "per_action"}};
   for (int i = 0; i < 3; ++i) {
     fw_config_t d = c;
-    assert_int_equal(fw_config_set(&d, elsewhere[i][0], elsewhere[i][1], "--set", err, sizeof err), 0);
+    assert_int_equal(fw_config_set(&d, k_outside_pairs[i][0], k_outside_pairs[i][1], "--set", err, sizeof err), 0);
     assert_false(fw_config_pair_runs_active(&d));
     assert_false(fw_config_pair_learner(&d));
     assert_int_equal(fw_config_validate(&d, err, sizeof err), 0);
@@ -427,8 +431,8 @@ static void test_config_pair_runs_auto_only_in_the_emulated_corridor(void** stat
 }
 
 // pair_runs = true needs the corridor (its perturbation uses the target angle and lateral
-// fraction), HEDGER and the state-model greedy search (the weights steer that search's
-// imitation): each other combination is refused naming pair_runs, where it was set, and the key
+// fraction), HEDGER and the state-model greedy search (the pairs steer that search's policy):
+// each other combination is refused naming pair_runs, where it was set, and the key
 // in the way.
 static void test_config_pair_runs_needs_corridor_hedger_state_model(void** state) {
   (void)state;
@@ -438,10 +442,10 @@ static void test_config_pair_runs_needs_corridor_hedger_state_model(void** state
   assert_int_equal(fw_config_set(&c, "pair_runs", "true", "robot.conf:3", err, sizeof err), 0);
   assert_true(fw_config_pair_runs_active(&c));
   assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
-  const char* blockers[3][2] = {{"task", "obstacles"}, {"learner", "tabular"}, {"hedger_greedy_method", "per_action"}};
   for (int i = 0; i < 3; ++i) {
     fw_config_t d = c;
-    assert_int_equal(fw_config_set(&d, blockers[i][0], blockers[i][1], "robot.conf:9", err, sizeof err), 0);
+    assert_int_equal(fw_config_set(&d, k_outside_pairs[i][0], k_outside_pairs[i][1], "robot.conf:9", err, sizeof err),
+                     0);
     assert_int_equal(fw_config_validate(&d, err, sizeof err), -1);
     assert_non_null(strstr(err, "robot.conf:3: pair_runs needs"));
     assert_non_null(strstr(err, "set at robot.conf:9"));

@@ -113,7 +113,7 @@ static void test_loop_pair_runs_share_start_and_rank(void** state) {
       shift[0] += rate * u * a->pair_gain;
       shift[1] += rate * u * a->pair_centring;
     }
-    assert_true(st.shift_gain == shift[0] && st.shift_centring == shift[1]);
+    assert_true(st.shift.gain == shift[0] && st.shift.centring == shift[1]);
     assert_true(shift[0] != 0.0 || shift[1] != 0.0);
     for (int p = 0; p < 3; ++p) {
       const b21r_run_t* a = two[2 * p];
@@ -160,51 +160,51 @@ static void test_pair_ranker_moves_the_shift(void** state) {
   assert_true(w[0] == 0.0 && tags[0] == 7);
   assert_int_equal(fw_pair_ranker_end(&r, &c, 1, false, true, 142, 8, 0.2, -0.4, tags, w), 2);
   assert_true(tags[0] == 7 && tags[1] == 8 && w[0] == 0.0 && w[1] == 0.0);
-  assert_true(fabs(r.shift_gain - 0.2 * tanh(1.0)) < 1e-15 && fabs(r.shift_centring + 0.4 * tanh(1.0)) < 1e-15);
-  const double a1 = r.shift_gain;
-  const double b1 = r.shift_centring;
+  assert_true(fabs(r.shift.gain - 0.2 * tanh(1.0)) < 1e-15 && fabs(r.shift.centring + 0.4 * tanh(1.0)) < 1e-15);
+  const double a1 = r.shift.gain;
+  const double b1 = r.shift.centring;
   // The first run missed the goal (or the filter corrected it): the second's side, in full.
   (void)fw_pair_ranker_end(&r, &c, 0, false, false, 300, 9, 0.5, 1.0, tags, w);
   (void)fw_pair_ranker_end(&r, &c, 1, false, true, 150, 10, 0.5, 1.0, tags, w);
-  assert_true(r.shift_gain == a1 - 0.5 && r.shift_centring == b1 - 1.0);
+  assert_true(r.shift.gain == a1 - 0.5 && r.shift.centring == b1 - 1.0);
   // Both missed: nothing is learned.
   (void)fw_pair_ranker_end(&r, &c, 0, false, false, 300, 11, 0.5, 1.0, tags, w);
   (void)fw_pair_ranker_end(&r, &c, 1, false, false, 300, 12, 0.5, 1.0, tags, w);
-  assert_true(r.shift_gain == a1 - 0.5 && r.shift_centring == b1 - 1.0);
+  assert_true(r.shift.gain == a1 - 0.5 && r.shift.centring == b1 - 1.0);
   // A second run without its first (an aborted first run) ranks nothing and moves nothing.
   (void)fw_pair_ranker_end(&r, &c, 0, true, false, 20, 13, 3.0, 3.0, tags, w);
   assert_int_equal(fw_pair_ranker_end(&r, &c, 1, false, true, 140, 14, 3.0, 3.0, tags, w), 0);
-  assert_true(r.shift_gain == a1 - 0.5);
+  assert_true(r.shift.gain == a1 - 0.5);
   // The bound: at most FW_PAIR_SHIFT_MAX per component.
   c.pair_shift_rate = 4.0;
   for (int i = 0; i < 4; ++i) {
     (void)fw_pair_ranker_end(&r, &c, 0, false, true, 100, 20U + 2U * (uint32_t)i, 2.0, -2.0, tags, w);
     (void)fw_pair_ranker_end(&r, &c, 1, false, true, 200, 21U + 2U * (uint32_t)i, 2.0, -2.0, tags, w);
   }
-  assert_true(r.shift_gain == FW_PAIR_SHIFT_MAX && r.shift_centring == -FW_PAIR_SHIFT_MAX);
+  assert_true(r.shift.gain == FW_PAIR_SHIFT_MAX && r.shift.centring == -FW_PAIR_SHIFT_MAX);
   // Rate 0: the ranking weighs the runs in the imitation and the shift stays.
   c.pair_shift_rate = 0.0;
   (void)fw_pair_ranker_end(&r, &c, 0, false, true, 140, 40, 0.2, 0.4, tags, w);
   (void)fw_pair_ranker_end(&r, &c, 1, false, true, 141, 41, 0.2, 0.4, tags, w);
   assert_true(fabs(w[0] - 2.0 / (1.0 + exp(-1.0 / c.pair_tau_steps))) < 1e-15 && fabs(w[0] + w[1] - 2.0) < 1e-15);
-  assert_true(r.shift_gain == FW_PAIR_SHIFT_MAX && r.shift_centring == -FW_PAIR_SHIFT_MAX);
+  assert_true(r.shift.gain == FW_PAIR_SHIFT_MAX && r.shift.centring == -FW_PAIR_SHIFT_MAX);
   // The falling rate: after n pairs a pair moves the shift by rate * K / (K + n) of its side.
   fw_pair_ranker_t q;
   memset(&q, 0, sizeof q);
   c.pair_shift_rate = 1.0;
   c.pair_shift_decay_pairs = 30.0;
-  q.shift_pairs = 90;
+  q.shift.pairs = 90;
   (void)fw_pair_ranker_end(&q, &c, 0, false, false, 300, 50, 0.4, -0.8, tags, w);
   (void)fw_pair_ranker_end(&q, &c, 1, false, true, 150, 51, 0.4, -0.8, tags, w);
-  assert_true(fabs(q.shift_gain + 0.4 * 0.25) < 1e-15 && fabs(q.shift_centring - 0.8 * 0.25) < 1e-15);
-  assert_int_equal(q.shift_pairs, 91);
+  assert_true(fabs(q.shift.gain + 0.4 * 0.25) < 1e-15 && fabs(q.shift.centring - 0.8 * 0.25) < 1e-15);
+  assert_int_equal(q.shift.pairs, 91);
   // A non-finite perturbation (a damaged log record) moves nothing.
   (void)fw_pair_ranker_end(&q, &c, 0, false, true, 140, 52, NAN, 0.5, tags, w);
   (void)fw_pair_ranker_end(&q, &c, 1, false, true, 150, 53, NAN, 0.5, tags, w);
-  assert_true(fabs(q.shift_gain + 0.4 * 0.25) < 1e-15 && fabs(q.shift_centring - 0.8 * 0.25) < 1e-15);
+  assert_true(fabs(q.shift.gain + 0.4 * 0.25) < 1e-15 && fabs(q.shift.centring - 0.8 * 0.25) < 1e-15);
   // The shift at a state: a * target angle + b * (lateral fraction - 0.5).
-  r.shift_gain = 0.5;
-  r.shift_centring = -2.0;
+  r.shift.gain = 0.5;
+  r.shift.centring = -2.0;
   const double s[3] = {5.0, 0.75, 0.2};
   assert_true(fabs(fw_pair_shift_at(&r, s) - (0.5 * 0.2 - 2.0 * 0.25)) < 1e-15);
 }
@@ -592,8 +592,8 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
   for (int with_shift = 0; with_shift <= 1; ++with_shift) {
     fw_progress_t gs;
     assert_int_equal(fw_progress_decode(meta, ms, &gs, NULL, 0), 0);
-    gs.shift_gain = with_shift ? 0.75 : 0.0;
-    gs.shift_centring = with_shift ? -1.25 : 0.0;
+    gs.shift.gain = with_shift ? 0.75 : 0.0;
+    gs.shift.centring = with_shift ? -1.25 : 0.0;
     uint8_t shifted[FW_PROGRESS_BYTES];
     (void)fw_progress_encode(&gs, shifted);
     assert_int_equal(fw_checkpoint_write(c.checkpoint_file, shifted, sizeof shifted, payload, ps, err, sizeof err), 0);
@@ -604,18 +604,18 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
     assert_int_equal(harness_open(&g_h, &ce, false, 3), 0);
     assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), 1);
     fw_loop_get_stats(g_h.loop, &st);
-    assert_true(st.shift_gain == gs.shift_gain && st.shift_centring == gs.shift_centring);
+    assert_true(st.shift.gain == gs.shift.gain && st.shift.centring == gs.shift.centring);
     harness_run(&g_h, 100000);
     fw_loop_get_stats(g_h.loop, &st);
     assert_true(st.done);
     assert_int_equal(g_h.runs, 2);
     for (int i = 0; i < g_h.runs; ++i) {
-      assert_true(g_h.run[i].shift_gain == gs.shift_gain && g_h.run[i].shift_centring == gs.shift_centring);
+      assert_true(g_h.run[i].shift_gain == gs.shift.gain && g_h.run[i].shift_centring == gs.shift.centring);
     }
     eval_hash[with_shift] = g_h.exp_hash;
     harness_close(&g_h);
     if (with_shift) {
-      gs.shift_gain = FW_PAIR_SHIFT_MAX * 1.5;
+      gs.shift.gain = FW_PAIR_SHIFT_MAX * 1.5;
       (void)fw_progress_encode(&gs, shifted);
       assert_int_equal(fw_checkpoint_write(c.checkpoint_file, shifted, sizeof shifted, payload, ps, err, sizeof err),
                        0);

@@ -27,9 +27,9 @@ static fw_progress_t sample(void) {
   p.schedule.example_steps_sum = 27.0 * 130.0 + 17.0;
   p.schedule.best_example_steps = 126;
   p.run_id = 130;
-  p.shift_gain = 0.8125;
-  p.shift_centring = -1.5;
-  p.shift_pairs = 17;
+  p.shift.gain = 0.8125;
+  p.shift.centring = -1.5;
+  p.shift.pairs = 17;
   return p;
 }
 
@@ -123,10 +123,10 @@ static void test_progress_out_of_range_refused(void** state) {
   const double bad_shift[] = {NAN, INFINITY, -INFINITY, 4.0000001, -4.5};
   for (size_t i = 0; i < sizeof bad_shift / sizeof bad_shift[0]; ++i) {
     q = p;
-    q.shift_gain = bad_shift[i];
+    q.shift.gain = bad_shift[i];
     expect_refused(&q, 8, 1, "learned policy shift");
     q = p;
-    q.shift_centring = bad_shift[i];
+    q.shift.centring = bad_shift[i];
     expect_refused(&q, 8, 1, "learned policy shift");
   }
   expect_refused(&p, 72, 0x80000000U, "pairs that moved the shift");
@@ -148,8 +148,8 @@ static void test_progress_out_of_range_refused(void** state) {
   q = p;
   q.schedule.eval_blocks = INT32_MAX;
   q.run_id = INT32_MAX - 1;
-  q.shift_gain = 4.0;
-  q.shift_centring = -4.0;
+  q.shift.gain = 4.0;
+  q.shift.centring = -4.0;
   (void)fw_progress_encode(&q, b);
   assert_int_equal(fw_progress_decode(b, sizeof b, &out, why, sizeof why), 0);
   assert_int_equal(out.run_id, INT32_MAX - 1);
