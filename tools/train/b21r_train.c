@@ -159,16 +159,17 @@ int main(int argc, char** argv) {
              (unsigned long long)s.skipped_eval);
     }
     if (s.pairs_ranked > 0) {
-      printf("b21r-train: %llu pairs of phase-two runs ranked from B21R_RUN (pair_runs); the learned policy's "
+      printf("b21r-train: %llu pairs of runs ranked from B21R_RUN (pair_runs); the learned policy's "
              "shift: %.4f rad/s per rad of target angle, %.4f rad/s per corridor width\n",
              (unsigned long long)s.pairs_ranked, s.shift.gain, s.shift.centring);
     }
-    if (s.phase_two_unranked > 0) {
+    if (s.paired_unranked > 0) {
       fprintf(stderr,
-              "b21r-train: warning: the learner ranks pair runs under this configuration (pair_runs), but %llu phase-two experiences come from "
-              "logs without B21R_RUN records (an experience log): their pair runs, if any, are learned unranked; "
-              "give the controller's full log (log_file) to rank them\n",
-              (unsigned long long)s.phase_two_unranked);
+              "b21r-train: warning: the learner ranks pair runs under this configuration (pair_runs), but %llu experiences "
+              "of phases that run pairs (phase two; phase one too with pair_phase_one and the example policy) come "
+              "from logs without B21R_RUN records (an experience log): their pair runs, if any, are learned unranked "
+              "and do not move the shift; give the controller's full log (log_file) to rank them\n",
+              (unsigned long long)s.paired_unranked);
     }
     if (s.pairs_unmatched > 0 || s.run_records_undecodable > 0) {
       fprintf(stderr,

@@ -36,10 +36,11 @@ struct trainer {
   // ranked (fw_pair_ranker_end, the controller's ranking).
   bool pairs;
   bool pairs_ran;            // cfg runs pairs in phase two (fw_config_pair_runs_active)
+  bool pairs_in_phase_one;   // and in phase one (pair_phase_one with the example policy)
   uint32_t run_tag;
   fw_pair_ranker_t ranker;
   bool log_has_run_records;  // the log being read has B21R_RUN (a full log)
-  uint64_t log_phase_two;    // phase-two training experiences learned from the log being read
+  uint64_t log_paired;       // training experiences of phases that run pairs, learned from the log being read
   int64_t next_seq;      // expected seq of the next experience (-1: none yet in this log)
   double progress_next_s;
   double started_s;
@@ -80,6 +81,7 @@ trainer_t* trainer_create(const fw_config_t* cfg, const train_options_t* opt, ch
   }
   t->pairs = fw_config_pair_learner(cfg);
   t->pairs_ran = fw_config_pair_runs_active(cfg);
+  t->pairs_in_phase_one = t->pairs_ran && cfg->pair_phase_one && cfg->phase_driver == FW_DRIVER_EXAMPLE;
   t->next_seq = -1;
   t->started_s = now_s();
   t->progress_next_s = t->started_s + t->opt.progress_period_s;
@@ -204,7 +206,7 @@ static int learn(trainer_t* t, const b21r_experience_t* e, const char* path, cha
   if (hs == HEDGER_OK) {
     t->stats.used++;
     t->run_learned = true;
-    t->log_phase_two += e->phase == 2 ? 1U : 0U;
+    t->log_paired += e->phase == 2 || (e->phase == 1 && t->pairs_in_phase_one) ? 1U : 0U;
   } else {
     t->stats.refused++;
   }
@@ -246,8 +248,8 @@ static void rank_pair_run(trainer_t* t, const b21r_run_t* r) {
   const bool goal = r->end_reason == B21R_RUN_T_END_GOAL && !r->pair_vetoed;
   uint32_t tags[2];
   double weights[2];
-  const int32_t n = fw_pair_ranker_end(&t->ranker, &t->cfg, r->pair_member, aborted, goal, r->steps, t->run_tag,
-                                       r->pair_gain, r->pair_centring, tags, weights);
+  const int32_t n = fw_pair_ranker_end(&t->ranker, &t->cfg, r->phase == 1, r->pair_member, aborted, goal, r->steps,
+                                       t->run_tag, r->pair_gain, r->pair_centring, tags, weights);
   for (int32_t i = 0; i < n; ++i) {
     (void)hedger_weight_run(t->hedger, tags[i], weights[i], NULL);
   }
@@ -269,7 +271,7 @@ int trainer_add_log(trainer_t* t, const char* path, char* err, size_t err_cap) {
   end_run(t);  // a log starts with a run of its own
   t->next_seq = -1;
   t->log_has_run_records = false;
-  t->log_phase_two = 0;
+  t->log_paired = 0;
   const double t0 = now_s();
   uint64_t events_here = 0;
   int rc = 0;
@@ -307,7 +309,7 @@ int trainer_add_log(trainer_t* t, const char* path, char* err, size_t err_cap) {
   }
   lcm_eventlog_destroy(log);
   if (t->pairs_ran && !t->log_has_run_records) {
-    t->stats.phase_two_unranked += t->log_phase_two;
+    t->stats.paired_unranked += t->log_paired;
   }
   t->stats.seconds += now_s() - t0;
   if (rc == 0 && events_here == 0) {

@@ -55,13 +55,14 @@ typedef struct train_stats {
   uint64_t seq_gaps;          ///< gaps in the experiences' seq (lost messages in the recording)
   uint64_t runs;              ///< runs ended (hedger_end_run calls)
   uint64_t replayed;          ///< updates done by backward replay at run ends
-  /// the learner configured for pairs: pairs of phase-two training runs ranked from the log's B21R_RUN
+  /// the learner configured for pairs: pairs of training runs ranked from the log's B21R_RUN
   /// records (a full log, log_file; an experience log has none), as the controller ranked them
   uint64_t pairs_ranked;
-  /// cfg runs pairs (fw_config_pair_runs_active): phase-two training experiences of logs without
-  /// B21R_RUN records; whether they came from pair runs cannot be told, so any pair among them is
-  /// not ranked (weight 1)
-  uint64_t phase_two_unranked;
+  /// cfg runs pairs (fw_config_pair_runs_active): training experiences of logs without B21R_RUN
+  /// records from phases that run pairs (phase two; phase one with pair_phase_one and the example
+  /// policy); whether they came from pair runs cannot be told, so any pair among them is not
+  /// ranked (weight 1, no shift)
+  uint64_t paired_unranked;
   uint64_t pairs_unmatched;          ///< second runs of a pair whose first run's record is missing
   uint64_t run_records_undecodable;  ///< B21R_RUN records of another layout (an older controller)
   uint64_t run_records_invalid;      ///< pair-run records with a non-finite perturbation or shift: not ranked

@@ -291,11 +291,12 @@ static const key_desc_t k_keys[] = {
    "the learner's state ends with the rotation the base executes, the last command sent [rad/s]: the "
    "acceleration limit ties the next rotation to it (false = the paper's task features alone)"},
   {NULL, "pair_runs", KIND_ENUM, OFF(pair_runs_mode), 0, 0, false, false, k_pair_runs, "auto",
-   "phase two: training runs come in pairs from one start pose; the first adds a policy perturbation "
-   "g * target angle + c * (lateral fraction - 0.5) to the greedy action (g, c drawn per pair), the second "
-   "subtracts it, with the same exploration noise; the pair's difference in steps then moves the learned "
-   "policy's shift toward the faster run (pair_shift_rate; docs/LEARNING.md, \"Ranking whole runs in "
-   "phase two\"); pair_safety vets every perturbed command. auto = on for task = corridor with learner = "
+   "phase two (and phase one's example runs, pair_phase_one): training runs come in pairs from one start "
+   "pose; the first adds a policy perturbation g * target angle + c * (lateral fraction - 0.5) to the greedy "
+   "action (phase one: the example's; g, c drawn per pair), the second subtracts it, with the same exploration "
+   "noise; the pair's difference in steps then moves the learned policy's shift toward the faster run "
+   "(pair_shift_rate; docs/LEARNING.md, \"Ranking whole runs in phase two\"); pair_safety vets every "
+   "perturbed command. auto = on for task = corridor with learner = "
    "hedger, hedger_greedy_method = state_model and reposition = emulator (where it was measured to help), "
    "off elsewhere (the learner still tags its runs and fades old points, as with pairs, wherever the "
    "corridor, hedger and state_model apply, so a learned state acts alike on the robot); true = on "
@@ -325,6 +326,14 @@ static const key_desc_t k_keys[] = {
   {NULL, "pair_recency_runs", KIND_DOUBLE, OFF(pair_recency_runs), 0, 1e6, false, false, NULL, "150",
    "pair_runs: in the imitation (the anchor) a point stored N runs ago (evaluation runs counted) weighs exp(-N / "
    "pair_recency_runs), in both phases (0 = no fading)"},
+  {NULL, "pair_phase_one", KIND_BOOL, OFF(pair_phase_one), 0, 0, false, false, NULL, "true",
+   "pair_runs with phase_one_driver = example: phase one's runs come in pairs too, the example policy plus "
+   "and minus the pair's perturbation from one start pose with the same example gain and dither, and their "
+   "ranking moves the learned policy's shift as in phase two; both runs are imitated (their perturbations "
+   "cancel in the imitation)"},
+  {NULL, "pair_phase_one_from_run", KIND_INT, OFF(pair_phase_one_from_run), 0, 1000000, false, false, NULL, "10",
+   "pair_phase_one: the first phase-one training run (counted from 0) that starts a pair; the runs before it "
+   "are the plain examples, each from its own pose, so that the first evaluations find a policy"},
   {NULL, "pair_safety", KIND_BOOL, OFF(pair_safety), 0, 0, false, false, NULL, "true",
    "pair_runs: a safety filter vets every perturbed command before it is sent: a kinematic rollout (the command "
    "for one period, then the recovery law 2 x target angle, under the velocity and acceleration limits) must keep "

@@ -239,6 +239,8 @@ struct fw_loop {
                                  // shift (learned state: checkpointed, fw/progress.h)
   features_pose_t pair_pose;     // the pair's start pose
   tasks_rng_t pair_explore_rng;  // explore_rng as the first run began: the second run's noise
+  int32_t pair_phase;            // the phase of the pair under way (a pair stays in one phase)
+  uint64_t pair_driver_seed;     // pair_phase_one: the first run's example stream (its gain), for the second
   int32_t pair_weigh_n;          // weights to apply between runs (0: none)
   uint32_t pair_weigh_tag[2];    // run tags
   double pair_weigh_w[2];        // and their anchor weights

@@ -67,14 +67,24 @@ static const char* run_kind_name(const fw_loop_t* L) {
 // pair starts from the same pose (and replays the same exploration noise), so that the two runs
 // differ mainly by their perturbation (the sensor noise of each run is its own).
 static bool pair_run_planned(const fw_loop_t* L, const fw_run_plan_t* plan) {
-  return fw_config_pair_runs_active(&L->cfg) && L->cfg.mode == FW_MODE_LEARN && plan->kind == FW_RUN_TRAINING && plan->phase == 2;
+  const bool paired_phase =
+      plan->phase == 2 || (plan->phase == 1 && L->cfg.pair_phase_one && L->cfg.phase_driver == FW_DRIVER_EXAMPLE &&
+                           plan->training_index >= L->cfg.pair_phase_one_from_run);
+  return fw_config_pair_runs_active(&L->cfg) && L->cfg.mode == FW_MODE_LEARN && plan->kind == FW_RUN_TRAINING &&
+         paired_phase;
+}
+
+// Whether a planned pair run is the second of the pair under way: a pair never spans the switch
+// from phase one to phase two (a first run left then stays without its pair).
+static bool pair_continues(const fw_loop_t* L, const fw_run_plan_t* plan) {
+  return L->pair_next_member == 1 && plan->phase == L->pair_phase;
 }
 
 static features_pose_t next_start_pose(fw_loop_t* L, const fw_run_plan_t* plan) {
   if (plan->kind == FW_RUN_EVAL) {
     return tasks_episode_eval_start(&L->ep, (uint32_t)plan->eval_index);
   }
-  if (pair_run_planned(L, plan) && L->pair_next_member == 1) {
+  if (pair_run_planned(L, plan) && pair_continues(L, plan)) {
     return L->pair_pose;
   }
   const features_pose_t pose = tasks_episode_training_start(&L->ep, &L->pose_rng);
@@ -102,7 +112,8 @@ static void pair_begin_run(fw_loop_t* L) {
   if (!pair_run_planned(L, &L->plan)) {
     return;
   }
-  L->pair_member = L->pair_next_member;
+  L->pair_member = pair_continues(L, &L->plan) ? 1 : 0;
+  L->pair_phase = L->plan.phase;
   if (L->pair_member == 0) {
     L->pair_gain = L->cfg.pair_gain_sigma * tasks_rng_normal(&L->explore_rng);
     L->pair_centring = L->cfg.pair_centring_sigma * tasks_rng_normal(&L->explore_rng);
@@ -119,16 +130,19 @@ uint32_t fw_pair_run_tag(int32_t run_id, uint32_t current) {
   return current < UINT32_MAX ? current + 1U : current;
 }
 
-int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, int32_t member, bool aborted, bool goal,
-                           int32_t steps, uint32_t tag, double gain, double centring, uint32_t tags[2],
+int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool examples, int32_t member, bool aborted,
+                           bool goal, int32_t steps, uint32_t tag, double gain, double centring, uint32_t tags[2],
                            double weights[2]) {
+  // Runs of the example policy are imitated whole when the ranking goes into the shift: their +
+  // and - perturbations cancel in the imitation, and the shift was not in their commands.
+  const double imitated = examples && cfg->pair_shift_rate > 0.0 ? 1.0 : 0.0;
   if (aborted || member == 0) {
     r->first_pending = !aborted;
     r->first_goal = goal;
     r->first_steps = steps;
     r->first_tag = tag;
     tags[0] = tag;
-    weights[0] = 0.0;
+    weights[0] = imitated;
     return 1;
   }
   if (!r->first_pending) {
@@ -139,8 +153,8 @@ int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, int32_t 
   tags[1] = tag;
   const double d = (double)steps - (double)r->first_steps;  // > 0: the first run was faster
   if (cfg->pair_shift_rate > 0.0) {
-    weights[0] = 0.0;
-    weights[1] = 0.0;
+    weights[0] = imitated;
+    weights[1] = imitated;
     double u = 0.0;
     if (r->first_goal && goal) {
       u = tanh(d / cfg->pair_shift_tau_steps);
@@ -189,8 +203,9 @@ static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps
   goal = goal && !L->pair_run_vetoed;
   L->pair_runs_vetoed += L->pair_run_vetoed ? 1 : 0;
   L->pair_runs_missed += goal ? 0 : 1;
-  L->pair_weigh_n = fw_pair_ranker_end(&L->pair_ranker, &L->cfg, L->pair_member, aborted, goal, steps, L->run_tag,
-                                       L->pair_gain, L->pair_centring, L->pair_weigh_tag, L->pair_weigh_w);
+  L->pair_weigh_n = fw_pair_ranker_end(&L->pair_ranker, &L->cfg, L->plan.phase == 1, L->pair_member, aborted, goal,
+                                       steps, L->run_tag, L->pair_gain, L->pair_centring, L->pair_weigh_tag,
+                                       L->pair_weigh_w);
   L->pair_next_member = aborted || L->pair_member == 1 ? 0 : 1;
   L->pair_member = -1;
 }
@@ -203,8 +218,9 @@ static double pair_offset(const fw_loop_t* L) {
 }
 
 // pair_safety: a pair run's command a goes only if the recovery rollout (tasks/recovery.h) keeps
-// pair_safety_margin_m to both walls; otherwise the learned policy's own action (when one is
-// known), if it does, and else the recovery law's. The first correction vetoes the run (it counts
+// pair_safety_margin_m to both walls; otherwise the unperturbed policy's own action (phase two:
+// the learned policy's, when one is known; phase one: the example's), if it does, and else the
+// recovery law's. The first correction vetoes the run (it counts
 // as failed in its pair and its perturbation ends): whatever failed the check, the run needed the
 // filter. Runs before the command is sent: three rollouts at most (30 periods each at the
 // defaults).
@@ -214,15 +230,16 @@ static bool pair_passes(const fw_loop_t* L, double a) {
                                              L->cmd_w, a, L->cfg.pair_safety_horizon_s) >= L->cfg.pair_safety_margin_m;
 }
 
-static void pair_vet(fw_loop_t* L, bool greedy_known, double greedy_action, double* a, int8_t* source) {
+static void pair_vet(fw_loop_t* L, bool own_known, double own_action, int8_t own_source, double* a,
+                     int8_t* source) {
   if (pair_passes(L, *a)) {
     return;
   }
   L->pair_safety_overrides++;
   L->pair_run_vetoed = true;
-  if (greedy_known && pair_passes(L, greedy_action)) {
-    *a = greedy_action;
-    *source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
+  if (own_known && pair_passes(L, own_action)) {
+    *a = own_action;
+    *source = own_source;
     return;
   }
   *a = tasks_corridor_recovery_action(&L->ep.corridor, &L->ep.corridor_state);
@@ -282,7 +299,15 @@ static void begin_run(fw_loop_t* L) {
   // The driver of this run: the example policy in phase one, the advisor in phase two, or the
   // evaluated reference. Its stream is seeded per run, so a run does not depend on earlier ones.
   uint64_t st = L->driver_seed_base ^ ((uint64_t)(uint32_t)L->run_id * 0x9E3779B97F4A7C15ULL);
-  const uint64_t run_seed = tasks_rng_splitmix64(&st);
+  uint64_t run_seed = tasks_rng_splitmix64(&st);
+  if (pair_run_planned(L, &L->plan) && L->plan.phase == 1) {
+    // A phase-one pair probes the example policy at one gain: its second run repeats the first's.
+    if (pair_continues(L, &L->plan)) {
+      run_seed = L->pair_driver_seed;
+    } else {
+      L->pair_driver_seed = run_seed;
+    }
+  }
   tasks_driver_kind_t kind = TASKS_DRIVER_PROPORTIONAL;
   if (L->cfg.mode == FW_MODE_EVALUATE && L->cfg.evaluate_policy == FW_EVAL_OPTIMAL) {
     kind = TASKS_DRIVER_OPTIMAL;
@@ -581,6 +606,10 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
   double a = 0.0;
   double offset = 0.0;
   int8_t source = B21R_EXPERIENCE_T_SOURCE_EXAMPLE;
+  // The unperturbed policy's command, for the safety filter of a pair run (pair_vet).
+  bool own_known = greedy_known;
+  double own_action = greedy_action;
+  int8_t own_source = greedy_known ? B21R_EXPERIENCE_T_SOURCE_GREEDY : B21R_EXPERIENCE_T_SOURCE_EXAMPLE;
   if (!learned_policy) {
     if (fw_run_joystick_drives(L)) {
       a = L->teleop_rot_radps;
@@ -589,6 +618,11 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
       a = advice;
       if (!evaluating && L->cfg.example_noise_radps > 0.0 && explore_offset(L, L->cfg.example_noise_radps, &offset)) {
         a += offset;  // phase-one dither: the learner sees actions around the example's
+      }
+      own_known = true;  // the example's command: the safety filter's first fallback in a pair run
+      own_action = a;
+      if (!evaluating && L->pair_member >= 0 && !L->pair_run_vetoed) {
+        a = tasks_clamp_omega(a + pair_offset(L), L->omega_max);  // a phase-one pair run
       }
     }
   } else if (greedy_known) {
@@ -613,7 +647,7 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
     source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
   }
   if (!evaluating && L->pair_member >= 0 && L->cfg.pair_safety) {
-    pair_vet(L, greedy_known, greedy_action, &a, &source);  // every command of a pair run
+    pair_vet(L, own_known, own_action, own_source, &a, &source);  // every command of a pair run
     pair_keep_model(L);
   }
   *w_cmd = a;

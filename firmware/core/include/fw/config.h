@@ -93,7 +93,8 @@ typedef enum fw_eval_policy {
   FW_EVAL_HUMAN = 3,     ///< the simulated sloppy human driver (phase_one_driver = human's examples)
 } fw_eval_policy_t;
 
-/// Whether phase two's training runs come in ranked pairs (config pair_runs; run.c).
+/// Whether phase two's training runs (and, with pair_phase_one, phase one's example runs from
+/// pair_phase_one_from_run on) come in ranked pairs (config pair_runs; run.c).
 typedef enum fw_pair_runs {
   FW_PAIR_RUNS_OFF = 0,   ///< "false": every phase-two training run is the learned policy's own
   FW_PAIR_RUNS_ON = 1,    ///< "true": pairs wherever allowed (fw_config_validate refuses the rest)
@@ -239,6 +240,10 @@ typedef struct fw_config {
   double pair_shift_tau_steps;     ///< pair_runs: steps' difference d at which the shift's step is 0.76 of the rate's
   /// pair_runs: the rate falls as K / (K + n) after n pairs moved the shift (0 = constant)
   double pair_shift_decay_pairs;
+  /// pair_runs: phase one's example runs (phase_one_driver = example) come in pairs too, and their
+  /// ranking moves the shift; both runs of a pair are imitated (their perturbations cancel)
+  bool pair_phase_one;
+  int32_t pair_phase_one_from_run; ///< pair_phase_one: phase one's pairs start at this training run (0-based)
   bool pair_safety;                ///< pair_runs: a kinematic rollout vets each perturbed command
   double pair_safety_margin_m;     ///< pair_safety: least predicted skirt-to-wall clearance [m]
   double pair_safety_horizon_s;    ///< pair_safety: rollout length [s]
@@ -322,8 +327,8 @@ void fw_config_print_reference(FILE* out);
 /// the same on the emulator and on the robot. Pure, O(1).
 bool fw_config_pair_learner(const fw_config_t* cfg);
 
-/// Whether phase two's training runs come in ranked pairs under cfg (callers also check mode =
-/// learn): fw_config_pair_learner, and pair_runs = true or reposition = emulator. pair_runs =
+/// Whether training runs come in ranked pairs under cfg (phase two; phase one too with
+/// pair_phase_one and the example policy; callers also check mode = learn): fw_config_pair_learner, and pair_runs = true or reposition = emulator. pair_runs =
 /// auto leaves the pairs off on the robot: the pair's second run needs the first one's start pose
 /// again, and the safety filter's margin is measured in the lockstep emulator only. Pure, O(1).
 bool fw_config_pair_runs_active(const fw_config_t* cfg);

@@ -152,14 +152,17 @@ typedef struct fw_pair_ranker {
   fw_pair_shift_t shift; ///< the learned policy's shift (fw/progress.h)
 } fw_pair_ranker_t;
 
-/// A pair run ended: member 0 or 1 (the run of its pair), aborted (safety stop, shutdown: its
-/// pair starts again), goal = it reached the goal and the safety filter did not correct it,
-/// steps, tag, the run's tag, and (gain, centring) = the pair's perturbation (g, c: the first run
-/// drove with +, the second with −). Settings from cfg: pair_shift_rate, pair_shift_tau_steps,
-/// pair_tau_steps. Writes the anchor weights to apply between runs into tags[]/weights[] and
-/// returns how many:
+/// A pair run ended: examples = the pair drove the example policy (phase one, pair_phase_one),
+/// member 0 or 1 (the run of its pair), aborted (safety stop, shutdown: its pair starts again),
+/// goal = it reached the goal and the safety filter did not correct it, steps, tag, the run's
+/// tag, and (gain, centring) = the pair's perturbation (g, c: the first run drove with +, the
+/// second with −). Settings from cfg: pair_shift_rate, pair_shift_tau_steps, pair_tau_steps.
+/// Writes the anchor weights to apply between runs into tags[]/weights[] and returns how many:
 /// - 1 for a first or an aborted run: it weighs 0 (a perturbed run is not imitated unranked);
-/// - 2 when a second run ranks its pair. With pair_shift_rate > 0 both runs weigh 0 and the pair
+///   runs of the examples weigh 1 when pair_shift_rate > 0 (they are imitated whole: their + and
+///   − perturbations cancel in the imitation, and the shift was not in their commands);
+/// - 2 when a second run ranks its pair. With pair_shift_rate > 0 both runs weigh 0 (1 for the
+///   examples) and the pair
 ///   moves the shift: (a, b) += rate · u · (g, c), rate = pair_shift_rate · K / (K + n) after n
 ///   pairs (K = pair_shift_decay_pairs; 0: the rate stays), u = tanh(d / pair_shift_tau_steps), d = the
 ///   second run's steps minus the first's; u = +1 when only the first reached the goal, −1 when
@@ -173,8 +176,8 @@ typedef struct fw_pair_ranker {
 ///   weighs 2 / (1 + e^(−d / pair_tau_steps)) and the slower 2 minus that;
 /// - 0 for a second run whose first run never ended here (a log that lost its record).
 /// O(1).
-int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, int32_t member, bool aborted, bool goal,
-                           int32_t steps, uint32_t tag, double gain, double centring, uint32_t tags[2],
+int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool examples, int32_t member, bool aborted,
+                           bool goal, int32_t steps, uint32_t tag, double gain, double centring, uint32_t tags[2],
                            double weights[2]);
 
 /// The learned policy's shift at a corridor state s (s[1] lateral fraction, s[2] target angle

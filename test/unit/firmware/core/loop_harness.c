@@ -91,6 +91,10 @@ void harness_drain(harness_t* h) {
             h->rotation_mismatches++;
           }
         }
+        if (e->step_id == 0 && e->run_id >= 0 && e->run_id < 64 && e->state_dim >= 3) {
+          memcpy(h->run_first_s[e->run_id], e->s, sizeof h->run_first_s[0]);
+          h->run_first_action[e->run_id] = e->action_radps;
+        }
         h->exp_prev_run_id = e->run_id;
         h->exp_prev_action = e->action_radps;
         if (m->u.experience.terminal && m->u.experience.reward > 0.0) {

@@ -47,6 +47,9 @@ typedef struct harness {
   int runs;                 // B21R_RUN messages seen
   b21r_run_t run[64];       // the first 64 (detail points at a static string)
   int64_t run_exp_next_seq[64]; // exp_next_seq when each arrived (its experiences came first)
+  // The first experience of runs 0-63 (by run_id): its state's first three entries and action.
+  double run_first_s[64][3];
+  double run_first_action[64];
 } harness_t;
 
 /// Test defaults: lockstep, short corridor schedule, no LCM, fake robot (rFLEX unless canopen).

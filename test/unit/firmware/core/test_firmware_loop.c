@@ -129,6 +129,93 @@ static void test_loop_pair_runs_share_start_and_rank(void** state) {
   assert_true(hash[0] == hash[1]);
 }
 
+// pair_phase_one: from training run pair_phase_one_from_run on, phase one's example runs come in
+// pairs too. A pair's two runs start from one pose with the same example gain and dither and
+// differ by exactly the pair's perturbation (+ then -); the examples still drive every step; the
+// pairs move the shift by the ranker's rule during phase one, so the evaluation after phase one
+// already has it, and phase two goes on counting from there. Before that run, and with
+// pair_phase_one = false, phase one is the plain examples.
+static void test_loop_phase_one_pairs(void** state) {
+  (void)state;
+  for (int on = 0; on < 2; ++on) {
+    fw_config_t c;
+    short_schedule(&c);
+    c.phase_one_runs = 10;
+    c.phase_two_runs = 2;
+    c.eval_every_runs = 10;
+    c.eval_starts = 2;
+    c.pair_runs_mode = FW_PAIR_RUNS_ON;
+    c.pair_phase_one = on == 1;
+    c.pair_phase_one_from_run = 4;
+    assert_int_equal(harness_open(&g_h, &c, false, 9), 0);
+    g_h.fake.lidar.noise_sigma_m = 0.0;  // a pair's two runs then see the same first state
+    harness_run(&g_h, 200000);
+    fw_loop_stats_t st;
+    fw_loop_get_stats(g_h.loop, &st);
+    assert_true(st.done);
+    assert_int_equal(st.training_runs, 12);
+    assert_int_equal(st.pairs_ranked, on ? 4 : 1);
+    const b21r_run_t* one[10];
+    int n = 0;
+    for (int i = 0; i < g_h.runs && i < 64; ++i) {
+      const b21r_run_t* r = &g_h.run[i];
+      if (r->kind == B21R_RUN_T_KIND_TRAINING && r->phase == 1) {
+        assert_true(n < 10);
+        one[n++] = r;
+        assert_int_equal(r->steps_by_source[B21R_EXPERIENCE_T_SOURCE_EXAMPLE], r->steps);  // the examples drive
+      } else if (r->kind == B21R_RUN_T_KIND_TRAINING) {
+        assert_int_equal(r->shift_pairs, on ? 3 : 0);  // phase two counts on from phase one's pairs
+      }
+    }
+    assert_int_equal(n, 10);
+    double shift[2] = {0.0, 0.0};
+    int compared = 0;
+    for (int i = 0; i < 10; ++i) {
+      const b21r_run_t* r = one[i];
+      assert_int_equal(r->pair_member, on && i >= 4 ? (i - 4) % 2 : -1);
+      assert_true(r->shift_gain == shift[0] && r->shift_centring == shift[1]);
+      if (r->pair_member != 1) {
+        continue;
+      }
+      const b21r_run_t* a = one[i - 1];
+      assert_true(a->pair_gain == r->pair_gain && a->pair_centring == r->pair_centring && a->pair_gain != 0.0);
+      assert_true(a->start_x_m == r->start_x_m && a->start_y_m == r->start_y_m &&
+                  a->start_theta_rad == r->start_theta_rad);
+      // The first commands: the same example action (gain, dither) plus and minus the perturbation
+      // (where the acceleration limit from rest, 0.29 rad/s per tick, did not cut either).
+      const double* s0 = g_h.run_first_s[a->run_id];
+      const double* s1 = g_h.run_first_s[r->run_id];
+      assert_true(s0[0] == s1[0] && s0[1] == s1[1] && s0[2] == s1[2]);
+      const double a0 = g_h.run_first_action[a->run_id];
+      const double a1 = g_h.run_first_action[r->run_id];
+      if (fabs(a0) < 0.28 && fabs(a1) < 0.28) {
+        const double offset = a->pair_gain * s0[2] + a->pair_centring * (s0[1] - 0.5);
+        assert_true(fabs(0.5 * (a0 - a1) - offset) < 1e-12);
+        compared++;
+      }
+      const bool ga = a->end_reason == B21R_RUN_T_END_GOAL && !a->pair_vetoed;
+      const bool gb = r->end_reason == B21R_RUN_T_END_GOAL && !r->pair_vetoed;
+      const double u = ga && gb ? tanh((double)(r->steps - a->steps) / c.pair_shift_tau_steps)
+                                : (ga == gb ? 0.0 : (ga ? 1.0 : -1.0));
+      const double rate = c.pair_shift_decay_pairs / (c.pair_shift_decay_pairs + (double)a->shift_pairs);
+      shift[0] += rate * u * a->pair_gain;
+      shift[1] += rate * u * a->pair_centring;
+    }
+    assert_true(on == 0 || ((shift[0] != 0.0 || shift[1] != 0.0) && compared > 0));
+    // The evaluation after phase one drove with the shift phase one's pairs learned.
+    int evaluated = 0;
+    for (int i = 0; i < g_h.runs && i < 64 && evaluated == 0; ++i) {
+      const b21r_run_t* r = &g_h.run[i];
+      if (r->kind == B21R_RUN_T_KIND_EVALUATION) {
+        assert_true(r->shift_gain == shift[0] && r->shift_centring == shift[1]);
+        evaluated++;
+      }
+    }
+    assert_int_equal(evaluated, 1);
+    harness_close(&g_h);
+  }
+}
+
 // Run tags increase from run to run: a run's id while the ids run ahead of the store's tag, else
 // one past the tag (a resume from a b21r-train checkpoint starts its ids again at 0).
 static void test_pair_run_tag_always_increases(void** state) {
@@ -156,51 +243,69 @@ static void test_pair_ranker_moves_the_shift(void** state) {
   uint32_t tags[2];
   double w[2];
   // First run (+perturbation) 140 steps, second (−) 142: the first was faster by 2.
-  assert_int_equal(fw_pair_ranker_end(&r, &c, 0, false, true, 140, 7, 0.2, -0.4, tags, w), 1);
+  assert_int_equal(fw_pair_ranker_end(&r, &c, false, 0, false, true, 140, 7, 0.2, -0.4, tags, w), 1);
   assert_true(w[0] == 0.0 && tags[0] == 7);
-  assert_int_equal(fw_pair_ranker_end(&r, &c, 1, false, true, 142, 8, 0.2, -0.4, tags, w), 2);
+  assert_int_equal(fw_pair_ranker_end(&r, &c, false, 1, false, true, 142, 8, 0.2, -0.4, tags, w), 2);
   assert_true(tags[0] == 7 && tags[1] == 8 && w[0] == 0.0 && w[1] == 0.0);
   assert_true(fabs(r.shift.gain - 0.2 * tanh(1.0)) < 1e-15 && fabs(r.shift.centring + 0.4 * tanh(1.0)) < 1e-15);
   const double a1 = r.shift.gain;
   const double b1 = r.shift.centring;
   // The first run missed the goal (or the filter corrected it): the second's side, in full.
-  (void)fw_pair_ranker_end(&r, &c, 0, false, false, 300, 9, 0.5, 1.0, tags, w);
-  (void)fw_pair_ranker_end(&r, &c, 1, false, true, 150, 10, 0.5, 1.0, tags, w);
+  (void)fw_pair_ranker_end(&r, &c, false, 0, false, false, 300, 9, 0.5, 1.0, tags, w);
+  (void)fw_pair_ranker_end(&r, &c, false, 1, false, true, 150, 10, 0.5, 1.0, tags, w);
   assert_true(r.shift.gain == a1 - 0.5 && r.shift.centring == b1 - 1.0);
   // Both missed: nothing is learned.
-  (void)fw_pair_ranker_end(&r, &c, 0, false, false, 300, 11, 0.5, 1.0, tags, w);
-  (void)fw_pair_ranker_end(&r, &c, 1, false, false, 300, 12, 0.5, 1.0, tags, w);
+  (void)fw_pair_ranker_end(&r, &c, false, 0, false, false, 300, 11, 0.5, 1.0, tags, w);
+  (void)fw_pair_ranker_end(&r, &c, false, 1, false, false, 300, 12, 0.5, 1.0, tags, w);
   assert_true(r.shift.gain == a1 - 0.5 && r.shift.centring == b1 - 1.0);
   // A second run without its first (an aborted first run) ranks nothing and moves nothing.
-  (void)fw_pair_ranker_end(&r, &c, 0, true, false, 20, 13, 3.0, 3.0, tags, w);
-  assert_int_equal(fw_pair_ranker_end(&r, &c, 1, false, true, 140, 14, 3.0, 3.0, tags, w), 0);
+  (void)fw_pair_ranker_end(&r, &c, false, 0, true, false, 20, 13, 3.0, 3.0, tags, w);
+  assert_int_equal(fw_pair_ranker_end(&r, &c, false, 1, false, true, 140, 14, 3.0, 3.0, tags, w), 0);
   assert_true(r.shift.gain == a1 - 0.5);
   // The bound: at most FW_PAIR_SHIFT_MAX per component.
   c.pair_shift_rate = 4.0;
   for (int i = 0; i < 4; ++i) {
-    (void)fw_pair_ranker_end(&r, &c, 0, false, true, 100, 20U + 2U * (uint32_t)i, 2.0, -2.0, tags, w);
-    (void)fw_pair_ranker_end(&r, &c, 1, false, true, 200, 21U + 2U * (uint32_t)i, 2.0, -2.0, tags, w);
+    (void)fw_pair_ranker_end(&r, &c, false, 0, false, true, 100, 20U + 2U * (uint32_t)i, 2.0, -2.0, tags, w);
+    (void)fw_pair_ranker_end(&r, &c, false, 1, false, true, 200, 21U + 2U * (uint32_t)i, 2.0, -2.0, tags, w);
   }
   assert_true(r.shift.gain == FW_PAIR_SHIFT_MAX && r.shift.centring == -FW_PAIR_SHIFT_MAX);
   // Rate 0: the ranking weighs the runs in the imitation and the shift stays.
   c.pair_shift_rate = 0.0;
-  (void)fw_pair_ranker_end(&r, &c, 0, false, true, 140, 40, 0.2, 0.4, tags, w);
-  (void)fw_pair_ranker_end(&r, &c, 1, false, true, 141, 41, 0.2, 0.4, tags, w);
+  (void)fw_pair_ranker_end(&r, &c, false, 0, false, true, 140, 40, 0.2, 0.4, tags, w);
+  (void)fw_pair_ranker_end(&r, &c, false, 1, false, true, 141, 41, 0.2, 0.4, tags, w);
   assert_true(fabs(w[0] - 2.0 / (1.0 + exp(-1.0 / c.pair_tau_steps))) < 1e-15 && fabs(w[0] + w[1] - 2.0) < 1e-15);
   assert_true(r.shift.gain == FW_PAIR_SHIFT_MAX && r.shift.centring == -FW_PAIR_SHIFT_MAX);
+  // Pairs of the example policy (phase one): the same step, and both runs stay imitated (weight
+  // 1: their perturbations cancel there); with rate 0 they are ranked into the imitation instead.
+  fw_pair_ranker_t e;
+  memset(&e, 0, sizeof e);
+  c.pair_shift_rate = 1.0;
+  c.pair_shift_decay_pairs = 0.0;
+  assert_int_equal(fw_pair_ranker_end(&e, &c, true, 0, false, true, 140, 60, 0.2, -0.4, tags, w), 1);
+  assert_true(tags[0] == 60 && w[0] == 1.0);
+  assert_int_equal(fw_pair_ranker_end(&e, &c, true, 1, false, true, 142, 61, 0.2, -0.4, tags, w), 2);
+  assert_true(tags[0] == 60 && tags[1] == 61 && w[0] == 1.0 && w[1] == 1.0);
+  assert_true(fabs(e.shift.gain - 0.2 * tanh(1.0)) < 1e-15 && fabs(e.shift.centring + 0.4 * tanh(1.0)) < 1e-15);
+  assert_int_equal(e.shift.pairs, 1);
+  c.pair_shift_rate = 0.0;
+  (void)fw_pair_ranker_end(&e, &c, true, 0, false, true, 140, 62, 0.2, 0.4, tags, w);
+  assert_true(w[0] == 0.0);
+  (void)fw_pair_ranker_end(&e, &c, true, 1, false, true, 141, 63, 0.2, 0.4, tags, w);
+  assert_true(fabs(w[0] - 2.0 / (1.0 + exp(-1.0 / c.pair_tau_steps))) < 1e-15 && fabs(w[0] + w[1] - 2.0) < 1e-15);
+  assert_true(fabs(e.shift.gain - 0.2 * tanh(1.0)) < 1e-15);
   // The falling rate: after n pairs a pair moves the shift by rate * K / (K + n) of its side.
   fw_pair_ranker_t q;
   memset(&q, 0, sizeof q);
   c.pair_shift_rate = 1.0;
   c.pair_shift_decay_pairs = 30.0;
   q.shift.pairs = 90;
-  (void)fw_pair_ranker_end(&q, &c, 0, false, false, 300, 50, 0.4, -0.8, tags, w);
-  (void)fw_pair_ranker_end(&q, &c, 1, false, true, 150, 51, 0.4, -0.8, tags, w);
+  (void)fw_pair_ranker_end(&q, &c, false, 0, false, false, 300, 50, 0.4, -0.8, tags, w);
+  (void)fw_pair_ranker_end(&q, &c, false, 1, false, true, 150, 51, 0.4, -0.8, tags, w);
   assert_true(fabs(q.shift.gain + 0.4 * 0.25) < 1e-15 && fabs(q.shift.centring - 0.8 * 0.25) < 1e-15);
   assert_int_equal(q.shift.pairs, 91);
   // A non-finite perturbation (a damaged log record) moves nothing.
-  (void)fw_pair_ranker_end(&q, &c, 0, false, true, 140, 52, NAN, 0.5, tags, w);
-  (void)fw_pair_ranker_end(&q, &c, 1, false, true, 150, 53, NAN, 0.5, tags, w);
+  (void)fw_pair_ranker_end(&q, &c, false, 0, false, true, 140, 52, NAN, 0.5, tags, w);
+  (void)fw_pair_ranker_end(&q, &c, false, 1, false, true, 150, 53, NAN, 0.5, tags, w);
   assert_true(fabs(q.shift.gain + 0.4 * 0.25) < 1e-15 && fabs(q.shift.centring - 0.8 * 0.25) < 1e-15);
   // The shift at a state: a * target angle + b * (lateral fraction - 0.5).
   r.shift.gain = 0.5;
@@ -674,6 +779,7 @@ int main(void) {
       cmocka_unit_test(test_pair_run_tag_always_increases),
       cmocka_unit_test(test_pair_ranker_moves_the_shift),
       cmocka_unit_test(test_loop_pair_runs_share_start_and_rank),
+      cmocka_unit_test(test_loop_phase_one_pairs),
       cmocka_unit_test(test_loop_pair_runs_auto_off_where_it_does_not_apply),
       cmocka_unit_test(test_loop_pair_safety_keeps_pair_runs_off_the_walls),
       cmocka_unit_test(test_loop_pair_safety_vets_unknown_actions),
