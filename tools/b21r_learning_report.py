@@ -146,6 +146,8 @@ def main():
     pair_of = {r["run_id"]: (r["pair_member"], r["pair_vetoed"]) for r in run_records}
     # The learned policy's shift (pair_runs) in force in the last evaluation run: what was evaluated.
     final_shift = next((r["shift"] for r in reversed(run_records) if r["evaluating"]), None)
+    # ... and in the last evaluation of phase one (phase one's pairs, pair_phase_one).
+    shift_after_one = next((r["shift"] for r in reversed(run_records) if r["evaluating"] and r["phase"] == 1), None)
     for r in train:
         r["pair_member"], r["pair_vetoed"] = pair_of.get(r["run_id"], (-1, False))
     p1 = [r for r in train if r["phase"] == 1]
@@ -190,6 +192,7 @@ def main():
         "blocks": blocks,
         "training_runs": len(train),
         "shift": list(final_shift) if final_shift is not None else None,
+        "shift_after_phase_one": list(shift_after_one) if shift_after_one is not None else None,
         "phase_one_runs": len(p1),
         "phase_two_runs": len(train) - len(p1),
         "phase_two_first_block_after_runs": switch_after,
@@ -240,7 +243,7 @@ def main():
     lines = ["Two-phase learning: %s" % args.title,
              "training runs: %d (phase one %d, phase two %d); experiences %d, sequence gaps %d" %
              (len(train), len(p1), len(train) - len(p1), len(exps), gaps),
-             "best example run: %s steps; mean example run: %s steps" %
+             "best phase-one run: %s steps; mean phase-one run: %s steps (the examples; in pairs, perturbed)" %
              (best_example, "%.1f" % mean_example if mean_example is not None else None)]
     if optimal is not None:
         lines.append("optimal controller: %d/%d reached, %.1f +- %.1f steps" %
@@ -267,17 +270,27 @@ def main():
         tot = sum(agg.values())
         lines.append("phase %d training steps by driver: %s" % (phase, ", ".join(
             "%s %d (%.1f %%)" % (src, n, 100.0 * n / tot) for src, n in sorted(agg.items()))))
-    in_pairs = [r for r in train if r["pair_member"] >= 0]
-    if in_pairs:
-        lines.append("phase two in ranked pairs (pair_runs): %d of %d phase-two training runs; each pair starts twice from one "
-                     "pose, the learned policy plus then minus a perturbation (counted as exploration above); %d "
-                     "runs corrected by the safety filter (ranked as failed; the recovery law's steps count as "
-                     "advisor), %d reached the goal" %
-                     (len(in_pairs), sum(1 for r in train if r["phase"] == 2),
+    # pair_runs: phase two's runs in ranked pairs, and (pair_phase_one) phase one's example runs from
+    # pair_phase_one_from_run on; each phase's pairs on a line of their own.
+    for phase, policy in ((1, "the example policy"), (2, "the learned policy")):
+        in_pairs = [r for r in train if r["pair_member"] >= 0 and r["phase"] == phase]
+        if not in_pairs:
+            continue
+        lines.append("phase %s in ranked pairs (pair_runs%s): %d of %d phase-%s training runs; each pair starts "
+                     "twice from one pose, %s plus then minus a perturbation (%s); %d runs corrected by the "
+                     "safety filter (ranked as failed; the recovery law's steps count as advisor), %d reached the "
+                     "goal" %
+                     ("one" if phase == 1 else "two", ", pair_phase_one" if phase == 1 else "", len(in_pairs),
+                      sum(1 for r in train if r["phase"] == phase), "one" if phase == 1 else "two", policy,
+                      "counted as the example's above" if phase == 1 else "counted as exploration above",
                       sum(1 for r in in_pairs if r["pair_vetoed"]), sum(1 for r in in_pairs if r["goal"])))
-        if final_shift is not None:
-            lines.append("the learned policy in the last evaluation block: the greedy action plus the shift the pairs "
-                         "learned, %+.3f x target angle %+.3f x (lateral fraction - 0.5) [rad/s]" % final_shift)
+    if any(r["pair_member"] >= 0 and r["phase"] == 1 for r in train) and shift_after_one is not None:
+        lines.append("the learned policy after phase one (its last phase-one evaluation): the greedy action plus the "
+                     "shift phase one's pairs learned, %+.3f x target angle %+.3f x (lateral fraction - 0.5) "
+                     "[rad/s]" % shift_after_one)
+    if any(r["pair_member"] >= 0 for r in train) and final_shift is not None:
+        lines.append("the learned policy in the last evaluation block: the greedy action plus the shift the pairs "
+                     "learned, %+.3f x target angle %+.3f x (lateral fraction - 0.5) [rad/s]" % final_shift)
     lines.append("claims (paired over the same poses, 95 %; this seed only, see docs/RESULTS.md for 10 seeds):")
     for c, ok, n in verdicts:
         lines.append("  %-3s %s: %s" % ("yes" if ok else "NO", c, n))

@@ -219,7 +219,8 @@ static bool differs(double a, double b) { return a < b || a > b; }
 // pair_runs: a B21R_RUN record of a pair run (it follows the run's last experience). As in the
 // controller, the run's replay comes first, then its weights: a first run weighs 0 until its pair
 // is ranked, an aborted run 0 (its pair starts again), and the second run ranks the pair and
-// moves the learned policy's shift (fw_pair_ranker_end, the controller's rule).
+// moves the learned policy's shift (fw_pair_ranker_end, the controller's rule; the record's phase
+// 1 marks a pair of example runs, which keeps weight 1).
 static void rank_pair_run(trainer_t* t, const b21r_run_t* r) {
   if (!t->pairs || r->kind != B21R_RUN_T_KIND_TRAINING || r->pair_member < 0 || !t->in_run ||
       r->run_id != t->run_id) {

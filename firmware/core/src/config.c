@@ -311,9 +311,9 @@ static const key_desc_t k_keys[] = {
    "pair_runs: the learned policy is the greedy action plus a shift a * target angle + b * (lateral fraction - "
    "0.5) that the pairs move: each ranked pair adds pair_shift_rate * tanh(d / pair_shift_tau_steps) times its "
    "perturbation (g, c) to (a, b), d = the second run's steps minus the first's (a failed run counts as the "
-   "slower), and phase two's runs then weigh 0 in the imitation; 0 = the pairs do not move the shift (one "
-   "loaded from a checkpoint still applies): the faster run's points weigh more in the imitation instead "
-   "(pair_tau_steps)"},
+   "slower), and phase two's runs then weigh 0 in the imitation (phase one's paired example runs 1); 0 = the "
+   "pairs do not move the shift (one loaded from a checkpoint still applies): the faster run's points weigh "
+   "more in the imitation instead, in both phases (pair_tau_steps)"},
   {NULL, "pair_shift_tau_steps", KIND_DOUBLE, OFF(pair_shift_tau_steps), 0.01, 1000, false, false, NULL, "2",
    "pair_runs: the difference in steps at which a pair moves the shift by 0.76 of pair_shift_rate times its "
    "perturbation"},
@@ -329,16 +329,19 @@ static const key_desc_t k_keys[] = {
   {NULL, "pair_phase_one", KIND_BOOL, OFF(pair_phase_one), 0, 0, false, false, NULL, "true",
    "pair_runs with phase_one_driver = example: phase one's runs come in pairs too, the example policy plus "
    "and minus the pair's perturbation from one start pose with the same example gain and dither, and their "
-   "ranking moves the learned policy's shift as in phase two; both runs are imitated (their perturbations "
-   "cancel in the imitation)"},
+   "ranking moves the learned policy's shift as in phase two, whose pairs go on counting from there; both runs "
+   "are imitated (their perturbations cancel in the imitation; with pair_shift_rate = 0 they are ranked into "
+   "its weights instead). The examples still drive every step (counted as the example's); a person's runs "
+   "(phase_one_driver = human, joystick) are never paired"},
   {NULL, "pair_phase_one_from_run", KIND_INT, OFF(pair_phase_one_from_run), 0, 1000000, false, false, NULL, "10",
    "pair_phase_one: the first phase-one training run (counted from 0) that starts a pair; the runs before it "
    "are the plain examples, each from its own pose, so that the first evaluations find a policy"},
   {NULL, "pair_safety", KIND_BOOL, OFF(pair_safety), 0, 0, false, false, NULL, "true",
    "pair_runs: a safety filter vets every perturbed command before it is sent: a kinematic rollout (the command "
    "for one period, then the recovery law 2 x target angle, under the velocity and acceleration limits) must keep "
-   "pair_safety_margin_m between the robot's skirt and both walls for pair_safety_horizon_s; otherwise the greedy "
-   "action goes if it passes, else the recovery law's (source advisor)"},
+   "pair_safety_margin_m between the robot's skirt and both walls for pair_safety_horizon_s; otherwise the "
+   "unperturbed policy's command goes if it passes (phase two: the greedy action; phase one: the example's), else "
+   "the recovery law's (source advisor)"},
   {NULL, "pair_safety_margin_m", KIND_DOUBLE, OFF(pair_safety_margin_m), 0, 0.5, false, false, NULL, "0.1",
    "pair_safety: least predicted clearance between the skirt and a wall a command must keep [m] (covers sensing "
    "error and actuation lag the rollout leaves out)"},

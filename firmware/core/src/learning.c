@@ -293,7 +293,7 @@ static void save_slice(fw_loop_t* L) {
 }
 
 // pair_runs: the anchor weights run.c decided at the end of a pair run (a first run's 0 until its
-// pair is ranked, or the ranked pair's two weights).
+// pair is ranked, or the ranked pair's two weights; phase one's example pairs 1: fw_pair_ranker_end).
 static void weigh_pair(fw_loop_t* L) {
   for (int32_t i = 0; i < L->pair_weigh_n; ++i) {
     (void)fw_learner_weight_run(&L->learner, L->pair_weigh_tag[i], L->pair_weigh_w[i]);

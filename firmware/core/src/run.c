@@ -63,9 +63,11 @@ static const char* run_kind_name(const fw_loop_t* L) {
   return "train";
 }
 
-// pair_runs: a phase-two training run that starts a pair draws its pose; the one that ends the
-// pair starts from the same pose (and replays the same exploration noise), so that the two runs
-// differ mainly by their perturbation (the sensor noise of each run is its own).
+// pair_runs: a phase-two training run (pair_phase_one: also a phase-one example run from
+// pair_phase_one_from_run on) that starts a pair draws its pose; the one that ends the pair
+// starts from the same pose (and replays the same exploration noise and, in phase one, the same
+// example gain), so that the two runs differ mainly by their perturbation (the sensor noise of
+// each run is its own).
 static bool pair_run_planned(const fw_loop_t* L, const fw_run_plan_t* plan) {
   const bool paired_phase =
       plan->phase == 2 || (plan->phase == 1 && L->cfg.pair_phase_one && L->cfg.phase_driver == FW_DRIVER_EXAMPLE &&
@@ -192,7 +194,9 @@ double fw_pair_shift_at(const fw_pair_ranker_t* r, const double* s) {
 // pair is ranked (fw_pair_ranker_end): by default it moves the learned policy's shift toward the
 // faster run and both runs keep weight 0, so the imitation stays the teachers' and the shift
 // alone carries what phase two found (imitating the shifted runs as well would add the shift
-// twice). A run the safety filter had to correct (pair_vet) counts as one that missed the goal:
+// twice). Phase one's pairs of example runs keep weight 1 by default: their + and - perturbations
+// cancel in the imitation (a run left without its pair, or corrected by the filter, keeps its
+// side's: a small bias, as rare as those runs). A run the safety filter had to correct (pair_vet) counts as one that missed the goal:
 // its perturbation was predicted to reach a wall, and a policy that learns from it would lean on
 // a filter that evaluations and greedy runs do not have. The shift is O(1) arithmetic and acts
 // from the next run; learning.c applies the weights between runs.

@@ -118,7 +118,8 @@ typedef struct fw_loop_stats {
   /// with the shift, a state only phase two's runs reached; there the imitation copies shifted actions)
   uint64_t anchor_unweighted;
   /// pair_safety: pair-run commands the filter replaced (the perturbed policy's, or after a
-  /// veto the learned policy's with its exploration noise), by the greedy or the recovery law
+  /// veto the learned policy's with its exploration noise), by the unperturbed policy's own
+  /// command (phase two: the greedy action; phase one: the example's) or the recovery law
   int64_t pair_safety_overrides;
   int32_t pair_runs_vetoed;      ///< pair_safety: pair runs the filter corrected (ranked as failed)
   int32_t pair_runs_missed;      ///< pair runs ranked as having missed the goal (vetoed included)

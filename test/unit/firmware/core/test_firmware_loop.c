@@ -134,10 +134,15 @@ static void test_loop_pair_runs_share_start_and_rank(void** state) {
 // differ by exactly the pair's perturbation (+ then -); the examples still drive every step; the
 // pairs move the shift by the ranker's rule during phase one, so the evaluation after phase one
 // already has it, and phase two goes on counting from there. Before that run, and with
-// pair_phase_one = false, phase one is the plain examples.
+// pair_phase_one = false, phase one is the plain examples. Paired from run 5 of 10, the last
+// phase-one run is left without its pair: phase two starts a pair of its own (a pair never spans
+// the switch).
 static void test_loop_phase_one_pairs(void** state) {
   (void)state;
-  for (int on = 0; on < 2; ++on) {
+  for (int variant = 0; variant < 3; ++variant) {
+    const bool on = variant > 0;
+    const int32_t from_run = variant == 2 ? 5 : 4;
+    const int32_t phase_one_pairs = on ? (10 - from_run) / 2 : 0;
     fw_config_t c;
     short_schedule(&c);
     c.phase_one_runs = 10;
@@ -145,8 +150,8 @@ static void test_loop_phase_one_pairs(void** state) {
     c.eval_every_runs = 10;
     c.eval_starts = 2;
     c.pair_runs_mode = FW_PAIR_RUNS_ON;
-    c.pair_phase_one = on == 1;
-    c.pair_phase_one_from_run = 4;
+    c.pair_phase_one = on;
+    c.pair_phase_one_from_run = from_run;
     assert_int_equal(harness_open(&g_h, &c, false, 9), 0);
     g_h.fake.lidar.noise_sigma_m = 0.0;  // a pair's two runs then see the same first state
     harness_run(&g_h, 200000);
@@ -154,9 +159,10 @@ static void test_loop_phase_one_pairs(void** state) {
     fw_loop_get_stats(g_h.loop, &st);
     assert_true(st.done);
     assert_int_equal(st.training_runs, 12);
-    assert_int_equal(st.pairs_ranked, on ? 4 : 1);
+    assert_int_equal(st.pairs_ranked, phase_one_pairs + 1);
     const b21r_run_t* one[10];
     int n = 0;
+    int phase_two_runs = 0;
     for (int i = 0; i < g_h.runs && i < 64; ++i) {
       const b21r_run_t* r = &g_h.run[i];
       if (r->kind == B21R_RUN_T_KIND_TRAINING && r->phase == 1) {
@@ -164,15 +170,18 @@ static void test_loop_phase_one_pairs(void** state) {
         one[n++] = r;
         assert_int_equal(r->steps_by_source[B21R_EXPERIENCE_T_SOURCE_EXAMPLE], r->steps);  // the examples drive
       } else if (r->kind == B21R_RUN_T_KIND_TRAINING) {
-        assert_int_equal(r->shift_pairs, on ? 3 : 0);  // phase two counts on from phase one's pairs
+        assert_int_equal(r->shift_pairs, phase_one_pairs);  // phase two counts on from phase one's pairs
+        assert_int_equal(r->pair_member, phase_two_runs % 2);  // phase two's first run starts a pair
+        phase_two_runs++;
       }
     }
     assert_int_equal(n, 10);
+    assert_int_equal(phase_two_runs, 2);
     double shift[2] = {0.0, 0.0};
     int compared = 0;
     for (int i = 0; i < 10; ++i) {
       const b21r_run_t* r = one[i];
-      assert_int_equal(r->pair_member, on && i >= 4 ? (i - 4) % 2 : -1);
+      assert_int_equal(r->pair_member, on && i >= from_run ? (i - from_run) % 2 : -1);
       assert_true(r->shift_gain == shift[0] && r->shift_centring == shift[1]);
       if (r->pair_member != 1) {
         continue;
@@ -201,7 +210,8 @@ static void test_loop_phase_one_pairs(void** state) {
       shift[0] += rate * u * a->pair_gain;
       shift[1] += rate * u * a->pair_centring;
     }
-    assert_true(on == 0 || ((shift[0] != 0.0 || shift[1] != 0.0) && compared > 0));
+    assert_true(!on || shift[0] != 0.0 || shift[1] != 0.0);
+    assert_true(variant != 1 || compared > 0);  // (seed 9: the first commands of a pair compared)
     // The evaluation after phase one drove with the shift phase one's pairs learned.
     int evaluated = 0;
     for (int i = 0; i < g_h.runs && i < 64 && evaluated == 0; ++i) {
