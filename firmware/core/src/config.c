@@ -326,13 +326,15 @@ static const key_desc_t k_keys[] = {
   {NULL, "pair_recency_runs", KIND_DOUBLE, OFF(pair_recency_runs), 0, 1e6, false, false, NULL, "150",
    "pair_runs: in the imitation (the anchor) a point stored N runs ago (evaluation runs counted) weighs exp(-N / "
    "pair_recency_runs), in both phases (0 = no fading)"},
-  {NULL, "pair_phase_one", KIND_BOOL, OFF(pair_phase_one), 0, 0, false, false, NULL, "true",
+  {NULL, "pair_phase_one", KIND_BOOL, OFF(pair_phase_one), 0, 0, false, false, NULL, "false",
    "pair_runs with phase_one_driver = example: phase one's runs come in pairs too, the example policy plus "
    "and minus the pair's perturbation from one start pose with the same example gain and dither, and their "
    "ranking moves the learned policy's shift as in phase two, whose pairs go on counting from there; both runs "
    "are imitated (their perturbations cancel in the imitation; with pair_shift_rate = 0 they are ranked into "
    "its weights instead). The examples still drive every step (counted as the example's); a person's runs "
-   "(phase_one_driver = human, joystick) are never paired"},
+   "(phase_one_driver = human, joystick) are never paired. Off by default: it makes the policy after phase one "
+   "better than the examples' best gain (Fig. 4), but the shift moved by a few pairs made evaluations within "
+   "phase one end on a wall (docs/LEARNING.md)"},
   {NULL, "pair_phase_one_from_run", KIND_INT, OFF(pair_phase_one_from_run), 0, 1000000, false, false, NULL, "10",
    "pair_phase_one: the first phase-one training run (counted from 0) that starts a pair; the runs before it "
    "are the plain examples, each from its own pose, so that the first evaluations find a policy"},

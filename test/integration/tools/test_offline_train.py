@@ -29,8 +29,11 @@ import fwtest
 from b21r_log import read_log
 
 # 4 replay passes instead of the default 20: the sanitizer build is slow.
-SESSION = {"phase_one_runs": 30, "eval_every_runs": 1000, "eval_starts": 1, "hedger_replay_passes": 4}
-TRAINER_SETS = ["--set", "hedger_replay_passes=4"]
+# Phase one's example runs in ranked pairs from the 11th on (pair_phase_one, off by default), so
+# that the trainer's ranking of both phases' pairs is checked.
+SESSION = {"phase_one_runs": 30, "eval_every_runs": 1000, "eval_starts": 1, "hedger_replay_passes": 4,
+           "pair_phase_one": "true"}
+TRAINER_SETS = ["--set", "hedger_replay_passes=4", "--set", "pair_phase_one=true"]
 
 
 def sections(path):
@@ -92,7 +95,7 @@ def main():
         if sections(offline)[1] != sections(online)[1]:
             fwtest.fail("the offline learned state differs from the controller's own after phase one")
         fwtest.note("claim 1: the offline learned state equals the controller's after phase one, bit for bit")
-        # pair_phase_one (default) ran phase one's example runs from run 10 on in ranked pairs: their
+        # pair_phase_one (set above) ran phase one's example runs from run 10 on in ranked pairs: their
         # points are imitated whole, so the experience log gives the same store, but only the full
         # log's B21R_RUN records give the shift they learned (bytes 56-75 of the controller section).
         shift_phase_one = struct.unpack_from("<ddI", sections(online)[0], 56)

@@ -464,13 +464,14 @@ static void test_config_pair_runs_needs_corridor_hedger_state_model(void** state
   assert_true(c.pair_shift_rate == 0.0);
   assert_int_equal(fw_config_set(&c, "pair_gain_sigma", "0.1", "--set", err, sizeof err), 0);
   assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
-  // Phase one's pairs: on by default from the 11th example run; a negative first run is refused.
-  assert_true(c.pair_phase_one && c.pair_phase_one_from_run == 10);
+  // Phase one's pairs: off by default, from the 11th example run when on; a negative first run
+  // is refused.
+  assert_true(!c.pair_phase_one && c.pair_phase_one_from_run == 10);
   assert_int_equal(fw_config_set(&c, "pair_phase_one_from_run", "-1", "--set", err, sizeof err), -1);
   assert_non_null(strstr(err, "pair_phase_one_from_run"));
   assert_int_equal(fw_config_set(&c, "pair_phase_one_from_run", "0", "--set", err, sizeof err), 0);
-  assert_int_equal(fw_config_set(&c, "pair_phase_one", "false", "--set", err, sizeof err), 0);
-  assert_true(!c.pair_phase_one && c.pair_phase_one_from_run == 0);
+  assert_int_equal(fw_config_set(&c, "pair_phase_one", "true", "--set", err, sizeof err), 0);
+  assert_true(c.pair_phase_one && c.pair_phase_one_from_run == 0);
   assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
   assert_int_equal(fw_config_set(&c, "pair_safety_margin_m", "-0.1", "--set", err, sizeof err), -1);
   assert_non_null(strstr(err, "pair_safety_margin_m"));
