@@ -36,7 +36,7 @@ struct trainer {
   // ranked (fw_pair_ranker_end, the controller's ranking).
   bool pairs;
   bool pairs_ran;            // cfg runs pairs in phase two (fw_config_pair_runs_active)
-  bool pairs_in_phase_one;   // and in phase one (pair_phase_one with the example policy)
+  bool pairs_in_phase_one;   // and in phase one (fw_config_pair_phase_one_active)
   uint32_t run_tag;
   fw_pair_ranker_t ranker;
   bool log_has_run_records;  // the log being read has B21R_RUN (a full log)
@@ -81,7 +81,7 @@ trainer_t* trainer_create(const fw_config_t* cfg, const train_options_t* opt, ch
   }
   t->pairs = fw_config_pair_learner(cfg);
   t->pairs_ran = fw_config_pair_runs_active(cfg);
-  t->pairs_in_phase_one = t->pairs_ran && cfg->pair_phase_one && cfg->phase_driver == FW_DRIVER_EXAMPLE;
+  t->pairs_in_phase_one = fw_config_pair_phase_one_active(cfg);
   t->next_seq = -1;
   t->started_s = now_s();
   t->progress_next_s = t->started_s + t->opt.progress_period_s;

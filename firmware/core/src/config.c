@@ -1051,6 +1051,10 @@ bool fw_config_pair_runs_active(const fw_config_t* cfg) {
          (cfg->pair_runs_mode == FW_PAIR_RUNS_ON || cfg->reposition == FW_REPOSITION_EMULATOR);
 }
 
+bool fw_config_pair_phase_one_active(const fw_config_t* cfg) {
+  return fw_config_pair_runs_active(cfg) && cfg->pair_phase_one && cfg->phase_driver == FW_DRIVER_EXAMPLE;
+}
+
 int fw_config_validate_program(const fw_config_t* cfg, char* err, size_t err_cap) {
   if (fw_config_validate(cfg, err, err_cap) != 0) {
     return -1;

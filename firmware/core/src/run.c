@@ -69,11 +69,13 @@ static const char* run_kind_name(const fw_loop_t* L) {
 // example gain), so that the two runs differ mainly by their perturbation (the sensor noise of
 // each run is its own).
 static bool pair_run_planned(const fw_loop_t* L, const fw_run_plan_t* plan) {
-  const bool paired_phase =
-      plan->phase == 2 || (plan->phase == 1 && L->cfg.pair_phase_one && L->cfg.phase_driver == FW_DRIVER_EXAMPLE &&
-                           plan->training_index >= L->cfg.pair_phase_one_from_run);
-  return fw_config_pair_runs_active(&L->cfg) && L->cfg.mode == FW_MODE_LEARN && plan->kind == FW_RUN_TRAINING &&
-         paired_phase;
+  if (L->cfg.mode != FW_MODE_LEARN || plan->kind != FW_RUN_TRAINING) {
+    return false;
+  }
+  if (plan->phase == 1) {
+    return fw_config_pair_phase_one_active(&L->cfg) && plan->training_index >= L->cfg.pair_phase_one_from_run;
+  }
+  return plan->phase == 2 && fw_config_pair_runs_active(&L->cfg);
 }
 
 // Whether a planned pair run is the second of the pair under way: a pair never spans the switch
@@ -196,9 +198,9 @@ double fw_pair_shift_at(const fw_pair_ranker_t* r, const double* s) {
 // alone carries what phase two found (imitating the shifted runs as well would add the shift
 // twice). Phase one's pairs of example runs keep weight 1 by default: their + and - perturbations
 // cancel in the imitation (a run left without its pair, or corrected by the filter, keeps its
-// side's: a small bias, as rare as those runs). A run the safety filter had to correct (pair_vet) counts as one that missed the goal:
-// its perturbation was predicted to reach a wall, and a policy that learns from it would lean on
-// a filter that evaluations and greedy runs do not have. The shift is O(1) arithmetic and acts
+// side's: a small bias, as rare as those runs). A run the safety filter had to correct (pair_vet)
+// counts as one that missed the goal: its perturbation was predicted to reach a wall, and a
+// policy that learns from it would lean on a filter that evaluations and greedy runs do not have. The shift is O(1) arithmetic and acts
 // from the next run; learning.c applies the weights between runs.
 static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps) {
   if (L->pair_member < 0) {
@@ -224,9 +226,8 @@ static double pair_offset(const fw_loop_t* L) {
 // pair_safety: a pair run's command a goes only if the recovery rollout (tasks/recovery.h) keeps
 // pair_safety_margin_m to both walls; otherwise the unperturbed policy's own action (phase two:
 // the learned policy's, when one is known; phase one: the example's), if it does, and else the
-// recovery law's. The first correction vetoes the run (it counts
-// as failed in its pair and its perturbation ends): whatever failed the check, the run needed the
-// filter. Runs before the command is sent: three rollouts at most (30 periods each at the
+// recovery law's. The first correction vetoes the run (it counts as failed in its pair and its
+// perturbation ends): whatever failed the check, the run needed the filter. Runs before the command is sent: three rollouts at most (30 periods each at the
 // defaults).
 // pair_safety: the recovery rollout from this tick's state keeps the margin after command a.
 static bool pair_passes(const fw_loop_t* L, double a) {

@@ -327,11 +327,16 @@ void fw_config_print_reference(FILE* out);
 /// the same on the emulator and on the robot. Pure, O(1).
 bool fw_config_pair_learner(const fw_config_t* cfg);
 
-/// Whether training runs come in ranked pairs under cfg (phase two; phase one too with
-/// pair_phase_one and the example policy; callers also check mode = learn): fw_config_pair_learner, and pair_runs = true or reposition = emulator. pair_runs =
+/// Whether phase two's training runs come in ranked pairs under cfg (callers also check mode =
+/// learn): fw_config_pair_learner, and pair_runs = true or reposition = emulator. pair_runs =
 /// auto leaves the pairs off on the robot: the pair's second run needs the first one's start pose
 /// again, and the safety filter's margin is measured in the lockstep emulator only. Pure, O(1).
 bool fw_config_pair_runs_active(const fw_config_t* cfg);
+
+/// Whether phase one's example runs come in ranked pairs too (from pair_phase_one_from_run on):
+/// fw_config_pair_runs_active, pair_phase_one and phase_one_driver = example (a person's runs are
+/// never paired). The controller plans its runs by it, b21r-train reads logs by it. Pure, O(1).
+bool fw_config_pair_phase_one_active(const fw_config_t* cfg);
 
 /// Writes the current value of every key to out in the config file format.
 void fw_config_print(const fw_config_t* cfg, FILE* out);

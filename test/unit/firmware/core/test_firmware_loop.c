@@ -59,6 +59,19 @@ static void test_loop_learns_corridor_reaches_goal_from_all_poses(void** state) 
   harness_close(&g_h);
 }
 
+// The ranker's rule (fw_pair_ranker_end, tested alone below) applied by hand to a pair's two
+// B21R_RUN records (a: the first run, b: the second): moves shift[] as the controller should have.
+static void expect_pair_step(const fw_config_t* c, const b21r_run_t* a, const b21r_run_t* b, double shift[2]) {
+  const bool ga = a->end_reason == B21R_RUN_T_END_GOAL && !a->pair_vetoed;
+  const bool gb = b->end_reason == B21R_RUN_T_END_GOAL && !b->pair_vetoed;
+  const double u = ga && gb ? tanh((double)(b->steps - a->steps) / c->pair_shift_tau_steps)
+                            : (ga == gb ? 0.0 : (ga ? 1.0 : -1.0));
+  const double k = c->pair_shift_decay_pairs;
+  const double rate = c->pair_shift_rate * k / (k + (double)a->shift_pairs);
+  shift[0] += rate * u * a->pair_gain;
+  shift[1] += rate * u * a->pair_centring;
+}
+
 // pair_runs: phase two's training runs come in pairs from one start pose (the B21R_RUN start
 // poses of a pair are equal, those of different pairs differ), every pair's ranking reaches the
 // store between runs, and the same seed still gives the same experience stream.
@@ -104,14 +117,8 @@ static void test_loop_pair_runs_share_start_and_rank(void** state) {
       assert_true(a->pair_gain != 0.0 && a->pair_centring != 0.0);
       assert_true(a->shift_gain == shift[0] && a->shift_centring == shift[1]);
       assert_true(b->shift_gain == shift[0] && b->shift_centring == shift[1]);
-      const bool ga = a->end_reason == B21R_RUN_T_END_GOAL && !a->pair_vetoed;
-      const bool gb = b->end_reason == B21R_RUN_T_END_GOAL && !b->pair_vetoed;
-      const double u = ga && gb ? tanh((double)(b->steps - a->steps) / c.pair_shift_tau_steps)
-                                : (ga == gb ? 0.0 : (ga ? 1.0 : -1.0));
       assert_int_equal(a->shift_pairs, p);
-      const double rate = c.pair_shift_rate * c.pair_shift_decay_pairs / (c.pair_shift_decay_pairs + (double)p);
-      shift[0] += rate * u * a->pair_gain;
-      shift[1] += rate * u * a->pair_centring;
+      expect_pair_step(&c, a, b, shift);
     }
     assert_true(st.shift.gain == shift[0] && st.shift.centring == shift[1]);
     assert_true(shift[0] != 0.0 || shift[1] != 0.0);
@@ -202,13 +209,7 @@ static void test_loop_phase_one_pairs(void** state) {
         assert_true(fabs(0.5 * (a0 - a1) - offset) < 1e-12);
         compared++;
       }
-      const bool ga = a->end_reason == B21R_RUN_T_END_GOAL && !a->pair_vetoed;
-      const bool gb = r->end_reason == B21R_RUN_T_END_GOAL && !r->pair_vetoed;
-      const double u = ga && gb ? tanh((double)(r->steps - a->steps) / c.pair_shift_tau_steps)
-                                : (ga == gb ? 0.0 : (ga ? 1.0 : -1.0));
-      const double rate = c.pair_shift_decay_pairs / (c.pair_shift_decay_pairs + (double)a->shift_pairs);
-      shift[0] += rate * u * a->pair_gain;
-      shift[1] += rate * u * a->pair_centring;
+      expect_pair_step(&c, a, r, shift);
     }
     assert_true(!on || shift[0] != 0.0 || shift[1] != 0.0);
     assert_true(variant != 1 || compared > 0);  // (seed 9: the first commands of a pair compared)
