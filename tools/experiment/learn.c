@@ -36,6 +36,7 @@ typedef struct run_rec {
   bool last_terminal;
   int64_t sources[N_SOURCES];
   uint32_t store_fill;     // after the run (and its backward replay)
+  fw_pair_shift_t shift;   // the learned policy's shift after the run (pair_runs; 0 without)
 } run_rec_t;
 
 typedef struct block_rec {
@@ -137,6 +138,7 @@ static void take_run_end(session_t* S, const fw_loop_stats_t* before, const fw_l
     return;
   }
   r->store_fill = after->store_fill;
+  r->shift = after->shift;
   if (!r->eval && r->outcome != OUT_ABORTED) {
     r->training_index = S->training_done++;
   }
@@ -374,6 +376,8 @@ static void write_learning(json_writer_t* w, const session_t* S, double dt_s) {
     json_num(w, "return", r->ret);
     write_sources(w, "sources", r->sources);
     json_int(w, "store_fill", r->store_fill);
+    json_num(w, "shift_gain", r->shift.gain);
+    json_num(w, "shift_centring", r->shift.centring);
     json_end_object(w);
   }
   json_end_array(w);
@@ -400,6 +404,9 @@ static void write_learning(json_writer_t* w, const session_t* S, double dt_s) {
   json_int(w, "pair_safety_overrides", S->final.pair_safety_overrides);
   json_int(w, "pair_runs_vetoed", S->final.pair_runs_vetoed);
   json_int(w, "pair_runs_missed", S->final.pair_runs_missed);
+  json_int(w, "shift_steps_halved", S->final.shift_steps_halved);
+  json_int(w, "shift_steps_refused", S->final.shift_steps_refused);
+  json_int(w, "shift_vet_periods", S->final.shift_vet_periods);
   json_int(w, "pair_safety_short", S->final.pair_safety_short);
   json_int(w, "pair_safety_held", S->final.pair_safety_held);
   json_num(w, "shift_gain", S->final.shift.gain);

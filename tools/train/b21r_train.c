@@ -162,6 +162,11 @@ int main(int argc, char** argv) {
       printf("b21r-train: %llu pairs of runs ranked from B21R_RUN (pair_runs); the learned policy's "
              "shift: %.4f rad/s per rad of target angle, %.4f rad/s per corridor width\n",
              (unsigned long long)s.pairs_ranked, s.shift.gain, s.shift.centring);
+      if (s.shift_steps_halved > 0 || s.shift_steps_refused > 0) {
+        printf("b21r-train: of their steps of the shift, %llu halved and %llu refused by the vet on the kinematic "
+               "model (pair_shift_vet)\n",
+               (unsigned long long)s.shift_steps_halved, (unsigned long long)s.shift_steps_refused);
+      }
     }
     if (s.paired_unranked > 0) {
       fprintf(stderr,

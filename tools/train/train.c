@@ -9,6 +9,7 @@
 #include <fw/io.h>
 #include <fw/loop.h>
 #include <fw/pubq.h>
+#include <fw/shift_vet.h>
 
 #include <b21r/b21r_experience_t.h>
 #include <b21r/b21r_run_t.h>
@@ -39,6 +40,10 @@ struct trainer {
   bool pairs_in_phase_one;   // and in phase one (fw_config_pair_phase_one_active)
   uint32_t run_tag;
   fw_pair_ranker_t ranker;
+  // pair_shift_vet: the controller's vet of each step of the shift, from the same starts (the first
+  // state of each training run's first experience).
+  fw_shift_vet_env_t vet_env;
+  fw_shift_vet_starts_t vet_starts;
   bool log_has_run_records;  // the log being read has B21R_RUN (a full log)
   uint64_t log_paired;       // training experiences of phases that run pairs, learned from the log being read
   int64_t next_seq;      // expected seq of the next experience (-1: none yet in this log)
@@ -82,6 +87,7 @@ trainer_t* trainer_create(const fw_config_t* cfg, const train_options_t* opt, ch
   t->pairs = fw_config_pair_learner(cfg);
   t->pairs_ran = fw_config_pair_runs_active(cfg);
   t->pairs_in_phase_one = fw_config_pair_phase_one_active(cfg);
+  fw_shift_vet_env_init(&t->vet_env, cfg);
   t->next_seq = -1;
   t->started_s = now_s();
   t->progress_next_s = t->started_s + t->opt.progress_period_s;
@@ -201,6 +207,9 @@ static int learn(trainer_t* t, const b21r_experience_t* e, const char* path, cha
     t->stats.skipped_eval++;
     return 0;
   }
+  if (!e->evaluating && e->step_id == 0 && t->cfg.task == FW_TASK_CORRIDOR) {
+    fw_shift_vet_starts_add(&t->vet_starts, &t->vet_env, e->s);
+  }
   const hedger_status_t hs =
       hedger_update(t->hedger, e->s, e->action_radps, e->reward, e->s_next, e->terminal ? 1 : 0, NULL);
   if (hs == HEDGER_OK) {
@@ -249,10 +258,20 @@ static void rank_pair_run(trainer_t* t, const b21r_run_t* r) {
   const bool goal = r->end_reason == B21R_RUN_T_END_GOAL && !r->pair_vetoed;
   uint32_t tags[2];
   double weights[2];
+  const fw_pair_shift_t in_force = *shift;
   const int32_t n = fw_pair_ranker_end(&t->ranker, &t->cfg, r->phase == 1, r->pair_member, aborted, goal, r->steps,
                                        t->run_tag, r->pair_gain, r->pair_centring, tags, weights);
   for (int32_t i = 0; i < n; ++i) {
     (void)hedger_weight_run(t->hedger, tags[i], weights[i], NULL);
+  }
+  if (n == 2 && t->cfg.pair_shift_vet) {
+    // The controller's vet of the step, after the replay and the weights as there (at once here).
+    fw_shift_vet_t vet;
+    fw_shift_vet_begin(&vet, &in_force, shift);
+    (void)fw_shift_vet_step(&vet, fw_shift_vet_hedger_greedy, t->hedger, &t->vet_env, &t->vet_starts, UINT32_MAX);
+    *shift = vet.result;
+    t->stats.shift_steps_halved += vet.verdict == FW_SHIFT_STEP_HALVED ? 1U : 0U;
+    t->stats.shift_steps_refused += vet.verdict == FW_SHIFT_STEP_REFUSED ? 1U : 0U;
   }
   if (n == 2) {
     t->stats.pairs_ranked++;

@@ -326,15 +326,15 @@ static const key_desc_t k_keys[] = {
   {NULL, "pair_recency_runs", KIND_DOUBLE, OFF(pair_recency_runs), 0, 1e6, false, false, NULL, "150",
    "pair_runs: in the imitation (the anchor) a point stored N runs ago (evaluation runs counted) weighs exp(-N / "
    "pair_recency_runs), in both phases (0 = no fading)"},
-  {NULL, "pair_phase_one", KIND_BOOL, OFF(pair_phase_one), 0, 0, false, false, NULL, "false",
+  {NULL, "pair_phase_one", KIND_BOOL, OFF(pair_phase_one), 0, 0, false, false, NULL, "true",
    "pair_runs with phase_one_driver = example: phase one's runs come in pairs too, the example policy plus "
    "and minus the pair's perturbation from one start pose with the same example gain and dither, and their "
    "ranking moves the learned policy's shift as in phase two, whose pairs go on counting from there; both runs "
    "are imitated (their perturbations cancel in the imitation; with pair_shift_rate = 0 they are ranked into "
    "its weights instead). The examples still drive every step (counted as the example's); a person's runs "
-   "(phase_one_driver = human, joystick) are never paired. Off by default: it makes the policy after phase one "
-   "better than the examples' best gain (Fig. 4), but the shift moved by a few pairs made evaluations within "
-   "phase one end on a wall (docs/LEARNING.md)"},
+   "(phase_one_driver = human, joystick) are never paired. With it the policy after phase one beats the "
+   "examples' best gain (Fig. 4); pair_shift_vet keeps its first steps from turning the policy into a wall "
+   "(docs/LEARNING.md)"},
   {NULL, "pair_phase_one_from_run", KIND_INT, OFF(pair_phase_one_from_run), 0, 1000000, false, false, NULL, "10",
    "pair_phase_one: the first phase-one training run (counted from 0) that starts a pair; the runs before it "
    "are the plain examples, each from its own pose, so that the first evaluations find a policy"},
@@ -349,6 +349,18 @@ static const key_desc_t k_keys[] = {
    "error and actuation lag the rollout leaves out)"},
   {NULL, "pair_safety_horizon_s", KIND_DOUBLE, OFF(pair_safety_horizon_s), 0.1, 20, false, false, NULL, "3",
    "pair_safety: length of the rollout [s] (the recovery law settles in about 3 s)"},
+  {NULL, "pair_shift_vet", KIND_BOOL, OFF(pair_shift_vet), 0, 0, false, false, NULL, "true",
+   "pair_runs with pair_shift_rate > 0: before a ranked pair's step of the shift is taken, the learned policy "
+   "with it drives whole runs on the safety filter's kinematic model from the first states of the last "
+   "pair_shift_vet_starts training runs, each also mirrored; where it comes closer than pair_safety_margin_m to a "
+   "wall (or runs out of steps) from a start from which the shift in force does not, half the step is tried, and "
+   "then none (docs/LEARNING.md)"},
+  {NULL, "pair_shift_vet_starts", KIND_INT, OFF(pair_shift_vet_starts), 1, 32, false, false, NULL, "20",
+   "pair_shift_vet: the training runs whose first states the vet drives from (the last ones; each also mirrored)"},
+  {NULL, "pair_shift_vet_periods_per_tick", KIND_INT, OFF(pair_shift_vet_periods_per_tick), 1, 100000, false, false,
+   NULL, "16",
+   "between runs (the robot stands): pair_shift_vet's rollout periods per tick, one greedy search each; bounds "
+   "the tick's time (a search costs less than a replay update)"},
 
   {"Output", "lcm_url", KIND_STRING, OFF(lcm_url), 0, 0, false, false, NULL, "",
    "LCM provider (\"\" = LCM's default or $LCM_DEFAULT_URL; \"none\" = no LCM)"},

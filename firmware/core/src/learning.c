@@ -257,6 +257,10 @@ static void learn_pending(fw_loop_t* L) {
     q = 0.0;
     kind = HEDGER_KIND_UNKNOWN;
   }
+  if (p->learning && p->step_id == 0 && L->cfg.task == FW_TASK_CORRIDOR) {
+    // pair_shift_vet: a training run's first state is a start the vet drives from.
+    fw_shift_vet_starts_add(&L->shift_vet_starts, &L->shift_vet_env, p->s);
+  }
   fw_out_experience(L, p, q, kind);
   p->active = false;
 }
@@ -304,6 +308,21 @@ static void weigh_pair(fw_loop_t* L) {
   L->pair_weigh_n = 0;
 }
 
+// pair_shift_vet: at most `periods` rollout periods of the vet under way; once it has decided,
+// its shift goes in force. True when done.
+static bool vet_shift(fw_loop_t* L, uint32_t periods) {
+  if (!fw_shift_vet_step(&L->shift_vet, fw_shift_vet_hedger_greedy, L->learner.hedger, &L->shift_vet_env,
+                         &L->shift_vet_starts, periods)) {
+    return false;
+  }
+  L->pair_ranker.shift = L->shift_vet.result;
+  L->shift_steps_halved += L->shift_vet.verdict == FW_SHIFT_STEP_HALVED ? 1 : 0;
+  L->shift_steps_refused += L->shift_vet.verdict == FW_SHIFT_STEP_REFUSED ? 1 : 0;
+  L->shift_vet_periods += L->shift_vet.periods;
+  L->shift_vet_pending = false;
+  return true;
+}
+
 // One slice of the between-run work: at most learn_updates_per_tick replay updates, then (pair_runs)
 // the ended pair's weights, then at most checkpoint_points_per_tick points of the save.
 static void between_runs_slice(fw_loop_t* L) {
@@ -323,12 +342,23 @@ static void between_runs_slice(fw_loop_t* L) {
       return;
     }
     L->learn_stage = FW_LEARN_SAVE;
+    if (L->shift_vet_pending) {
+      fw_shift_vet_begin(&L->shift_vet, &L->pair_ranker.shift, &L->shift_proposed);
+      L->learn_stage = FW_LEARN_VET;
+    }
     if (L->pair_weigh_n > 0) {
       // A pair has ended: its ranking goes into the store in this slice (two O(fill) passes, the
       // robot standing) and is part of the checkpoint that follows.
       weigh_pair(L);
       return;
     }
+  }
+  if (L->learn_stage == FW_LEARN_VET) {
+    // The vet drives the learned policy the pair's weights left, the one the next run drives.
+    if (vet_shift(L, (uint32_t)L->cfg.pair_shift_vet_periods_per_tick)) {
+      L->learn_stage = FW_LEARN_SAVE;
+    }
+    return;
   }
   save_slice(L);
 }
@@ -354,6 +384,12 @@ void fw_learning_finish_now(fw_loop_t* L) {
   (void)fw_learner_end_run_step(&L->learner, UINT32_MAX);
   if (L->pair_weigh_n > 0) {
     weigh_pair(L);
+  }
+  if (L->shift_vet_pending) {
+    if (L->learn_stage != FW_LEARN_VET) {
+      fw_shift_vet_begin(&L->shift_vet, &L->pair_ranker.shift, &L->shift_proposed);
+    }
+    (void)vet_shift(L, UINT32_MAX);
   }
   if (L->learn_stage == FW_LEARN_SAVE && L->save_handle >= 0) {
     // A slice-wise save was under way: finish it at once.

@@ -28,6 +28,26 @@ static bool all_finite(const double* v, uint32_t n) {
 
 // ---- set-up ---------------------------------------------------------------------------------
 
+void fw_loop_task_specs(const fw_config_t* cfg, tasks_corridor_spec_t* corridor, tasks_obstacles_spec_t* obstacles,
+                        tasks_command_limits_t* limits) {
+  const double dt_s = (double)fw_config_period_us(cfg) * 1e-6;
+  tasks_corridor_spec_default(corridor);
+  corridor->length_m = cfg->corridor_length_m;
+  corridor->omega_max_radps = cfg->max_rotation_radps;
+  corridor->dt_s = dt_s;
+  tasks_obstacles_spec_default(obstacles);
+  obstacles->omega_max_radps = cfg->max_rotation_radps;
+  obstacles->dt_s = dt_s;
+  if (cfg->max_steps_per_run > 0) {
+    corridor->step_limit = (uint32_t)cfg->max_steps_per_run;
+    obstacles->step_limit = (uint32_t)cfg->max_steps_per_run;
+  }
+  limits->max_translation_mps = cfg->max_translation_mps;
+  limits->max_rotation_radps = cfg->max_rotation_radps;
+  limits->max_translation_accel_mps2 = cfg->max_translation_accel_mps2;
+  limits->max_rotation_accel_radps2 = cfg->max_rotation_accel_radps2;
+}
+
 // The task as configured: specs (corridor length, action bound, period, step limit), the
 // command limits, the learner's state dimension and discount.
 static void setup_task(fw_loop_t* L) {
@@ -36,26 +56,13 @@ static void setup_task(fw_loop_t* L) {
   L->dt_s = (double)L->period_us * 1e-6;
   L->omega_max = cfg->max_rotation_radps;
   tasks_corridor_spec_t corridor;
-  tasks_corridor_spec_default(&corridor);
-  corridor.length_m = cfg->corridor_length_m;
-  corridor.omega_max_radps = L->omega_max;
-  corridor.dt_s = L->dt_s;
   tasks_obstacles_spec_t obstacles;
-  tasks_obstacles_spec_default(&obstacles);
-  obstacles.omega_max_radps = L->omega_max;
-  obstacles.dt_s = L->dt_s;
-  if (cfg->max_steps_per_run > 0) {
-    corridor.step_limit = (uint32_t)cfg->max_steps_per_run;
-    obstacles.step_limit = (uint32_t)cfg->max_steps_per_run;
-  }
+  fw_loop_task_specs(cfg, &corridor, &obstacles, &L->limits);
   tasks_episode_init(&L->ep, cfg->task == FW_TASK_CORRIDOR ? TASKS_TASK_CORRIDOR : TASKS_TASK_OBSTACLES, &corridor,
                      &obstacles);
-  L->limits.max_translation_mps = cfg->max_translation_mps;
-  L->limits.max_rotation_radps = cfg->max_rotation_radps;
-  L->limits.max_translation_accel_mps2 = cfg->max_translation_accel_mps2;
-  L->limits.max_rotation_accel_radps2 = cfg->max_rotation_accel_radps2;
   L->state_dim = L->ep.state_dim + (cfg->state_rotation ? 1U : 0U);
   L->gamma = cfg->gamma > 0.0 ? cfg->gamma : tasks_episode_gamma(&L->ep);
+  fw_shift_vet_env_init(&L->shift_vet_env, cfg);
 }
 
 // Every random stream derives from the one root seed, in this order.
@@ -702,6 +709,9 @@ void fw_loop_get_stats(const fw_loop_t* L, fw_loop_stats_t* out) {
   out->pair_safety_short = L->pair_safety_short;
   out->pair_runs_vetoed = L->pair_runs_vetoed;
   out->pair_runs_missed = L->pair_runs_missed;
+  out->shift_steps_halved = L->shift_steps_halved;
+  out->shift_steps_refused = L->shift_steps_refused;
+  out->shift_vet_periods = L->shift_vet_periods;
   out->pair_safety_held = L->pair_safety_held;
   const fw_timing_t* t = &L->timing;
   out->tick_max_ever_us = t->max_ever_us;

@@ -14,6 +14,7 @@
 
 #include "fw/loop.h"
 #include "fw/safety.h"
+#include "fw/shift_vet.h"
 #include "fw/timing.h"
 
 #include <features/features.h>
@@ -88,6 +89,7 @@ typedef enum fw_learn_stage {
   FW_LEARN_IDLE = 0,     ///< nothing to do between runs
   FW_LEARN_REPLAY = 1,   ///< backward replay of the finished training run, in slices
   FW_LEARN_SAVE = 2,     ///< serialising the learned state into the checkpoint writer, in slices
+  FW_LEARN_VET = 3,      ///< pair_shift_vet: the ranked pair's step of the shift, rollouts in slices
 } fw_learn_stage_t;
 
 /// A transition waiting to be learned (and published) after this tick's command was sent.
@@ -257,6 +259,16 @@ struct fw_loop {
   double pair_model_w;           // [rad/s]
   bool pair_model_ok;            // pair_model holds this run's last decision
   int32_t pair_model_periods;    // periods dead-reckoned since that decision
+  // pair_shift_vet (fw/shift_vet.h): a ranked pair's step of the shift waits for the vet between
+  // runs; the starts are the first states of the last training runs.
+  fw_shift_vet_env_t shift_vet_env;
+  fw_shift_vet_starts_t shift_vet_starts;
+  fw_shift_vet_t shift_vet;
+  bool shift_vet_pending;        // a step waits: shift_proposed, from the shift in force
+  fw_pair_shift_t shift_proposed;
+  int32_t shift_steps_halved;    // vets that took half the step
+  int32_t shift_steps_refused;   // and that kept the shift
+  int64_t shift_vet_periods;     // rollout periods the vets drove (one greedy search each)
 
   // Run state.
   int32_t mode;                // b21r_status_t MODE_*
@@ -403,6 +415,12 @@ uint32_t fw_learner_run_tag(const fw_learner_t* lr);
 bool fw_learner_weight_run(fw_learner_t* lr, uint32_t tag, double weight);
 uint32_t fw_learner_end_run_step(fw_learner_t* lr, uint32_t max_updates);
 fw_learner_stats_t fw_learner_stats(const fw_learner_t* lr);
+
+// ---- loop.c ----
+/// The task's specs and command limits as cfg configures them (the loop's set-up and the shift's
+/// vet, fw_shift_vet_env_init). O(1).
+void fw_loop_task_specs(const fw_config_t* cfg, tasks_corridor_spec_t* corridor, tasks_obstacles_spec_t* obstacles,
+                        tasks_command_limits_t* limits);
 
 // ---- learning.c ----
 void fw_learning_config(const fw_loop_t* L, hedger_config_t* out);

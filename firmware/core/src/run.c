@@ -209,9 +209,18 @@ static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps
   goal = goal && !L->pair_run_vetoed;
   L->pair_runs_vetoed += L->pair_run_vetoed ? 1 : 0;
   L->pair_runs_missed += goal ? 0 : 1;
+  const fw_pair_shift_t in_force = L->pair_ranker.shift;
   L->pair_weigh_n = fw_pair_ranker_end(&L->pair_ranker, &L->cfg, L->plan.phase == 1, L->pair_member, aborted, goal,
                                        steps, L->run_tag, L->pair_gain, L->pair_centring, L->pair_weigh_tag,
                                        L->pair_weigh_w);
+  if (L->pair_weigh_n == 2 && L->cfg.pair_shift_vet) {
+    // pair_shift_vet: the step waits for the vet between runs (learning.c), which puts in force
+    // the step, half of it or none; the pair counts at once.
+    L->shift_proposed = L->pair_ranker.shift;
+    L->pair_ranker.shift.gain = in_force.gain;
+    L->pair_ranker.shift.centring = in_force.centring;
+    L->shift_vet_pending = true;
+  }
   L->pair_next_member = aborted || L->pair_member == 1 ? 0 : 1;
   L->pair_member = -1;
 }

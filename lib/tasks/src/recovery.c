@@ -5,6 +5,7 @@
 #include <math.h>
 #include <stdbool.h>
 #include <stddef.h>
+#include <string.h>
 
 // The longest rollout: 20 s is several times the recovery law's settling time (about 3 s).
 #define RECOVERY_MAX_HORIZON_S 20.0
@@ -116,4 +117,74 @@ int tasks_corridor_recovery_predict(const tasks_corridor_spec_t* spec, const tas
   m.ahead = fmax(0.0, m.ahead);
   *out = features_at(spec, f, width, &m);
   return 1;
+}
+
+int32_t tasks_corridor_rollout_begin(tasks_corridor_rollout_t* ro, const tasks_corridor_spec_t* spec,
+                                     const double* corridor_state, double omega_radps) {
+  if (ro == NULL) {
+    return TASKS_ROLLOUT_INVALID;
+  }
+  memset(ro, 0, sizeof *ro);
+  ro->status = TASKS_ROLLOUT_INVALID;
+  if (spec == NULL || corridor_state == NULL || !isfinite(corridor_state[0]) || !isfinite(corridor_state[1]) ||
+      !isfinite(corridor_state[2]) || !isfinite(omega_radps)) {
+    return ro->status;
+  }
+  const double width = spec->width_m;
+  const double y = (0.5 - corridor_state[1]) * width;
+  const model_t m = {y, -corridor_state[2] - atan2(y, spec->lookahead_m), corridor_state[0], 0.0, omega_radps};
+  features_corridor_t base;
+  memset(&base, 0, sizeof base);
+  base.width_m = width;
+  base.valid = 1U;
+  ro->f = features_at(spec, &base, width, &m);
+  ro->omega_radps = omega_radps;
+  ro->least_clearance_m = 0.5 * width - spec->robot_radius_m - fabs(y);
+  ro->status = TASKS_ROLLOUT_RUNNING;
+  return ro->status;
+}
+
+int32_t tasks_corridor_rollout_step(tasks_corridor_rollout_t* ro, const tasks_corridor_spec_t* spec,
+                                    const tasks_command_limits_t* lim, double dt_s, double omega_radps,
+                                    double margin_m, uint32_t step_limit) {
+  if (ro == NULL) {
+    return TASKS_ROLLOUT_INVALID;
+  }
+  if (ro->status != TASKS_ROLLOUT_RUNNING) {
+    return ro->status;
+  }
+  if (!inputs_ok(spec, lim, dt_s, &ro->f) || !isfinite(omega_radps) || !isfinite(margin_m)) {
+    ro->status = TASKS_ROLLOUT_INVALID;
+    return ro->status;
+  }
+  const double width = wall_width_m(spec, &ro->f);
+  const double half_free = 0.5 * width - spec->robot_radius_m;
+  model_t m = {ro->f.offset_m, ro->f.heading_rad, ro->f.end_distance_m, ro->v_mps, ro->omega_radps};
+  step(lim, dt_s, tasks_corridor_speed_mps(spec, &ro->f), omega_radps, &m);
+  ro->periods++;
+  ro->least_clearance_m = fmin(ro->least_clearance_m, half_free - fabs(m.y));
+  if (m.ahead <= spec->goal_distance_m) {
+    // The coast to a stand, as in tasks_corridor_recovery_clearance_m.
+    const int32_t n_max = (int32_t)ceil(RECOVERY_MAX_HORIZON_S / dt_s);
+    for (int32_t k = 0; fabs(m.v) > 0.0 || fabs(m.w) > 0.0; ++k) {
+      if (k == n_max) {
+        ro->status = TASKS_ROLLOUT_INVALID;
+        return ro->status;
+      }
+      step(lim, dt_s, 0.0, 0.0, &m);
+      ro->least_clearance_m = fmin(ro->least_clearance_m, half_free - fabs(m.y));
+    }
+  }
+  ro->v_mps = m.v;
+  ro->omega_radps = m.w;
+  m.ahead = fmax(0.0, m.ahead);
+  ro->f = features_at(spec, &ro->f, width, &m);
+  if (ro->least_clearance_m < margin_m) {
+    ro->status = TASKS_ROLLOUT_WALL;
+  } else if (m.ahead <= spec->goal_distance_m) {
+    ro->status = TASKS_ROLLOUT_GOAL;
+  } else if (ro->periods >= step_limit) {
+    ro->status = TASKS_ROLLOUT_STEP_LIMIT;
+  }
+  return ro->status;
 }

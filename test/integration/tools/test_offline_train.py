@@ -29,8 +29,9 @@ import fwtest
 from b21r_log import read_log
 
 # 4 replay passes instead of the default 20: the sanitizer build is slow.
-# Phase one's example runs in ranked pairs from the 11th on (pair_phase_one, off by default), so
-# that the trainer's ranking of both phases' pairs is checked.
+# Phase one's example runs in ranked pairs from the 11th on (pair_phase_one, the default; set here
+# so that the test does not depend on it), so that the trainer's ranking of both phases' pairs and
+# its vet of their steps (pair_shift_vet) are checked.
 SESSION = {"phase_one_runs": 30, "eval_every_runs": 1000, "eval_starts": 1, "hedger_replay_passes": 4,
            "pair_phase_one": "true"}
 TRAINER_SETS = ["--set", "hedger_replay_passes=4", "--set", "pair_phase_one=true"]

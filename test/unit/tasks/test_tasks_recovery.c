@@ -265,6 +265,96 @@ static void test_recovery_action_is_the_gain_two_law(void** state) {
   assert_true(tasks_corridor_recovery_action(&g_spec, &g) == -g_spec.omega_max_radps);
 }
 
+// A whole run on the model (tasks_corridor_rollout_*): it starts at the pose the learner's state
+// describes, then moves period by period exactly as chained dead reckoning does, and ends at the
+// goal when the end distance is reached.
+static void test_rollout_follows_the_prediction_to_the_goal(void** state) {
+  (void)state;
+  const features_corridor_t f0 = at_pose(1.2, 0.3, 0.4);
+  double s0[3];
+  features_corridor_state(&f0, s0);
+  tasks_corridor_rollout_t ro;
+  assert_int_equal(tasks_corridor_rollout_begin(&ro, &g_spec, s0, 0.1), TASKS_ROLLOUT_RUNNING);
+  assert_true(fabs(ro.f.offset_m - 0.3) < 1e-12 && fabs(ro.f.heading_rad - 0.4) < 1e-12);
+  assert_true(ro.f.end_distance_m == f0.end_distance_m && ro.v_mps == 0.0 && ro.omega_radps == 0.1);
+  features_corridor_t f = f0;
+  double v = 0.0;
+  double w = 0.1;
+  double least = 0.74 - 0.3;
+  uint32_t periods = 0;
+  alloc_counter_begin();
+  while (ro.status == TASKS_ROLLOUT_RUNNING) {
+    const double w_cmd = tasks_corridor_recovery_action(&g_spec, &ro.f);
+    double v_sent = tasks_corridor_speed_mps(&g_spec, &f);
+    double w_sent = w_cmd;
+    (void)tasks_command_clamp(&g_lim, g_spec.dt_s, v, w, &v_sent, &w_sent);
+    features_corridor_t next;
+    assert_int_equal(tasks_corridor_recovery_predict(&g_spec, &g_lim, g_spec.dt_s, &f, v, w,
+                                                     tasks_corridor_speed_mps(&g_spec, &f), w_cmd, &next), 1);
+    (void)tasks_corridor_rollout_step(&ro, &g_spec, &g_lim, g_spec.dt_s, w_cmd, 0.1, g_spec.step_limit);
+    f = next;
+    v = v_sent;
+    w = w_sent;
+    least = fmin(least, 0.74 - fabs(f.offset_m));
+    periods++;
+    if (ro.status == TASKS_ROLLOUT_RUNNING) {
+      assert_true(fabs(ro.f.offset_m - f.offset_m) < 1e-12 && fabs(ro.f.heading_rad - f.heading_rad) < 1e-12);
+      assert_true(fabs(ro.f.end_distance_m - f.end_distance_m) < 1e-12 && ro.omega_radps == w);
+    }
+  }
+  assert_int_equal(alloc_counter_end(), 0);
+  assert_int_equal(ro.status, TASKS_ROLLOUT_GOAL);
+  assert_true(f.end_distance_m <= g_spec.goal_distance_m);
+  assert_int_equal(ro.periods, periods);
+  // 7.8 m to the goal at no more than 0.6 m/s take at least 130 periods; the recovery law
+  // settles within a few seconds, so not many more.
+  assert_true(periods >= 130 && periods < 160);
+  assert_true(ro.least_clearance_m <= least && ro.least_clearance_m > 0.1);
+  // A finished rollout stays as it ended.
+  assert_int_equal(tasks_corridor_rollout_step(&ro, &g_spec, &g_lim, g_spec.dt_s, 1.0, 0.1, 1000),
+                   TASKS_ROLLOUT_GOAL);
+  assert_int_equal(ro.periods, periods);
+}
+
+// Holding course at 0.6 rad off the axis meets the wall (with or without a margin, the margin
+// sooner); a run that needs more periods than the limit ends at the limit; non-finite inputs are
+// refused as unpredictable.
+static void test_rollout_ends_at_a_wall_the_limit_or_bad_input(void** state) {
+  (void)state;
+  const features_corridor_t f0 = at_pose(1.0, 0.0, 0.6);
+  double s0[3];
+  features_corridor_state(&f0, s0);
+  uint32_t to_contact = 0;
+  uint32_t to_margin = 0;
+  for (int pass = 0; pass < 2; ++pass) {
+    tasks_corridor_rollout_t ro;
+    (void)tasks_corridor_rollout_begin(&ro, &g_spec, s0, 0.0);
+    const double margin = pass == 0 ? 0.0 : 0.2;
+    while (tasks_corridor_rollout_step(&ro, &g_spec, &g_lim, g_spec.dt_s, 0.0, margin, 1000) == TASKS_ROLLOUT_RUNNING) {
+    }
+    assert_int_equal(ro.status, TASKS_ROLLOUT_WALL);
+    assert_true(ro.least_clearance_m < margin && ro.f.end_distance_m > g_spec.goal_distance_m);
+    *(pass == 0 ? &to_contact : &to_margin) = ro.periods;
+  }
+  assert_true(to_margin < to_contact);
+  const features_corridor_t c = at_pose(1.0, 0.0, 0.0);
+  double sc[3];
+  features_corridor_state(&c, sc);
+  tasks_corridor_rollout_t ro;
+  (void)tasks_corridor_rollout_begin(&ro, &g_spec, sc, 0.0);
+  while (tasks_corridor_rollout_step(&ro, &g_spec, &g_lim, g_spec.dt_s, 0.0, 0.1, 25) == TASKS_ROLLOUT_RUNNING) {
+  }
+  assert_int_equal(ro.status, TASKS_ROLLOUT_STEP_LIMIT);
+  assert_int_equal(ro.periods, 25);
+  (void)tasks_corridor_rollout_begin(&ro, &g_spec, sc, 0.0);
+  assert_int_equal(tasks_corridor_rollout_step(&ro, &g_spec, &g_lim, g_spec.dt_s, NAN, 0.1, 25), TASKS_ROLLOUT_INVALID);
+  sc[1] = NAN;
+  assert_int_equal(tasks_corridor_rollout_begin(&ro, &g_spec, sc, 0.0), TASKS_ROLLOUT_INVALID);
+  assert_int_equal(tasks_corridor_rollout_step(&ro, &g_spec, &g_lim, g_spec.dt_s, 0.0, 0.1, 25), TASKS_ROLLOUT_INVALID);
+  assert_int_equal(tasks_corridor_rollout_begin(NULL, &g_spec, sc, 0.0), TASKS_ROLLOUT_INVALID);
+  assert_int_equal(tasks_corridor_rollout_begin(&ro, NULL, s0, 0.0), TASKS_ROLLOUT_INVALID);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test_setup(test_recovery_centred_straight_keeps_half_width, setup),
@@ -277,6 +367,8 @@ int main(void) {
       cmocka_unit_test_setup(test_recovery_horizon, setup),
       cmocka_unit_test_setup(test_recovery_refuses_what_it_cannot_predict, setup),
       cmocka_unit_test_setup(test_recovery_action_is_the_gain_two_law, setup),
+      cmocka_unit_test_setup(test_rollout_follows_the_prediction_to_the_goal, setup),
+      cmocka_unit_test_setup(test_rollout_ends_at_a_wall_the_limit_or_bad_input, setup),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

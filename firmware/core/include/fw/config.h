@@ -247,6 +247,9 @@ typedef struct fw_config {
   bool pair_safety;                ///< pair_runs: a kinematic rollout vets each perturbed command
   double pair_safety_margin_m;     ///< pair_safety: least predicted skirt-to-wall clearance [m]
   double pair_safety_horizon_s;    ///< pair_safety: rollout length [s]
+  bool pair_shift_vet;             ///< a ranked pair's step of the shift is vetted on the kinematic model (fw/shift_vet.h)
+  int32_t pair_shift_vet_starts;   ///< pair_shift_vet: the last training runs whose first states it drives from
+  int32_t pair_shift_vet_periods_per_tick;  ///< pair_shift_vet: rollout periods per tick between runs
 
   // Output.
   char lcm_url[FW_CONFIG_STR_MAX]; ///< LCM provider URL; "" = LCM's default; "none" = off

@@ -123,6 +123,9 @@ typedef struct fw_loop_stats {
   int64_t pair_safety_overrides;
   int32_t pair_runs_vetoed;      ///< pair_safety: pair runs the filter corrected (ranked as failed)
   int32_t pair_runs_missed;      ///< pair runs ranked as having missed the goal (vetoed included)
+  int32_t shift_steps_halved;    ///< pair_shift_vet: pairs whose step of the shift was halved
+  int32_t shift_steps_refused;   ///< and whose step was refused (the shift stayed)
+  int64_t shift_vet_periods;     ///< pair_shift_vet: rollout periods driven between runs (one greedy search each)
   int64_t pair_safety_short;     ///< of those, where the recovery law too missed the margin
   int64_t pair_safety_held;      ///< periods without a scan where the dead-reckoned law drove
   // Deadline accounting (fw/timing.h; real time only, except the compute time).

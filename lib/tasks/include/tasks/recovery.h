@@ -75,6 +75,45 @@ int tasks_corridor_recovery_predict(const tasks_corridor_spec_t* spec,
                                     double prev_omega_radps, double v_mps, double omega_radps,
                                     features_corridor_t* out);
 
+/// A policy's whole run on the rollout's model (the vet of the learned policy's shift,
+/// firmware/core/src/shift_vet.c): the caller asks its policy for a rotation command at ro->f,
+/// then tasks_corridor_rollout_step moves the model one period, until the status is no longer
+/// TASKS_ROLLOUT_RUNNING. The model, the limits, the speed policy and the coast at the goal are
+/// those of tasks_corridor_recovery_clearance_m.
+typedef enum tasks_rollout_status {
+  TASKS_ROLLOUT_RUNNING = 0,     ///< the run goes on: ask the policy at ro->f
+  TASKS_ROLLOUT_GOAL = 1,        ///< the goal was reached and the coast kept the margin
+  TASKS_ROLLOUT_WALL = 2,        ///< the skirt came closer than the margin to a side wall
+  TASKS_ROLLOUT_STEP_LIMIT = 3,  ///< step_limit periods passed without reaching the goal
+  TASKS_ROLLOUT_INVALID = 4,     ///< a non-finite input or command: nothing can be predicted
+} tasks_rollout_status_t;
+
+/// The state of one rollout. Plain data; tasks_corridor_rollout_begin fills it.
+typedef struct tasks_corridor_rollout {
+  features_corridor_t f;     ///< the features at the model's pose: what the policy decides on
+  double v_mps;              ///< the command in force, after the limits [m/s]
+  double omega_radps;        ///< [rad/s]
+  double least_clearance_m;  ///< the smallest skirt-to-wall clearance so far [m]
+  uint32_t periods;          ///< commands executed
+  int32_t status;            ///< a tasks_rollout_status_t value
+} tasks_corridor_rollout_t;
+
+/// Starts a rollout at the corridor state of features_corridor_state (end distance [m], lateral
+/// fraction, target angle [rad]) with the robot standing except for the rotation omega_radps in
+/// force: the offset is (0.5 - lateral fraction) x the nominal width, the heading follows from
+/// the target angle and spec->lookahead_m. Returns ro->status (TASKS_ROLLOUT_INVALID for a NULL
+/// argument or a non-finite input). O(1).
+int32_t tasks_corridor_rollout_begin(tasks_corridor_rollout_t* ro, const tasks_corridor_spec_t* spec,
+                                     const double* corridor_state, double omega_radps);
+
+/// One period: the command (speed policy, omega_radps) under lim, then the checks: closer than
+/// margin_m to a wall, the goal (then the coast to a stand, which must keep the margin too), or
+/// step_limit periods. Returns ro->status; a finished rollout stays as it is. O(1), or O(the
+/// coast) at the goal: at most 20 s of periods.
+int32_t tasks_corridor_rollout_step(tasks_corridor_rollout_t* ro, const tasks_corridor_spec_t* spec,
+                                    const tasks_command_limits_t* lim, double dt_s, double omega_radps,
+                                    double margin_m, uint32_t step_limit);
+
 #ifdef __cplusplus
 }
 #endif

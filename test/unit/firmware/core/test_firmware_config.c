@@ -464,14 +464,21 @@ static void test_config_pair_runs_needs_corridor_hedger_state_model(void** state
   assert_true(c.pair_shift_rate == 0.0);
   assert_int_equal(fw_config_set(&c, "pair_gain_sigma", "0.1", "--set", err, sizeof err), 0);
   assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
-  // Phase one's pairs: off by default, from the 11th example run when on; a negative first run
-  // is refused.
-  assert_true(!c.pair_phase_one && c.pair_phase_one_from_run == 10);
+  // Phase one's pairs: on by default from the 11th example run, with the vet of the shift's steps
+  // (20 starts, 16 periods per tick); a negative first run and a ring beyond its capacity are
+  // refused.
+  assert_true(c.pair_phase_one && c.pair_phase_one_from_run == 10);
+  assert_true(c.pair_shift_vet && c.pair_shift_vet_starts == 20 && c.pair_shift_vet_periods_per_tick == 16);
   assert_int_equal(fw_config_set(&c, "pair_phase_one_from_run", "-1", "--set", err, sizeof err), -1);
   assert_non_null(strstr(err, "pair_phase_one_from_run"));
   assert_int_equal(fw_config_set(&c, "pair_phase_one_from_run", "0", "--set", err, sizeof err), 0);
-  assert_int_equal(fw_config_set(&c, "pair_phase_one", "true", "--set", err, sizeof err), 0);
-  assert_true(c.pair_phase_one && c.pair_phase_one_from_run == 0);
+  assert_int_equal(fw_config_set(&c, "pair_phase_one", "false", "--set", err, sizeof err), 0);
+  assert_true(!c.pair_phase_one && c.pair_phase_one_from_run == 0);
+  assert_int_equal(fw_config_set(&c, "pair_shift_vet_starts", "33", "--set", err, sizeof err), -1);
+  assert_non_null(strstr(err, "pair_shift_vet_starts"));
+  assert_int_equal(fw_config_set(&c, "pair_shift_vet_periods_per_tick", "0", "--set", err, sizeof err), -1);
+  assert_int_equal(fw_config_set(&c, "pair_shift_vet", "false", "--set", err, sizeof err), 0);
+  assert_false(c.pair_shift_vet);
   assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
   assert_int_equal(fw_config_set(&c, "pair_safety_margin_m", "-0.1", "--set", err, sizeof err), -1);
   assert_non_null(strstr(err, "pair_safety_margin_m"));

@@ -136,6 +136,77 @@ static void test_loop_pair_runs_share_start_and_rank(void** state) {
   assert_true(hash[0] == hash[1]);
 }
 
+// pair_shift_vet in the controller, with perturbations far beyond the defaults (large steps):
+// each ranked pair's step waits for the vet between runs, and the next pair's B21R_RUN shows the
+// whole step, half of it or none (the cut ones counted as the vet's), after the vet drove every
+// step on the model from the 10 starts. Without the vet the shift moves by the rule alone and
+// nothing is driven. (Which steps the vet cuts, and why: firmware.shift_vet.)
+static void test_loop_shift_vet_runs_between_runs(void** state) {
+  (void)state;
+  for (int vet = 0; vet < 2; ++vet) {
+    fw_config_t c;
+    short_schedule(&c);
+    c.phase_one_runs = 10;
+    c.phase_two_runs = 8;
+    c.eval_every_runs = 10;
+    c.eval_starts = 2;
+    c.pair_runs_mode = FW_PAIR_RUNS_ON;
+    c.pair_gain_sigma = 3.0;
+    c.pair_centring_sigma = 3.0;
+    c.pair_shift_vet = vet == 1;
+    assert_int_equal(harness_open(&g_h, &c, false, 9), 0);
+    harness_run(&g_h, 300000);
+    fw_loop_stats_t st;
+    fw_loop_get_stats(g_h.loop, &st);
+    assert_true(st.done);
+    // The pairs' runs in order: a first run (member 0) and its second (member 1) each.
+    const b21r_run_t* pr[64];
+    int n = 0;
+    for (int i = 0; i < g_h.runs && i < 64; ++i) {
+      if (g_h.run[i].kind == B21R_RUN_T_KIND_TRAINING && g_h.run[i].pair_member >= 0) {
+        pr[n++] = &g_h.run[i];
+      }
+    }
+    assert_int_equal(n, 2 * st.pairs_ranked);
+    int cut = 0;
+    for (int p = 0; p < st.pairs_ranked; ++p) {
+      const b21r_run_t* a = pr[2 * p];
+      assert_int_equal(a->pair_member, 0);
+      assert_int_equal(pr[2 * p + 1]->pair_member, 1);
+      double rule[2] = {a->shift_gain, a->shift_centring};
+      expect_pair_step(&c, a, pr[2 * p + 1], rule);
+      for (int k = 0; k < 2; ++k) {
+        rule[k] = fmin(FW_PAIR_SHIFT_MAX, fmax(-FW_PAIR_SHIFT_MAX, rule[k]));  // as the ranker bounds it
+      }
+      // The shift the next pair drove with (after the last pair: the session's).
+      const bool last = p + 1 == st.pairs_ranked;
+      const double taken[2] = {last ? st.shift.gain : pr[2 * p + 2]->shift_gain,
+                               last ? st.shift.centring : pr[2 * p + 2]->shift_centring};
+      if (!last) {
+        assert_int_equal(pr[2 * p + 2]->shift_pairs, p + 1);  // the pair counts whatever the verdict
+      }
+      const bool whole = taken[0] == rule[0] && taken[1] == rule[1];
+      const bool none = taken[0] == a->shift_gain && taken[1] == a->shift_centring;
+      const bool half = fabs(taken[0] - 0.5 * (a->shift_gain + rule[0])) < 1e-12 &&
+                        fabs(taken[1] - 0.5 * (a->shift_centring + rule[1])) < 1e-12;
+      assert_true(whole || half || none);
+      if (vet == 0) {
+        assert_true(whole);
+      }
+      cut += whole ? 0 : 1;
+    }
+    assert_int_equal(cut, st.shift_steps_halved + st.shift_steps_refused);
+    // With the vet every pair's step was driven on the model from the 10 starts (at least 100
+    // periods per rollout) before the next run; without it nothing was.
+    if (vet == 1) {
+      assert_true(st.shift_vet_periods >= (int64_t)st.pairs_ranked * 10 * 100);
+    } else {
+      assert_int_equal(st.shift_vet_periods, 0);
+    }
+    harness_close(&g_h);
+  }
+}
+
 // pair_phase_one: from training run pair_phase_one_from_run on, phase one's example runs come in
 // pairs too. A pair's two runs start from one pose with the same example gain and dither and
 // differ by exactly the pair's perturbation (+ then -); the examples still drive every step; the
@@ -791,6 +862,7 @@ int main(void) {
       cmocka_unit_test(test_pair_ranker_moves_the_shift),
       cmocka_unit_test(test_loop_pair_runs_share_start_and_rank),
       cmocka_unit_test(test_loop_phase_one_pairs),
+      cmocka_unit_test(test_loop_shift_vet_runs_between_runs),
       cmocka_unit_test(test_loop_pair_runs_auto_off_where_it_does_not_apply),
       cmocka_unit_test(test_loop_pair_safety_keeps_pair_runs_off_the_walls),
       cmocka_unit_test(test_loop_pair_safety_vets_unknown_actions),

@@ -1,0 +1,124 @@
+// SPDX-License-Identifier: MIT
+/// fw/shift_vet.h — Is a step of the learned policy's shift safe to take? (pair_shift_vet)
+///
+/// A ranked pair proposes a step of the shift (fw_pair_ranker_end): the learned policy, HEDGER's
+/// greedy action plus a θ + b (lateral fraction − 0.5), would drive with (a, b) moved toward the
+/// faster run. The pair measured the step from one start pose on the perturbed policy of that
+/// pair (in phase one the example policy's), not on the learned policy itself; and the first
+/// pairs, at the full rate, move the shift by up to a whole perturbation. A step can so turn the
+/// learned policy the wrong way where its own action is weak, at poses far off the axis. Before a
+/// step is taken the vet drives the learned policy with it on the safety filter's kinematic model
+/// (tasks/recovery.h: tasks_corridor_rollout_*) from the first states of the last
+/// pair_shift_vet_starts training runs, each also mirrored (the corridor is symmetric):
+///   1. the proposed shift, start by start. Where a rollout fails (closer than the margin to a
+///      wall, the step limit, nothing predictable), the shift in force is driven from the same
+///      start; if that one reaches the goal, the proposed shift is not taken (go to 2). If it
+///      fails nowhere the shift in force does not, the step is taken;
+///   2. half the step, likewise: taken (halved) or
+///   3. the shift stays where it is (the pair still counts, so the rate falls).
+/// A rollout drives the learned policy as the evaluations do: the greedy action plus the shift
+/// where an action is known, 0 where none is (tasks_clamp_omega to ±omega_max).
+///
+/// The controller runs the vet between runs, after the run's replay and the pair's weights, in
+/// slices of at most pair_shift_vet_periods_per_tick rollout periods (one greedy search each), so
+/// no tick waits for it; b21r-train runs it at once at the same point of its replay of a log,
+/// with the same starts (the first state of each training run's first experience), so both reach
+/// the same shift. The starts are not in the checkpoint: a resumed session vets with the starts it
+/// has seen since (none: every step is taken, as without the vet).
+///
+/// Memory: fixed (the structures below, no allocation). Cost per vet: usually 2 × starts
+/// rollouts of about 140 periods; at most 4 × 2 × starts rollouts of at most step_limit periods.
+#ifndef FW_SHIFT_VET_H
+#define FW_SHIFT_VET_H
+
+#include "fw/config.h"
+#include "fw/progress.h"
+
+#include <hedger/hedger.h>
+#include <tasks/recovery.h>
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/// The most start states a vet keeps (pair_shift_vet_starts is at most this).
+#define FW_SHIFT_VET_STARTS_MAX 32
+
+/// The start states of the last training runs, a ring. Plain data: zero it to empty it.
+typedef struct fw_shift_vet_starts {
+  double state[FW_SHIFT_VET_STARTS_MAX][3];  ///< corridor state: end distance [m], lateral fraction, target angle [rad]
+  double omega_radps[FW_SHIFT_VET_STARTS_MAX];  ///< the rotation in force (state_rotation's last element; else 0)
+  uint32_t n;     ///< starts held, <= FW_SHIFT_VET_STARTS_MAX
+  uint32_t next;  ///< the slot the next start goes to
+} fw_shift_vet_starts_t;
+
+/// What the rollouts need from the configuration (fw_shift_vet_env_init).
+typedef struct fw_shift_vet_env {
+  tasks_corridor_spec_t spec;   ///< the corridor as the controller configures it
+  tasks_command_limits_t lim;   ///< the command limits
+  double dt_s;                  ///< control period [s]
+  double margin_m;              ///< pair_safety_margin_m: closer to a wall counts as a failure
+  bool state_rotation;          ///< the learner's state ends with the rotation in force
+  uint32_t capacity;            ///< pair_shift_vet_starts: the starts kept
+} fw_shift_vet_env_t;
+
+/// The vet's verdict on a step.
+typedef enum fw_shift_verdict {
+  FW_SHIFT_STEP_TAKEN = 0,    ///< the proposed shift is in force
+  FW_SHIFT_STEP_HALVED = 1,   ///< half the step is
+  FW_SHIFT_STEP_REFUSED = 2,  ///< the shift stays
+} fw_shift_verdict_t;
+
+/// One vet under way. Plain data; fw_shift_vet_begin fills it.
+typedef struct fw_shift_vet {
+  fw_pair_shift_t shift[3];   ///< [0] the proposed shift, [1] the one in force, [2] half the step
+  int32_t failures[3];        ///< rollouts of each that failed (a wall, the step limit, nothing predictable)
+  int8_t in_force_failed[2 * FW_SHIFT_VET_STARTS_MAX];  ///< per rollout start: 0 not driven, 1 failed, -1 reached the goal
+  int32_t stage;              ///< 0: the proposed shift under test, 1: half the step; -1 once decided
+  uint32_t start;             ///< the rollout start under test (start k / 2, mirrored when k is odd)
+  bool checking_in_force;     ///< the rollout under way drives the shift in force (the candidate failed there)
+  bool rolling;               ///< a rollout is under way
+  uint32_t periods;           ///< rollout periods driven so far (policy calls)
+  tasks_corridor_rollout_t ro;
+  fw_shift_verdict_t verdict; ///< once decided
+  fw_pair_shift_t result;     ///< once decided: the shift to put in force
+} fw_shift_vet_t;
+
+/// The environment from cfg: the corridor (length, period, step limit, action bound), the
+/// command limits, pair_safety_margin_m, state_rotation, pair_shift_vet_starts. O(1).
+void fw_shift_vet_env_init(fw_shift_vet_env_t* env, const fw_config_t* cfg);
+
+/// A training run's first state (the learner's state vector: the corridor state, then the
+/// rotation in force when env->state_rotation) joins the ring, pushing out the oldest beyond
+/// env->capacity. Non-finite states are not kept. O(1).
+void fw_shift_vet_starts_add(fw_shift_vet_starts_t* starts, const fw_shift_vet_env_t* env, const double* state);
+
+/// Starts the vet of a step from `in_force` to `proposed` (pairs: the count after the step, the
+/// result carries it whatever the verdict). A step that moves nothing is taken at once. O(1).
+void fw_shift_vet_begin(fw_shift_vet_t* vet, const fw_pair_shift_t* in_force, const fw_pair_shift_t* proposed);
+
+/// The learned policy's unshifted action at a learner state s: true with *action [rad/s] where
+/// one is known, false where none is (the policy then holds course).
+typedef bool (*fw_shift_vet_greedy_fn)(void* ctx, const double* s, double* action);
+
+/// fw_shift_vet_greedy_fn of a HEDGER (ctx: hedger_t*): hedger_greedy, HEDGER_OK = known. The
+/// store is not changed (its query counters count the searches).
+bool fw_shift_vet_hedger_greedy(void* hedger, const double* s, double* action);
+
+/// Goes on with the vet for at most `periods` rollout periods (one call of greedy each) and
+/// returns true once it has decided (vet->verdict, vet->result); with no starts it decides at
+/// once (taken). O(periods).
+bool fw_shift_vet_step(fw_shift_vet_t* vet, fw_shift_vet_greedy_fn greedy, void* ctx, const fw_shift_vet_env_t* env,
+                       const fw_shift_vet_starts_t* starts, uint32_t periods);
+
+/// Whether a vet has decided. O(1).
+bool fw_shift_vet_done(const fw_shift_vet_t* vet);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif  // FW_SHIFT_VET_H

@@ -1,0 +1,202 @@
+// SPDX-License-Identifier: MIT
+// The vet of a step of the learned policy's shift (fw/shift_vet.h), with a policy whose behaviour
+// on the model is known: the recovery law (2 x target angle) as the "greedy" action. A shift that
+// keeps the law turning toward the axis is taken; one that makes it turn away is halved when half
+// of it is safe and refused when not; a step is judged start by start against the shift in force
+// (mirrored starts included); where the model sees no difference the step is taken; the verdict
+// does not depend on how the work is sliced; the start ring keeps the last starts.
+#include <b21r_test/alloc_counter.h>
+#include <features/features.h>
+#include <fw/config.h>
+#include <fw/shift_vet.h>
+#include <tasks/tasks.h>
+
+#include <math.h>
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <string.h>
+
+#include <cmocka.h>
+
+static fw_shift_vet_env_t g_env;
+static fw_shift_vet_starts_t g_starts;
+static int g_calls;
+
+static int setup(void** state) {
+  (void)state;
+  fw_config_t cfg;
+  fw_config_defaults(&cfg);
+  fw_shift_vet_env_init(&g_env, &cfg);
+  memset(&g_starts, 0, sizeof g_starts);
+  g_calls = 0;
+  return 0;
+}
+
+// The learner's state at a pose: x from the start wall, y offset (+ left), psi heading [rad];
+// then the rotation in force (state_rotation), 0.
+static void add_start(double x, double y, double psi) {
+  const tasks_corridor_spec_t* sp = &g_env.spec;
+  const double s[4] = {sp->length_m - x, 0.5 - y / sp->width_m, -psi - atan2(y, sp->lookahead_m), 0.0};
+  fw_shift_vet_starts_add(&g_starts, &g_env, s);
+}
+
+// Poses like the evaluation's: near the start wall, off the axis, turned by up to 0.5 rad.
+static void add_typical_starts(void) {
+  add_start(1.0, 0.3, 0.4);
+  add_start(1.2, -0.3, -0.4);
+  add_start(1.4, 0.0, 0.5);
+  add_start(1.1, -0.2, 0.3);
+}
+
+// The "learned" policy: the recovery law, known everywhere.
+static bool law(void* ctx, const double* s, double* action) {
+  (void)ctx;
+  g_calls++;
+  *action = 2.0 * s[2];
+  return true;
+}
+
+static bool nothing_known(void* ctx, const double* s, double* action) {
+  (void)ctx;
+  (void)s;
+  g_calls++;
+  *action = 0.0;
+  return false;
+}
+
+static fw_shift_vet_t vet_of(fw_shift_vet_greedy_fn greedy, double gain, double centring, uint32_t periods) {
+  const fw_pair_shift_t in_force = {0.0, 0.0, 3U};
+  const fw_pair_shift_t proposed = {gain, centring, 4U};
+  fw_shift_vet_t vet;
+  fw_shift_vet_begin(&vet, &in_force, &proposed);
+  while (!fw_shift_vet_step(&vet, greedy, NULL, &g_env, &g_starts, periods)) {
+  }
+  assert_true(fw_shift_vet_done(&vet));
+  return vet;
+}
+
+// A small step of a policy that reaches the goal from every start: taken, after one rollout from
+// each start and from its mirror image (about 140 periods each), and the pair counts.
+static void test_vet_takes_a_safe_step(void** state) {
+  (void)state;
+  add_typical_starts();
+  alloc_counter_begin();
+  const fw_shift_vet_t vet = vet_of(law, 0.2, 0.3, UINT32_MAX);
+  assert_int_equal(alloc_counter_end(), 0);
+  assert_int_equal(vet.verdict, FW_SHIFT_STEP_TAKEN);
+  assert_true(vet.result.gain == 0.2 && vet.result.centring == 0.3 && vet.result.pairs == 4U);
+  assert_int_equal(vet.failures[0], 0);
+  assert_int_equal(vet.failures[1], 0);  // the shift in force was never needed
+  assert_true(g_calls > 8 * 120 && g_calls < 8 * 200);
+  assert_int_equal((int)vet.periods, g_calls);
+}
+
+// Gain -2.6 turns the law away from the axis (-0.6 x target angle): the first start ends on a
+// wall where the shift in force reaches the goal, and the proposed shift is dropped at once. Half
+// of it (-1.3: 0.7 x target angle) still turns toward the axis from every start: halved.
+static void test_vet_halves_a_step_that_reaches_a_wall(void** state) {
+  (void)state;
+  add_typical_starts();
+  const fw_shift_vet_t vet = vet_of(law, -2.6, 0.0, UINT32_MAX);
+  assert_int_equal(vet.verdict, FW_SHIFT_STEP_HALVED);
+  assert_int_equal(vet.failures[0], 1);
+  assert_int_equal(vet.failures[1], 0);
+  assert_int_equal(vet.failures[2], 0);
+  assert_int_equal(vet.in_force_failed[0], -1);
+  assert_true(vet.result.gain == -1.3 && vet.result.centring == 0.0 && vet.result.pairs == 4U);
+}
+
+// Gain -5: half of it (-2.5) turns away too: the shift stays, and the pair still counts.
+static void test_vet_refuses_a_step_whose_half_reaches_a_wall(void** state) {
+  (void)state;
+  add_typical_starts();
+  const fw_shift_vet_t vet = vet_of(law, -5.0, 0.0, UINT32_MAX);
+  assert_int_equal(vet.verdict, FW_SHIFT_STEP_REFUSED);
+  assert_true(vet.failures[2] > 0);
+  assert_true(vet.result.gain == 0.0 && vet.result.centring == 0.0 && vet.result.pairs == 4U);
+}
+
+// A step that the model cannot tell from the shift in force is taken: with no starts at all, or
+// with a policy that knows nothing anywhere (it holds course, the shift does not act), even
+// though every rollout fails (from each start and its mirror, with both shifts). A step that
+// moves nothing is taken without a rollout.
+static void test_vet_takes_what_it_cannot_tell_apart(void** state) {
+  (void)state;
+  fw_shift_vet_t vet = vet_of(law, -5.0, 0.0, UINT32_MAX);
+  assert_int_equal(vet.verdict, FW_SHIFT_STEP_TAKEN);
+  assert_int_equal(g_calls, 0);
+  add_typical_starts();
+  vet = vet_of(nothing_known, -5.0, 0.0, UINT32_MAX);
+  assert_int_equal(vet.verdict, FW_SHIFT_STEP_TAKEN);
+  assert_true(vet.failures[0] == 8 && vet.failures[1] == 8);
+  g_calls = 0;
+  vet = vet_of(law, 0.0, 0.0, UINT32_MAX);
+  assert_int_equal(vet.verdict, FW_SHIFT_STEP_TAKEN);
+  assert_int_equal(g_calls, 0);
+}
+
+// The work in slices (one period per call, as a tick with the budget 1) reaches the same verdict
+// and shift with the same number of policy calls, and never does more than its budget per call.
+static void test_vet_in_slices_decides_the_same(void** state) {
+  (void)state;
+  add_typical_starts();
+  const fw_shift_vet_t whole = vet_of(law, -2.6, 0.4, UINT32_MAX);
+  const int whole_calls = g_calls;
+  g_calls = 0;
+  const fw_pair_shift_t in_force = {0.0, 0.0, 3U};
+  const fw_pair_shift_t proposed = {-2.6, 0.4, 4U};
+  fw_shift_vet_t sliced;
+  fw_shift_vet_begin(&sliced, &in_force, &proposed);
+  int slices = 0;
+  for (;;) {
+    const int before = g_calls;
+    const bool done = fw_shift_vet_step(&sliced, law, NULL, &g_env, &g_starts, 3U);
+    assert_true(g_calls - before <= 3);
+    slices++;
+    if (done) {
+      break;
+    }
+  }
+  assert_int_equal(g_calls, whole_calls);
+  assert_true(slices >= whole_calls / 3);
+  assert_int_equal(sliced.verdict, whole.verdict);
+  assert_true(sliced.result.gain == whole.result.gain && sliced.result.centring == whole.result.centring);
+  assert_int_equal(sliced.result.pairs, whole.result.pairs);
+}
+
+// The ring keeps the last pair_shift_vet_starts starts (20 by default), oldest out first, and
+// drops non-finite states.
+static void test_vet_starts_keep_the_last_runs(void** state) {
+  (void)state;
+  assert_int_equal(g_env.capacity, 20);
+  for (int i = 0; i < 23; ++i) {
+    add_start(1.0 + 0.01 * i, 0.0, 0.0);
+  }
+  assert_int_equal(g_starts.n, 20);
+  double lowest = INFINITY;
+  for (uint32_t i = 0; i < g_starts.n; ++i) {
+    lowest = fmin(lowest, g_env.spec.length_m - g_starts.state[i][0]);
+  }
+  assert_true(fabs(lowest - 1.03) < 1e-12);  // runs 0, 1 and 2 were pushed out
+  const double bad[4] = {5.0, NAN, 0.0, 0.0};
+  fw_shift_vet_starts_add(&g_starts, &g_env, bad);
+  assert_int_equal(g_starts.next, 3);
+  for (uint32_t i = 0; i < g_starts.n; ++i) {
+    assert_true(isfinite(g_starts.state[i][1]));
+  }
+}
+
+int main(void) {
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test_setup(test_vet_takes_a_safe_step, setup),
+      cmocka_unit_test_setup(test_vet_halves_a_step_that_reaches_a_wall, setup),
+      cmocka_unit_test_setup(test_vet_refuses_a_step_whose_half_reaches_a_wall, setup),
+      cmocka_unit_test_setup(test_vet_takes_what_it_cannot_tell_apart, setup),
+      cmocka_unit_test_setup(test_vet_in_slices_decides_the_same, setup),
+      cmocka_unit_test_setup(test_vet_starts_keep_the_last_runs, setup),
+  };
+  return cmocka_run_group_tests(tests, NULL, NULL);
+}
