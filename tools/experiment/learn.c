@@ -36,7 +36,8 @@ typedef struct run_rec {
   bool last_terminal;
   int64_t sources[N_SOURCES];
   uint32_t store_fill;     // after the run (and its backward replay)
-  fw_pair_shift_t shift;   // the learned policy's shift after the run (pair_runs; 0 without)
+  fw_pair_shift_t shift;   // the learned policy's shift after the run and its between-run work (the
+                           // vet of a pair's step, pair_shift_vet): the next run's; 0 without pairs
 } run_rec_t;
 
 typedef struct block_rec {
@@ -127,6 +128,10 @@ static void take_experience(session_t* S, const b21r_experience_t* e) {
 // After a tick: a run that ended gets its outcome from the loop's counters.
 static void take_run_end(session_t* S, const fw_loop_stats_t* before, const fw_loop_stats_t* after) {
   if (!S->have_current) {
+    if (S->n_runs > 0) {
+      // Between runs: the vet may still move the shift after the run that ranked its pair.
+      S->runs[S->n_runs - 1].shift = after->shift;
+    }
     return;
   }
   run_rec_t* r = &S->runs[S->n_runs - 1];

@@ -41,7 +41,8 @@ struct trainer {
   uint32_t run_tag;
   fw_pair_ranker_t ranker;
   // pair_shift_vet: the controller's vet of each step of the shift, from the same starts (the first
-  // state of each training run's first experience).
+  // state of each training run's first experience; emptied where a controller session begins: a
+  // log, or seq starting again at 0).
   fw_shift_vet_env_t vet_env;
   fw_shift_vet_starts_t vet_starts;
   bool log_has_run_records;  // the log being read has B21R_RUN (a full log)
@@ -194,6 +195,10 @@ static int learn(trainer_t* t, const b21r_experience_t* e, const char* path, cha
     t->stats.seq_gaps++;
   }
   t->next_seq = e->seq + 1;
+  if (restart) {
+    // A controller that started again (seq from 0 in one log): its vet starts with no starts.
+    memset(&t->vet_starts, 0, sizeof t->vet_starts);
+  }
   if (!t->in_run || restart || e->run_id != t->run_id) {
     end_run(t);
     t->in_run = true;
@@ -228,8 +233,9 @@ static bool differs(double a, double b) { return a < b || a > b; }
 // pair_runs: a B21R_RUN record of a pair run (it follows the run's last experience). As in the
 // controller, the run's replay comes first, then its weights: a first run weighs 0 until its pair
 // is ranked, an aborted run 0 (its pair starts again), and the second run ranks the pair and
-// moves the learned policy's shift (fw_pair_ranker_end, the controller's rule; the record's phase
-// 1 marks a pair of example runs, which keeps weight 1).
+// proposes a step of the learned policy's shift (fw_pair_ranker_end, the controller's rule; the
+// record's phase 1 marks a pair of example runs, which keeps weight 1), which the vet then takes,
+// halves or refuses (pair_shift_vet, fw/shift_vet.h) on the store the replay and weights left.
 static void rank_pair_run(trainer_t* t, const b21r_run_t* r) {
   if (!t->pairs || r->kind != B21R_RUN_T_KIND_TRAINING || r->pair_member < 0 || !t->in_run ||
       r->run_id != t->run_id) {
@@ -290,6 +296,8 @@ int trainer_add_log(trainer_t* t, const char* path, char* err, size_t err_cap) {
   }
   end_run(t);  // a log starts with a run of its own
   t->next_seq = -1;
+  // A log is one controller session, whose vet began with no starts (they are not checkpointed).
+  memset(&t->vet_starts, 0, sizeof t->vet_starts);
   t->log_has_run_records = false;
   t->log_paired = 0;
   const double t0 = now_s();

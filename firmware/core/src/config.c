@@ -333,8 +333,8 @@ static const key_desc_t k_keys[] = {
    "are imitated (their perturbations cancel in the imitation; with pair_shift_rate = 0 they are ranked into "
    "its weights instead). The examples still drive every step (counted as the example's); a person's runs "
    "(phase_one_driver = human, joystick) are never paired. With it the policy after phase one beats the "
-   "examples' best gain (Fig. 4); pair_shift_vet keeps its first steps from turning the policy into a wall "
-   "(docs/LEARNING.md)"},
+   "examples' best gain (Fig. 4); each step of the shift is vetted on the kinematic model first (pair_shift_vet), "
+   "without which its first steps drove some evaluations into a wall (docs/LEARNING.md)"},
   {NULL, "pair_phase_one_from_run", KIND_INT, OFF(pair_phase_one_from_run), 0, 1000000, false, false, NULL, "10",
    "pair_phase_one: the first phase-one training run (counted from 0) that starts a pair; the runs before it "
    "are the plain examples, each from its own pose, so that the first evaluations find a policy"},

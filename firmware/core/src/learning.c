@@ -324,7 +324,8 @@ static bool vet_shift(fw_loop_t* L, uint32_t periods) {
 }
 
 // One slice of the between-run work: at most learn_updates_per_tick replay updates, then (pair_runs)
-// the ended pair's weights, then at most checkpoint_points_per_tick points of the save.
+// the ended pair's weights, then (pair_shift_vet) at most pair_shift_vet_periods_per_tick periods
+// of the vet of its step, then at most checkpoint_points_per_tick points of the save.
 static void between_runs_slice(fw_loop_t* L) {
   if (L->end_run_pending) {
     L->end_run_pending = false;

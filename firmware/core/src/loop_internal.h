@@ -430,7 +430,9 @@ void fw_learning_after_command(fw_loop_t* L);
 void fw_learning_run_ended(fw_loop_t* L);
 /// True when no between-run work is left (a run may start).
 bool fw_learning_idle(const fw_loop_t* L);
-/// Finishes all between-run work at once (shutdown; not for the tick).
+/// Finishes all between-run work at once (shutdown; not for the tick): the replay, the pair's
+/// weights and the vet of its step (at most 3 x 2 x pair_shift_vet_starts rollouts of at most the
+/// step limit; usually well under a second), so that the checkpoint holds the vetted shift.
 void fw_learning_finish_now(fw_loop_t* L);
 /// Serialises the learned state and the schedule's progress into the writer at once (shutdown).
 void fw_learning_checkpoint_now(fw_loop_t* L);

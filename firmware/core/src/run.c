@@ -193,15 +193,18 @@ double fw_pair_shift_at(const fw_pair_ranker_t* r, const double* s) {
 // pair_runs: the run under way ended. A perturbed run is not imitated until its pair is ranked:
 // the first run's points weigh 0 at once (so the second run does not imitate it either), and so
 // do the points of a run that was aborted or is left without its pair. After the second run the
-// pair is ranked (fw_pair_ranker_end): by default it moves the learned policy's shift toward the
-// faster run and both runs keep weight 0, so the imitation stays the teachers' and the shift
+// pair is ranked (fw_pair_ranker_end): by default it proposes a step of the learned policy's shift
+// toward the faster run (taken, halved or refused by the vet between runs, pair_shift_vet:
+// learning.c) and both runs keep weight 0, so the imitation stays the teachers' and the shift
 // alone carries what phase two found (imitating the shifted runs as well would add the shift
 // twice). Phase one's pairs of example runs keep weight 1 by default: their + and - perturbations
 // cancel in the imitation (a run left without its pair, or corrected by the filter, keeps its
 // side's: a small bias, as rare as those runs). A run the safety filter had to correct (pair_vet)
 // counts as one that missed the goal: its perturbation was predicted to reach a wall, and a
-// policy that learns from it would lean on a filter that evaluations and greedy runs do not have. The shift is O(1) arithmetic and acts
-// from the next run; learning.c applies the weights between runs.
+// policy that learns from it would lean on a filter that evaluations and greedy runs do not have.
+// The ranking is O(1) arithmetic; learning.c applies the weights and vets the step between runs,
+// and the shift in force acts from the next run. Every ranked pair passes the vet stage (a step
+// that moves nothing is decided at once, at the cost of one between-run tick).
 static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps) {
   if (L->pair_member < 0) {
     return;

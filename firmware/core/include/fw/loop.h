@@ -110,7 +110,7 @@ typedef struct fw_loop_stats {
   double mean_example_steps;
   int32_t last_run_steps;
   bool last_run_goal;
-  int64_t learn_ticks;           ///< ticks that did between-run learning work (replay, checkpoint)
+  int64_t learn_ticks;           ///< ticks that did between-run learning work (replay, the shift's vet, checkpoint)
   int64_t checkpoints_submitted; ///< checkpoints handed to the writer (between runs and at shutdown)
   int32_t pairs_ranked;          ///< pair_runs: pairs ranked (into the shift, or the anchor weights)
   fw_pair_shift_t shift;         ///< pair_runs: the learned policy's shift (fw_pair_ranker_t)
@@ -123,11 +123,11 @@ typedef struct fw_loop_stats {
   int64_t pair_safety_overrides;
   int32_t pair_runs_vetoed;      ///< pair_safety: pair runs the filter corrected (ranked as failed)
   int32_t pair_runs_missed;      ///< pair runs ranked as having missed the goal (vetoed included)
+  int64_t pair_safety_short;     ///< of those, where the recovery law too missed the margin
+  int64_t pair_safety_held;      ///< periods without a scan where the dead-reckoned law drove
   int32_t shift_steps_halved;    ///< pair_shift_vet: pairs whose step of the shift was halved
   int32_t shift_steps_refused;   ///< and whose step was refused (the shift stayed)
   int64_t shift_vet_periods;     ///< pair_shift_vet: rollout periods driven between runs (one greedy search each)
-  int64_t pair_safety_short;     ///< of those, where the recovery law too missed the margin
-  int64_t pair_safety_held;      ///< periods without a scan where the dead-reckoned law drove
   // Deadline accounting (fw/timing.h; real time only, except the compute time).
   int32_t tick_max_ever_us;      ///< longest tick compute time since start [µs]
   int64_t tick_overruns;         ///< ticks that ended after the next scheduled start

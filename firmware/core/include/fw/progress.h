@@ -63,7 +63,7 @@ extern "C" {
 typedef struct fw_pair_shift {
   double gain;       ///< a [rad/s per rad], |a| <= FW_PAIR_SHIFT_MAX
   double centring;   ///< b [rad/s per corridor width], |b| <= FW_PAIR_SHIFT_MAX
-  uint32_t pairs;    ///< pairs that have moved it (its step size falls with them: pair_shift_decay_pairs)
+  uint32_t pairs;    ///< pairs ranked into it, whatever pair_shift_vet made of their steps (its step size falls with them: pair_shift_decay_pairs)
 } fw_pair_shift_t;
 
 /// True when a and b are finite and within ±FW_PAIR_SHIFT_MAX (a shift the controller can have

@@ -23,11 +23,12 @@
 /// slices of at most pair_shift_vet_periods_per_tick rollout periods (one greedy search each), so
 /// no tick waits for it; b21r-train runs it at once at the same point of its replay of a log,
 /// with the same starts (the first state of each training run's first experience), so both reach
-/// the same shift. The starts are not in the checkpoint: a resumed session vets with the starts it
-/// has seen since (none: every step is taken, as without the vet).
+/// the same shift. The starts are not in the checkpoint: a resumed session vets with the starts of
+/// its own runs since (b21r-train empties its ring at each log and where seq starts again at 0).
 ///
 /// Memory: fixed (the structures below, no allocation). Cost per vet: usually 2 × starts
-/// rollouts of about 140 periods; at most 4 × 2 × starts rollouts of at most step_limit periods.
+/// rollouts of about 140 periods; at most 3 × 2 × starts rollouts (proposed, half, in force: the
+/// last driven once per start) of at most step_limit periods.
 #ifndef FW_SHIFT_VET_H
 #define FW_SHIFT_VET_H
 

@@ -103,7 +103,7 @@
 /// - Run tags and anchor weights (hedger_set_run_tag, hedger_weight_run, cfg.anchor_recency_runs):
 ///   the caller ranks whole runs and the anchor (and the action range tilted with it) follows the
 ///   better ones; the value fits do not see the weights. The firmware's pair_runs runs phase two
-///   (and, opt-in pair_phase_one, phase one's example runs from the 11th on) in pairs from one pose with
+///   (and, pair_phase_one by default, phase one's example runs from the 11th on) in pairs from one pose with
 ///   opposite policy perturbations and the same exploration noise. By default (pair_shift_rate >
 ///   0) it learns the ranking outside HEDGER, as a shift added to the greedy action, and weighs
 ///   phase two's runs 0 here (phase one's paired examples 1), so the anchor stays the teachers'
