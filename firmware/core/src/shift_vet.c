@@ -71,6 +71,18 @@ static void begin_rollout(fw_shift_vet_t* vet, const fw_shift_vet_env_t* env, co
   vet->rolling = true;
 }
 
+// The candidate under test fails from a start where the shift in force reaches the goal: not
+// taken. After the proposed shift half the step is tried (from the first start again); after
+// half the step the shift stays.
+static void candidate_dropped(fw_shift_vet_t* vet) {
+  if (vet->stage == 0) {
+    vet->stage = 1;
+    vet->start = 0;
+  } else {
+    decide(vet, FW_SHIFT_STEP_REFUSED);
+  }
+}
+
 // A rollout ended (status failed or not): what the vet does next.
 static void rollout_finished(fw_shift_vet_t* vet, bool failed) {
   vet->rolling = false;
@@ -81,13 +93,7 @@ static void rollout_finished(fw_shift_vet_t* vet, bool failed) {
     vet->failures[1] += failed ? 1 : 0;
     vet->in_force_failed[k] = failed ? 1 : -1;
     if (!failed) {
-      // The candidate fails where the shift in force does not: not taken.
-      if (vet->stage == 0) {
-        vet->stage = 1;
-        vet->start = 0;
-      } else {
-        decide(vet, FW_SHIFT_STEP_REFUSED);
-      }
+      candidate_dropped(vet);
       return;
     }
     vet->start++;
@@ -99,12 +105,7 @@ static void rollout_finished(fw_shift_vet_t* vet, bool failed) {
     return;
   }
   if (failed && vet->in_force_failed[k] < 0) {
-    if (vet->stage == 0) {
-      vet->stage = 1;
-      vet->start = 0;
-    } else {
-      decide(vet, FW_SHIFT_STEP_REFUSED);
-    }
+    candidate_dropped(vet);
     return;
   }
   vet->start++;
