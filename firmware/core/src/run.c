@@ -186,8 +186,8 @@ int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool exa
   return 2;
 }
 
-double fw_pair_shift_at(const fw_pair_ranker_t* r, const double* s) {
-  return r->shift.gain * s[2] + r->shift.centring * (s[1] - 0.5);
+double fw_pair_shift_at(const fw_pair_shift_t* shift, const double* s) {
+  return shift->gain * s[2] + shift->centring * (s[1] - 0.5);
 }
 
 // pair_runs: the run under way ended. A perturbed run is not imitated until its pair is ranked:
@@ -611,7 +611,7 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
     if (greedy_known && fw_run_is_corridor(L)) {
       // The learned policy: HEDGER's greedy action plus the shift the ranked pairs learned (0
       // until a pair is ranked). The value stays the greedy action's (the learning target).
-      greedy_action = tasks_clamp_omega(greedy_action + fw_pair_shift_at(&L->pair_ranker, L->s), L->omega_max);
+      greedy_action = tasks_clamp_omega(greedy_action + fw_pair_shift_at(&L->pair_ranker.shift, L->s), L->omega_max);
     }
     if (L->pending.active) {
       L->pending.need_greedy = false;

@@ -143,7 +143,7 @@ bool fw_shift_vet_step(fw_shift_vet_t* vet, fw_shift_vet_greedy_fn greedy, void*
         // The learned policy as run.c drives it: the greedy action plus the shift where an action
         // is known, 0 (hold course) where none is.
         const fw_pair_shift_t* sh = &vet->shift[vet->checking_in_force ? 1 : (vet->stage == 0 ? 0 : 2)];
-        omega = tasks_clamp_omega(a + sh->gain * s[2] + sh->centring * (s[1] - 0.5), omega_max);
+        omega = tasks_clamp_omega(a + fw_pair_shift_at(sh, s), omega_max);
       }
       budget--;
       vet->periods++;

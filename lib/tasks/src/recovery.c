@@ -69,6 +69,23 @@ double tasks_corridor_recovery_action(const tasks_corridor_spec_t* spec, const f
   return tasks_clamp_omega(TASKS_CORRIDOR_RECOVERY_GAIN * f->target_angle_rad, spec->omega_max_radps);
 }
 
+// The run ends at the goal and the base is told to stop: it coasts to a stand under its
+// acceleration limits, on its heading, and may still reach a wall. *least takes the clearance of
+// every period of the coast (half_free: |y| where the skirt touches). False when the base would
+// not stand within 20 s (a limit near 0): nothing can be predicted.
+static bool coast_to_stand(const tasks_command_limits_t* lim, double dt_s, double half_free, model_t* m,
+                           double* least) {
+  const int32_t n_max = (int32_t)ceil(RECOVERY_MAX_HORIZON_S / dt_s);
+  for (int32_t k = 0; fabs(m->v) > 0.0 || fabs(m->w) > 0.0; ++k) {
+    if (k == n_max) {
+      return false;
+    }
+    step(lim, dt_s, 0.0, 0.0, m);
+    *least = fmin(*least, half_free - fabs(m->y));
+  }
+  return true;
+}
+
 double tasks_corridor_recovery_clearance_m(const tasks_corridor_spec_t* spec, const tasks_command_limits_t* lim,
                                            double dt_s, const features_corridor_t* f, double prev_v_mps,
                                            double prev_omega_radps, double omega_radps, double horizon_s) {
@@ -80,7 +97,6 @@ double tasks_corridor_recovery_clearance_m(const tasks_corridor_spec_t* spec, co
   const double half_free = 0.5 * width - spec->robot_radius_m;  // |y| where the skirt touches
   const double h = fmin(fmax(horizon_s, dt_s), RECOVERY_MAX_HORIZON_S);
   const int32_t n = (int32_t)ceil(h / dt_s - 1e-9);  // <= 20 / 1e-3
-  const int32_t n_max = (int32_t)ceil(RECOVERY_MAX_HORIZON_S / dt_s);
   model_t m = {f->offset_m, f->heading_rad, f->end_distance_m, prev_v_mps, prev_omega_radps};
   double least = HUGE_VAL;
   bool at_goal = false;
@@ -91,15 +107,8 @@ double tasks_corridor_recovery_clearance_m(const tasks_corridor_spec_t* spec, co
     least = fmin(least, half_free - fabs(m.y));
     at_goal = m.ahead <= spec->goal_distance_m;
   }
-  // The run ends at the goal and the base is told to stop: it coasts to a stand under its
-  // acceleration limits, on its heading, and may still reach a wall. A base that would not stand
-  // within 20 s (a limit near 0) cannot be predicted.
-  for (int32_t k = 0; at_goal && (fabs(m.v) > 0.0 || fabs(m.w) > 0.0); ++k) {
-    if (k == n_max) {
-      return -HUGE_VAL;
-    }
-    step(lim, dt_s, 0.0, 0.0, &m);
-    least = fmin(least, half_free - fabs(m.y));
+  if (at_goal && !coast_to_stand(lim, dt_s, half_free, &m, &least)) {
+    return -HUGE_VAL;
   }
   return least;
 }
@@ -163,17 +172,9 @@ int32_t tasks_corridor_rollout_step(tasks_corridor_rollout_t* ro, const tasks_co
   step(lim, dt_s, tasks_corridor_speed_mps(spec, &ro->f), omega_radps, &m);
   ro->periods++;
   ro->least_clearance_m = fmin(ro->least_clearance_m, half_free - fabs(m.y));
-  if (m.ahead <= spec->goal_distance_m) {
-    // The coast to a stand, as in tasks_corridor_recovery_clearance_m.
-    const int32_t n_max = (int32_t)ceil(RECOVERY_MAX_HORIZON_S / dt_s);
-    for (int32_t k = 0; fabs(m.v) > 0.0 || fabs(m.w) > 0.0; ++k) {
-      if (k == n_max) {
-        ro->status = TASKS_ROLLOUT_INVALID;
-        return ro->status;
-      }
-      step(lim, dt_s, 0.0, 0.0, &m);
-      ro->least_clearance_m = fmin(ro->least_clearance_m, half_free - fabs(m.y));
-    }
+  if (m.ahead <= spec->goal_distance_m && !coast_to_stand(lim, dt_s, half_free, &m, &ro->least_clearance_m)) {
+    ro->status = TASKS_ROLLOUT_INVALID;
+    return ro->status;
   }
   ro->v_mps = m.v;
   ro->omega_radps = m.w;

@@ -185,8 +185,9 @@ int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool exa
                            double weights[2]);
 
 /// The learned policy's shift at a corridor state s (s[1] lateral fraction, s[2] target angle
-/// [rad]): a s[2] + b (s[1] − 0.5) [rad/s]. Pure, O(1).
-double fw_pair_shift_at(const fw_pair_ranker_t* r, const double* s);
+/// [rad]): a s[2] + b (s[1] − 0.5) [rad/s], as the controller adds it to the greedy action and the
+/// vet's rollouts do (fw/shift_vet.h). Pure, O(1).
+double fw_pair_shift_at(const fw_pair_shift_t* shift, const double* s);
 
 /// pair_runs: the run tag of a training run with id run_id when the store's current tag is
 /// `current` (run.c; b21r-train uses the same rule): its id while ids run ahead of the tags, else
