@@ -34,6 +34,17 @@ static void short_schedule(fw_config_t* c) {
   c->progress = true;
 }
 
+// The pair tests' session: short_schedule with 10 phase-one runs, phase_two_runs phase-two runs,
+// an evaluation of 2 poses every 10 runs (so one, after phase one), pair runs on.
+static void pair_session_schedule(fw_config_t* c, int32_t phase_two_runs) {
+  short_schedule(c);
+  c->phase_one_runs = 10;
+  c->phase_two_runs = phase_two_runs;
+  c->eval_every_runs = 10;
+  c->eval_starts = 2;
+  c->pair_runs_mode = FW_PAIR_RUNS_ON;
+}
+
 // The controller learns the corridor from example runs and, in phase two, reaches the goal
 // from all 10 evaluation poses; the experience stream has no gaps.
 static void test_loop_learns_corridor_reaches_goal_from_all_poses(void** state) {
@@ -80,12 +91,7 @@ static void test_loop_pair_runs_share_start_and_rank(void** state) {
   uint64_t hash[2];
   for (int rep = 0; rep < 2; ++rep) {
     fw_config_t c;
-    short_schedule(&c);
-    c.phase_one_runs = 10;
-    c.phase_two_runs = 6;
-    c.eval_every_runs = 10;
-    c.eval_starts = 2;
-    c.pair_runs_mode = FW_PAIR_RUNS_ON;
+    pair_session_schedule(&c, 6);
     c.pair_shift_vet = false;  // the ranker's rule alone (the vet: test_loop_shift_vet_runs_between_runs)
     assert_int_equal(harness_open(&g_h, &c, false, 9), 0);
     harness_run(&g_h, 200000);
@@ -148,12 +154,7 @@ static void test_loop_shift_vet_runs_between_runs(void** state) {
   (void)state;
   for (int vet = 0; vet < 2; ++vet) {
     fw_config_t c;
-    short_schedule(&c);
-    c.phase_one_runs = 10;
-    c.phase_two_runs = 8;
-    c.eval_every_runs = 10;
-    c.eval_starts = 2;
-    c.pair_runs_mode = FW_PAIR_RUNS_ON;
+    pair_session_schedule(&c, 8);
     c.pair_gain_sigma = 3.0;
     c.pair_centring_sigma = 3.0;
     c.pair_shift_vet = vet == 1;
@@ -229,12 +230,7 @@ static void test_loop_phase_one_pairs(void** state) {
     const int32_t from_run = variant == 2 ? 5 : 4;
     const int32_t phase_one_pairs = on ? (10 - from_run) / 2 : 0;
     fw_config_t c;
-    short_schedule(&c);
-    c.phase_one_runs = 10;
-    c.phase_two_runs = 2;
-    c.eval_every_runs = 10;
-    c.eval_starts = 2;
-    c.pair_runs_mode = FW_PAIR_RUNS_ON;
+    pair_session_schedule(&c, 2);
     c.pair_shift_vet = false;  // the ranker's rule alone (the vet: test_loop_shift_vet_runs_between_runs)
     c.pair_phase_one = on;
     c.pair_phase_one_from_run = from_run;
@@ -401,7 +397,7 @@ static void test_pair_ranker_moves_the_shift(void** state) {
   r.shift.gain = 0.5;
   r.shift.centring = -2.0;
   const double s[3] = {5.0, 0.75, 0.2};
-  assert_true(fabs(fw_pair_shift_at(&r, s) - (0.5 * 0.2 - 2.0 * 0.25)) < 1e-15);
+  assert_true(fabs(fw_pair_shift_at(&r.shift, s) - (0.5 * 0.2 - 2.0 * 0.25)) < 1e-15);
 }
 
 // One pair-runs session to its end: its statistics, its phase-two training runs that ended on a
