@@ -162,8 +162,10 @@ int main(int argc, char** argv) {
     }
     if (s.pairs_ranked > 0) {
       printf("b21r-train: %llu pairs of runs ranked from B21R_RUN (pair_runs); the learned policy's "
-             "shift: %.4f rad/s per rad of target angle, %.4f rad/s per corridor width\n",
-             (unsigned long long)s.pairs_ranked, s.shift.gain, s.shift.centring);
+             "shift: %.4f rad/s per rad of %s, %.4f rad/s %s\n",
+             (unsigned long long)s.pairs_ranked, s.shift.gain,
+             cfg.task == FW_TASK_CORRIDOR ? "target angle" : "goal bearing", s.shift.centring,
+             cfg.task == FW_TASK_CORRIDOR ? "per corridor width" : "at full obstacle proximity");
       if (s.shift_steps_halved > 0 || s.shift_steps_refused > 0) {
         printf("b21r-train: of their steps of the shift, %llu halved and %llu refused by the vet on the kinematic "
                "model (pair_shift_vet)\n",

@@ -212,7 +212,7 @@ static int learn(trainer_t* t, const b21r_experience_t* e, const char* path, cha
     t->stats.skipped_eval++;
     return 0;
   }
-  if (!e->evaluating && e->step_id == 0 && t->cfg.task == FW_TASK_CORRIDOR) {
+  if (!e->evaluating && e->step_id == 0) {
     fw_shift_vet_starts_add(&t->vet_starts, &t->vet_env, e->s);
   }
   const hedger_status_t hs =

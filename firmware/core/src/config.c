@@ -292,24 +292,23 @@ static const key_desc_t k_keys[] = {
    "acceleration limit ties the next rotation to it (false = the paper's task features alone)"},
   {NULL, "pair_runs", KIND_ENUM, OFF(pair_runs_mode), 0, 0, false, false, k_pair_runs, "auto",
    "phase two (and phase one's example runs, pair_phase_one): training runs come in pairs from one start "
-   "pose; the first adds a policy perturbation g * target angle + c * (lateral fraction - 0.5) to the greedy "
-   "action (phase one: the example's; g, c drawn per pair), the second subtracts it, with the same exploration "
-   "noise; the pair's difference in steps then moves the learned policy's shift toward the faster run "
-   "(pair_shift_rate; docs/LEARNING.md, \"Ranking whole runs in phase two\"); pair_safety vets every "
-   "perturbed command. auto = on for task = corridor with learner = "
-   "hedger, hedger_greedy_method = state_model and reposition = emulator (where it was measured to help), "
-   "off elsewhere (the learner still tags its runs and fades old points, as with pairs, wherever the "
-   "corridor, hedger and state_model apply, so a learned state acts alike on the robot); true = on "
-   "(corridor, hedger, state_model only; on the robot only with pair_safety at least at its default margin "
-   "and horizon)"},
+   "pose; the first adds a perturbation g * target angle + c * (lateral fraction - 0.5) to the greedy action "
+   "(obstacles: g * goal bearing + c * the obstacle's proximity, sign(bearing) * max(0, 1 - distance / 1.5 m); "
+   "phase one: the example's), the second subtracts it, with the same exploration noise; the pair's difference "
+   "in steps moves the learned policy's shift toward the faster run (pair_shift_rate; docs/LEARNING.md); in the "
+   "corridor pair_safety vets every perturbed command. auto = on for learner = hedger, hedger_greedy_method = "
+   "state_model and reposition = emulator (where it was measured to help), off elsewhere (the learner still "
+   "tags its runs and fades old points wherever hedger and state_model apply); true = on (hedger, state_model only; on the robot only in the corridor, with pair_safety at "
+   "least at its default margin and horizon: the obstacle task has no safety filter)"},
   {NULL, "pair_gain_sigma", KIND_DOUBLE, OFF(pair_gain_sigma), 0, 4, false, false, NULL, "0.25",
-   "pair_runs: standard deviation of the perturbation's gain g on the target angle [rad/s per rad]"},
+   "pair_runs: standard deviation of the perturbation's gain g on the target angle (obstacles: the goal "
+   "bearing) [rad/s per rad]"},
   {NULL, "pair_centring_sigma", KIND_DOUBLE, OFF(pair_centring_sigma), 0, 8, false, false, NULL, "0.5",
    "pair_runs: standard deviation of the perturbation's factor c on the lateral fraction's offset from the "
-   "centre line [rad/s per corridor width]"},
+   "centre line [rad/s per corridor width] (obstacles: on the obstacle's proximity [rad/s])"},
   {NULL, "pair_shift_rate", KIND_DOUBLE, OFF(pair_shift_rate), 0, 4, false, false, NULL, "1",
    "pair_runs: the learned policy is the greedy action plus a shift a * target angle + b * (lateral fraction - "
-   "0.5) that the pairs move: each ranked pair adds pair_shift_rate * tanh(d / pair_shift_tau_steps) times its "
+   "0.5) (obstacles: a * goal bearing + b * the obstacle's proximity) that the pairs move: each ranked pair adds pair_shift_rate * tanh(d / pair_shift_tau_steps) times its "
    "perturbation (g, c) to (a, b), d = the second run's steps minus the first's (a failed run counts as the "
    "slower), and phase two's runs then weigh 0 in the imitation (phase one's paired example runs 1); 0 = the "
    "pairs do not move the shift (one loaded from a checkpoint still applies): the faster run's points weigh "
@@ -339,8 +338,8 @@ static const key_desc_t k_keys[] = {
    "pair_phase_one: the first phase-one training run (counted from 0) that starts a pair; the runs before it "
    "are the plain examples, each from its own pose, so that the first evaluations find a policy"},
   {NULL, "pair_safety", KIND_BOOL, OFF(pair_safety), 0, 0, false, false, NULL, "true",
-   "pair_runs: a safety filter vets every perturbed command before it is sent: a kinematic rollout (the command "
-   "for one period, then the recovery law 2 x target angle, under the velocity and acceleration limits) must keep "
+   "pair_runs in the corridor: a safety filter vets every perturbed command before it is sent: a kinematic "
+   "rollout (the command for one period, then the recovery law 2 x target angle, under the velocity and acceleration limits) must keep "
    "pair_safety_margin_m between the robot's skirt and both walls for pair_safety_horizon_s; otherwise the "
    "unperturbed policy's command goes if it passes (phase two: the greedy action; phase one: the example's), else "
    "the recovery law's (source advisor)"},
@@ -351,9 +350,10 @@ static const key_desc_t k_keys[] = {
    "pair_safety: length of the rollout [s] (the recovery law settles in about 3 s)"},
   {NULL, "pair_shift_vet", KIND_BOOL, OFF(pair_shift_vet), 0, 0, false, false, NULL, "true",
    "pair_runs with pair_shift_rate > 0: before a ranked pair's step of the shift is taken, the learned policy "
-   "with it drives whole runs on the safety filter's kinematic model from the first states of the last "
-   "pair_shift_vet_starts training runs, each also mirrored; where it comes closer than pair_safety_margin_m to a "
-   "wall (or runs out of steps) from a start from which the shift in force does not, half the step is tried, and "
+   "with it drives whole runs on the safety filter's kinematic model (obstacles: the same unicycle among the "
+   "obstacle and the walls) from the first states of the last pair_shift_vet_starts training runs, each also "
+   "mirrored; where it comes closer than pair_safety_margin_m to a wall (obstacles: touches the obstacle or a "
+   "wall) or runs out of steps from a start from which the shift in force does not, half the step is tried, and "
    "then none (docs/LEARNING.md)"},
   {NULL, "pair_shift_vet_starts", KIND_INT, OFF(pair_shift_vet_starts), 1, 32, false, false, NULL, "20",
    "pair_shift_vet: the training runs whose first states the vet drives from (the last ones; each also mirrored)"},
@@ -1052,10 +1052,10 @@ static origin_buf_t origin_of(const fw_config_t* cfg, const char* key) {
 
 bool fw_config_pair_learner(const fw_config_t* cfg) {
   if (cfg->pair_runs_mode == FW_PAIR_RUNS_ON) {
-    return true;  // fw_config_validate refuses it outside the corridor, HEDGER and state_model
+    return true;  // fw_config_validate refuses it outside HEDGER and state_model
   }
-  return cfg->pair_runs_mode == FW_PAIR_RUNS_AUTO && cfg->task == FW_TASK_CORRIDOR &&
-         cfg->learner == FW_LEARNER_HEDGER && cfg->hedger_greedy_method == (int32_t)HEDGER_GREEDY_STATE_MODEL;
+  return cfg->pair_runs_mode == FW_PAIR_RUNS_AUTO && cfg->learner == FW_LEARNER_HEDGER &&
+         cfg->hedger_greedy_method == (int32_t)HEDGER_GREEDY_STATE_MODEL;
 }
 
 bool fw_config_pair_runs_active(const fw_config_t* cfg) {
@@ -1069,6 +1069,17 @@ bool fw_config_pair_phase_one_active(const fw_config_t* cfg) {
 
 int fw_config_validate_program(const fw_config_t* cfg, char* err, size_t err_cap) {
   if (fw_config_validate(cfg, err, err_cap) != 0) {
+    return -1;
+  }
+  if (fw_config_pair_runs_active(cfg) && cfg->task == FW_TASK_OBSTACLES && cfg->mode == FW_MODE_LEARN &&
+      cfg->reposition != FW_REPOSITION_EMULATOR) {
+    // The safety filter (pair_safety) is the corridor's: among obstacles nothing vets a perturbed
+    // command, and about a third of the perturbed training runs end on the obstacle in the emulator.
+    fw_errfmt(err, err_cap,
+        "%s: pair_runs with task = obstacles (set at %s) is for the emulator only (reposition = emulator needed, "
+        "set at %s): the obstacle task has no safety filter for the perturbed runs, and about a third of them end "
+        "on the obstacle in the emulator; set pair_runs = auto (off on the robot) or false",
+        origin_of(cfg, "pair_runs").text, origin_of(cfg, "task").text, origin_of(cfg, "reposition").text);
     return -1;
   }
   if (fw_config_pair_runs_active(cfg) && !cfg->pair_safety && cfg->mode == FW_MODE_LEARN && cfg->reposition != FW_REPOSITION_EMULATOR) {
@@ -1157,14 +1168,13 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
         cfg->state_rotation ? ", the last one the executed rotation of state_rotation" : "");
     return -1;
   }
-  if (cfg->pair_runs_mode == FW_PAIR_RUNS_ON && (cfg->task != FW_TASK_CORRIDOR || cfg->learner != FW_LEARNER_HEDGER ||
+  if (cfg->pair_runs_mode == FW_PAIR_RUNS_ON && (cfg->learner != FW_LEARNER_HEDGER ||
                          cfg->hedger_greedy_method != (int32_t)HEDGER_GREEDY_STATE_MODEL)) {
     fw_errfmt(err, err_cap,
-        "%s: pair_runs needs task = corridor (set at %s: its perturbation uses the target angle and the lateral "
-        "fraction), learner = hedger (set at %s) and hedger_greedy_method = state_model (set at %s: the "
+        "%s: pair_runs needs learner = hedger (set at %s) and hedger_greedy_method = state_model (set at %s: the "
         "pairs steer that search's policy); set pair_runs = auto (on only where it applies) or false, or change "
         "those keys",
-        origin_of(cfg, "pair_runs").text, origin_of(cfg, "task").text, origin_of(cfg, "learner").text,
+        origin_of(cfg, "pair_runs").text, origin_of(cfg, "learner").text,
         origin_of(cfg, "hedger_greedy_method").text);
     return -1;
   }

@@ -257,7 +257,7 @@ static void learn_pending(fw_loop_t* L) {
     q = 0.0;
     kind = HEDGER_KIND_UNKNOWN;
   }
-  if (p->learning && p->step_id == 0 && L->cfg.task == FW_TASK_CORRIDOR) {
+  if (p->learning && p->step_id == 0) {
     // pair_shift_vet: a training run's first state is a start the vet drives from.
     fw_shift_vet_starts_add(&L->shift_vet_starts, &L->shift_vet_env, p->s);
   }

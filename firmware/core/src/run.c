@@ -186,8 +186,21 @@ int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool exa
   return 2;
 }
 
-double fw_pair_shift_at(const fw_pair_shift_t* shift, const double* s) {
-  return shift->gain * s[2] + shift->centring * (s[1] - 0.5);
+void fw_pair_basis(fw_task_t task, const double* s, double basis[2]) {
+  if (task == FW_TASK_CORRIDOR) {
+    basis[0] = s[2];
+    basis[1] = s[1] - 0.5;
+    return;
+  }
+  basis[0] = s[0];
+  const double near = fmax(0.0, 1.0 - s[3] / FW_PAIR_OBSTACLE_RANGE_M);
+  basis[1] = s[2] >= 0.0 ? near : -near;
+}
+
+double fw_pair_shift_at(const fw_pair_shift_t* shift, fw_task_t task, const double* s) {
+  double basis[2];
+  fw_pair_basis(task, s, basis);
+  return shift->gain * basis[0] + shift->centring * basis[1];
 }
 
 // pair_runs: the run under way ended. A perturbed run is not imitated until its pair is ranked:
@@ -228,11 +241,13 @@ static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps
   L->pair_member = -1;
 }
 
-// pair_runs: the perturbation of the run under way at state s (corridor: lateral fraction s[1],
-// target angle s[2]); + in the pair's first run, - in its second [rad/s].
+// pair_runs: the perturbation of the run under way at state s (g, c on the task's two terms,
+// fw_pair_basis); + in the pair's first run, - in its second [rad/s].
 static double pair_offset(const fw_loop_t* L) {
   const double sign = L->pair_member == 0 ? 1.0 : -1.0;
-  return sign * (L->pair_gain * L->s[2] + L->pair_centring * (L->s[1] - 0.5));
+  double basis[2];
+  fw_pair_basis(L->cfg.task, L->s, basis);
+  return sign * (L->pair_gain * basis[0] + L->pair_centring * basis[1]);
 }
 
 // pair_safety: a pair run's command a goes only if the recovery rollout (tasks/recovery.h) keeps
@@ -608,10 +623,10 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
   if (learned_policy) {
     double value = 0.0;
     greedy_known = fw_learner_greedy(&L->learner, L->s, &greedy_action, &value);
-    if (greedy_known && fw_run_is_corridor(L)) {
+    if (greedy_known) {
       // The learned policy: HEDGER's greedy action plus the shift the ranked pairs learned (0
       // until a pair is ranked). The value stays the greedy action's (the learning target).
-      greedy_action = tasks_clamp_omega(greedy_action + fw_pair_shift_at(&L->pair_ranker.shift, L->s), L->omega_max);
+      greedy_action = tasks_clamp_omega(greedy_action + fw_pair_shift_at(&L->pair_ranker.shift, L->cfg.task, L->s), L->omega_max);
     }
     if (L->pending.active) {
       L->pending.need_greedy = false;
@@ -663,7 +678,9 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
     a = 0.0;  // nothing known: hold course (evaluations measure the learned policy alone)
     source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
   }
-  if (!evaluating && L->pair_member >= 0 && L->cfg.pair_safety) {
+  // The safety filter is the corridor's: the obstacle task has none (its pairs run in the
+  // emulator only, fw_config_validate_program; the vet of the shift covers its evaluations).
+  if (!evaluating && L->pair_member >= 0 && L->cfg.pair_safety && fw_run_is_corridor(L)) {
     pair_vet(L, own_known, own_action, own_source, &a, &source);  // every command of a pair run
     pair_keep_model(L);
   }

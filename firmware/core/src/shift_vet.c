@@ -8,25 +8,60 @@
 #include <math.h>
 #include <string.h>
 
+// Whether the obstacle task is its own mirror image about the line y = goal_y (the default:
+// goal, disc and walls on and about the x axis): then a start's mirror image is a start too.
+static bool obstacles_symmetric(const tasks_obstacles_spec_t* spec) {
+  const double gy = spec->goal_y_m;
+  if (fabs((spec->arena_max_y_m - gy) - (gy - spec->arena_min_y_m)) > 1e-9) {
+    return false;
+  }
+  for (uint32_t i = 0U; i < spec->n_obstacles && i < TASKS_MAX_OBSTACLES; ++i) {
+    const tasks_circle_t* a = &spec->obstacles[i];
+    bool twin = false;
+    for (uint32_t j = 0U; j < spec->n_obstacles && j < TASKS_MAX_OBSTACLES && !twin; ++j) {
+      const tasks_circle_t* b = &spec->obstacles[j];
+      twin = fabs(a->x_m - b->x_m) < 1e-9 && fabs((a->y_m - gy) + (b->y_m - gy)) < 1e-9 &&
+             fabs(a->radius_m - b->radius_m) < 1e-9;
+    }
+    if (!twin) {
+      return false;
+    }
+  }
+  return true;
+}
+
 void fw_shift_vet_env_init(fw_shift_vet_env_t* env, const fw_config_t* cfg) {
   memset(env, 0, sizeof *env);
-  tasks_obstacles_spec_t obstacles;
-  fw_loop_task_specs(cfg, &env->spec, &obstacles, &env->lim);
-  env->dt_s = env->spec.dt_s;
-  env->margin_m = cfg->pair_safety_margin_m;
+  fw_loop_task_specs(cfg, &env->spec, &env->obstacles, &env->lim);
+  env->task = cfg->task;
+  tasks_obstacles_features_config(&env->obstacles, &env->obstacles_features);
+  const bool corridor = cfg->task == FW_TASK_CORRIDOR;
+  env->dt_s = corridor ? env->spec.dt_s : env->obstacles.dt_s;
+  env->omega_max_radps = corridor ? env->spec.omega_max_radps : env->obstacles.omega_max_radps;
+  env->step_limit = corridor ? env->spec.step_limit : env->obstacles.step_limit;
+  env->task_dim = corridor ? 3U : 4U;
+  env->margin_m = corridor ? cfg->pair_safety_margin_m : FW_SHIFT_VET_OBSTACLES_MARGIN_M;
+  env->mirror = corridor || obstacles_symmetric(&env->obstacles);
   env->state_rotation = cfg->state_rotation;
   const int32_t cap = cfg->pair_shift_vet_starts;
   env->capacity = cap < 1 ? 1U : (cap > FW_SHIFT_VET_STARTS_MAX ? FW_SHIFT_VET_STARTS_MAX : (uint32_t)cap);
 }
 
 void fw_shift_vet_starts_add(fw_shift_vet_starts_t* starts, const fw_shift_vet_env_t* env, const double* state) {
-  const double omega = env->state_rotation ? state[3] : 0.0;
-  if (!isfinite(state[0]) || !isfinite(state[1]) || !isfinite(state[2]) || !isfinite(omega)) {
+  const uint32_t dim = env->task_dim;
+  const double omega = env->state_rotation ? state[dim] : 0.0;
+  for (uint32_t i = 0U; i < dim; ++i) {
+    if (!isfinite(state[i])) {
+      return;
+    }
+  }
+  if (!isfinite(omega)) {
     return;
   }
   const uint32_t cap = env->capacity;
   const uint32_t slot = starts->next < cap ? starts->next : 0U;
-  memcpy(starts->state[slot], state, sizeof starts->state[slot]);
+  memset(starts->state[slot], 0, sizeof starts->state[slot]);
+  memcpy(starts->state[slot], state, dim * sizeof state[0]);
   starts->omega_radps[slot] = omega;
   starts->next = slot + 1U < cap ? slot + 1U : 0U;
   starts->n = starts->n < cap ? starts->n + 1U : cap;
@@ -55,20 +90,62 @@ void fw_shift_vet_begin(fw_shift_vet_t* vet, const fw_pair_shift_t* in_force, co
 
 bool fw_shift_vet_done(const fw_shift_vet_t* vet) { return vet->stage < 0; }
 
-// Rollout k of a start set: start k / 2, mirrored when k is odd (the corridor is symmetric:
-// lateral fraction 1 - l, target angle and rotation negated).
+// Rollouts per start: 2 where the task is mirror-symmetric (the start and its mirror image).
+static uint32_t rollouts_per_start(const fw_shift_vet_env_t* env) { return env->mirror ? 2U : 1U; }
+
+// Rollout k of a start set: start k / 2, mirrored when k is odd (with env->mirror; else start k).
+// The mirror image: corridor lateral fraction 1 - l, target angle negated; obstacles both
+// bearings negated (an obstacle straight behind, at pi, stays); the rotation negated.
 static void begin_rollout(fw_shift_vet_t* vet, const fw_shift_vet_env_t* env, const fw_shift_vet_starts_t* starts,
                           uint32_t k) {
-  const uint32_t i = k / 2U;
-  double s[3] = {starts->state[i][0], starts->state[i][1], starts->state[i][2]};
+  const uint32_t per = rollouts_per_start(env);
+  const uint32_t i = k / per;
+  const bool mirrored = per == 2U && (k & 1U) != 0U;
+  double s[FW_SHIFT_VET_TASK_DIM_MAX];
+  memcpy(s, starts->state[i], sizeof s);
   double omega = starts->omega_radps[i];
-  if ((k & 1U) != 0U) {
-    s[1] = 1.0 - s[1];
-    s[2] = -s[2];
+  if (mirrored) {
     omega = -omega;
+    if (env->task == FW_TASK_CORRIDOR) {
+      s[1] = 1.0 - s[1];
+      s[2] = -s[2];
+    } else {
+      s[0] = -s[0];
+      s[2] = s[2] < 3.14159265358979 ? -s[2] : s[2];
+    }
   }
-  (void)tasks_corridor_rollout_begin(&vet->ro, &env->spec, s, omega);
+  if (env->task == FW_TASK_CORRIDOR) {
+    (void)tasks_corridor_rollout_begin(&vet->ro, &env->spec, s, omega);
+  } else {
+    (void)tasks_obstacles_rollout_begin(&vet->ro_obstacles, &env->obstacles, &env->obstacles_features, s, omega);
+  }
   vet->rolling = true;
+}
+
+// The rollout under way: its status, and (running) the learner's state at its pose, the rotation
+// in force appended.
+static int32_t rollout_status(const fw_shift_vet_t* vet, const fw_shift_vet_env_t* env) {
+  return env->task == FW_TASK_CORRIDOR ? vet->ro.status : vet->ro_obstacles.status;
+}
+
+static void rollout_state(const fw_shift_vet_t* vet, const fw_shift_vet_env_t* env, double* s) {
+  if (env->task == FW_TASK_CORRIDOR) {
+    features_corridor_state(&vet->ro.f, s);
+    s[3] = vet->ro.omega_radps;
+  } else {
+    (void)features_obstacles_state(&vet->ro_obstacles.f, 1U, s, FW_SHIFT_VET_TASK_DIM_MAX);
+    s[4] = vet->ro_obstacles.omega_radps;
+  }
+}
+
+static void rollout_step(fw_shift_vet_t* vet, const fw_shift_vet_env_t* env, double omega) {
+  if (env->task == FW_TASK_CORRIDOR) {
+    (void)tasks_corridor_rollout_step(&vet->ro, &env->spec, &env->lim, env->dt_s, omega, env->margin_m,
+                                      env->step_limit);
+  } else {
+    (void)tasks_obstacles_rollout_step(&vet->ro_obstacles, &env->obstacles, &env->obstacles_features, &env->lim,
+                                       env->dt_s, omega, env->margin_m, env->step_limit);
+  }
 }
 
 // The candidate under test fails from a start where the shift in force reaches the goal: not
@@ -117,8 +194,8 @@ bool fw_shift_vet_hedger_greedy(void* hedger, const double* s, double* action) {
 
 bool fw_shift_vet_step(fw_shift_vet_t* vet, fw_shift_vet_greedy_fn greedy, void* ctx, const fw_shift_vet_env_t* env,
                        const fw_shift_vet_starts_t* starts, uint32_t periods) {
-  const double omega_max = env->spec.omega_max_radps;
-  const uint32_t n_rollouts = 2U * starts->n;
+  const double omega_max = env->omega_max_radps;
+  const uint32_t n_rollouts = rollouts_per_start(env) * starts->n;
   uint32_t budget = periods;
   while (vet->stage >= 0) {
     if (!vet->rolling) {
@@ -132,26 +209,24 @@ bool fw_shift_vet_step(fw_shift_vet_t* vet, fw_shift_vet_greedy_fn greedy, void*
     if (budget == 0U) {
       return false;
     }
-    tasks_corridor_rollout_t* ro = &vet->ro;
-    if (ro->status == TASKS_ROLLOUT_RUNNING) {
-      double s[4];
-      features_corridor_state(&ro->f, s);
-      s[3] = ro->omega_radps;
+    if (rollout_status(vet, env) == TASKS_ROLLOUT_RUNNING) {
+      double s[FW_SHIFT_VET_TASK_DIM_MAX + 1];
+      rollout_state(vet, env, s);
       double a = 0.0;
       double omega = 0.0;
       if (greedy(ctx, s, &a)) {
         // The learned policy as run.c drives it: the greedy action plus the shift where an action
         // is known, 0 (hold course) where none is.
         const fw_pair_shift_t* sh = &vet->shift[vet->checking_in_force ? 1 : (vet->stage == 0 ? 0 : 2)];
-        omega = tasks_clamp_omega(a + fw_pair_shift_at(sh, s), omega_max);
+        omega = tasks_clamp_omega(a + fw_pair_shift_at(sh, env->task, s), omega_max);
       }
       budget--;
       vet->periods++;
-      (void)tasks_corridor_rollout_step(ro, &env->spec, &env->lim, env->dt_s, omega, env->margin_m,
-                                        env->spec.step_limit);
+      rollout_step(vet, env, omega);
     }
-    if (ro->status != TASKS_ROLLOUT_RUNNING) {
-      rollout_finished(vet, ro->status != TASKS_ROLLOUT_GOAL);
+    const int32_t status = rollout_status(vet, env);
+    if (status != TASKS_ROLLOUT_RUNNING) {
+      rollout_finished(vet, status != TASKS_ROLLOUT_GOAL);
     }
   }
   return true;

@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
-// The corridor's recovery rollout (see tasks/recovery.h).
+// The corridor's recovery rollout and the whole-run rollouts of both tasks (see tasks/recovery.h).
 #include "tasks/recovery.h"
+
+#include "tasks_internal.h"
 
 #include <math.h>
 #include <stdbool.h>
@@ -183,6 +185,146 @@ int32_t tasks_corridor_rollout_step(tasks_corridor_rollout_t* ro, const tasks_co
   if (ro->least_clearance_m < margin_m) {
     ro->status = TASKS_ROLLOUT_WALL;
   } else if (m.ahead <= spec->goal_distance_m) {
+    ro->status = TASKS_ROLLOUT_GOAL;
+  } else if (ro->periods >= step_limit) {
+    ro->status = TASKS_ROLLOUT_STEP_LIMIT;
+  }
+  return ro->status;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The obstacle task's whole run. The corridor's model_t and step() serve in the arena frame with
+// y = the pose's y, psi = its heading and ahead = -x (step moves ahead by -ds cos psi, so x by
+// +ds cos psi).
+
+// How far the triangle robot-goal-disc may miss a disc's distance from the goal and still be
+// taken for it [m]: the laser's distance and bearing errors (about 0.02 m and 0.01 rad at 3 m)
+// with room to spare, well below the distance between two discs' circles around the goal.
+#define OBSTACLES_MATCH_TOLERANCE_M 0.25
+
+static bool obstacles_inputs_ok(const tasks_obstacles_spec_t* spec, const features_obstacles_config_t* fcfg) {
+  return spec != NULL && fcfg != NULL && spec->n_obstacles <= TASKS_MAX_OBSTACLES && isfinite(spec->goal_x_m) &&
+         isfinite(spec->goal_y_m);
+}
+
+int tasks_obstacles_pose_from_state(const tasks_obstacles_spec_t* spec, const features_obstacles_config_t* fcfg,
+                                    const double* obstacles_state, features_pose_t* pose) {
+  if (!obstacles_inputs_ok(spec, fcfg) || obstacles_state == NULL || pose == NULL) {
+    return 0;
+  }
+  const double goal_bearing = obstacles_state[0];
+  const double goal_distance = obstacles_state[1];
+  const double obstacle_bearing = obstacles_state[2];
+  const double obstacle_distance = obstacles_state[3];
+  if (!isfinite(goal_bearing) || !isfinite(goal_distance) || !isfinite(obstacle_bearing) ||
+      !isfinite(obstacle_distance) || goal_distance < 0.0 || obstacle_distance < 0.0 ||
+      obstacle_distance >= fcfg->no_obstacle_distance_m) {
+    return 0;
+  }
+  int best = -1;
+  double best_miss = OBSTACLES_MATCH_TOLERANCE_M;
+  double wx = 0.0;
+  double wy = 0.0;
+  for (uint32_t k = 0U; k < spec->n_obstacles; ++k) {
+    const tasks_circle_t* c = &spec->obstacles[k];
+    // The goal-to-disc-centre vector in the robot frame: robot to disc centre minus robot to goal.
+    const double rho = obstacle_distance + c->radius_m;
+    const double x = rho * cos(obstacle_bearing) - goal_distance * cos(goal_bearing);
+    const double y = rho * sin(obstacle_bearing) - goal_distance * sin(goal_bearing);
+    const double miss = fabs(hypot(x, y) - hypot(c->x_m - spec->goal_x_m, c->y_m - spec->goal_y_m));
+    if (isfinite(miss) && miss <= best_miss) {
+      best = (int)k;
+      best_miss = miss;
+      wx = x;
+      wy = y;
+    }
+  }
+  if (best < 0) {
+    return 0;
+  }
+  // The heading turns the robot-frame vector onto the arena's goal-to-disc vector.
+  const tasks_circle_t* c = &spec->obstacles[best];
+  const double heading = wrap_pi(atan2(c->y_m - spec->goal_y_m, c->x_m - spec->goal_x_m) - atan2(wy, wx));
+  pose->x_m = spec->goal_x_m - goal_distance * cos(heading + goal_bearing);
+  pose->y_m = spec->goal_y_m - goal_distance * sin(heading + goal_bearing);
+  pose->theta_rad = heading;
+  return 1;
+}
+
+// The skirt's least clearance to the spec's discs and the arena's walls at pose p [m].
+static double obstacles_clearance_m(const tasks_obstacles_spec_t* spec, features_pose_t p) {
+  const double r = spec->robot_radius_m;
+  double least = fmin(fmin(p.x_m - spec->arena_min_x_m, spec->arena_max_x_m - p.x_m),
+                      fmin(p.y_m - spec->arena_min_y_m, spec->arena_max_y_m - p.y_m)) - r;
+  for (uint32_t k = 0U; k < spec->n_obstacles; ++k) {
+    const tasks_circle_t* c = &spec->obstacles[k];
+    least = fmin(least, hypot(p.x_m - c->x_m, p.y_m - c->y_m) - c->radius_m - r);
+  }
+  return least;
+}
+
+// The features an ideal laser gives at the model's pose (tasks_episode_observe_pose's).
+static bool obstacles_features_at(const tasks_obstacles_spec_t* spec, const features_obstacles_config_t* fcfg,
+                                  features_pose_t p, features_obstacles_t* f) {
+  features_disc_t discs[TASKS_MAX_OBSTACLES];
+  for (uint32_t k = 0U; k < spec->n_obstacles; ++k) {
+    discs[k].x_m = spec->obstacles[k].x_m;
+    discs[k].y_m = spec->obstacles[k].y_m;
+    discs[k].radius_m = spec->obstacles[k].radius_m;
+  }
+  return features_obstacles_from_pose(fcfg, p, spec->goal_x_m, spec->goal_y_m, discs, spec->n_obstacles, TASKS_PI,
+                                      f) == FEATURES_OK &&
+         f->valid != 0U;
+}
+
+int32_t tasks_obstacles_rollout_begin(tasks_obstacles_rollout_t* ro, const tasks_obstacles_spec_t* spec,
+                                      const features_obstacles_config_t* fcfg, const double* obstacles_state,
+                                      double omega_radps) {
+  if (ro == NULL) {
+    return TASKS_ROLLOUT_INVALID;
+  }
+  memset(ro, 0, sizeof *ro);
+  ro->status = TASKS_ROLLOUT_INVALID;
+  features_pose_t p;
+  if (!isfinite(omega_radps) || tasks_obstacles_pose_from_state(spec, fcfg, obstacles_state, &p) == 0 ||
+      !obstacles_features_at(spec, fcfg, p, &ro->f)) {
+    return ro->status;
+  }
+  ro->pose = p;
+  ro->omega_radps = omega_radps;
+  ro->least_clearance_m = obstacles_clearance_m(spec, p);
+  ro->status = TASKS_ROLLOUT_RUNNING;
+  return ro->status;
+}
+
+int32_t tasks_obstacles_rollout_step(tasks_obstacles_rollout_t* ro, const tasks_obstacles_spec_t* spec,
+                                     const features_obstacles_config_t* fcfg, const tasks_command_limits_t* lim,
+                                     double dt_s, double omega_radps, double margin_m, uint32_t step_limit) {
+  if (ro == NULL) {
+    return TASKS_ROLLOUT_INVALID;
+  }
+  if (ro->status != TASKS_ROLLOUT_RUNNING) {
+    return ro->status;
+  }
+  if (!obstacles_inputs_ok(spec, fcfg) || lim == NULL || !(dt_s >= RECOVERY_MIN_DT_S) || !isfinite(dt_s) ||
+      !isfinite(omega_radps) || !isfinite(margin_m) || !isfinite(spec->v_mps)) {
+    ro->status = TASKS_ROLLOUT_INVALID;
+    return ro->status;
+  }
+  model_t m = {ro->pose.y_m, ro->pose.theta_rad, -ro->pose.x_m, ro->v_mps, ro->omega_radps};
+  step(lim, dt_s, spec->v_mps, omega_radps, &m);
+  ro->periods++;
+  ro->pose.x_m = -m.ahead;
+  ro->pose.y_m = m.y;
+  ro->pose.theta_rad = wrap_pi(m.psi);
+  ro->v_mps = m.v;
+  ro->omega_radps = m.w;
+  ro->least_clearance_m = fmin(ro->least_clearance_m, obstacles_clearance_m(spec, ro->pose));
+  if (!obstacles_features_at(spec, fcfg, ro->pose, &ro->f)) {
+    ro->status = TASKS_ROLLOUT_INVALID;
+  } else if (ro->least_clearance_m < margin_m) {
+    ro->status = TASKS_ROLLOUT_WALL;
+  } else if (ro->f.goal_distance_m <= spec->goal_radius_m) {
     ro->status = TASKS_ROLLOUT_GOAL;
   } else if (ro->periods >= step_limit) {
     ro->status = TASKS_ROLLOUT_STEP_LIMIT;

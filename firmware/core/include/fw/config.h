@@ -98,9 +98,8 @@ typedef enum fw_eval_policy {
 typedef enum fw_pair_runs {
   FW_PAIR_RUNS_OFF = 0,   ///< "false": every phase-two training run is the learned policy's own
   FW_PAIR_RUNS_ON = 1,    ///< "true": pairs wherever allowed (fw_config_validate refuses the rest)
-  /// "auto": pairs where they were measured to help (in lockstep), the corridor in the emulator
-  /// (task = corridor, learner = hedger, hedger_greedy_method = state_model, reposition =
-  /// emulator); elsewhere off. See fw_config_pair_learner() and fw_config_pair_runs_active().
+  /// "auto": pairs where they were measured to help (in lockstep), both tasks in the emulator
+  /// (learner = hedger, hedger_greedy_method = state_model, reposition = emulator); elsewhere off. See fw_config_pair_learner() and fw_config_pair_runs_active().
   FW_PAIR_RUNS_AUTO = 2,
 } fw_pair_runs_t;
 
@@ -229,8 +228,8 @@ typedef struct fw_config {
   /// key pair_runs, fw_pair_runs_t (AUTO = 2: never test it as a bool); read through
   /// fw_config_pair_learner() and fw_config_pair_runs_active()
   int32_t pair_runs_mode;
-  double pair_gain_sigma;          ///< pair_runs: std-dev of the perturbation's gain on θ [rad/s per rad]
-  double pair_centring_sigma;      ///< pair_runs: std-dev of its term on (lateral fraction − 0.5) [rad/s]
+  double pair_gain_sigma;          ///< pair_runs: std-dev of the perturbation's gain on θ (obstacles: goal bearing) [rad/s per rad]
+  double pair_centring_sigma;      ///< pair_runs: std-dev of its term on (lateral fraction − 0.5) (obstacles: proximity) [rad/s]
   double pair_tau_steps;           ///< pair_runs: scale of the weights' response to the steps' difference
   double pair_recency_runs;        ///< pair_runs: imitation fades a point stored N runs ago by e^(−N/this)
   /// pair_runs: each ranked pair moves the learned policy's shift (fw_pair_ranker_t) by this times
@@ -324,7 +323,7 @@ void fw_config_origin(const fw_config_t* cfg, const char* key, char* out, size_t
 void fw_config_print_reference(FILE* out);
 
 /// Whether the learner is configured for ranked pairs under cfg: pair_runs = true, or pair_runs =
-/// auto with task = corridor, learner = hedger and hedger_greedy_method = state_model, wherever it
+/// auto with learner = hedger and hedger_greedy_method = state_model (either task), wherever it
 /// runs. Then every training run's points carry their run tag (mode = learn, both phases) and the
 /// imitation fades old points (pair_recency_runs; in evaluations too), so a learned state behaves
 /// the same on the emulator and on the robot. Pure, O(1).
@@ -333,7 +332,8 @@ bool fw_config_pair_learner(const fw_config_t* cfg);
 /// Whether phase two's training runs come in ranked pairs under cfg (callers also check mode =
 /// learn): fw_config_pair_learner, and pair_runs = true or reposition = emulator. pair_runs =
 /// auto leaves the pairs off on the robot: the pair's second run needs the first one's start pose
-/// again, and the safety filter's margin is measured in the lockstep emulator only. Pure, O(1).
+/// again, and the safety filter's margin is measured in the lockstep emulator only (the obstacle
+/// task has no filter: fw_config_validate_program refuses its pairs on the robot). Pure, O(1).
 bool fw_config_pair_runs_active(const fw_config_t* cfg);
 
 /// Whether phase one's example runs come in ranked pairs too (from pair_phase_one_from_run on):

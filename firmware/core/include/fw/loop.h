@@ -146,7 +146,8 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
 /// pair_runs: the ranking of pairs as their runs end, kept by the controller (run.c) and by
 /// b21r-train on a log's B21R_RUN records, so that both weigh the same runs alike and reach the
 /// same shift. The shift is part of the learned state: the learned policy is HEDGER's greedy
-/// action plus a θ + b (lateral fraction − 0.5) (fw_pair_shift_at), and checkpoints keep (a, b)
+/// action plus a θ + b (lateral fraction − 0.5) in the corridor, a × goal bearing + b × the
+/// obstacle's proximity among obstacles (fw_pair_shift_at), and checkpoints keep (a, b)
 /// and its pair count (fw/progress.h); b21r-train takes all three from each pair record's copy.
 typedef struct fw_pair_ranker {
   bool first_pending;    ///< a pair's first run ended and the pair is not ranked yet
@@ -184,10 +185,25 @@ int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool exa
                            bool goal, int32_t steps, uint32_t tag, double gain, double centring, uint32_t tags[2],
                            double weights[2]);
 
-/// The learned policy's shift at a corridor state s (s[1] lateral fraction, s[2] target angle
-/// [rad]): a s[2] + b (s[1] − 0.5) [rad/s], as the controller adds it to the greedy action and the
-/// vet's rollouts do (fw/shift_vet.h). Pure, O(1).
-double fw_pair_shift_at(const fw_pair_shift_t* shift, const double* s);
+/// The obstacle task's pair term acts within this distance of the nearest obstacle [m]: a little
+/// beyond the reference law's avoidance range (1.25 m), so a shift can change where the robot
+/// starts to go round; farther off only the goal bearing's term acts.
+#define FW_PAIR_OBSTACLE_RANGE_M 1.5
+
+/// The two terms of the pairs' perturbation family and of the shift at a learner state s
+/// (fw_pair_ranker_t), per task:
+/// - corridor: basis[0] = target angle s[2] [rad], basis[1] = lateral fraction s[1] − 0.5;
+/// - obstacles: basis[0] = goal bearing s[0] [rad], basis[1] = the nearest obstacle's proximity,
+///   sign(its bearing s[2]) × max(0, 1 − distance s[3] / FW_PAIR_OBSTACLE_RANGE_M): 0 where no
+///   obstacle is near, up to ±1 at contact, + when it is on the left. A positive coefficient on
+///   it turns toward the obstacle (a closer pass), a negative one away (a wider berth).
+/// Pure, O(1).
+void fw_pair_basis(fw_task_t task, const double* s, double basis[2]);
+
+/// The learned policy's shift at a learner state s of the task: gain × basis[0] + centring ×
+/// basis[1] (fw_pair_basis) [rad/s], as the controller adds it to the greedy action and the vet's
+/// rollouts do (fw/shift_vet.h). Pure, O(1).
+double fw_pair_shift_at(const fw_pair_shift_t* shift, fw_task_t task, const double* s);
 
 /// pair_runs: the run tag of a training run with id run_id when the store's current tag is
 /// `current` (run.c; b21r-train uses the same rule): its id while ids run ahead of the tags, else

@@ -59,10 +59,12 @@ extern "C" {
 
 /// pair_runs: the learned policy's shift, moved by the ranked pairs (fw_pair_ranker_t, fw/loop.h)
 /// and kept by checkpoints (here, because this section carries it): the learned policy is HEDGER's
-/// greedy action plus gain θ + centring (lateral fraction − 0.5) [rad/s].
+/// greedy action plus gain × (the task's first pair term) + centring × (its second)
+/// (fw_pair_basis): corridor gain θ + centring (lateral fraction − 0.5); obstacles gain × goal
+/// bearing + centring × the obstacle's proximity term [rad/s].
 typedef struct fw_pair_shift {
   double gain;       ///< a [rad/s per rad], |a| <= FW_PAIR_SHIFT_MAX
-  double centring;   ///< b [rad/s per corridor width], |b| <= FW_PAIR_SHIFT_MAX
+  double centring;   ///< b [rad/s per corridor width; obstacles rad/s], |b| <= FW_PAIR_SHIFT_MAX
   uint32_t pairs;    ///< pairs ranked into it, whatever pair_shift_vet made of their steps (its step size falls with them: pair_shift_decay_pairs)
 } fw_pair_shift_t;
 

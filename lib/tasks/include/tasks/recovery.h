@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 /// tasks/recovery.h — Will the robot stay off the corridor's walls? A short kinematic rollout
 /// that vets a rotation command before it is sent (the safety filter of the controller's
-/// pair_runs, firmware/core/src/run.c).
+/// pair_runs, firmware/core/src/run.c); and whole runs of a policy on the same model, in the
+/// corridor and among the obstacle task's discs (the vet of the learned policy's shift).
 ///
 /// The question asked is the one a safety filter with a backup controller asks: if this command
 /// is sent now and a known recovery law drives from the next period on, does the robot's skirt
@@ -83,7 +84,7 @@ int tasks_corridor_recovery_predict(const tasks_corridor_spec_t* spec,
 typedef enum tasks_rollout_status {
   TASKS_ROLLOUT_RUNNING = 0,     ///< the run goes on: ask the policy at ro->f
   TASKS_ROLLOUT_GOAL = 1,        ///< the goal was reached and the coast kept the margin
-  TASKS_ROLLOUT_WALL = 2,        ///< the skirt came closer than the margin to a side wall
+  TASKS_ROLLOUT_WALL = 2,        ///< the skirt came closer than the margin to a wall (or an obstacle)
   TASKS_ROLLOUT_STEP_LIMIT = 3,  ///< step_limit periods passed without reaching the goal
   TASKS_ROLLOUT_INVALID = 4,     ///< a non-finite input or command: nothing can be predicted
 } tasks_rollout_status_t;
@@ -113,6 +114,50 @@ int32_t tasks_corridor_rollout_begin(tasks_corridor_rollout_t* ro, const tasks_c
 int32_t tasks_corridor_rollout_step(tasks_corridor_rollout_t* ro, const tasks_corridor_spec_t* spec,
                                     const tasks_command_limits_t* lim, double dt_s, double omega_radps,
                                     double margin_m, uint32_t step_limit);
+
+/// The obstacle task's whole run on a kinematic model, for the same vet: the unicycle of the
+/// corridor's rollout (the same limits and ramp) in the arena frame of tasks.h, at the task's
+/// constant speed, among the spec's discs and walls; the policy decides on the features an ideal
+/// laser gives at the model's pose (features_obstacles_from_pose, the LMS200's 180° field of
+/// view), as the emulator's idealised model does. The coast after the goal is not driven: at
+/// 0.3 m/s and the base's deceleration it is a few centimetres, in the open space around the
+/// goal. Plain data; tasks_obstacles_rollout_begin fills it.
+typedef struct tasks_obstacles_rollout {
+  features_obstacles_t f;    ///< the features at the model's pose: what the policy decides on
+  features_pose_t pose;      ///< the model's pose, arena frame
+  double v_mps;              ///< the command in force, after the limits [m/s]
+  double omega_radps;        ///< [rad/s]
+  double least_clearance_m;  ///< the smallest skirt-to-disc or skirt-to-wall clearance so far [m]
+  uint32_t periods;          ///< commands executed
+  int32_t status;            ///< a tasks_rollout_status_t value
+} tasks_obstacles_rollout_t;
+
+/// The arena pose that the obstacle state (goal bearing [rad], goal distance [m], nearest
+/// obstacle's bearing [rad] and distance [m] from the robot centre to its surface: the first four
+/// values of features_obstacles_state) describes, with the goal and discs of spec: the goal's and
+/// the obstacle's directions and distances fix the triangle robot-goal-disc, and so the pose,
+/// for the disc whose distance from the goal the triangle matches best. Returns 1 with *pose, or
+/// 0 when an argument is NULL or not finite, no obstacle is visible (distance at or beyond
+/// fcfg->no_obstacle_distance_m: the pose is not determined) or no disc matches within 0.25 m.
+/// O(spec->n_obstacles).
+int tasks_obstacles_pose_from_state(const tasks_obstacles_spec_t* spec, const features_obstacles_config_t* fcfg,
+                                    const double* obstacles_state, features_pose_t* pose);
+
+/// Starts a rollout at the pose tasks_obstacles_pose_from_state gives, standing except for the
+/// rotation omega_radps in force. Returns ro->status: TASKS_ROLLOUT_INVALID where no pose is
+/// determined (see there) or an input is not finite, else TASKS_ROLLOUT_RUNNING (a start already
+/// closer than a margin fails at its first step). O(spec->n_obstacles).
+int32_t tasks_obstacles_rollout_begin(tasks_obstacles_rollout_t* ro, const tasks_obstacles_spec_t* spec,
+                                      const features_obstacles_config_t* fcfg, const double* obstacles_state,
+                                      double omega_radps);
+
+/// One period: the command (spec->v_mps, omega_radps) under lim, then the checks: the skirt
+/// closer than margin_m to a disc or a wall (TASKS_ROLLOUT_WALL), the goal (the centre within
+/// spec->goal_radius_m), or step_limit periods. Returns ro->status; a finished rollout stays as
+/// it is. O(spec->n_obstacles).
+int32_t tasks_obstacles_rollout_step(tasks_obstacles_rollout_t* ro, const tasks_obstacles_spec_t* spec,
+                                     const features_obstacles_config_t* fcfg, const tasks_command_limits_t* lim,
+                                     double dt_s, double omega_radps, double margin_m, uint32_t step_limit);
 
 #ifdef __cplusplus
 }

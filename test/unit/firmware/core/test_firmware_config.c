@@ -389,14 +389,13 @@ static void test_config_validate_cross_key_rules(void** state) {
 
 // One key each that takes a configuration outside the pairs: the corridor task, HEDGER and its
 // state-model greedy search are what pair_runs needs.
-static const char* const k_outside_pairs[3][2] = {
-    {"task", "obstacles"}, {"learner", "tabular"}, {"hedger_greedy_method", "per_action"}};
+static const char* const k_outside_pairs[2][2] = {{"learner", "tabular"}, {"hedger_greedy_method", "per_action"}};
 
-// pair_runs = auto (the default) turns the pairs on only where they were measured to help: the
-// corridor with HEDGER's state-model search in the emulator. Anywhere else it is off, silently:
-// no combination of keys is refused because of it, the robot's gates included. The learner's
-// side of it (run tags, fading) does not depend on where it runs.
-static void test_config_pair_runs_auto_only_in_the_emulated_corridor(void** state) {
+// pair_runs = auto (the default) turns the pairs on only where they were measured to help: both
+// tasks with HEDGER's state-model search in the emulator. Anywhere else it is off, silently: no
+// combination of keys is refused because of it, the robot's gates included. The learner's side
+// of it (run tags, fading) does not depend on where it runs.
+static void test_config_pair_runs_auto_only_in_the_emulator(void** state) {
   (void)state;
   fw_config_t c;
   char err[FW_CONFIG_ERR_MAX];
@@ -414,13 +413,22 @@ static void test_config_pair_runs_auto_only_in_the_emulated_corridor(void** stat
   assert_int_equal(fw_config_set(&c, "emulator_control", "/tmp/sim.sock", "--set", err, sizeof err), 0);
   assert_true(fw_config_pair_runs_active(&c));
   assert_int_equal(fw_config_validate_program(&c, err, sizeof err), 0);
-  for (int i = 0; i < 3; ++i) {
+  for (int i = 0; i < 2; ++i) {
     fw_config_t d = c;
     assert_int_equal(fw_config_set(&d, k_outside_pairs[i][0], k_outside_pairs[i][1], "--set", err, sizeof err), 0);
     assert_false(fw_config_pair_runs_active(&d));
     assert_false(fw_config_pair_learner(&d));
     assert_int_equal(fw_config_validate(&d, err, sizeof err), 0);
   }
+  // The obstacle task pairs in the emulator too; on the robot auto leaves it off, silently.
+  fw_config_t obstacles = c;
+  assert_int_equal(fw_config_set(&obstacles, "task", "obstacles", "--set", err, sizeof err), 0);
+  assert_true(fw_config_pair_runs_active(&obstacles));
+  assert_int_equal(fw_config_validate_program(&obstacles, err, sizeof err), 0);
+  assert_int_equal(fw_config_set(&obstacles, "reposition", "operator", "--set", err, sizeof err), 0);
+  assert_false(fw_config_pair_runs_active(&obstacles));
+  assert_true(fw_config_pair_learner(&obstacles));
+  assert_int_equal(fw_config_validate_program(&obstacles, err, sizeof err), 0);
   fw_config_t off = c;
   assert_int_equal(fw_config_set(&off, "pair_runs", "false", "--set", err, sizeof err), 0);
   assert_false(fw_config_pair_runs_active(&off));
@@ -430,11 +438,11 @@ static void test_config_pair_runs_auto_only_in_the_emulated_corridor(void** stat
   assert_non_null(strstr(err, "auto"));
 }
 
-// pair_runs = true needs the corridor (its perturbation uses the target angle and lateral
-// fraction), HEDGER and the state-model greedy search (the pairs steer that search's policy):
-// each other combination is refused naming pair_runs, where it was set, and the key
-// in the way.
-static void test_config_pair_runs_needs_corridor_hedger_state_model(void** state) {
+// pair_runs = true needs HEDGER and the state-model greedy search (the pairs steer that search's
+// policy): each other combination is refused naming pair_runs, where it was set, and the key in
+// the way. The obstacle task pairs only in the emulator: it has no safety filter for the
+// perturbed runs, so on the robot pair_runs = true is refused, naming the task and reposition.
+static void test_config_pair_runs_needs_hedger_state_model(void** state) {
   (void)state;
   fw_config_t c;
   char err[FW_CONFIG_ERR_MAX];
@@ -442,7 +450,17 @@ static void test_config_pair_runs_needs_corridor_hedger_state_model(void** state
   assert_int_equal(fw_config_set(&c, "pair_runs", "true", "robot.conf:3", err, sizeof err), 0);
   assert_true(fw_config_pair_runs_active(&c));
   assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
-  for (int i = 0; i < 3; ++i) {
+  fw_config_t obstacles = c;
+  assert_int_equal(fw_config_set(&obstacles, "task", "obstacles", "robot.conf:7", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate(&obstacles, err, sizeof err), 0);
+  assert_int_equal(fw_config_validate_program(&obstacles, err, sizeof err), -1);
+  assert_non_null(strstr(err, "robot.conf:3: pair_runs with task = obstacles (set at robot.conf:7)"));
+  assert_non_null(strstr(err, "reposition = emulator"));
+  assert_non_null(strstr(err, "set pair_runs = auto"));
+  assert_int_equal(fw_config_set(&obstacles, "reposition", "emulator", "--set", err, sizeof err), 0);
+  assert_int_equal(fw_config_set(&obstacles, "emulator_control", "/tmp/sim.sock", "--set", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate_program(&obstacles, err, sizeof err), 0);
+  for (int i = 0; i < 2; ++i) {
     fw_config_t d = c;
     assert_int_equal(fw_config_set(&d, k_outside_pairs[i][0], k_outside_pairs[i][1], "robot.conf:9", err, sizeof err),
                      0);
@@ -758,8 +776,8 @@ int main(int argc, char** argv) {
       cmocka_unit_test(test_config_reference_file_matches_defaults),
       cmocka_unit_test(test_config_extra_keys_go_to_the_handler),
       cmocka_unit_test(test_config_set_allocates_nothing),
-      cmocka_unit_test(test_config_pair_runs_auto_only_in_the_emulated_corridor),
-      cmocka_unit_test(test_config_pair_runs_needs_corridor_hedger_state_model),
+      cmocka_unit_test(test_config_pair_runs_auto_only_in_the_emulator),
+      cmocka_unit_test(test_config_pair_runs_needs_hedger_state_model),
       cmocka_unit_test(test_config_program_refuses_joystick_without_operator),
       cmocka_unit_test(test_config_learner_key),
   };

@@ -397,7 +397,16 @@ static void test_pair_ranker_moves_the_shift(void** state) {
   r.shift.gain = 0.5;
   r.shift.centring = -2.0;
   const double s[3] = {5.0, 0.75, 0.2};
-  assert_true(fabs(fw_pair_shift_at(&r.shift, s) - (0.5 * 0.2 - 2.0 * 0.25)) < 1e-15);
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_CORRIDOR, s) - (0.5 * 0.2 - 2.0 * 0.25)) < 1e-15);
+  // Among obstacles: a * goal bearing + b * sign(obstacle bearing) * max(0, 1 - distance / 1.5 m).
+  const double left_near[4] = {0.3, 3.0, 0.4, 0.6};
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, left_near) - (0.5 * 0.3 - 2.0 * 0.6)) < 1e-15);
+  const double right_near[4] = {-0.3, 3.0, -0.4, 0.6};
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, right_near) - (-0.5 * 0.3 + 2.0 * 0.6)) < 1e-15);
+  const double far[4] = {0.3, 3.0, 0.4, 2.0};  // beyond FW_PAIR_OBSTACLE_RANGE_M: the bearing's term alone
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, far) - 0.5 * 0.3) < 1e-15);
+  const double hidden[4] = {0.3, 3.0, 3.141592653589793, 8.0};
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, hidden) - 0.5 * 0.3) < 1e-15);
 }
 
 // One pair-runs session to its end: its statistics, its phase-two training runs that ended on a

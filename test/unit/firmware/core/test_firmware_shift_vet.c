@@ -9,6 +9,8 @@
 #include <features/features.h>
 #include <fw/config.h>
 #include <fw/shift_vet.h>
+#include <fw/loop.h>
+#include <tasks/episode.h>
 #include <tasks/tasks.h>
 
 #include <math.h>
@@ -189,6 +191,134 @@ static void test_vet_starts_keep_the_last_runs(void** state) {
   }
 }
 
+// ---------------------------------------------------------------------------------------------
+// The obstacle task: its rollouts (tasks_obstacles_rollout_*), its pair terms and its mirror.
+
+static fw_shift_vet_env_t g_obstacles_env;
+
+static int setup_obstacles(void** state) {
+  (void)state;
+  fw_config_t cfg;
+  fw_config_defaults(&cfg);
+  cfg.task = FW_TASK_OBSTACLES;
+  fw_shift_vet_env_init(&g_obstacles_env, &cfg);
+  memset(&g_starts, 0, sizeof g_starts);
+  g_calls = 0;
+  return 0;
+}
+
+// The "learned" policy among obstacles: 1.5 x goal bearing, turning away from a near obstacle
+// (-2.5 x the proximity term of fw_pair_basis). On the model it reaches the goal from all ten
+// evaluation poses and their mirror images; moved by the shift it does so or not as follows
+// (measured on the model): gain +0.2 hits the obstacle from 2 poses and their mirror images,
+// gain +0.1 from none, gain -1 from none; centring +4 (turning toward the obstacle) from all,
+// +2 from 6.
+static bool avoid_law(void* ctx, const double* s, double* action) {
+  (void)ctx;
+  g_calls++;
+  double basis[2];
+  fw_pair_basis(FW_TASK_OBSTACLES, s, basis);
+  *action = 1.5 * basis[0] - 2.5 * basis[1];
+  return true;
+}
+
+static fw_shift_vet_t obstacles_vet_of(double gain, double centring) {
+  const fw_pair_shift_t in_force = {0.0, 0.0, 3U};
+  const fw_pair_shift_t proposed = {gain, centring, 4U};
+  fw_shift_vet_t vet;
+  fw_shift_vet_begin(&vet, &in_force, &proposed);
+  while (!fw_shift_vet_step(&vet, avoid_law, NULL, &g_obstacles_env, &g_starts, 64U)) {
+  }
+  return vet;
+}
+
+// The learner's states at the ten evaluation poses (state_rotation: the rotation in force, 0),
+// from the ideal laser of tasks_episode_observe_pose.
+static void add_obstacle_eval_starts(void) {
+  tasks_corridor_spec_t corridor;
+  tasks_corridor_spec_default(&corridor);
+  tasks_episode_t ep;
+  tasks_episode_init(&ep, TASKS_TASK_OBSTACLES, &corridor, &g_obstacles_env.obstacles);
+  for (uint32_t i = 0; i < TASKS_N_EVAL_STARTS; ++i) {
+    double s[5] = {0.0, 0.0, 0.0, 0.0, 0.0};
+    assert_int_equal(tasks_episode_observe_pose(&ep, tasks_obstacles_eval_start(&g_obstacles_env.obstacles, i), s), 1);
+    fw_shift_vet_starts_add(&g_starts, &g_obstacles_env, s);
+  }
+}
+
+// Among obstacles the vet drives the obstacle model from each start and its mirror image (the
+// default arena is symmetric), fails at contact, and judges a step as in the corridor: taken
+// where nothing new fails, halved where half the step is safe, refused where not. A mirrored
+// start fails exactly where its original does for this symmetric law. A start without a visible
+// obstacle (no pose to drive from) fails with every shift, so it blocks nothing.
+static void test_vet_among_obstacles(void** state) {
+  (void)state;
+  assert_true(g_obstacles_env.task == FW_TASK_OBSTACLES && g_obstacles_env.task_dim == 4U);
+  assert_true(g_obstacles_env.mirror && g_obstacles_env.margin_m == FW_SHIFT_VET_OBSTACLES_MARGIN_M);
+  add_obstacle_eval_starts();
+  assert_int_equal((int)g_starts.n, TASKS_N_EVAL_STARTS);
+  alloc_counter_begin();
+  fw_shift_vet_t vet = obstacles_vet_of(-1.0, 0.0);
+  assert_int_equal(alloc_counter_end(), 0);
+  assert_int_equal(vet.verdict, FW_SHIFT_STEP_TAKEN);
+  assert_int_equal(vet.failures[0], 0);
+  // 20 rollouts of about 100-120 periods (0.3 m/s over about 3 m).
+  assert_true(vet.periods > 20 * 90 && vet.periods < 20 * 130);
+
+  vet = obstacles_vet_of(0.2, 0.0);
+  assert_int_equal(vet.verdict, FW_SHIFT_STEP_HALVED);
+  assert_true(vet.result.gain == 0.1 && vet.result.centring == 0.0 && vet.result.pairs == 4U);
+  assert_int_equal(vet.failures[0], 1);  // dropped at its first failing start
+  assert_int_equal(vet.failures[2], 0);
+
+  vet = obstacles_vet_of(0.0, 4.0);
+  assert_int_equal(vet.verdict, FW_SHIFT_STEP_REFUSED);
+  assert_true(vet.result.gain == 0.0 && vet.result.centring == 0.0 && vet.result.pairs == 4U);
+  assert_true(vet.failures[2] > 0);
+
+  // The mirror image the vet drives is the mirrored pose's state: each start and its mirror
+  // image driven alone (without the vet's own mirroring) fail alike for this symmetric law, a
+  // shift of gain +0.2 from the same 2 poses.
+  fw_shift_vet_env_t alone = g_obstacles_env;
+  alone.mirror = false;
+  int fails[2] = {0, 0};
+  for (uint32_t i = 0; i < g_starts.n; ++i) {
+    bool failed[2];
+    for (int m = 0; m < 2; ++m) {
+      fw_shift_vet_starts_t one;
+      memset(&one, 0, sizeof one);
+      double s[5];
+      memcpy(s, g_starts.state[i], 4 * sizeof s[0]);
+      s[4] = 0.0;
+      if (m == 1) {
+        s[0] = -s[0];  // goal bearing
+        s[2] = -s[2];  // obstacle bearing (visible from every evaluation pose)
+      }
+      fw_shift_vet_starts_add(&one, &alone, s);
+      const fw_pair_shift_t in_force = {0.0, 0.0, 3U};
+      const fw_pair_shift_t proposed = {0.2, 0.0, 4U};
+      fw_shift_vet_begin(&vet, &in_force, &proposed);
+      (void)fw_shift_vet_step(&vet, avoid_law, NULL, &alone, &one, UINT32_MAX);
+      failed[m] = vet.failures[0] > 0;  // the proposed shift's one rollout
+      fails[m] += failed[m] ? 1 : 0;
+    }
+    assert_true(failed[0] == failed[1]);
+  }
+  assert_int_equal(fails[0], 2);
+  assert_int_equal(fails[1], 2);
+
+  // A start without a visible obstacle (facing away from it, the disc behind): every shift fails
+  // there, so it does not block a step the other starts allow.
+  memset(&g_starts, 0, sizeof g_starts);
+  const double hidden[5] = {3.0, 3.0, 3.141592653589793, 8.0, 0.0};
+  fw_shift_vet_starts_add(&g_starts, &g_obstacles_env, hidden);
+  add_obstacle_eval_starts();
+  vet = obstacles_vet_of(-1.0, 0.0);
+  assert_int_equal(vet.verdict, FW_SHIFT_STEP_TAKEN);
+  assert_int_equal(vet.failures[0], 2);  // the hidden start and its mirror image
+  assert_int_equal(vet.failures[1], 2);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test_setup(test_vet_takes_a_safe_step, setup),
@@ -197,6 +327,7 @@ int main(void) {
       cmocka_unit_test_setup(test_vet_takes_what_it_cannot_tell_apart, setup),
       cmocka_unit_test_setup(test_vet_in_slices_decides_the_same, setup),
       cmocka_unit_test_setup(test_vet_starts_keep_the_last_runs, setup),
+      cmocka_unit_test_setup(test_vet_among_obstacles, setup_obstacles),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
