@@ -1074,10 +1074,10 @@ int fw_config_validate_program(const fw_config_t* cfg, char* err, size_t err_cap
   if (fw_config_pair_runs_active(cfg) && cfg->task == FW_TASK_OBSTACLES && cfg->mode == FW_MODE_LEARN &&
       cfg->reposition != FW_REPOSITION_EMULATOR) {
     // The safety filter (pair_safety) is the corridor's: among obstacles nothing vets a perturbed
-    // command, and about a third of the perturbed training runs end on the obstacle in the emulator.
+    // command, and about a quarter of the perturbed training runs end on the obstacle in the emulator.
     fw_errfmt(err, err_cap,
         "%s: pair_runs with task = obstacles (set at %s) is for the emulator only (reposition = emulator needed, "
-        "set at %s): the obstacle task has no safety filter for the perturbed runs, and about a third of them end "
+        "set at %s): the obstacle task has no safety filter for the perturbed runs, and about a quarter of them end "
         "on the obstacle in the emulator; set pair_runs = auto (off on the robot) or false",
         origin_of(cfg, "pair_runs").text, origin_of(cfg, "task").text, origin_of(cfg, "reposition").text);
     return -1;

@@ -441,7 +441,7 @@ static pair_session_t run_pair_session(const fw_config_t* c, uint64_t fake_seed,
   return out;
 }
 
-// pair_runs = auto, the default, runs pairs in the emulated corridor only with HEDGER's
+// pair_runs = auto, the default, runs pairs in the emulator only, with HEDGER's
 // state-model search: with the per-action search, or on the robot (reposition = operator), no run
 // is a pair run and no pair is ranked. On the robot the learner still tags and fades its runs as
 // with pairs (the experience stream differs from pair_runs = false's), so that a learned state
