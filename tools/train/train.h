@@ -87,7 +87,7 @@ int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t er
 
 /// Trains on one LCM event log, streamed in file order. A run ends where the run id changes, the
 /// controller restarted (seq back to 0), or the log ends. Where cfg configures the learner for
-/// pairs (fw_config_pair_learner: the default for the corridor), every training run's points
+/// pairs (fw_config_pair_learner: the default for both tasks), every training run's points
 /// carry its run tag as in the controller, and each pair of phase-two runs is ranked from the
 /// B21R_RUN records of a full log (fw_pair_ranker_end) after the second run's replay. Call it once
 /// per log (and again for further passes over the data). Returns 0, or -1 with a message naming

@@ -230,13 +230,13 @@ struct fw_loop {
   tasks_start_cycle_t start_cycle;
   int32_t explore_steps_left;  // of the exploration segment under way
   double explore_offset;       // its action offset [rad/s]
-  // pair_runs (corridor; phase two, and phase one with pair_phase_one): the pair under way (run.c);
+  // pair_runs (phase two, and phase one with pair_phase_one): the pair under way (run.c);
   // its anchor weights are applied between runs, after the second run's replay (learning.c), and
   // its ranking moves the shift.
   int32_t pair_next_member;      // 0: the next paired training run starts a pair; 1: it ends one
   int32_t pair_member;           // of the run under way; -1 = not a pair run
-  double pair_gain;              // the pair's perturbation: gain on the target angle [rad/s per rad]
-  double pair_centring;          // and factor on (lateral fraction - 0.5) [rad/s]
+  double pair_gain;              // the pair's perturbation on the task's first pair term (fw_pair_basis) [rad/s per rad]
+  double pair_centring;          // and on its second [rad/s]
   uint32_t run_tag;              // run tag of the training run under way (its id, or later)
   fw_pair_ranker_t pair_ranker;  // the pair's first run until it is ranked; the learned policy's
                                  // shift (learned state: checkpointed, fw/progress.h)

@@ -194,7 +194,7 @@ void fw_pair_basis(fw_task_t task, const double* s, double basis[2]) {
   }
   basis[0] = s[0];
   const double near = fmax(0.0, 1.0 - s[3] / FW_PAIR_OBSTACLE_RANGE_M);
-  basis[1] = s[2] >= 0.0 ? near : -near;
+  basis[1] = s[2] > 0.0 ? near : (s[2] < 0.0 ? -near : 0.0);  // dead ahead: no side, as its mirror image
 }
 
 double fw_pair_shift_at(const fw_pair_shift_t* shift, fw_task_t task, const double* s) {

@@ -202,6 +202,9 @@ int32_t tasks_corridor_rollout_step(tasks_corridor_rollout_t* ro, const tasks_co
 // with room to spare, well below the distance between two discs' circles around the goal.
 #define OBSTACLES_MATCH_TOLERANCE_M 0.25
 
+static bool obstacles_features_at(const tasks_obstacles_spec_t* spec, const features_obstacles_config_t* fcfg,
+                                  features_pose_t p, features_obstacles_t* f);
+
 static bool obstacles_inputs_ok(const tasks_obstacles_spec_t* spec, const features_obstacles_config_t* fcfg) {
   return spec != NULL && fcfg != NULL && spec->n_obstacles <= TASKS_MAX_OBSTACLES && isfinite(spec->goal_x_m) &&
          isfinite(spec->goal_y_m);
@@ -221,34 +224,39 @@ int tasks_obstacles_pose_from_state(const tasks_obstacles_spec_t* spec, const fe
       obstacle_distance >= fcfg->no_obstacle_distance_m) {
     return 0;
   }
-  int best = -1;
-  double best_miss = OBSTACLES_MATCH_TOLERANCE_M;
-  double wx = 0.0;
-  double wy = 0.0;
+  // Each disc whose distance from the goal the triangle matches gives a pose. With one disc that
+  // is the pose; with several the distance alone can match the wrong disc, so the pose whose own
+  // features best reproduce the state's obstacle is taken (one where no obstacle is in view, at
+  // the field of view's edge, only when no other candidate shows one).
+  bool found = false;
+  double best_score = HUGE_VAL;
   for (uint32_t k = 0U; k < spec->n_obstacles; ++k) {
     const tasks_circle_t* c = &spec->obstacles[k];
     // The goal-to-disc-centre vector in the robot frame: robot to disc centre minus robot to goal.
     const double rho = obstacle_distance + c->radius_m;
-    const double x = rho * cos(obstacle_bearing) - goal_distance * cos(goal_bearing);
-    const double y = rho * sin(obstacle_bearing) - goal_distance * sin(goal_bearing);
-    const double miss = fabs(hypot(x, y) - hypot(c->x_m - spec->goal_x_m, c->y_m - spec->goal_y_m));
-    if (isfinite(miss) && miss <= best_miss) {
-      best = (int)k;
-      best_miss = miss;
-      wx = x;
-      wy = y;
+    const double wx = rho * cos(obstacle_bearing) - goal_distance * cos(goal_bearing);
+    const double wy = rho * sin(obstacle_bearing) - goal_distance * sin(goal_bearing);
+    const double miss = fabs(hypot(wx, wy) - hypot(c->x_m - spec->goal_x_m, c->y_m - spec->goal_y_m));
+    if (!(miss <= OBSTACLES_MATCH_TOLERANCE_M)) {
+      continue;
+    }
+    // The heading turns the robot-frame vector onto the arena's goal-to-disc vector.
+    const double heading = wrap_pi(atan2(c->y_m - spec->goal_y_m, c->x_m - spec->goal_x_m) - atan2(wy, wx));
+    const features_pose_t p = {spec->goal_x_m - goal_distance * cos(heading + goal_bearing),
+                               spec->goal_y_m - goal_distance * sin(heading + goal_bearing), heading};
+    double score = 1e6 + miss;
+    features_obstacles_t f;
+    if (spec->n_obstacles > 1U && obstacles_features_at(spec, fcfg, p, &f) && f.n_visible > 0U) {
+      score = fabs(f.obstacle[0].distance_m - obstacle_distance) +
+              fabs(remainder(f.obstacle[0].bearing_rad - obstacle_bearing, 2.0 * TASKS_PI));
+    }
+    if (score < best_score) {
+      found = true;
+      best_score = score;
+      *pose = p;
     }
   }
-  if (best < 0) {
-    return 0;
-  }
-  // The heading turns the robot-frame vector onto the arena's goal-to-disc vector.
-  const tasks_circle_t* c = &spec->obstacles[best];
-  const double heading = wrap_pi(atan2(c->y_m - spec->goal_y_m, c->x_m - spec->goal_x_m) - atan2(wy, wx));
-  pose->x_m = spec->goal_x_m - goal_distance * cos(heading + goal_bearing);
-  pose->y_m = spec->goal_y_m - goal_distance * sin(heading + goal_bearing);
-  pose->theta_rad = heading;
-  return 1;
+  return found ? 1 : 0;
 }
 
 // The skirt's least clearance to the spec's discs and the arena's walls at pose p [m].

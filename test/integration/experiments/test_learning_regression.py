@@ -34,39 +34,22 @@ Claims, each printed with its numbers; ASSERTED ones fail the test when they do 
                   the optimal controller from the same poses (measured: -0.1 ± 0.1 steps, t =
                   -1.41; +0.2 ± 0.2, t = 2.77, before phase one's pairs)
 usage: test_learning_regression.py B21R_EXPERIMENT FIG4_CONFIG"""
-import concurrent.futures
-import json
-import os
-import subprocess
 import sys
-import tempfile
 
-from paired_stats import T95_ONE_SIDED_DF9, T975_DF9, mean, paired, report
+from paired_stats import T95_ONE_SIDED_DF9, T975_DF9, mean, paired, report, run_sessions
 
 SEEDS = list(range(1, 11))
 ASSERTED = {"learns": True, "improves": True, "keeps": True, "reaches": True, "within_1pct": True,
             "beats_examples": True, "best_gain": True, "near_optimal": True}
 
 
-def run(exe, conf, seed, d):
-    out = os.path.join(d, "seed-%d.json" % seed)
-    cmd = [exe, "--config", conf, "--seed", str(seed), "--set", "eval_at_start=true", "--out", out]
-    p = subprocess.run(cmd, capture_output=True, text=True)
-    if p.returncode != 0:
-        raise RuntimeError("%s: exit status %d: %s" % (" ".join(cmd), p.returncode, p.stderr))
-    with open(out) as f:
-        return json.load(f)
-
-
 def main():
     exe, conf = sys.argv[1:3]
-    with tempfile.TemporaryDirectory(prefix="b21r-regression-") as d:
-        with concurrent.futures.ThreadPoolExecutor(max_workers=2) as pool:
-            try:
-                rs = list(pool.map(lambda s: run(exe, conf, s, d), SEEDS))
-            except RuntimeError as e:
-                print("FAIL:", e)
-                return 1
+    try:
+        rs = run_sessions(exe, conf, [(s, ["--set", "eval_at_start=true"]) for s in SEEDS], "b21r-regression-")
+    except RuntimeError as e:
+        print("FAIL:", e)
+        return 1
     before, first, end_p1, final, example, optimal, successes, excess = [], [], [], [], [], [], [], []
     gains = []  # per seed: mean steps of each example reference
     for r in rs:

@@ -35,14 +35,9 @@ Claims, each printed with its numbers; ASSERTED ones fail the test when they do 
                   its pair's ranking; the learned policy drives the rest of the run) and the
                   training time with and without pairs (reported)
 usage: test_pairs_claim.py B21R_EXPERIMENT ABLATION_PAIRS_CONFIG"""
-import concurrent.futures
-import json
-import os
-import subprocess
 import sys
-import tempfile
 
-from paired_stats import T95_ONE_SIDED_DF9, mean, paired, report
+from paired_stats import T95_ONE_SIDED_DF9, mean, paired, report, run_sessions
 
 SEEDS = list(range(1, 11))
 PHASE_TWO_RUNS = 60
@@ -54,30 +49,21 @@ ASSERTED = {"phase_one": True, "better": True, "falls": True, "reaches": True, "
 VARIANTS = {"false": [], "true": [], "weights": ["--set", "pair_shift_rate=0"]}
 
 
-def run(exe, conf, seed, variant, d):
-    out = os.path.join(d, "seed-%d-%s.json" % (seed, variant))
+def session_args(variant):
     pairs = "false" if variant == "false" else "true"
-    cmd = [exe, "--config", conf, "--seed", str(seed), "--variant", "pair_runs=" + pairs, *VARIANTS[variant],
-           "--set", "phase_two_runs=%d" % PHASE_TWO_RUNS, "--out", out]
-    p = subprocess.run(cmd, capture_output=True, text=True)
-    if p.returncode != 0:
-        raise RuntimeError("%s: exit status %d: %s" % (" ".join(cmd), p.returncode, p.stderr))
-    with open(out) as f:
-        r = json.load(f)
-    r["variant_name"] = variant
-    return r
+    return ["--variant", "pair_runs=" + pairs, *VARIANTS[variant], "--set", "phase_two_runs=%d" % PHASE_TWO_RUNS]
 
 
 def main():
     exe, conf = sys.argv[1:3]
     jobs = [(s, v) for s in SEEDS for v in VARIANTS]
-    with tempfile.TemporaryDirectory(prefix="b21r-pairs-") as d:
-        with concurrent.futures.ThreadPoolExecutor(max_workers=2) as pool:
-            try:
-                rs = list(pool.map(lambda j: run(exe, conf, j[0], j[1], d), jobs))
-            except RuntimeError as e:
-                print("FAIL:", e)
-                return 1
+    try:
+        rs = run_sessions(exe, conf, [(s, session_args(v)) for s, v in jobs], "b21r-pairs-")
+    except RuntimeError as e:
+        print("FAIL:", e)
+        return 1
+    for (_, v), r in zip(jobs, rs):
+        r["variant_name"] = v
     by = {(r["seed"], "pair_runs=" + r["variant_name"]): r for r in rs}
     p1 = {v: [] for v in ("false", "true")}
     final = {v: [] for v in VARIANTS}

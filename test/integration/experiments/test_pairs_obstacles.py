@@ -22,14 +22,9 @@ Claims, each printed with its numbers; ASSERTED ones fail the test when they do 
   collisions      phase-two training runs that end on the obstacle, with and without pairs
                   (reported: the obstacle task has no safety filter for the perturbed runs)
 usage: test_pairs_obstacles.py B21R_EXPERIMENT ABLATION_PAIRS_OBSTACLES_CONFIG"""
-import concurrent.futures
-import json
-import os
-import subprocess
 import sys
-import tempfile
 
-from paired_stats import T95_ONE_SIDED_DF9, mean, paired, report
+from paired_stats import T95_ONE_SIDED_DF9, mean, paired, report, run_sessions
 
 SEEDS = list(range(1, 11))
 PHASE_TWO_PAIRS = 35 // 2
@@ -37,26 +32,14 @@ ASSERTED = {"reaches": True, "fewer_failures": True, "ranked": True, "better": F
             "collisions": False}
 
 
-def run(exe, conf, seed, pairs, d):
-    out = os.path.join(d, "seed-%d-%s.json" % (seed, pairs))
-    cmd = [exe, "--config", conf, "--seed", str(seed), "--variant", "pair_runs=" + pairs, "--out", out]
-    p = subprocess.run(cmd, capture_output=True, text=True)
-    if p.returncode != 0:
-        raise RuntimeError("%s: exit status %d: %s" % (" ".join(cmd), p.returncode, p.stderr))
-    with open(out) as f:
-        return json.load(f)
-
-
 def main():
     exe, conf = sys.argv[1:3]
     jobs = [(s, v) for s in SEEDS for v in ("false", "true")]
-    with tempfile.TemporaryDirectory(prefix="b21r-pairs-obstacles-") as d:
-        with concurrent.futures.ThreadPoolExecutor(max_workers=2) as pool:
-            try:
-                rs = list(pool.map(lambda j: run(exe, conf, j[0], j[1], d), jobs))
-            except RuntimeError as e:
-                print("FAIL:", e)
-                return 1
+    try:
+        rs = run_sessions(exe, conf, [(s, ["--variant", "pair_runs=" + v]) for s, v in jobs], "b21r-pairs-obstacles-")
+    except RuntimeError as e:
+        print("FAIL:", e)
+        return 1
     by = dict(zip(jobs, rs))
     final = {"false": [], "true": []}
     failed = {"false": 0, "true": 0}

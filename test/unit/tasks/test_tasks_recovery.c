@@ -359,6 +359,12 @@ static void test_rollout_ends_at_a_wall_the_limit_or_bad_input(void** state) {
 // ---------------------------------------------------------------------------------------------
 // The obstacle task's whole-run rollout.
 
+// The default obstacle task and its features' configuration.
+static void obstacles_defaults(tasks_obstacles_spec_t* spec, features_obstacles_config_t* fcfg) {
+  tasks_obstacles_spec_default(spec);
+  tasks_obstacles_features_config(spec, fcfg);
+}
+
 // The state an ideal laser gives at an arena pose (the emulator's idealised model).
 static bool obstacles_state_at(const tasks_obstacles_spec_t* spec, features_pose_t p, double s[4]) {
   tasks_episode_t ep;
@@ -376,9 +382,8 @@ static bool obstacles_state_at(const tasks_obstacles_spec_t* spec, features_pose
 static void test_obstacles_pose_from_state_inverts_the_features(void** state) {
   (void)state;
   tasks_obstacles_spec_t spec;
-  tasks_obstacles_spec_default(&spec);
   features_obstacles_config_t fcfg;
-  tasks_obstacles_features_config(&spec, &fcfg);
+  obstacles_defaults(&spec, &fcfg);
   int visible = 0;
   int hidden = 0;
   double worst = 0.0;
@@ -413,6 +418,36 @@ static void test_obstacles_pose_from_state_inverts_the_features(void** state) {
   assert_true(visible > 1000 && hidden > 1000);
   assert_true(worst < 1e-9);
   assert_true(worst_noisy < 0.35);
+  // Two discs at the same distance from the goal: the distance alone matches both, and the pose
+  // taken is the one whose features reproduce the state's obstacle, so the pose recovered always
+  // reproduces the state (where the second disc is out of view the state cannot tell the two
+  // poses apart; poses equally far from both discs are left out: which one the state names there
+  // is a matter of rounding).
+  tasks_obstacles_spec_t two = spec;
+  two.n_obstacles = 2;
+  two.obstacles[1] = (tasks_circle_t){0.0, 1.5, 0.25};
+  int checked = 0;
+  for (double x = -4.0; x <= 1.5001; x += 0.5) {
+    for (double y = -3.0; y <= 3.0001; y += 0.5) {
+      for (double th = -3.0; th <= 3.0001; th += 0.75) {
+        double s[4];
+        double r[4];
+        features_pose_t q;
+        if (hypot(x + 1.5, y) < 0.6 || hypot(x, y - 1.5) < 0.6 || hypot(x, y) < 0.3 ||
+            fabs(hypot(x + 1.5, y) - hypot(x, y - 1.5)) < 0.01 ||
+            !obstacles_state_at(&two, (features_pose_t){x, y, th}, s) || s[3] >= fcfg.no_obstacle_distance_m) {
+          continue;
+        }
+        assert_int_equal(tasks_obstacles_pose_from_state(&two, &fcfg, s, &q), 1);
+        assert_true(obstacles_state_at(&two, q, r));
+        for (int i = 0; i < 4; ++i) {
+          assert_true(fabs(r[i] - s[i]) < 1e-9);
+        }
+        checked++;
+      }
+    }
+  }
+  assert_true(checked > 300);
   features_pose_t q;
   const double mismatched[4] = {0.0, 3.0, 0.0, 0.5};  // the obstacle 0.75 m from the goal: no disc is
   assert_int_equal(tasks_obstacles_pose_from_state(&spec, &fcfg, mismatched, &q), 0);
@@ -430,9 +465,8 @@ static void test_obstacles_pose_from_state_inverts_the_features(void** state) {
 static void test_obstacles_rollout_follows_the_integration_to_the_goal(void** state) {
   (void)state;
   tasks_obstacles_spec_t spec;
-  tasks_obstacles_spec_default(&spec);
   features_obstacles_config_t fcfg;
-  tasks_obstacles_features_config(&spec, &fcfg);
+  obstacles_defaults(&spec, &fcfg);
   const double dt = spec.dt_s;
   const int sub = 100;
   sim_kin_limits_t kl = {g_lim.max_translation_accel_mps2, g_lim.max_rotation_accel_radps2};
@@ -486,9 +520,8 @@ static void test_obstacles_rollout_follows_the_integration_to_the_goal(void** st
 static void test_obstacles_rollout_ends_at_contact_the_limit_or_bad_input(void** state) {
   (void)state;
   tasks_obstacles_spec_t spec;
-  tasks_obstacles_spec_default(&spec);
   features_obstacles_config_t fcfg;
-  tasks_obstacles_features_config(&spec, &fcfg);
+  obstacles_defaults(&spec, &fcfg);
   const double dt = spec.dt_s;
   double s[4];
   assert_true(obstacles_state_at(&spec, (features_pose_t){-3.0, 0.05, 0.0}, s));
@@ -512,13 +545,15 @@ static void test_obstacles_rollout_ends_at_contact_the_limit_or_bad_input(void**
   assert_true(obstacles_state_at(&spec, (features_pose_t){-1.0, 0.0, 1.5}, s));  // the disc behind on the right
   assert_true(s[3] < fcfg.no_obstacle_distance_m || tasks_obstacles_rollout_begin(&ro, &spec, &fcfg, s, 0.0) ==
                                                         TASKS_ROLLOUT_INVALID);
-  assert_true(obstacles_state_at(&spec, (features_pose_t){-1.5, 2.0, 1.5708}, s));  // toward the wall at y = 3.5
-  if (tasks_obstacles_rollout_begin(&ro, &spec, &fcfg, s, 0.0) == TASKS_ROLLOUT_RUNNING) {
-    while (tasks_obstacles_rollout_step(&ro, &spec, &fcfg, &g_lim, dt, 0.0, 0.1, 1000) == TASKS_ROLLOUT_RUNNING) {
-    }
-    assert_int_equal(ro.status, TASKS_ROLLOUT_WALL);
-    assert_true(ro.pose.y_m > 3.5 - 0.26 - 0.1 - 0.05);
+  // Toward the wall at x = -5, past the disc 1 m to the side (visible ahead on the left at the
+  // start): the skirt clears the disc by 0.49 m and meets the wall's margin.
+  assert_true(obstacles_state_at(&spec, (features_pose_t){-1.0, 1.0, 3.141592653589793}, s));
+  assert_int_equal(tasks_obstacles_rollout_begin(&ro, &spec, &fcfg, s, 0.0), TASKS_ROLLOUT_RUNNING);
+  while (tasks_obstacles_rollout_step(&ro, &spec, &fcfg, &g_lim, dt, 0.0, 0.1, 1000) == TASKS_ROLLOUT_RUNNING) {
   }
+  assert_int_equal(ro.status, TASKS_ROLLOUT_WALL);
+  assert_true(ro.pose.x_m < -5.0 + 0.26 + 0.1 && ro.pose.x_m > -5.0 + 0.26 + 0.1 - 0.05);
+  assert_true(fabs(ro.pose.y_m - 1.0) < 1e-9);
   assert_true(obstacles_state_at(&spec, (features_pose_t){-3.0, 1.0, 0.0}, s));
   (void)tasks_obstacles_rollout_begin(&ro, &spec, &fcfg, s, 0.0);
   while (tasks_obstacles_rollout_step(&ro, &spec, &fcfg, &g_lim, dt, 0.0, 0.1, 25) == TASKS_ROLLOUT_RUNNING) {

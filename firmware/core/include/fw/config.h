@@ -97,9 +97,10 @@ typedef enum fw_eval_policy {
 /// pair_phase_one_from_run on) come in ranked pairs (config pair_runs; run.c).
 typedef enum fw_pair_runs {
   FW_PAIR_RUNS_OFF = 0,   ///< "false": every phase-two training run is the learned policy's own
-  FW_PAIR_RUNS_ON = 1,    ///< "true": pairs wherever allowed (fw_config_validate refuses the rest)
+  FW_PAIR_RUNS_ON = 1,    ///< "true": pairs wherever allowed (fw_config_validate and, for the obstacle task on the robot, fw_config_validate_program refuse the rest)
   /// "auto": pairs where they were measured to help (in lockstep), both tasks in the emulator
-  /// (learner = hedger, hedger_greedy_method = state_model, reposition = emulator); elsewhere off. See fw_config_pair_learner() and fw_config_pair_runs_active().
+  /// (learner = hedger, hedger_greedy_method = state_model, reposition = emulator); elsewhere off.
+  /// See fw_config_pair_learner() and fw_config_pair_runs_active().
   FW_PAIR_RUNS_AUTO = 2,
 } fw_pair_runs_t;
 

@@ -195,7 +195,7 @@ int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool exa
 /// - corridor: basis[0] = target angle s[2] [rad], basis[1] = lateral fraction s[1] − 0.5;
 /// - obstacles: basis[0] = goal bearing s[0] [rad], basis[1] = the nearest obstacle's proximity,
 ///   sign(its bearing s[2]) × max(0, 1 − distance s[3] / FW_PAIR_OBSTACLE_RANGE_M): 0 where no
-///   obstacle is near, up to ±1 at contact, + when it is on the left. A positive coefficient on
+///   obstacle is near or it is dead ahead, up to ±1 at contact, + when it is on the left. A positive coefficient on
 ///   it turns toward the obstacle (a closer pass), a negative one away (a wider berth).
 /// Pure, O(1).
 void fw_pair_basis(fw_task_t task, const double* s, double basis[2]);

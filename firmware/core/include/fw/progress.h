@@ -11,8 +11,8 @@
 /// 32  4  evaluation blocks                   36  4  successful phase-one runs
 /// 40  8  their summed steps (IEEE-754 double) 48  4  shortest of them (0 = none)
 /// 52  4  run id + 1 (0 = no run started)
-/// 56  8  the learned policy's shift a (IEEE-754 double) [rad/s per rad of target angle]
-/// 64  8  its b [rad/s per corridor width]    72  4  pairs that have moved it
+/// 56  8  the learned policy's shift a (IEEE-754 double) [rad/s per rad of target angle or goal bearing]
+/// 64  8  its b [rad/s per corridor width, or at full obstacle proximity]  72  4  pairs that have moved it
 /// 76 20  reserved, 0
 /// ```
 /// The shift (fw_pair_ranker_t, pair_runs) is part of the learned policy, so it travels with the
@@ -52,9 +52,11 @@ extern "C" {
 #define FW_PROGRESS_WHY_MAX 160U
 
 /// pair_runs: bound on each component of the learned policy's shift: |a| in rad/s per rad of
-/// target angle, |b| in rad/s per corridor width. Above what the corridor needs (with the falling
-/// rate the pairs settle at |a| 1-2, |b| 1.4-2.7 after 50 pairs, seeds 11-20): a limit on runaway,
-/// not a tuning (with a constant rate b reached it once in 50 pairs).
+/// target angle (obstacles: goal bearing), |b| in rad/s per corridor width (obstacles: at full
+/// proximity). Above what either task needs (with the falling rate the corridor's pairs settle at
+/// |a| 1-2, |b| 1.4-2.7 after 50 pairs, seeds 11-20; the obstacle task's at |a| up to 1.1, |b| up
+/// to 2.3 after 17, seeds 1-10): a limit on runaway, not a tuning (with a constant rate b reached
+/// it once in 50 pairs).
 #define FW_PAIR_SHIFT_MAX 4.0
 
 /// pair_runs: the learned policy's shift, moved by the ranked pairs (fw_pair_ranker_t, fw/loop.h)

@@ -83,7 +83,7 @@ int tasks_corridor_recovery_predict(const tasks_corridor_spec_t* spec,
 /// those of tasks_corridor_recovery_clearance_m.
 typedef enum tasks_rollout_status {
   TASKS_ROLLOUT_RUNNING = 0,     ///< the run goes on: ask the policy at ro->f
-  TASKS_ROLLOUT_GOAL = 1,        ///< the goal was reached and the coast kept the margin
+  TASKS_ROLLOUT_GOAL = 1,        ///< the goal was reached (corridor: and the coast kept the margin)
   TASKS_ROLLOUT_WALL = 2,        ///< the skirt came closer than the margin to a wall (or an obstacle)
   TASKS_ROLLOUT_STEP_LIMIT = 3,  ///< step_limit periods passed without reaching the goal
   TASKS_ROLLOUT_INVALID = 4,     ///< a non-finite input or command: nothing can be predicted
@@ -136,10 +136,13 @@ typedef struct tasks_obstacles_rollout {
 /// obstacle's bearing [rad] and distance [m] from the robot centre to its surface: the first four
 /// values of features_obstacles_state) describes, with the goal and discs of spec: the goal's and
 /// the obstacle's directions and distances fix the triangle robot-goal-disc, and so the pose,
-/// for the disc whose distance from the goal the triangle matches best. Returns 1 with *pose, or
-/// 0 when an argument is NULL or not finite, no obstacle is visible (distance at or beyond
-/// fcfg->no_obstacle_distance_m: the pose is not determined) or no disc matches within 0.25 m.
-/// O(spec->n_obstacles).
+/// for a disc whose distance from the goal the triangle matches within 0.25 m (with several
+/// discs, of those the one whose pose's own features best reproduce the state's obstacle; the
+/// state names only the nearest obstacle, so two poses can fit it). Sensing errors of 0.02 m and
+/// 0.01 rad move the pose by up to 0.3 m at 6 m from the goal (a bearing error turns the whole
+/// triangle). Returns 1 with *pose, or 0 when an argument is NULL or not finite, no obstacle is
+/// visible (distance at or beyond fcfg->no_obstacle_distance_m: the pose is not determined) or no
+/// disc matches. O(spec->n_obstacles).
 int tasks_obstacles_pose_from_state(const tasks_obstacles_spec_t* spec, const features_obstacles_config_t* fcfg,
                                     const double* obstacles_state, features_pose_t* pose);
 
