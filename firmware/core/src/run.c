@@ -246,7 +246,7 @@ static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps
 static double pair_offset(const fw_loop_t* L) {
   const double sign = L->pair_member == 0 ? 1.0 : -1.0;
   double basis[2];
-  fw_pair_basis(L->cfg.task, L->s, basis);
+  fw_pair_basis((fw_task_t)L->cfg.task, L->s, basis);
   return sign * (L->pair_gain * basis[0] + L->pair_centring * basis[1]);
 }
 
@@ -626,7 +626,7 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
     if (greedy_known) {
       // The learned policy: HEDGER's greedy action plus the shift the ranked pairs learned (0
       // until a pair is ranked). The value stays the greedy action's (the learning target).
-      greedy_action = tasks_clamp_omega(greedy_action + fw_pair_shift_at(&L->pair_ranker.shift, L->cfg.task, L->s), L->omega_max);
+      greedy_action = tasks_clamp_omega(greedy_action + fw_pair_shift_at(&L->pair_ranker.shift, (fw_task_t)L->cfg.task, L->s), L->omega_max);
     }
     if (L->pending.active) {
       L->pending.need_greedy = false;

@@ -33,7 +33,7 @@ static bool obstacles_symmetric(const tasks_obstacles_spec_t* spec) {
 void fw_shift_vet_env_init(fw_shift_vet_env_t* env, const fw_config_t* cfg) {
   memset(env, 0, sizeof *env);
   fw_loop_task_specs(cfg, &env->spec, &env->obstacles, &env->lim);
-  env->task = cfg->task;
+  env->task = (fw_task_t)cfg->task;
   tasks_obstacles_features_config(&env->obstacles, &env->obstacles_features);
   const bool corridor = cfg->task == FW_TASK_CORRIDOR;
   env->dt_s = corridor ? env->spec.dt_s : env->obstacles.dt_s;
