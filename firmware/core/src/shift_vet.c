@@ -95,7 +95,8 @@ static uint32_t rollouts_per_start(const fw_shift_vet_env_t* env) { return env->
 
 // Rollout k of a start set: start k / 2, mirrored when k is odd (with env->mirror; else start k).
 // The mirror image: corridor lateral fraction 1 - l, target angle negated; obstacles both
-// bearings negated (an obstacle straight behind, at pi, stays); the rotation negated.
+// bearings negated (a visible obstacle's bearing is within +-pi/2; a hidden one's start has no
+// pose either way); the rotation negated.
 static void begin_rollout(fw_shift_vet_t* vet, const fw_shift_vet_env_t* env, const fw_shift_vet_starts_t* starts,
                           uint32_t k) {
   const uint32_t per = rollouts_per_start(env);
@@ -111,7 +112,7 @@ static void begin_rollout(fw_shift_vet_t* vet, const fw_shift_vet_env_t* env, co
       s[2] = -s[2];
     } else {
       s[0] = -s[0];
-      s[2] = s[2] < 3.14159265358979 ? -s[2] : s[2];
+      s[2] = -s[2];
     }
   }
   if (env->task == FW_TASK_CORRIDOR) {

@@ -115,21 +115,26 @@ int tasks_episode_observe(tasks_episode_t* ep, const features_scan_t* scan, feat
   return write_state(ep, st, state);
 }
 
+features_status_t tasks_obstacles_features_at_pose(const tasks_obstacles_spec_t* spec,
+                                                   const features_obstacles_config_t* fcfg, features_pose_t pose,
+                                                   features_obstacles_t* out) {
+  features_disc_t discs[TASKS_MAX_OBSTACLES];
+  const uint32_t n = spec->n_obstacles < TASKS_MAX_OBSTACLES ? spec->n_obstacles : TASKS_MAX_OBSTACLES;
+  for (uint32_t k = 0U; k < n; ++k) {
+    discs[k].x_m = spec->obstacles[k].x_m;
+    discs[k].y_m = spec->obstacles[k].y_m;
+    discs[k].radius_m = spec->obstacles[k].radius_m;
+  }
+  return features_obstacles_from_pose(fcfg, pose, spec->goal_x_m, spec->goal_y_m, discs, n, TASKS_PI, out);
+}
+
 int tasks_episode_observe_pose(tasks_episode_t* ep, features_pose_t pose_in_task, double* state) {
   features_status_t st;
   if (is_corridor(ep)) {
     st = features_corridor_from_pose(&ep->corridor_features, pose_in_task, &ep->corridor_state);
   } else {
-    features_disc_t discs[TASKS_MAX_OBSTACLES];
-    const uint32_t n = ep->obstacles.n_obstacles < TASKS_MAX_OBSTACLES ? ep->obstacles.n_obstacles
-                                                                        : TASKS_MAX_OBSTACLES;
-    for (uint32_t k = 0U; k < n; ++k) {
-      discs[k].x_m = ep->obstacles.obstacles[k].x_m;
-      discs[k].y_m = ep->obstacles.obstacles[k].y_m;
-      discs[k].radius_m = ep->obstacles.obstacles[k].radius_m;
-    }
-    st = features_obstacles_from_pose(&ep->obstacles_features, pose_in_task, ep->obstacles.goal_x_m,
-                                      ep->obstacles.goal_y_m, discs, n, TASKS_PI, &ep->obstacles_state);
+    st = tasks_obstacles_features_at_pose(&ep->obstacles, &ep->obstacles_features, pose_in_task,
+                                          &ep->obstacles_state);
   }
   return write_state(ep, st, state);
 }

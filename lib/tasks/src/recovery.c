@@ -202,8 +202,11 @@ int32_t tasks_corridor_rollout_step(tasks_corridor_rollout_t* ro, const tasks_co
 // with room to spare, well below the distance between two discs' circles around the goal.
 #define OBSTACLES_MATCH_TOLERANCE_M 0.25
 
+// The features an ideal laser gives at the model's pose (tasks_episode_observe_pose's), valid.
 static bool obstacles_features_at(const tasks_obstacles_spec_t* spec, const features_obstacles_config_t* fcfg,
-                                  features_pose_t p, features_obstacles_t* f);
+                                  features_pose_t p, features_obstacles_t* f) {
+  return tasks_obstacles_features_at_pose(spec, fcfg, p, f) == FEATURES_OK && f->valid != 0U;
+}
 
 static bool obstacles_inputs_ok(const tasks_obstacles_spec_t* spec, const features_obstacles_config_t* fcfg) {
   return spec != NULL && fcfg != NULL && spec->n_obstacles <= TASKS_MAX_OBSTACLES && isfinite(spec->goal_x_m) &&
@@ -271,19 +274,6 @@ static double obstacles_clearance_m(const tasks_obstacles_spec_t* spec, features
   return least;
 }
 
-// The features an ideal laser gives at the model's pose (tasks_episode_observe_pose's).
-static bool obstacles_features_at(const tasks_obstacles_spec_t* spec, const features_obstacles_config_t* fcfg,
-                                  features_pose_t p, features_obstacles_t* f) {
-  features_disc_t discs[TASKS_MAX_OBSTACLES];
-  for (uint32_t k = 0U; k < spec->n_obstacles; ++k) {
-    discs[k].x_m = spec->obstacles[k].x_m;
-    discs[k].y_m = spec->obstacles[k].y_m;
-    discs[k].radius_m = spec->obstacles[k].radius_m;
-  }
-  return features_obstacles_from_pose(fcfg, p, spec->goal_x_m, spec->goal_y_m, discs, spec->n_obstacles, TASKS_PI,
-                                      f) == FEATURES_OK &&
-         f->valid != 0U;
-}
 
 int32_t tasks_obstacles_rollout_begin(tasks_obstacles_rollout_t* ro, const tasks_obstacles_spec_t* spec,
                                       const features_obstacles_config_t* fcfg, const double* obstacles_state,

@@ -11,4 +11,14 @@
 /// A training start differs from its evaluation pose by at least this fraction of the jitter box.
 #define TASKS_MIN_JITTER_NORM 0.25
 
+#include "features/features.h"
+#include "tasks/tasks.h"
+
+/// The obstacle features an ideal laser gives at a pose in the arena: features_obstacles_from_pose
+/// with spec's discs (the first TASKS_MAX_OBSTACLES) and the LMS200's 180° field of view. Shared
+/// by tasks_episode_observe_pose and the obstacle rollouts (recovery.c). O(obstacles), pure.
+features_status_t tasks_obstacles_features_at_pose(const tasks_obstacles_spec_t* spec,
+                                                   const features_obstacles_config_t* fcfg, features_pose_t pose,
+                                                   features_obstacles_t* out);
+
 #endif  // B21R_TASKS_INTERNAL_H
