@@ -165,7 +165,7 @@ int main(int argc, char** argv) {
              "shift: %.4f rad/s per rad of %s, %.4f rad/s %s\n",
              (unsigned long long)s.pairs_ranked, s.shift.gain,
              cfg.task == FW_TASK_CORRIDOR ? "target angle" : "goal bearing", s.shift.centring,
-             cfg.task == FW_TASK_CORRIDOR ? "per corridor width" : "at full obstacle proximity");
+             cfg.task == FW_TASK_CORRIDOR ? "per corridor width" : "per rad of the goal bearing's bend");
       if (s.shift_steps_halved > 0 || s.shift_steps_refused > 0) {
         printf("b21r-train: of their steps of the shift, %llu halved and %llu refused by the vet on the kinematic "
                "model (pair_shift_vet)\n",

@@ -192,9 +192,27 @@ void fw_pair_basis(fw_task_t task, const double* s, double basis[2]) {
     basis[1] = s[1] - 0.5;
     return;
   }
-  basis[0] = s[0];
-  const double near = fmax(0.0, 1.0 - s[3] / FW_PAIR_OBSTACLE_RANGE_M);
-  basis[1] = s[2] > 0.0 ? near : (s[2] < 0.0 ? -near : 0.0);  // dead ahead: no side, as its mirror image
+  // Obstacles: the goal bearing, and how far the reference law's target bends it around the
+  // nearest obstacle (tasks_driver_obstacles, without its memory of the side chosen: a pure
+  // function of s, so the vet's model and the mirror image see the same term).
+  const double goal_bearing = s[0];
+  const double goal_distance = s[1];
+  const double obstacle_bearing = s[2];
+  const double obstacle_distance = s[3];
+  basis[0] = goal_bearing;
+  basis[1] = 0.0;
+  if (!(obstacle_distance < FW_PAIR_OBSTACLE_RANGE_M && obstacle_distance < goal_distance)) {
+    return;  // no obstacle near (or none visible: its distance is the features' far value), or it is beyond the goal
+  }
+  const double half_cone = obstacle_distance > FW_PAIR_OBSTACLE_CLEARANCE_M
+                               ? asin(FW_PAIR_OBSTACLE_CLEARANCE_M / obstacle_distance)
+                               : 1.57079632679489661923;  // within the clearance: a right angle either side
+  const double rel = features_angle_wrap(goal_bearing - obstacle_bearing);
+  if (fabs(rel) < half_cone && fabs(rel) > 0.0) {
+    // The goal direction passes the obstacle closer than the clearance: the target is the cone's
+    // edge on the goal's side (the goal exactly behind it has no side, as its mirror image).
+    basis[1] = (rel > 0.0 ? half_cone : -half_cone) - rel;
+  }
 }
 
 double fw_pair_shift_at(const fw_pair_shift_t* shift, fw_task_t task, const double* s) {

@@ -147,8 +147,8 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
 /// b21r-train on a log's B21R_RUN records, so that both weigh the same runs alike and reach the
 /// same shift. The shift is part of the learned state: the learned policy is HEDGER's greedy
 /// action plus a θ + b (lateral fraction − 0.5) in the corridor, a × goal bearing + b × the
-/// obstacle's proximity among obstacles (fw_pair_shift_at), and checkpoints keep (a, b)
-/// and its pair count (fw/progress.h); b21r-train takes all three from each pair record's copy.
+/// goal direction's bend around the nearest obstacle among obstacles (fw_pair_shift_at), and
+/// checkpoints keep (a, b) and its pair count (fw/progress.h); b21r-train takes all three from each pair record's copy.
 typedef struct fw_pair_ranker {
   bool first_pending;    ///< a pair's first run ended and the pair is not ranked yet
   bool first_goal;       ///< that run reached the goal (and was not corrected by the filter)
@@ -185,18 +185,27 @@ int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool exa
                            bool goal, int32_t steps, uint32_t tag, double gain, double centring, uint32_t tags[2],
                            double weights[2]);
 
-/// The obstacle task's pair term acts within this distance of the nearest obstacle [m]: a little
-/// beyond the reference law's avoidance range (1.25 m), so a shift can change where the robot
-/// starts to go round; farther off only the goal bearing's term acts.
+/// The obstacle task's second pair term acts within this distance of the nearest obstacle [m]: a
+/// little beyond the reference law's avoidance range (1.25 m), so a shift can change where the
+/// robot starts to go round; farther off only the goal bearing's term acts.
 #define FW_PAIR_OBSTACLE_RANGE_M 1.5
+
+/// The clearance that the obstacle task's second pair term bends the goal direction around
+/// [m, from the robot's centre to the obstacle's nearest return]: between the reference law's
+/// 0.40 m and the example policy's 0.55 m (chosen on seeds 11-50 among 0.4-0.7, docs/LEARNING.md).
+#define FW_PAIR_OBSTACLE_CLEARANCE_M 0.5
 
 /// The two terms of the pairs' perturbation family and of the shift at a learner state s
 /// (fw_pair_ranker_t), per task:
 /// - corridor: basis[0] = target angle s[2] [rad], basis[1] = lateral fraction s[1] − 0.5;
-/// - obstacles: basis[0] = goal bearing s[0] [rad], basis[1] = the nearest obstacle's proximity,
-///   sign(its bearing s[2]) × max(0, 1 − distance s[3] / FW_PAIR_OBSTACLE_RANGE_M): 0 where no
-///   obstacle is near or it is dead ahead, up to ±1 at contact, + when it is on the left. A positive coefficient on
-///   it turns toward the obstacle (a closer pass), a negative one away (a wider berth).
+/// - obstacles: basis[0] = goal bearing s[0] [rad], basis[1] = the bend of the goal direction
+///   around the nearest obstacle [rad]: where the obstacle (bearing s[2], distance s[3]) is nearer
+///   than FW_PAIR_OBSTACLE_RANGE_M and than the goal (distance s[1]) and the goal direction lies
+///   inside the cone of half-angle asin(FW_PAIR_OBSTACLE_CLEARANCE_M / s[3]) around it (π/2 within
+///   the clearance), the angle from the goal direction to the cone's edge on the goal's side;
+///   0 elsewhere and for a goal exactly behind the obstacle. goal bearing + bend is the reference
+///   law's target (tasks_driver_obstacles) without its memory of the side. A positive coefficient
+///   on it turns away from the obstacle (a wider berth), a negative one toward it (a closer pass).
 /// Pure, O(1).
 void fw_pair_basis(fw_task_t task, const double* s, double basis[2]);
 

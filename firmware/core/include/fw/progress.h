@@ -12,7 +12,7 @@
 /// 40  8  their summed steps (IEEE-754 double) 48  4  shortest of them (0 = none)
 /// 52  4  run id + 1 (0 = no run started)
 /// 56  8  the learned policy's shift a (IEEE-754 double) [rad/s per rad of target angle or goal bearing]
-/// 64  8  its b [rad/s per corridor width, or at full obstacle proximity]  72  4  pairs that have moved it
+/// 64  8  its b [rad/s per corridor width, or per rad of the goal bearing's bend]  72  4  pairs that have moved it
 /// 76 20  reserved, 0
 /// ```
 /// The shift (fw_pair_ranker_t, pair_runs) is part of the learned policy, so it travels with the
@@ -52,10 +52,10 @@ extern "C" {
 #define FW_PROGRESS_WHY_MAX 160U
 
 /// pair_runs: bound on each component of the learned policy's shift: |a| in rad/s per rad of
-/// target angle (obstacles: goal bearing), |b| in rad/s per corridor width (obstacles: at full
-/// proximity). Above what either task needs (with the falling rate the corridor's pairs settle at
-/// |a| 1-2, |b| 1.4-2.7 after 50 pairs, seeds 11-20; the obstacle task's at |a| up to 1.1, |b| up
-/// to 2.3 after 17, seeds 1-10): a limit on runaway, not a tuning (with a constant rate b reached
+/// target angle (obstacles: goal bearing), |b| in rad/s per corridor width (obstacles: per rad of
+/// the goal bearing's bend). Above what either task needs (with the falling rate the corridor's
+/// pairs settle at |a| 1-2, |b| 1.4-2.7 after 50 pairs, seeds 11-20; the obstacle task's at |a|
+/// and |b| up to about 1.5 after 17, seeds 11-50): a limit on runaway, not a tuning (with a constant rate b reached
 /// it once in 50 pairs).
 #define FW_PAIR_SHIFT_MAX 4.0
 
@@ -63,7 +63,7 @@ extern "C" {
 /// and kept by checkpoints (here, because this section carries it): the learned policy is HEDGER's
 /// greedy action plus gain × (the task's first pair term) + centring × (its second)
 /// (fw_pair_basis): corridor gain θ + centring (lateral fraction − 0.5); obstacles gain × goal
-/// bearing + centring × the obstacle's proximity term [rad/s].
+/// bearing + centring × its bend around the nearest obstacle [rad/s].
 typedef struct fw_pair_shift {
   double gain;       ///< a [rad/s per rad], |a| <= FW_PAIR_SHIFT_MAX
   double centring;   ///< b [rad/s per corridor width; obstacles rad/s], |b| <= FW_PAIR_SHIFT_MAX

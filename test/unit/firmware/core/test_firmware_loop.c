@@ -398,11 +398,22 @@ static void test_pair_ranker_moves_the_shift(void** state) {
   r.shift.centring = -2.0;
   const double s[3] = {5.0, 0.75, 0.2};
   assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_CORRIDOR, s) - (0.5 * 0.2 - 2.0 * 0.25)) < 1e-15);
-  // Among obstacles: a * goal bearing + b * sign(obstacle bearing) * max(0, 1 - distance / 1.5 m).
-  const double left_near[4] = {0.3, 3.0, 0.4, 0.6};
-  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, left_near) - (0.5 * 0.3 - 2.0 * 0.6)) < 1e-15);
-  const double right_near[4] = {-0.3, 3.0, -0.4, 0.6};
-  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, right_near) - (-0.5 * 0.3 + 2.0 * 0.6)) < 1e-15);
+  // Among obstacles: a * goal bearing + b * the goal direction's bend around the nearest
+  // obstacle: to the edge of the cone of half-angle asin(0.5 m / distance) on the goal's side.
+  const double left_near[4] = {0.3, 3.0, 0.4, 0.6};  // the goal just right of the obstacle: bend right
+  const double bend = -(asin(FW_PAIR_OBSTACLE_CLEARANCE_M / 0.6) - 0.1);
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, left_near) - (0.5 * 0.3 - 2.0 * bend)) < 1e-15);
+  const double right_near[4] = {-0.3, 3.0, -0.4, 0.6};  // its mirror image
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, right_near) - (-0.5 * 0.3 + 2.0 * bend)) < 1e-15);
+  const double within[4] = {0.3, 3.0, -0.5, 0.4};  // nearer than the clearance: the cone is a right angle
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, within) -
+                   (0.5 * 0.3 - 2.0 * (0.5 * 3.141592653589793 - 0.8))) < 1e-14);
+  const double clear[4] = {1.2, 3.0, 0.0, 1.0};  // the goal direction outside the cone (0.52 rad): no bend
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, clear) - 0.5 * 1.2) < 1e-15);
+  const double behind[4] = {0.2, 3.0, 0.2, 1.0};  // the goal exactly behind it: no side, no bend
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, behind) - 0.5 * 0.2) < 1e-15);
+  const double beyond_goal[4] = {0.3, 0.8, 0.4, 1.0};  // the obstacle farther than the goal
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, beyond_goal) - 0.5 * 0.3) < 1e-15);
   const double far[4] = {0.3, 3.0, 0.4, 2.0};  // beyond FW_PAIR_OBSTACLE_RANGE_M: the bearing's term alone
   assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, far) - 0.5 * 0.3) < 1e-15);
   const double hidden[4] = {0.3, 3.0, 3.141592653589793, 8.0};
