@@ -150,12 +150,17 @@ static void rollout_step(fw_shift_vet_t* vet, const fw_shift_vet_env_t* env, dou
 }
 
 // The candidate under test fails from a start where the shift in force reaches the goal: not
-// taken. After the proposed shift half the step is tried (from the first start again); after
-// half the step the shift stays.
+// taken. After the proposed shift half the step is tried, then a quarter, then an eighth (each
+// from the first start again; the shift in force's verdicts per start are kept, it is the same
+// shift); after the last the shift stays.
 static void candidate_dropped(fw_shift_vet_t* vet) {
-  if (vet->stage == 0) {
-    vet->stage = 1;
+  if (vet->stage < FW_SHIFT_VET_HALVINGS) {
+    vet->stage++;
     vet->start = 0;
+    const double fraction = ldexp(1.0, -vet->stage);
+    const fw_pair_shift_t* in_force = &vet->shift[1];
+    vet->shift[2].gain = in_force->gain + fraction * (vet->shift[0].gain - in_force->gain);
+    vet->shift[2].centring = in_force->centring + fraction * (vet->shift[0].centring - in_force->centring);
   } else {
     decide(vet, FW_SHIFT_STEP_REFUSED);
   }

@@ -17,8 +17,12 @@
 ///      driven from the same
 ///      start; if that one reaches the goal, the proposed shift is not taken (go to 2). If it
 ///      fails nowhere the shift in force does not, the step is taken;
-///   2. half the step, likewise: taken (halved) or
+///   2. half the step, likewise, then a quarter, then an eighth (FW_SHIFT_VET_HALVINGS): the
+///      first that fails nowhere the shift in force does not is taken (halved), or
 ///   3. the shift stays where it is (the pair still counts, so the rate falls).
+/// The smaller steps keep a seed from stalling: among obstacles a step toward a faster pair often
+/// clips the obstacle on the model from one recent start by a few centimetres, and where the
+/// half step does too, every step was refused and the shift stayed near 0 (docs/LEARNING.md).
 /// A rollout drives the learned policy as the evaluations do: the greedy action plus the shift
 /// where an action is known, 0 where none is (tasks_clamp_omega to ±omega_max).
 ///
@@ -30,8 +34,9 @@
 /// its own runs since (b21r-train empties its ring at each log and where seq starts again at 0).
 ///
 /// Memory: fixed (the structures below, no allocation). Cost per vet: usually 2 × starts
-/// rollouts of about 140 periods (the obstacle task: about 100); at most 3 × 2 × starts rollouts
-/// (proposed, half, in force: the last driven once per start) of at most step_limit periods.
+/// rollouts of about 140 periods (the obstacle task: about 100); at most
+/// (2 + FW_SHIFT_VET_HALVINGS) × 2 × starts rollouts (proposed, its fractions, in force: the last
+/// driven once per start) of at most step_limit periods.
 #ifndef FW_SHIFT_VET_H
 #define FW_SHIFT_VET_H
 
@@ -54,6 +59,12 @@ extern "C" {
 
 /// The task's part of a learner state the vet keeps (corridor 3, obstacles 4 values).
 #define FW_SHIFT_VET_TASK_DIM_MAX 4
+
+/// Fractions of a refused step the vet tries before it refuses it: 1/2, 1/4, 1/8. Chosen on
+/// seeds 11-50 of the obstacle task (docs/LEARNING.md) against 1 (the half alone) and 5: with 1 a
+/// few seeds stalled; 5 added failed evaluations (22 against 12 of 2,800). The corridor's
+/// sessions measured (Figs. 4 and 5, seeds 11-20) are the same bit for bit with 1 and 3.
+#define FW_SHIFT_VET_HALVINGS 3
 
 /// The obstacle task's rollouts fail closer than this to the obstacle or a wall [m] (the
 /// corridor's use pair_safety_margin_m): at contact, which ends a run with the collision's
@@ -95,16 +106,16 @@ typedef struct fw_shift_vet_env {
 /// The vet's verdict on a step.
 typedef enum fw_shift_verdict {
   FW_SHIFT_STEP_TAKEN = 0,    ///< the proposed shift is in force
-  FW_SHIFT_STEP_HALVED = 1,   ///< half the step is
+  FW_SHIFT_STEP_HALVED = 1,   ///< a half, a quarter or an eighth of the step is (FW_SHIFT_VET_HALVINGS)
   FW_SHIFT_STEP_REFUSED = 2,  ///< the shift stays
 } fw_shift_verdict_t;
 
 /// One vet under way. Plain data; fw_shift_vet_begin fills it.
 typedef struct fw_shift_vet {
-  fw_pair_shift_t shift[3];   ///< [0] the proposed shift, [1] the one in force, [2] half the step
-  int32_t failures[3];        ///< rollouts of each that failed (a wall, the step limit, nothing predictable)
+  fw_pair_shift_t shift[3];   ///< [0] the proposed shift, [1] the one in force, [2] the fraction of the step under test (or last tested)
+  int32_t failures[3];        ///< rollouts of each that failed (a wall, the step limit, nothing predictable); [2] summed over the fractions
   int8_t in_force_failed[2 * FW_SHIFT_VET_STARTS_MAX];  ///< per rollout start: 0 not driven, 1 failed, -1 reached the goal
-  int32_t stage;              ///< 0: the proposed shift under test, 1: half the step; -1 once decided
+  int32_t stage;              ///< 0: the proposed shift under test, k = 1..FW_SHIFT_VET_HALVINGS: 2^-k of the step; -1 once decided
   uint32_t start;             ///< the rollout start under test (start k / 2, mirrored when k is odd)
   bool checking_in_force;     ///< the rollout under way drives the shift in force (the candidate failed there)
   bool rolling;               ///< a rollout is under way

@@ -111,13 +111,31 @@ static void test_vet_halves_a_step_that_reaches_a_wall(void** state) {
   assert_true(vet.result.gain == -1.3 && vet.result.centring == 0.0 && vet.result.pairs == 4U);
 }
 
-// Gain -5: half of it (-2.5) turns away too: the shift stays, and the pair still counts.
-static void test_vet_refuses_a_step_whose_half_reaches_a_wall(void** state) {
+// Gain -5: half of it (-2.5) turns away too, a quarter (-1.25: 0.75 x target angle) does not:
+// a quarter of the step is taken. Gain -12: the half (-6) and the quarter (-3) turn away, the
+// eighth (-1.5) does not.
+static void test_vet_tries_a_quarter_and_an_eighth(void** state) {
   (void)state;
   add_typical_starts();
-  const fw_shift_vet_t vet = vet_of(law, -5.0, 0.0, UINT32_MAX);
+  fw_shift_vet_t vet = vet_of(law, -5.0, 0.0, UINT32_MAX);
+  assert_int_equal(vet.verdict, FW_SHIFT_STEP_HALVED);
+  assert_true(vet.result.gain == -1.25 && vet.result.centring == 0.0 && vet.result.pairs == 4U);
+  assert_int_equal(vet.failures[0], 1);
+  assert_int_equal(vet.failures[2], 1);  // the half, dropped at its first failing start
+  vet = vet_of(law, -12.0, 0.0, UINT32_MAX);
+  assert_int_equal(vet.verdict, FW_SHIFT_STEP_HALVED);
+  assert_true(vet.result.gain == -1.5 && vet.result.pairs == 4U);
+  assert_int_equal(vet.failures[2], 2);  // the half and the quarter
+  assert_int_equal(vet.failures[1], 0);  // the shift in force, driven once from the failing start
+}
+
+// Gain -20: even an eighth of it (-2.5) turns away: the shift stays, and the pair still counts.
+static void test_vet_refuses_a_step_whose_eighth_reaches_a_wall(void** state) {
+  (void)state;
+  add_typical_starts();
+  const fw_shift_vet_t vet = vet_of(law, -20.0, 0.0, UINT32_MAX);
   assert_int_equal(vet.verdict, FW_SHIFT_STEP_REFUSED);
-  assert_true(vet.failures[2] > 0);
+  assert_int_equal(vet.failures[2], FW_SHIFT_VET_HALVINGS);
   assert_true(vet.result.gain == 0.0 && vet.result.centring == 0.0 && vet.result.pairs == 4U);
 }
 
@@ -323,7 +341,8 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test_setup(test_vet_takes_a_safe_step, setup),
       cmocka_unit_test_setup(test_vet_halves_a_step_that_reaches_a_wall, setup),
-      cmocka_unit_test_setup(test_vet_refuses_a_step_whose_half_reaches_a_wall, setup),
+      cmocka_unit_test_setup(test_vet_tries_a_quarter_and_an_eighth, setup),
+      cmocka_unit_test_setup(test_vet_refuses_a_step_whose_eighth_reaches_a_wall, setup),
       cmocka_unit_test_setup(test_vet_takes_what_it_cannot_tell_apart, setup),
       cmocka_unit_test_setup(test_vet_in_slices_decides_the_same, setup),
       cmocka_unit_test_setup(test_vet_starts_keep_the_last_runs, setup),
