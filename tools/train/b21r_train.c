@@ -167,7 +167,7 @@ int main(int argc, char** argv) {
              cfg.task == FW_TASK_CORRIDOR ? "target angle" : "goal bearing", s.shift.centring,
              cfg.task == FW_TASK_CORRIDOR ? "per corridor width" : "per rad of the goal bearing's bend");
       if (s.shift_steps_halved > 0 || s.shift_steps_refused > 0) {
-        printf("b21r-train: of their steps of the shift, %llu halved and %llu refused by the vet on the kinematic "
+        printf("b21r-train: of their steps of the shift, %llu cut (to 1/2, 1/4 or 1/8) and %llu refused by the vet on the kinematic "
                "model (pair_shift_vet)\n",
                (unsigned long long)s.shift_steps_halved, (unsigned long long)s.shift_steps_refused);
       }

@@ -235,7 +235,7 @@ static bool differs(double a, double b) { return a < b || a > b; }
 // is ranked, an aborted run 0 (its pair starts again), and the second run ranks the pair and
 // proposes a step of the learned policy's shift (fw_pair_ranker_end, the controller's rule; the
 // record's phase 1 marks a pair of example runs, which keeps weight 1), which the vet then takes,
-// halves or refuses (pair_shift_vet, fw/shift_vet.h) on the store the replay and weights left.
+// cuts (to 1/2, 1/4 or 1/8) or refuses (pair_shift_vet, fw/shift_vet.h) on the store the replay and weights left.
 static void rank_pair_run(trainer_t* t, const b21r_run_t* r) {
   if (!t->pairs || r->kind != B21R_RUN_T_KIND_TRAINING || r->pair_member < 0 || !t->in_run ||
       r->run_id != t->run_id) {

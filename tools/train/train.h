@@ -69,7 +69,7 @@ typedef struct train_stats {
   /// pair records whose shift in force differed from the trainer's (it then takes the log's):
   /// logs of different sessions, a second pass, an --init that already held the log's pairs
   uint64_t shift_taken_from_log;
-  uint64_t shift_steps_halved;   ///< pair_shift_vet: ranked pairs whose step of the shift the vet halved
+  uint64_t shift_steps_halved;   ///< pair_shift_vet: ranked pairs whose step of the shift the vet cut (to a half, a quarter or an eighth)
   uint64_t shift_steps_refused;  ///< and whose step it refused (fw/shift_vet.h, as the controller)
   double seconds;             ///< wall time spent reading and training
   fw_pair_shift_t shift;      ///< the learned policy's shift after training; it goes into the checkpoint written

@@ -266,7 +266,7 @@ struct fw_loop {
   fw_shift_vet_t shift_vet;
   bool shift_vet_pending;        // a step waits: shift_proposed, from the shift in force
   fw_pair_shift_t shift_proposed;
-  int32_t shift_steps_halved;    // vets that took half the step
+  int32_t shift_steps_halved;    // vets that took a half, a quarter or an eighth of the step
   int32_t shift_steps_refused;   // and that kept the shift
   int64_t shift_vet_periods;     // rollout periods the vets drove (one greedy search each)
 
@@ -431,8 +431,8 @@ void fw_learning_run_ended(fw_loop_t* L);
 /// True when no between-run work is left (a run may start).
 bool fw_learning_idle(const fw_loop_t* L);
 /// Finishes all between-run work at once (shutdown; not for the tick): the replay, the pair's
-/// weights and the vet of its step (at most 3 x 2 x pair_shift_vet_starts rollouts of at most the
-/// step limit; usually well under a second), so that the checkpoint holds the vetted shift.
+/// weights and the vet of its step (at most (2 + FW_SHIFT_VET_HALVINGS) x 2 x pair_shift_vet_starts
+/// rollouts of at most the step limit; usually well under a second), so that the checkpoint holds the vetted shift.
 void fw_learning_finish_now(fw_loop_t* L);
 /// Serialises the learned state and the schedule's progress into the writer at once (shutdown).
 void fw_learning_checkpoint_now(fw_loop_t* L);

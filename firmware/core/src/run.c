@@ -192,9 +192,9 @@ void fw_pair_basis(fw_task_t task, const double* s, double basis[2]) {
     basis[1] = s[1] - 0.5;
     return;
   }
-  // Obstacles: the goal bearing, and how far the reference law's target bends it around the
-  // nearest obstacle (tasks_driver_obstacles, without its memory of the side chosen: a pure
-  // function of s, so the vet's model and the mirror image see the same term).
+  // Obstacles: the goal bearing, and how far turning to the goal-side edge of the reference law's
+  // cone around the nearest obstacle bends it (tasks_driver_obstacles; without a memory of the
+  // side: a pure function of s, so the vet's model and the mirror image see the same term).
   const double goal_bearing = s[0];
   const double goal_distance = s[1];
   const double obstacle_bearing = s[2];
@@ -225,7 +225,7 @@ double fw_pair_shift_at(const fw_pair_shift_t* shift, fw_task_t task, const doub
 // the first run's points weigh 0 at once (so the second run does not imitate it either), and so
 // do the points of a run that was aborted or is left without its pair. After the second run the
 // pair is ranked (fw_pair_ranker_end): by default it proposes a step of the learned policy's shift
-// toward the faster run (taken, halved or refused by the vet between runs, pair_shift_vet:
+// toward the faster run (taken, cut or refused by the vet between runs, pair_shift_vet:
 // learning.c) and both runs keep weight 0, so the imitation stays the teachers' and the shift
 // alone carries what phase two found (imitating the shifted runs as well would add the shift
 // twice). Phase one's pairs of example runs keep weight 1 by default: their + and - perturbations
@@ -249,7 +249,7 @@ static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps
                                        L->pair_weigh_w);
   if (L->pair_weigh_n == 2 && L->cfg.pair_shift_vet) {
     // pair_shift_vet: the step waits for the vet between runs (learning.c), which puts in force
-    // the step, half of it or none; the pair counts at once.
+    // the step, a half, a quarter or an eighth of it, or none; the pair counts at once.
     L->shift_proposed = L->pair_ranker.shift;
     L->pair_ranker.shift.gain = in_force.gain;
     L->pair_ranker.shift.centring = in_force.centring;

@@ -230,7 +230,7 @@ typedef struct fw_config {
   /// fw_config_pair_learner() and fw_config_pair_runs_active()
   int32_t pair_runs_mode;
   double pair_gain_sigma;          ///< pair_runs: std-dev of the perturbation's gain on θ (obstacles: goal bearing) [rad/s per rad]
-  double pair_centring_sigma;      ///< pair_runs: std-dev of its term on (lateral fraction − 0.5) (obstacles: the goal bearing's bend) [rad/s]
+  double pair_centring_sigma;      ///< pair_runs: std-dev of its term on (lateral fraction − 0.5) [rad/s per corridor width] (obstacles: on the goal bearing's bend [rad/s per rad])
   double pair_tau_steps;           ///< pair_runs: scale of the weights' response to the steps' difference
   double pair_recency_runs;        ///< pair_runs: imitation fades a point stored N runs ago by e^(−N/this)
   /// pair_runs: each ranked pair moves the learned policy's shift (fw_pair_ranker_t) by this times

@@ -125,7 +125,7 @@ typedef struct fw_loop_stats {
   int32_t pair_runs_missed;      ///< pair runs ranked as having missed the goal (vetoed included)
   int64_t pair_safety_short;     ///< of those, where the recovery law too missed the margin
   int64_t pair_safety_held;      ///< periods without a scan where the dead-reckoned law drove
-  int32_t shift_steps_halved;    ///< pair_shift_vet: pairs whose step of the shift was halved
+  int32_t shift_steps_halved;    ///< pair_shift_vet: pairs whose step of the shift was cut (to a half, a quarter or an eighth)
   int32_t shift_steps_refused;   ///< and whose step was refused (the shift stayed)
   int64_t shift_vet_periods;     ///< pair_shift_vet: rollout periods driven between runs (one greedy search each)
   // Deadline accounting (fw/timing.h; real time only, except the compute time).
@@ -203,9 +203,13 @@ int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool exa
 ///   than FW_PAIR_OBSTACLE_RANGE_M and than the goal (distance s[1]) and the goal direction lies
 ///   inside the cone of half-angle asin(FW_PAIR_OBSTACLE_CLEARANCE_M / s[3]) around it (π/2 within
 ///   the clearance), the angle from the goal direction to the cone's edge on the goal's side;
-///   0 elsewhere and for a goal exactly behind the obstacle. goal bearing + bend is the reference
-///   law's target (tasks_driver_obstacles) without its memory of the side. A positive coefficient
-///   on it turns away from the obstacle (a wider berth), a negative one toward it (a closer pass).
+///   0 elsewhere and for a goal exactly behind the obstacle. goal bearing + bend is the goal-side
+///   edge of the reference law's cone (tasks_driver_obstacles), which the law itself steers for
+///   only with the obstacle nearly dead ahead (off to one side it passes on the side of least
+///   turning). Without a memory of the side the term changes sign where the goal direction
+///   crosses the obstacle's bearing, and it drops to 0 at the range's edge (from 0.34 rad at
+///   most). A positive coefficient on it turns away from the obstacle (a wider berth), a negative
+///   one toward it (a closer pass).
 /// Pure, O(1).
 void fw_pair_basis(fw_task_t task, const double* s, double basis[2]);
 

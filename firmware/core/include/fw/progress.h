@@ -55,7 +55,7 @@ extern "C" {
 /// target angle (obstacles: goal bearing), |b| in rad/s per corridor width (obstacles: per rad of
 /// the goal bearing's bend). Above what either task needs (with the falling rate the corridor's
 /// pairs settle at |a| 1-2, |b| 1.4-2.7 after 50 pairs, seeds 11-20; the obstacle task's at |a|
-/// and |b| up to about 1.5 after 17, seeds 11-50): a limit on runaway, not a tuning (with a constant rate b reached
+/// up to 1.7 and |b| up to 3.4 after 17, seeds 1-50): a limit on runaway, not a tuning (with a constant rate b reached
 /// it once in 50 pairs).
 #define FW_PAIR_SHIFT_MAX 4.0
 
@@ -66,7 +66,7 @@ extern "C" {
 /// bearing + centring × its bend around the nearest obstacle [rad/s].
 typedef struct fw_pair_shift {
   double gain;       ///< a [rad/s per rad], |a| <= FW_PAIR_SHIFT_MAX
-  double centring;   ///< b [rad/s per corridor width; obstacles rad/s], |b| <= FW_PAIR_SHIFT_MAX
+  double centring;   ///< b [rad/s per corridor width; obstacles rad/s per rad of bend], |b| <= FW_PAIR_SHIFT_MAX
   uint32_t pairs;    ///< pairs ranked into it, whatever pair_shift_vet made of their steps (its step size falls with them: pair_shift_decay_pairs)
 } fw_pair_shift_t;
 

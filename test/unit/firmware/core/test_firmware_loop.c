@@ -6,6 +6,7 @@
 
 #include "fw/progress.h"
 #include "fw/safety.h"
+#include "fw/shift_vet.h"
 
 #include <b21r_test/alloc_counter.h>
 
@@ -145,7 +146,7 @@ static void test_loop_pair_runs_share_start_and_rank(void** state) {
 
 // pair_shift_vet in the controller, with perturbations far beyond the defaults (large steps):
 // each ranked pair's step waits for the vet between runs, and the next pair's B21R_RUN shows the
-// whole step, half of it or none (the cut ones counted as the vet's), after the vet drove every
+// whole step, a fraction of it or none (the cut ones counted as the vet's), after the vet drove every
 // step on the model from its starts (at least 10 training runs' and their mirror images). Without
 // the vet the shift moves by the rule alone and nothing is driven. Here the fake corridor's pairs
 // rank steps the model finds safe, so every step is taken: which steps the vet cuts, and why, is
@@ -193,9 +194,13 @@ static void test_loop_shift_vet_runs_between_runs(void** state) {
       const bool whole = taken[0] == rule[0] && taken[1] == rule[1];
       moved += rule[0] != a->shift_gain || rule[1] != a->shift_centring ? 1 : 0;
       const bool none = taken[0] == a->shift_gain && taken[1] == a->shift_centring;
-      const bool half = fabs(taken[0] - 0.5 * (a->shift_gain + rule[0])) < 1e-12 &&
-                        fabs(taken[1] - 0.5 * (a->shift_centring + rule[1])) < 1e-12;
-      assert_true(whole || half || none);
+      bool fraction = false;  // a half, a quarter or an eighth of the step (FW_SHIFT_VET_HALVINGS)
+      for (int k = 1; k <= FW_SHIFT_VET_HALVINGS; ++k) {
+        const double f = ldexp(1.0, -k);
+        fraction = fraction || (fabs(taken[0] - (a->shift_gain + f * (rule[0] - a->shift_gain))) < 1e-12 &&
+                                fabs(taken[1] - (a->shift_centring + f * (rule[1] - a->shift_centring))) < 1e-12);
+      }
+      assert_true(whole || fraction || none);
       if (vet == 0) {
         assert_true(whole);
       }

@@ -1,8 +1,8 @@
 // SPDX-License-Identifier: MIT
 // The vet of a step of the learned policy's shift (fw/shift_vet.h), with a policy whose behaviour
 // on the model is known: the recovery law (2 x target angle) as the "greedy" action. A shift that
-// keeps the law turning toward the axis is taken; one that makes it turn away is halved when half
-// of it is safe and refused when not; a step is judged start by start against the shift in force
+// keeps the law turning toward the axis is taken; one that makes it turn away is cut to a half, a
+// quarter or an eighth, the first of them that is safe, and refused when none is; a step is judged start by start against the shift in force
 // (mirrored starts included); where the model sees no difference the step is taken; the verdict
 // does not depend on how the work is sliced; the start ring keeps the last starts.
 #include <b21r_test/alloc_counter.h>
@@ -160,14 +160,14 @@ static void test_vet_takes_what_it_cannot_tell_apart(void** state) {
 
 // The work in slices (one period per call, as a tick with the budget 1) reaches the same verdict
 // and shift with the same number of policy calls, and never does more than its budget per call.
-static void test_vet_in_slices_decides_the_same(void** state) {
-  (void)state;
-  add_typical_starts();
-  const fw_shift_vet_t whole = vet_of(law, -2.6, 0.4, UINT32_MAX);
+static void check_slices(double gain, double centring, fw_shift_verdict_t verdict) {
+  g_calls = 0;
+  const fw_shift_vet_t whole = vet_of(law, gain, centring, UINT32_MAX);
+  assert_int_equal(whole.verdict, verdict);
   const int whole_calls = g_calls;
   g_calls = 0;
   const fw_pair_shift_t in_force = {0.0, 0.0, 3U};
-  const fw_pair_shift_t proposed = {-2.6, 0.4, 4U};
+  const fw_pair_shift_t proposed = {gain, centring, 4U};
   fw_shift_vet_t sliced;
   fw_shift_vet_begin(&sliced, &in_force, &proposed);
   int slices = 0;
@@ -185,6 +185,33 @@ static void test_vet_in_slices_decides_the_same(void** state) {
   assert_int_equal(sliced.verdict, whole.verdict);
   assert_true(sliced.result.gain == whole.result.gain && sliced.result.centring == whole.result.centring);
   assert_int_equal(sliced.result.pairs, whole.result.pairs);
+}
+
+// Sliced into 3 periods a slice, the vet decides as in one go: a step it halves, and one it cuts
+// to an eighth (the half and the quarter dropped in the middle of slices).
+static void test_vet_in_slices_decides_the_same(void** state) {
+  (void)state;
+  add_typical_starts();
+  check_slices(-2.6, 0.4, FW_SHIFT_STEP_HALVED);
+  check_slices(-12.0, 0.0, FW_SHIFT_STEP_HALVED);
+}
+
+// The fractions are of the step from the shift in force, not of the proposed shift: from gain
+// -0.5 (the law at 1.5 x target angle) a step to -4.5: its half (-2.5) turns away, its quarter
+// (-1.5, not a quarter of -4.5) does not.
+static void test_vet_cuts_the_step_from_the_shift_in_force(void** state) {
+  (void)state;
+  add_typical_starts();
+  const fw_pair_shift_t in_force = {-0.5, 0.0, 3U};
+  const fw_pair_shift_t proposed = {-4.5, 0.0, 4U};
+  fw_shift_vet_t vet;
+  fw_shift_vet_begin(&vet, &in_force, &proposed);
+  while (!fw_shift_vet_step(&vet, law, NULL, &g_env, &g_starts, UINT32_MAX)) {
+  }
+  assert_int_equal(vet.verdict, FW_SHIFT_STEP_HALVED);
+  assert_true(vet.result.gain == -1.5 && vet.result.centring == 0.0 && vet.result.pairs == 4U);
+  assert_int_equal(vet.failures[0], 1);
+  assert_int_equal(vet.failures[2], 1);  // the half
 }
 
 // The ring keeps the last pair_shift_vet_starts starts (20 by default), oldest out first, and
@@ -226,11 +253,12 @@ static int setup_obstacles(void** state) {
 }
 
 // The "learned" policy among obstacles: 1.5 x (goal bearing + its bend around a near obstacle,
-// the two terms of fw_pair_basis), the reference law's target without its memory of the side, at
-// a gentle gain. On the model it reaches the goal from all ten evaluation poses and their mirror
+// the two terms of fw_pair_basis), a goal-seeking law that turns to the edge of the obstacle's cone
+// on the goal's side, at a gentle gain. On the model it reaches the goal from all ten evaluation poses and their mirror
 // images; moved by the shift it does so or not as follows (measured on the model): gain +0.2 hits
 // the obstacle from 2 poses and their mirror images, gain +0.1 from none, gain -1 from none;
-// centring -2 (bending the goal direction toward the obstacle) from 8, -1 from 6, +4 from none.
+// centring -2 (bending the goal direction toward the obstacle) from 8, -1 from 6, -0.5 from 4,
+// -0.25 from at least one (the vet refuses -2), +4 from none.
 static bool avoid_law(void* ctx, const double* s, double* action) {
   (void)ctx;
   g_calls++;
@@ -266,7 +294,8 @@ static void add_obstacle_eval_starts(void) {
 
 // Among obstacles the vet drives the obstacle model from each start and its mirror image (the
 // default arena is symmetric), fails at contact, and judges a step as in the corridor: taken
-// where nothing new fails, halved where half the step is safe, refused where not. A mirrored
+// where nothing new fails, cut where a half (a quarter, an eighth) of the step is safe, refused
+// where none is. A mirrored
 // start fails exactly where its original does for this symmetric law. A start without a visible
 // obstacle (no pose to drive from) fails with every shift, so it blocks nothing.
 static void test_vet_among_obstacles(void** state) {
@@ -289,8 +318,9 @@ static void test_vet_among_obstacles(void** state) {
   assert_int_equal(vet.failures[0], 1);  // dropped at its first failing start
   assert_int_equal(vet.failures[2], 0);
 
-  vet = obstacles_vet_of(0.0, -2.0);
+  vet = obstacles_vet_of(0.0, -2.0);  // the half, the quarter and the eighth hit it too
   assert_int_equal(vet.verdict, FW_SHIFT_STEP_REFUSED);
+  assert_true(vet.failures[2] >= FW_SHIFT_VET_HALVINGS);
   assert_true(vet.result.gain == 0.0 && vet.result.centring == 0.0 && vet.result.pairs == 4U);
   assert_true(vet.failures[2] > 0);
 
@@ -345,6 +375,7 @@ int main(void) {
       cmocka_unit_test_setup(test_vet_refuses_a_step_whose_eighth_reaches_a_wall, setup),
       cmocka_unit_test_setup(test_vet_takes_what_it_cannot_tell_apart, setup),
       cmocka_unit_test_setup(test_vet_in_slices_decides_the_same, setup),
+      cmocka_unit_test_setup(test_vet_cuts_the_step_from_the_shift_in_force, setup),
       cmocka_unit_test_setup(test_vet_starts_keep_the_last_runs, setup),
       cmocka_unit_test_setup(test_vet_among_obstacles, setup_obstacles),
   };
