@@ -204,9 +204,7 @@ void fw_pair_basis(fw_task_t task, const double* s, double basis[2]) {
   if (!(obstacle_distance < FW_PAIR_OBSTACLE_RANGE_M && obstacle_distance < goal_distance)) {
     return;  // no obstacle near (or none visible: its distance is the features' far value), or it is beyond the goal
   }
-  const double half_cone = obstacle_distance > FW_PAIR_OBSTACLE_CLEARANCE_M
-                               ? asin(FW_PAIR_OBSTACLE_CLEARANCE_M / obstacle_distance)
-                               : 1.57079632679489661923;  // within the clearance: a right angle either side
+  const double half_cone = tasks_obstacles_cone_half_angle_rad(FW_PAIR_OBSTACLE_CLEARANCE_M, obstacle_distance);
   const double rel = features_angle_wrap(goal_bearing - obstacle_bearing);
   if (fabs(rel) < half_cone && fabs(rel) > 0.0) {
     // The goal direction passes the obstacle closer than the clearance: the target is the cone's

@@ -78,9 +78,7 @@ void fw_shift_vet_begin(fw_shift_vet_t* vet, const fw_pair_shift_t* in_force, co
   memset(vet, 0, sizeof *vet);
   vet->shift[0] = *proposed;
   vet->shift[1] = *in_force;
-  vet->shift[2] = *in_force;
-  vet->shift[2].gain = in_force->gain + 0.5 * (proposed->gain - in_force->gain);
-  vet->shift[2].centring = in_force->centring + 0.5 * (proposed->centring - in_force->centring);
+  vet->shift[2] = *in_force;  // the fraction under test, set when one is tried (candidate_dropped)
   vet->stage = 0;
   if (!(proposed->gain < in_force->gain || proposed->gain > in_force->gain ||
         proposed->centring < in_force->centring || proposed->centring > in_force->centring)) {

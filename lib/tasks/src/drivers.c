@@ -150,6 +150,10 @@ double tasks_driver_corridor(tasks_driver_t* d, const features_corridor_t* f) {
   }
 }
 
+double tasks_obstacles_cone_half_angle_rad(double clearance_m, double distance_m) {
+  return distance_m > clearance_m ? asin(clearance_m / distance_m) : 0.5 * TASKS_PI;
+}
+
 // Goal bearing bent around the nearest obstacle (see tasks.h).
 static double obstacle_target(tasks_driver_t* d, const features_obstacles_t* f) {
   const double g = f->goal_bearing_rad;
@@ -170,7 +174,7 @@ static double obstacle_target(tasks_driver_t* d, const features_obstacles_t* f) 
     return g;
   }
   d->pass_steps = 0U;
-  const double alpha = o->distance_m > clearance ? asin(clearance / o->distance_m) : 0.5 * TASKS_PI;
+  const double alpha = tasks_obstacles_cone_half_angle_rad(clearance, o->distance_m);
   const double rel = features_angle_wrap(g - o->bearing_rad);
   if (fabs(rel) >= alpha && d->avoid_side == 0) {
     return g;
