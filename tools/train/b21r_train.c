@@ -164,8 +164,8 @@ int main(int argc, char** argv) {
       printf("b21r-train: %llu pairs of runs ranked from B21R_RUN (pair_runs); the learned policy's "
              "shift: %.4f rad/s per rad of %s, %.4f rad/s %s\n",
              (unsigned long long)s.pairs_ranked, s.shift.gain,
-             cfg.task == FW_TASK_CORRIDOR ? "target angle" : "goal bearing", s.shift.centring,
-             cfg.task == FW_TASK_CORRIDOR ? "per corridor width" : "per rad of the goal bearing's bend");
+             cfg.task == FW_TASK_CORRIDOR ? "target angle" : "the bent goal direction", s.shift.centring,
+             cfg.task == FW_TASK_CORRIDOR ? "per corridor width" : "per rad of the bend");
       if (s.shift_steps_halved > 0 || s.shift_steps_refused > 0) {
         printf("b21r-train: of their steps of the shift, %llu cut (to 1/2, 1/4 or 1/8) and %llu refused by the vet on the kinematic "
                "model (pair_shift_vet)\n",

@@ -293,8 +293,8 @@ static const key_desc_t k_keys[] = {
   {NULL, "pair_runs", KIND_ENUM, OFF(pair_runs_mode), 0, 0, false, false, k_pair_runs, "auto",
    "phase two (and phase one's example runs, pair_phase_one): training runs come in pairs from one start "
    "pose; the first adds a perturbation g * target angle + c * (lateral fraction - 0.5) to the greedy action "
-   "(obstacles: g * goal bearing + c * its bend around the nearest obstacle within 1.5 m, to the edge of the cone "
-   "that keeps 0.5 m from it; "
+   "(obstacles: g * the goal direction bent to the edge of the cone that keeps 0.5 m from the nearest obstacle "
+   "within 1.5 m + c * the bend; "
    "phase one: the example's), the second subtracts it, with the same exploration noise; the pair's difference "
    "in steps moves the learned policy's shift toward the faster run (pair_shift_rate; docs/LEARNING.md); in the "
    "corridor pair_safety vets every perturbed command. auto = on for learner = hedger, hedger_greedy_method = "
@@ -302,14 +302,14 @@ static const key_desc_t k_keys[] = {
    "tags its runs and fades old points wherever hedger and state_model apply); true = on (hedger, state_model only; on the robot only in the corridor, with pair_safety at "
    "least at its default margin and horizon: the obstacle task has no safety filter)"},
   {NULL, "pair_gain_sigma", KIND_DOUBLE, OFF(pair_gain_sigma), 0, 4, false, false, NULL, "0.25",
-   "pair_runs: standard deviation of the perturbation's gain g on the target angle (obstacles: the goal "
-   "bearing) [rad/s per rad]"},
+   "pair_runs: standard deviation of the perturbation's gain g on the target angle (obstacles: the bent goal "
+   "direction; the obstacle experiments set 0.5) [rad/s per rad]"},
   {NULL, "pair_centring_sigma", KIND_DOUBLE, OFF(pair_centring_sigma), 0, 8, false, false, NULL, "0.5",
    "pair_runs: standard deviation of the perturbation's factor c on the lateral fraction's offset from the "
-   "centre line [rad/s per corridor width] (obstacles: on the goal bearing's bend around the obstacle [rad/s per rad])"},
+   "centre line [rad/s per corridor width] (obstacles: on the goal direction's bend around the obstacle [rad/s per rad])"},
   {NULL, "pair_shift_rate", KIND_DOUBLE, OFF(pair_shift_rate), 0, 4, false, false, NULL, "1",
    "pair_runs: the learned policy is the greedy action plus a shift a * target angle + b * (lateral fraction - "
-   "0.5) (obstacles: a * goal bearing + b * its bend around the obstacle) that the pairs move: each ranked pair adds pair_shift_rate * tanh(d / pair_shift_tau_steps) times its "
+   "0.5) (obstacles: a * the bent goal direction + b * the bend) that the pairs move: each ranked pair adds pair_shift_rate * tanh(d / pair_shift_tau_steps) times its "
    "perturbation (g, c) to (a, b), d = the second run's steps minus the first's (a failed run counts as the "
    "slower), and phase two's runs then weigh 0 in the imitation (phase one's paired example runs 1); 0 = the "
    "pairs do not move the shift (one loaded from a checkpoint still applies): the faster run's points weigh "

@@ -14,7 +14,7 @@
 #include <string.h>
 
 #define MAGIC "FWMETA01"
-#define USED_BYTES 76U
+#define USED_BYTES 80U
 
 size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]) {
   const fw_schedule_progress_t* g = &p->schedule;
@@ -34,6 +34,7 @@ size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]
   fw_put_f64(out + 56, p->shift.gain);
   fw_put_f64(out + 64, p->shift.centring);
   fw_put_u32(out + 72, p->shift.pairs);
+  fw_put_u32(out + 76, FW_PAIR_TERMS_REVISION);
   return FW_PROGRESS_BYTES;
 }
 
@@ -133,6 +134,17 @@ int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why
   p.shift.gain = fw_get_f64(b + 56);
   p.shift.centring = fw_get_f64(b + 64);
   p.shift.pairs = (uint32_t)shift_pairs;
+  const uint32_t terms = fw_get_u32(b + 76);
+  if (terms > FW_PAIR_TERMS_REVISION) {
+    fw_errfmt(why, cap, "shift terms revision %u, expected at most %u (written by a newer controller)", (unsigned)terms,
+        (unsigned)FW_PAIR_TERMS_REVISION);
+    return -1;
+  }
+  if (terms == 0U && p.task == (int32_t)FW_TASK_OBSTACLES) {
+    // Revision 0's obstacle terms were the goal bearing g and its bend: a g + b bend is
+    // a (g + bend) + (b - a) bend in today's terms, the same policy.
+    p.shift.centring -= p.shift.gain;
+  }
   if (!fw_pair_shift_valid(p.shift.gain, p.shift.centring)) {
     fw_errfmt(why, cap, "learned policy shift (%.17g, %.17g), expected finite values within +-%g", p.shift.gain,
         p.shift.centring, FW_PAIR_SHIFT_MAX);

@@ -192,25 +192,36 @@ void fw_pair_basis(fw_task_t task, const double* s, double basis[2]) {
     basis[1] = s[1] - 0.5;
     return;
   }
-  // Obstacles: the goal bearing, and how far turning to the goal-side edge of the reference law's
-  // cone around the nearest obstacle bends it (tasks_driver_obstacles; without a memory of the
-  // side: a pure function of s, so the vet's model and the mirror image see the same term).
+  // Obstacles: the goal direction bent around the nearest obstacle (the target the reference law
+  // steers for with the obstacle nearly dead ahead: the goal-side edge of its cone,
+  // tasks_driver_obstacles; without a memory of the side, so a pure function of s that the vet's
+  // model and the mirror image see alike), and the bend alone. The first term is the obstacle
+  // task's target angle, as the corridor's first is its own: a shift along it turns harder toward
+  // the course that keeps the clearance, not toward the obstacle; the second widens (+) or
+  // tightens (-) the berth. The bent direction is the cone's edge, obstacle bearing ± half-cone,
+  // within ±π (a visible obstacle lies within ±π/2, the half-cone at most π/2): no wrap. (With
+  // the goal bearing itself as the first term a harder turn toward
+  // the goal needed a matching wider bend, a ridge beside a cliff that the ranked pairs climbed
+  // slowly: docs/LEARNING.md, "The bent goal direction as the first term".)
   const double goal_bearing = s[0];
   const double goal_distance = s[1];
   const double obstacle_bearing = s[2];
   const double obstacle_distance = s[3];
-  basis[0] = goal_bearing;
-  basis[1] = 0.0;
-  if (!(obstacle_distance < FW_PAIR_OBSTACLE_RANGE_M && obstacle_distance < goal_distance)) {
-    return;  // no obstacle near (or none visible: its distance is the features' far value), or it is beyond the goal
+  double bend = 0.0;
+  if (obstacle_distance < FW_PAIR_OBSTACLE_RANGE_M && obstacle_distance < goal_distance) {
+    // (No obstacle near, none visible, its distance the features' far value, or it beyond the
+    // goal: no bend.)
+    const double half_cone = tasks_obstacles_cone_half_angle_rad(FW_PAIR_OBSTACLE_CLEARANCE_M, obstacle_distance);
+    const double rel = features_angle_wrap(goal_bearing - obstacle_bearing);
+    if (fabs(rel) < half_cone && fabs(rel) > 0.0) {
+      // The goal direction passes the obstacle closer than the clearance: the target is the
+      // cone's edge on the goal's side (the goal exactly behind it has no side, as its mirror
+      // image).
+      bend = (rel > 0.0 ? half_cone : -half_cone) - rel;
+    }
   }
-  const double half_cone = tasks_obstacles_cone_half_angle_rad(FW_PAIR_OBSTACLE_CLEARANCE_M, obstacle_distance);
-  const double rel = features_angle_wrap(goal_bearing - obstacle_bearing);
-  if (fabs(rel) < half_cone && fabs(rel) > 0.0) {
-    // The goal direction passes the obstacle closer than the clearance: the target is the cone's
-    // edge on the goal's side (the goal exactly behind it has no side, as its mirror image).
-    basis[1] = (rel > 0.0 ? half_cone : -half_cone) - rel;
-  }
+  basis[0] = goal_bearing + bend;
+  basis[1] = bend;
 }
 
 double fw_pair_shift_at(const fw_pair_shift_t* shift, fw_task_t task, const double* s) {

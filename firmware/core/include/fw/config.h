@@ -229,8 +229,8 @@ typedef struct fw_config {
   /// key pair_runs, fw_pair_runs_t (AUTO = 2: never test it as a bool); read through
   /// fw_config_pair_learner() and fw_config_pair_runs_active()
   int32_t pair_runs_mode;
-  double pair_gain_sigma;          ///< pair_runs: std-dev of the perturbation's gain on θ (obstacles: goal bearing) [rad/s per rad]
-  double pair_centring_sigma;      ///< pair_runs: std-dev of its term on (lateral fraction − 0.5) [rad/s per corridor width] (obstacles: on the goal bearing's bend [rad/s per rad])
+  double pair_gain_sigma;          ///< pair_runs: std-dev of the perturbation's gain on θ (obstacles: the bent goal direction) [rad/s per rad]
+  double pair_centring_sigma;      ///< pair_runs: std-dev of its term on (lateral fraction − 0.5) [rad/s per corridor width] (obstacles: on the bend [rad/s per rad])
   double pair_tau_steps;           ///< pair_runs: scale of the weights' response to the steps' difference
   double pair_recency_runs;        ///< pair_runs: imitation fades a point stored N runs ago by e^(−N/this)
   /// pair_runs: each ranked pair moves the learned policy's shift (fw_pair_ranker_t) by this times

@@ -146,8 +146,8 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
 /// pair_runs: the ranking of pairs as their runs end, kept by the controller (run.c) and by
 /// b21r-train on a log's B21R_RUN records, so that both weigh the same runs alike and reach the
 /// same shift. The shift is part of the learned state: the learned policy is HEDGER's greedy
-/// action plus a θ + b (lateral fraction − 0.5) in the corridor, a × goal bearing + b × the
-/// goal direction's bend around the nearest obstacle among obstacles (fw_pair_shift_at), and
+/// action plus a θ + b (lateral fraction − 0.5) in the corridor, a × the goal direction bent
+/// around the nearest obstacle + b × the bend among obstacles (fw_pair_shift_at), and
 /// checkpoints keep (a, b) and its pair count (fw/progress.h); b21r-train takes all three from each pair record's copy.
 typedef struct fw_pair_ranker {
   bool first_pending;    ///< a pair's first run ended and the pair is not ranked yet
@@ -187,7 +187,7 @@ int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool exa
 
 /// The obstacle task's second pair term acts within this distance of the nearest obstacle [m]: a
 /// little beyond the reference law's avoidance range (1.25 m), so a shift can change where the
-/// robot starts to go round; farther off only the goal bearing's term acts.
+/// robot starts to go round; farther off the first term is the goal bearing itself.
 #define FW_PAIR_OBSTACLE_RANGE_M 1.5
 
 /// The clearance that the obstacle task's second pair term bends the goal direction around
@@ -198,18 +198,20 @@ int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool exa
 /// The two terms of the pairs' perturbation family and of the shift at a learner state s
 /// (fw_pair_ranker_t), per task:
 /// - corridor: basis[0] = target angle s[2] [rad], basis[1] = lateral fraction s[1] − 0.5;
-/// - obstacles: basis[0] = goal bearing s[0] [rad], basis[1] = the bend of the goal direction
-///   around the nearest obstacle [rad]: where the obstacle (bearing s[2], distance s[3]) is nearer
-///   than FW_PAIR_OBSTACLE_RANGE_M and than the goal (distance s[1]) and the goal direction lies
-///   inside the cone of half-angle asin(FW_PAIR_OBSTACLE_CLEARANCE_M / s[3]) around it (π/2 within
-///   the clearance), the angle from the goal direction to the cone's edge on the goal's side;
-///   0 elsewhere and for a goal exactly behind the obstacle. goal bearing + bend is the goal-side
-///   edge of the reference law's cone (tasks_driver_obstacles), which the law itself steers for
-///   only with the obstacle nearly dead ahead (off to one side it passes on the side of least
-///   turning). Without a memory of the side the term changes sign where the goal direction
-///   crosses the obstacle's bearing, and it drops to 0 at the range's edge (from 0.34 rad at
-///   most). A positive coefficient on it turns away from the obstacle (a wider berth), a negative
-///   one toward it (a closer pass).
+/// - obstacles: basis[0] = the goal direction bent around the nearest obstacle, goal bearing
+///   s[0] + bend [rad, within ±π], basis[1] = the bend [rad]: where the obstacle (bearing s[2],
+///   distance s[3]) is nearer than FW_PAIR_OBSTACLE_RANGE_M and than the goal (distance s[1]) and
+///   the goal direction lies inside the cone of half-angle asin(FW_PAIR_OBSTACLE_CLEARANCE_M /
+///   s[3]) around it (π/2 within the clearance), the angle from the goal direction to the cone's
+///   edge on the goal's side; 0 elsewhere and for a goal exactly behind the obstacle. basis[0] is
+///   then the goal-side edge of the reference law's cone (tasks_driver_obstacles), which the law
+///   itself steers for only with the obstacle nearly dead ahead (off to one side it passes on the
+///   side of least turning): the obstacle task's target angle, as s[2] is the corridor's. A
+///   positive gain on it turns harder toward the course that keeps the clearance; a positive
+///   coefficient on the bend widens the berth, a negative one passes closer. Without a memory of
+///   the side the bend changes sign where the goal direction crosses the obstacle's bearing, and
+///   it drops to 0 at the range's edge (from 0.34 rad at most). (Until checkpoint terms revision
+///   1, fw/progress.h, basis[0] was the goal bearing itself; docs/LEARNING.md.)
 /// Pure, O(1).
 void fw_pair_basis(fw_task_t task, const double* s, double basis[2]);
 

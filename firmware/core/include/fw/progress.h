@@ -11,12 +11,18 @@
 /// 32  4  evaluation blocks                   36  4  successful phase-one runs
 /// 40  8  their summed steps (IEEE-754 double) 48  4  shortest of them (0 = none)
 /// 52  4  run id + 1 (0 = no run started)
-/// 56  8  the learned policy's shift a (IEEE-754 double) [rad/s per rad of target angle or goal bearing]
-/// 64  8  its b [rad/s per corridor width, or per rad of the goal bearing's bend]  72  4  pairs that have moved it
-/// 76 20  reserved, 0
+/// 56  8  the learned policy's shift a (IEEE-754 double) [rad/s per rad of target angle, or of
+///        the goal direction bent around the obstacle]
+/// 64  8  its b [rad/s per corridor width, or per rad of the bend]  72  4  pairs that have moved it
+/// 76  4  the shift's terms revision (FW_PAIR_TERMS_REVISION)
+/// 80 16  reserved, 0
 /// ```
 /// The shift (fw_pair_ranker_t, pair_runs) is part of the learned policy, so it travels with the
 /// learned state. Files written before it have zeros there: no shift, the policy they learned.
+/// Terms revision 0 (files written before the field) had the obstacle task's first term the goal
+/// bearing itself; the decoder converts such a shift exactly (b − a on the bend) and refuses it
+/// if the result is out of range, so an older checkpoint drives the policy it learned. A
+/// revision above FW_PAIR_TERMS_REVISION is refused (a newer controller's terms).
 /// Decoding validates every field against the ranges below, so a section with a valid CRC but
 /// impossible contents (a bug, or bytes written by something else) is refused like a corrupt
 /// file instead of steering the schedule. Ranges (fw_progress_decode):
@@ -26,8 +32,9 @@
 /// - successful phase-one runs <= phase-one runs; with none, their sum and shortest are 0;
 ///   otherwise the sum is a whole number with shortest × runs <= sum <= runs × INT32_MAX;
 /// - run id + 1 >= training runs (every training run started as a run);
-/// - the shift's a and b finite, each within ±FW_PAIR_SHIFT_MAX (fw_pair_shift_valid); its pairs
-///   in [0, INT32_MAX].
+/// - the shift's a and b finite, each within ±FW_PAIR_SHIFT_MAX (fw_pair_shift_valid, after the
+///   conversion of revision 0); its pairs in [0, INT32_MAX]; its terms revision at most
+///   FW_PAIR_TERMS_REVISION.
 /// Reserved bytes must be 0: later fields that read as "none" when 0 (as the shift did) may take
 /// them under the same magic; others need a new magic. A controller older than the shift refuses a
 /// file with one (reserved byte 56 not 0) rather than drive without it.
@@ -52,18 +59,25 @@ extern "C" {
 #define FW_PROGRESS_WHY_MAX 160U
 
 /// pair_runs: bound on each component of the learned policy's shift: |a| in rad/s per rad of
-/// target angle (obstacles: goal bearing), |b| in rad/s per corridor width (obstacles: per rad of
-/// the goal bearing's bend). Above what either task needs (with the falling rate the corridor's
-/// pairs settle at |a| 1-2, |b| 1.4-2.7 after 50 pairs, seeds 11-20; the obstacle task's at |a|
-/// up to 1.7 and |b| up to 3.4 after 17, seeds 1-50): a limit on runaway, not a tuning (with a constant rate b reached
-/// it once in 50 pairs).
+/// target angle (obstacles: the bent goal direction), |b| in rad/s per corridor width (obstacles:
+/// per rad of the bend). Above what either task needs (with the falling rate the corridor's
+/// pairs settle at |a| 1-2, |b| 1.4-2.7 after 50 pairs, seeds 11-20; the obstacle task's at a
+/// 1.0-3.3 and |b| up to 2.2 after 17, seeds 11-50): a limit on runaway, not a tuning (with a
+/// constant rate b reached it once in 50 pairs; the obstacle task's a reached it on one of the
+/// held-out seeds 1-10, where the runs shorten up to a gain of about 5 on the model,
+/// docs/LEARNING.md).
 #define FW_PAIR_SHIFT_MAX 4.0
+
+/// Revision of the pair terms (fw_pair_basis) that checkpoints record with the shift: 1 = the
+/// obstacle task's first term is the goal direction bent around the nearest obstacle (0: the goal
+/// bearing; the corridor's terms are the same in both).
+#define FW_PAIR_TERMS_REVISION 1U
 
 /// pair_runs: the learned policy's shift, moved by the ranked pairs (fw_pair_ranker_t, fw/loop.h)
 /// and kept by checkpoints (here, because this section carries it): the learned policy is HEDGER's
 /// greedy action plus gain × (the task's first pair term) + centring × (its second)
-/// (fw_pair_basis): corridor gain θ + centring (lateral fraction − 0.5); obstacles gain × goal
-/// bearing + centring × its bend around the nearest obstacle [rad/s].
+/// (fw_pair_basis): corridor gain θ + centring (lateral fraction − 0.5); obstacles gain × the goal
+/// direction bent around the nearest obstacle + centring × the bend [rad/s].
 typedef struct fw_pair_shift {
   double gain;       ///< a [rad/s per rad], |a| <= FW_PAIR_SHIFT_MAX
   double centring;   ///< b [rad/s per corridor width; obstacles rad/s per rad of bend], |b| <= FW_PAIR_SHIFT_MAX

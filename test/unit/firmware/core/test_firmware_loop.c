@@ -403,26 +403,36 @@ static void test_pair_ranker_moves_the_shift(void** state) {
   r.shift.centring = -2.0;
   const double s[3] = {5.0, 0.75, 0.2};
   assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_CORRIDOR, s) - (0.5 * 0.2 - 2.0 * 0.25)) < 1e-15);
-  // Among obstacles: a * goal bearing + b * the goal direction's bend around the nearest
-  // obstacle: to the edge of the cone of half-angle asin(0.5 m / distance) on the goal's side.
+  // Among obstacles: a * (goal bearing + bend) + b * bend, the bend the goal direction's turn to
+  // the edge of the nearest obstacle's cone of half-angle asin(0.5 m / distance) on the goal's side.
   const double left_near[4] = {0.3, 3.0, 0.4, 0.6};  // the goal just right of the obstacle: bend right
   const double bend = -(asin(FW_PAIR_OBSTACLE_CLEARANCE_M / 0.6) - 0.1);
-  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, left_near) - (0.5 * 0.3 - 2.0 * bend)) < 1e-15);
+  double basis[2];
+  fw_pair_basis(FW_TASK_OBSTACLES, left_near, basis);
+  assert_true(fabs(basis[0] - (0.4 - asin(FW_PAIR_OBSTACLE_CLEARANCE_M / 0.6))) < 1e-15);  // the cone's right edge
+  assert_true(fabs(basis[1] - bend) < 1e-15);
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, left_near) - (0.5 * (0.3 + bend) - 2.0 * bend)) < 1e-15);
   const double right_near[4] = {-0.3, 3.0, -0.4, 0.6};  // its mirror image
-  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, right_near) - (-0.5 * 0.3 + 2.0 * bend)) < 1e-15);
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, right_near) - (-0.5 * (0.3 + bend) + 2.0 * bend)) < 1e-15);
   const double within[4] = {0.3, 3.0, -0.5, 0.4};  // nearer than the clearance: the cone is a right angle
+  const double bend_within = 0.5 * 3.141592653589793 - 0.8;
   assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, within) -
-                   (0.5 * 0.3 - 2.0 * (0.5 * 3.141592653589793 - 0.8))) < 1e-14);
+                   (0.5 * (0.3 + bend_within) - 2.0 * bend_within)) < 1e-14);
   const double clear[4] = {1.2, 3.0, 0.0, 1.0};  // the goal direction outside the cone (0.52 rad): no bend
   assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, clear) - 0.5 * 1.2) < 1e-15);
   const double behind[4] = {0.2, 3.0, 0.2, 1.0};  // the goal exactly behind it: no side, no bend
   assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, behind) - 0.5 * 0.2) < 1e-15);
   const double beyond_goal[4] = {0.3, 0.8, 0.4, 1.0};  // the obstacle farther than the goal
   assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, beyond_goal) - 0.5 * 0.3) < 1e-15);
-  const double far[4] = {0.3, 3.0, 0.4, 2.0};  // beyond FW_PAIR_OBSTACLE_RANGE_M: the bearing's term alone
+  const double far[4] = {0.3, 3.0, 0.4, 2.0};  // beyond FW_PAIR_OBSTACLE_RANGE_M: the goal bearing alone
   assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, far) - 0.5 * 0.3) < 1e-15);
   const double hidden[4] = {0.3, 3.0, 3.141592653589793, 8.0};
   assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, hidden) - 0.5 * 0.3) < 1e-15);
+  // The bent direction stays within +-pi: an obstacle at the edge of the view, within the
+  // clearance, the goal behind on its far side.
+  const double edge_of_view[4] = {3.0, 3.0, 1.5, 0.3};
+  fw_pair_basis(FW_TASK_OBSTACLES, edge_of_view, basis);
+  assert_true(fabs(basis[0] - (1.5 + 0.5 * 3.141592653589793)) < 1e-15 && basis[0] <= 3.141592653589793);
 }
 
 // One pair-runs session to its end: its statistics, its phase-two training runs that ended on a

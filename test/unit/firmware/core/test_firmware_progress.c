@@ -71,7 +71,8 @@ static void test_progress_round_trip_and_layout(void** state) {
   memcpy(shift, b + 56, sizeof shift);  // little-endian doubles (the hosts this runs on)
   assert_true(shift[0] == 0.8125 && shift[1] == -1.5);
   assert_int_equal(b[72], 17);  // pairs that moved the shift
-  for (size_t i = 76; i < FW_PROGRESS_BYTES; ++i) {
+  assert_int_equal(b[76], FW_PAIR_TERMS_REVISION);
+  for (size_t i = 80; i < FW_PROGRESS_BYTES; ++i) {
     assert_int_equal(b[i], 0);
   }
   fw_progress_t q;
@@ -155,10 +156,38 @@ static void test_progress_out_of_range_refused(void** state) {
   assert_int_equal(out.run_id, INT32_MAX - 1);
 }
 
+// A file written before the terms revision (byte 76 = 0) keeps the policy it learned: the
+// obstacle task's shift a g + b bend becomes a (g + bend) + (b - a) bend, the corridor's stays;
+// a conversion out of range and a newer revision are refused.
+static void test_progress_terms_revision(void** state) {
+  (void)state;
+  fw_progress_t p = sample();  // obstacles: a 0.8125, b -1.5
+  uint8_t b[FW_PROGRESS_BYTES];
+  (void)fw_progress_encode(&p, b);
+  put_u32(b, 76, 0U);
+  fw_progress_t q;
+  char why[FW_PROGRESS_WHY_MAX];
+  assert_int_equal(fw_progress_decode(b, sizeof b, &q, why, sizeof why), 0);
+  assert_true(q.shift.gain == 0.8125 && q.shift.centring == -1.5 - 0.8125);
+  p.task = FW_TASK_CORRIDOR;
+  p.state_dim = 3;
+  (void)fw_progress_encode(&p, b);
+  put_u32(b, 76, 0U);
+  assert_int_equal(fw_progress_decode(b, sizeof b, &q, why, sizeof why), 0);
+  assert_true(q.shift.gain == 0.8125 && q.shift.centring == -1.5);
+  p = sample();
+  p.shift.gain = 3.0;
+  p.shift.centring = -2.0;  // -5 in today's terms: beyond FW_PAIR_SHIFT_MAX
+  expect_refused(&p, 76, 0U, "learned policy shift");
+  const fw_progress_t newest = sample();
+  expect_refused(&newest, 76, FW_PAIR_TERMS_REVISION + 1U, "shift terms revision 2");
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_progress_round_trip_and_layout),
       cmocka_unit_test(test_progress_out_of_range_refused),
+      cmocka_unit_test(test_progress_terms_revision),
   };
   return cmocka_run_group_tests_name("firmware.progress", tests, NULL, NULL);
 }
