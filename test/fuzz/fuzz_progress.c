@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
 // libFuzzer target: the checkpoint's controller section (fw/progress.h). Every accepted section
-// satisfies the documented ranges and re-encodes to the same bytes; every refusal has a reason.
+// satisfies the documented ranges and re-encodes to the same bytes (a section of pair terms
+// revision 0 to today's revision, with the obstacle shift converted, and those bytes decode to the
+// same values); every refusal has a reason.
 #include "fw/config.h"
 #include "fw/progress.h"
 #include "fuzz_util.h"
@@ -32,6 +34,22 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   FUZZ_CHECK(p.shift.pairs <= (uint32_t)INT32_MAX);
   uint8_t again[FW_PROGRESS_BYTES];
   FUZZ_CHECK(fw_progress_encode(&p, again) == FW_PROGRESS_BYTES);
-  FUZZ_CHECK(memcmp(again, data, FW_PROGRESS_BYTES) == 0);
+  const uint32_t terms = (uint32_t)data[76] | (uint32_t)data[77] << 8 | (uint32_t)data[78] << 16 |
+                         (uint32_t)data[79] << 24;
+  FUZZ_CHECK(terms <= FW_PAIR_TERMS_REVISION);
+  if (terms == FW_PAIR_TERMS_REVISION) {
+    FUZZ_CHECK(memcmp(again, data, FW_PROGRESS_BYTES) == 0);
+    return 0;
+  }
+  // Revision 0: only the shift's b (converted among obstacles) and the revision differ.
+  FUZZ_CHECK(memcmp(again, data, 64) == 0 && memcmp(again + 72, data + 72, 4) == 0 &&
+             memcmp(again + 80, data + 80, FW_PROGRESS_BYTES - 80U) == 0);
+  FUZZ_CHECK(p.task == FW_TASK_OBSTACLES || memcmp(again + 64, data + 64, 8) == 0);
+  fw_progress_t q;
+  FUZZ_CHECK(fw_progress_decode(again, sizeof again, &q, why, sizeof why) == 0);
+  FUZZ_CHECK(q.task == p.task && q.state_dim == p.state_dim && q.run_id == p.run_id &&
+             q.schedule.training_runs == g->training_runs && q.schedule.eval_blocks == g->eval_blocks &&
+             memcmp(&q.shift.gain, &p.shift.gain, sizeof(double)) == 0 &&
+             memcmp(&q.shift.centring, &p.shift.centring, sizeof(double)) == 0 && q.shift.pairs == p.shift.pairs);
   return 0;
 }
