@@ -45,11 +45,11 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   FUZZ_CHECK(memcmp(again, data, 64) == 0 && memcmp(again + 72, data + 72, 4) == 0 &&
              memcmp(again + 80, data + 80, FW_PROGRESS_BYTES - 80U) == 0);
   FUZZ_CHECK(p.task == FW_TASK_OBSTACLES || memcmp(again + 64, data + 64, 8) == 0);
+  // Today's bytes decode to the same values: they re-encode to themselves.
   fw_progress_t q;
   FUZZ_CHECK(fw_progress_decode(again, sizeof again, &q, why, sizeof why) == 0);
-  FUZZ_CHECK(q.task == p.task && q.state_dim == p.state_dim && q.run_id == p.run_id &&
-             q.schedule.training_runs == g->training_runs && q.schedule.eval_blocks == g->eval_blocks &&
-             memcmp(&q.shift.gain, &p.shift.gain, sizeof(double)) == 0 &&
-             memcmp(&q.shift.centring, &p.shift.centring, sizeof(double)) == 0 && q.shift.pairs == p.shift.pairs);
+  uint8_t twice[FW_PROGRESS_BYTES];
+  FUZZ_CHECK(fw_progress_encode(&q, twice) == FW_PROGRESS_BYTES);
+  FUZZ_CHECK(memcmp(twice, again, FW_PROGRESS_BYTES) == 0);
   return 0;
 }

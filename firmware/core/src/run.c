@@ -198,19 +198,19 @@ void fw_pair_basis(fw_task_t task, const double* s, double basis[2]) {
   // model and the mirror image see alike), and the bend alone. The first term is the obstacle
   // task's target angle, as the corridor's first is its own: a shift along it turns harder toward
   // the course that keeps the clearance, not toward the obstacle; the second widens (+) or
-  // tightens (-) the berth. The bent direction is the cone's edge, obstacle bearing ± half-cone,
-  // within ±π (a visible obstacle lies within ±π/2, the half-cone at most π/2): no wrap. (With
-  // the goal bearing itself as the first term a harder turn toward
+  // tightens (-) the berth. (With the goal bearing itself as the first term a harder turn toward
   // the goal needed a matching wider bend, a ridge beside a cliff that the ranked pairs climbed
-  // slowly: docs/LEARNING.md, "The bent goal direction as the first term".)
+  // slowly: docs/LEARNING.md, "The bent goal direction as the first term".) The bent direction is
+  // the cone's edge, obstacle bearing ± half-cone, within ±π (a visible obstacle lies within
+  // ±π/2, the half-cone at most π/2): no wrap.
   const double goal_bearing = s[0];
   const double goal_distance = s[1];
   const double obstacle_bearing = s[2];
   const double obstacle_distance = s[3];
   double bend = 0.0;
+  // No bend without an obstacle near (none visible: its distance is the features' far value) or
+  // with it beyond the goal.
   if (obstacle_distance < FW_PAIR_OBSTACLE_RANGE_M && obstacle_distance < goal_distance) {
-    // (No obstacle near, none visible, its distance the features' far value, or it beyond the
-    // goal: no bend.)
     const double half_cone = tasks_obstacles_cone_half_angle_rad(FW_PAIR_OBSTACLE_CLEARANCE_M, obstacle_distance);
     const double rel = features_angle_wrap(goal_bearing - obstacle_bearing);
     if (fabs(rel) < half_cone && fabs(rel) > 0.0) {
