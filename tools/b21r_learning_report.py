@@ -53,6 +53,12 @@ def paired(a, b):
     return m, T975_DF9 * se, t
 
 
+def weighted_greedy(imitation):
+    """How the learned policy weighs the greedy action: (1 + w) x it, w the imitation weight the
+    pairs learned (pair_imitation_sigma; 0 when not learned)."""
+    return "the greedy action" if imitation == 0.0 else "%.3f x the greedy action" % (1.0 + imitation)
+
+
 def mean_all(block):
     """Mean steps over every pose, failures at the step limit."""
     n = block["n_starts"]
@@ -285,12 +291,13 @@ def main():
                       "counted as the example's above" if phase == 1 else "counted as exploration above",
                       sum(1 for r in in_pairs if r["pair_vetoed"]), sum(1 for r in in_pairs if r["goal"])))
     if any(r["pair_member"] >= 0 and r["phase"] == 1 for r in train) and shift_after_one is not None:
-        lines.append("the learned policy after phase one (its last phase-one evaluation): the greedy action plus the "
+        lines.append("the learned policy after phase one (its last phase-one evaluation): %s plus the "
                      "shift phase one's pairs learned, %+.3f x target angle %+.3f x (lateral fraction - 0.5) "
-                     "[rad/s]" % shift_after_one)
+                     "[rad/s]" % ((weighted_greedy(shift_after_one[2]),) + tuple(shift_after_one[:2])))
     if any(r["pair_member"] >= 0 for r in train) and final_shift is not None:
-        lines.append("the learned policy in the last evaluation block: the greedy action plus the shift the pairs "
-                     "learned, %+.3f x target angle %+.3f x (lateral fraction - 0.5) [rad/s]" % final_shift)
+        lines.append("the learned policy in the last evaluation block: %s plus the shift the pairs "
+                     "learned, %+.3f x target angle %+.3f x (lateral fraction - 0.5) [rad/s]" %
+                     ((weighted_greedy(final_shift[2]),) + tuple(final_shift[:2])))
     lines.append("claims (paired over the same poses, 95 %; this seed only, see docs/RESULTS.md for 10 seeds):")
     for c, ok, n in verdicts:
         lines.append("  %-3s %s: %s" % ("yes" if ok else "NO", c, n))

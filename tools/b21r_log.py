@@ -127,8 +127,9 @@ SOURCE_NAMES = ("example", "joystick", "greedy", "exploration", "advisor")
 def runs_from_records(records, experiences=()):
     """One dict per B21R_RUN end record, in order: run_id, phase, evaluating, steps, end (END_NAMES),
     detail, return, sources ({source name: steps}), pair_member (-1: not a pair run; 0, 1: first
-    or second run of a ranked pair), pair_vetoed, perturbation (the pair's g, c; 0, 0 for other
-    runs), shift (the learned policy's shift a, b in force during the run), start (x, y, theta),
+    or second run of a ranked pair), pair_vetoed, perturbation (the pair's g, c, m; zeros for other
+    runs), shift (the learned policy's shift a, b and imitation weight w in force during the run),
+    start (x, y, theta),
     experiences (as the
     controller produced them), received (experiences of the run present in `experiences`) and
     complete: False when fewer were received than produced (only judged when experiences are
@@ -159,7 +160,8 @@ def runs_from_records(records, experiences=()):
                      "return": r.total_reward,
                      "sources": {SOURCE_NAMES[i]: n for i, n in enumerate(r.steps_by_source) if n},
                      "pair_member": r.pair_member, "pair_vetoed": bool(r.pair_vetoed),
-                     "perturbation": (r.pair_gain, r.pair_centring), "shift": (r.shift_gain, r.shift_centring),
+                     "perturbation": (r.pair_gain, r.pair_centring, r.pair_imitation),
+                     "shift": (r.shift_gain, r.shift_centring, r.shift_imitation),
                      "start": (r.start_x_m, r.start_y_m, r.start_theta_rad), "experiences": r.experiences,
                      "received": received, "complete": received is None or received == r.experiences})
     return runs

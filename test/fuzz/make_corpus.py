@@ -105,9 +105,10 @@ def can_record(can_id: int, data: bytes, dlc=None) -> bytes:
 
 
 def progress(task: int, state_dim: int, phase: int, p1: int, p2: int, blocks: int, ex_runs: int,
-             ex_sum: float, best: int, run_id: int, shift=(0.0, 0.0, 0), terms: int = 1) -> bytes:
-    body = b"FWMETA01" + struct.pack("<IIIIIIIIdIIddII", task, state_dim, phase, p1 + p2, p1, p2, blocks,
-                                     ex_runs, ex_sum, best, run_id + 1, *shift, terms)
+             ex_sum: float, best: int, run_id: int, shift=(0.0, 0.0, 0), terms: int = 1,
+             imitation: float = 0.0) -> bytes:
+    body = b"FWMETA01" + struct.pack("<IIIIIIIIdIIddIId", task, state_dim, phase, p1 + p2, p1, p2, blocks,
+                                     ex_runs, ex_sum, best, run_id + 1, *shift, terms, imitation)
     return body.ljust(96, b"\x00")
 
 
@@ -143,6 +144,8 @@ def more_seeds() -> None:
     write("progress", "bad_phase", progress(0, 3, 7, 3, 0, 1, 2, 300.0, 140, 5))
     write("progress", "shifted", progress(0, 4, 2, 30, 35, 13, 30, 30 * 139.0, 127, 194, (1.0625, 1.5, 17)))
     write("progress", "obstacles_terms_0", progress(1, 5, 2, 30, 35, 13, 30, 30 * 139.0, 127, 194, (1.0625, 1.5, 17), 0))
+    write("progress", "imitation_weight", progress(1, 5, 2, 30, 35, 13, 30, 30 * 139.0, 127, 194, (1.0625, 1.5, 17), 1,
+                                                   -0.625))
     # Worlds: the ones the product ships.
     for w in sorted((ROOT / "sim/worlds").glob("*.world")):
         write("world", w.stem, w.read_bytes())

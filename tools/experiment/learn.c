@@ -383,6 +383,7 @@ static void write_learning(json_writer_t* w, const session_t* S, double dt_s) {
     json_int(w, "store_fill", r->store_fill);
     json_num(w, "shift_gain", r->shift.gain);
     json_num(w, "shift_centring", r->shift.centring);
+    json_num(w, "shift_imitation", r->shift.imitation);
     json_end_object(w);
   }
   json_end_array(w);
@@ -416,6 +417,7 @@ static void write_learning(json_writer_t* w, const session_t* S, double dt_s) {
   json_int(w, "pair_safety_held", S->final.pair_safety_held);
   json_num(w, "shift_gain", S->final.shift.gain);
   json_num(w, "shift_centring", S->final.shift.centring);
+  json_num(w, "shift_imitation", S->final.shift.imitation);
   json_int(w, "anchor_unweighted", (int64_t)S->final.anchor_unweighted);
   json_end_object(w);
   char hex[24];

@@ -166,6 +166,11 @@ int main(int argc, char** argv) {
              (unsigned long long)s.pairs_ranked, s.shift.gain,
              cfg.task == FW_TASK_CORRIDOR ? "target angle" : "the bent goal direction", s.shift.centring,
              cfg.task == FW_TASK_CORRIDOR ? "per corridor width" : "per rad of the bend");
+      if (s.shift.imitation < 0.0 || s.shift.imitation > 0.0 || cfg.pair_imitation_sigma > 0.0) {
+        printf("b21r-train: the imitation's weight the pairs learned: the greedy action counts %.4f times (w = "
+               "%+.4f, pair_imitation_sigma)\n",
+               1.0 + s.shift.imitation, s.shift.imitation);
+      }
       if (s.shift_steps_halved > 0 || s.shift_steps_refused > 0) {
         printf("b21r-train: of their steps of the shift, %llu cut (to 1/2, 1/4 or 1/8) and %llu refused by the vet on the kinematic "
                "model (pair_shift_vet)\n",
@@ -183,8 +188,8 @@ int main(int argc, char** argv) {
     if (s.pairs_unmatched > 0 || s.run_records_undecodable > 0) {
       fprintf(stderr,
               "b21r-train: warning: %llu pair runs left unranked (their first run's B21R_RUN is missing from the "
-              "log); %llu B21R_RUN records of another layout skipped (a controller older than pair_member: its "
-              "pairs cannot be ranked)\n",
+              "log); %llu B21R_RUN records of another layout skipped (an older controller's, before pair_member or "
+              "the imitation's weight: its pairs cannot be ranked; its experiences are learned)\n",
               (unsigned long long)s.pairs_unmatched, (unsigned long long)s.run_records_undecodable);
     }
     if (s.run_records_invalid > 0) {

@@ -244,8 +244,8 @@ static void rank_pair_run(trainer_t* t, const b21r_run_t* r) {
   end_run(t);
   // The pair's perturbation and the shift in force come from the log: a record with values the
   // controller cannot have written (non-finite, or a shift beyond its bound) ranks nothing.
-  if (!isfinite(r->pair_gain) || !isfinite(r->pair_centring) ||
-      !fw_pair_shift_valid(r->shift_gain, r->shift_centring)) {
+  if (!isfinite(r->pair_gain) || !isfinite(r->pair_centring) || !isfinite(r->pair_imitation) ||
+      !fw_pair_shift_valid(r->shift_gain, r->shift_centring, r->shift_imitation)) {
     t->stats.run_records_invalid++;
     return;
   }
@@ -253,11 +253,12 @@ static void rank_pair_run(trainer_t* t, const b21r_run_t* r) {
   // session's log, a second pass over the same log or an --init that already holds these pairs
   // would otherwise move it again) and counts where its own differed.
   fw_pair_shift_t* shift = &t->ranker.shift;
-  if (differs(r->shift_gain, shift->gain) || differs(r->shift_centring, shift->centring) || r->shift_pairs < 0 ||
-      (uint32_t)r->shift_pairs != shift->pairs) {
+  if (differs(r->shift_gain, shift->gain) || differs(r->shift_centring, shift->centring) ||
+      differs(r->shift_imitation, shift->imitation) || r->shift_pairs < 0 || (uint32_t)r->shift_pairs != shift->pairs) {
     t->stats.shift_taken_from_log++;
     shift->gain = r->shift_gain;
     shift->centring = r->shift_centring;
+    shift->imitation = r->shift_imitation;
     shift->pairs = r->shift_pairs > 0 ? (uint32_t)r->shift_pairs : 0U;
   }
   const bool aborted = r->end_reason == B21R_RUN_T_END_SAFETY_STOP || r->end_reason == B21R_RUN_T_END_SHUTDOWN;
@@ -266,7 +267,7 @@ static void rank_pair_run(trainer_t* t, const b21r_run_t* r) {
   double weights[2];
   const fw_pair_shift_t in_force = *shift;
   const int32_t n = fw_pair_ranker_end(&t->ranker, &t->cfg, r->phase == 1, r->pair_member, aborted, goal, r->steps,
-                                       t->run_tag, r->pair_gain, r->pair_centring, tags, weights);
+                                       t->run_tag, r->pair_gain, r->pair_centring, r->pair_imitation, tags, weights);
   for (int32_t i = 0; i < n; ++i) {
     (void)hedger_weight_run(t->hedger, tags[i], weights[i], NULL);
   }
@@ -326,7 +327,7 @@ int trainer_add_log(trainer_t* t, const char* path, char* err, size_t err_cap) {
         rank_pair_run(t, &r);
         b21r_run_t_decode_cleanup(&r);
       } else {
-        t->stats.run_records_undecodable++;  // another layout: a controller older than pair_member
+        t->stats.run_records_undecodable++;  // another layout: an older controller's (pair_member, the imitation's weight)
       }
     }
     lcm_eventlog_free_event(ev);

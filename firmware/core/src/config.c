@@ -307,10 +307,16 @@ static const key_desc_t k_keys[] = {
   {NULL, "pair_centring_sigma", KIND_DOUBLE, OFF(pair_centring_sigma), 0, 8, false, false, NULL, "0.5",
    "pair_runs: standard deviation of the perturbation's factor c on the lateral fraction's offset from the "
    "centre line [rad/s per corridor width] (obstacles: on the goal direction's bend around the obstacle [rad/s per rad])"},
+  {NULL, "pair_imitation_sigma", KIND_DOUBLE, OFF(pair_imitation_sigma), 0, 1, false, false, NULL, "0",
+   "pair_runs: standard deviation of the perturbation's weight m on the unperturbed policy's own action (the "
+   "greedy action; phase one: the example's), so that the pairs also learn the imitation's weight w: the "
+   "learned policy is then (1 + w) times the greedy action plus the shift, w within [-1, 1] (0 = not perturbed: "
+   "w stays as loaded, 0 by default; the experiments with a person's examples, obstacles and Fig. 5, set 0.25, "
+   "where the pairs learn to follow them less)"},
   {NULL, "pair_shift_rate", KIND_DOUBLE, OFF(pair_shift_rate), 0, 4, false, false, NULL, "1",
    "pair_runs: the learned policy is the greedy action plus a shift a * target angle + b * (lateral fraction - "
    "0.5) (obstacles: a * the bent goal direction + b * the bend) that the pairs move: each ranked pair adds pair_shift_rate * tanh(d / pair_shift_tau_steps) times its "
-   "perturbation (g, c) to (a, b), d = the second run's steps minus the first's (a failed run counts as the "
+   "perturbation (g, c) to (a, b) (and m to the imitation's weight w, pair_imitation_sigma), d = the second run's steps minus the first's (a failed run counts as the "
    "slower), and phase two's runs then weigh 0 in the imitation (phase one's paired example runs 1); 0 = the "
    "pairs do not move the shift (one loaded from a checkpoint still applies): the faster run's points weigh "
    "more in the imitation instead, in both phases (pair_tau_steps)"},

@@ -237,6 +237,7 @@ struct fw_loop {
   int32_t pair_member;           // of the run under way; -1 = not a pair run
   double pair_gain;              // the pair's perturbation on the task's first pair term (fw_pair_basis) [rad/s per rad]
   double pair_centring;          // and on its second [rad/s]
+  double pair_imitation;         // and its weight on the unperturbed policy's own action [1]
   uint32_t run_tag;              // run tag of the training run under way (its id, or later)
   fw_pair_ranker_t pair_ranker;  // the pair's first run until it is ranked; the learned policy's
                                  // shift (learned state: checkpointed, fw/progress.h)

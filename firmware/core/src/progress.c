@@ -14,7 +14,7 @@
 #include <string.h>
 
 #define MAGIC "FWMETA01"
-#define USED_BYTES 80U
+#define USED_BYTES 88U
 
 size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]) {
   const fw_schedule_progress_t* g = &p->schedule;
@@ -35,11 +35,14 @@ size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]
   fw_put_f64(out + 64, p->shift.centring);
   fw_put_u32(out + 72, p->shift.pairs);
   fw_put_u32(out + 76, FW_PAIR_TERMS_REVISION);
+  fw_put_f64(out + 80, p->shift.imitation);
   return FW_PROGRESS_BYTES;
 }
 
-bool fw_pair_shift_valid(double gain, double centring) {
-  return fabs(gain) <= FW_PAIR_SHIFT_MAX && fabs(centring) <= FW_PAIR_SHIFT_MAX;  // false for NaN too
+bool fw_pair_shift_valid(double gain, double centring, double imitation) {
+  // false for NaN too
+  return fabs(gain) <= FW_PAIR_SHIFT_MAX && fabs(centring) <= FW_PAIR_SHIFT_MAX &&
+         imitation >= FW_PAIR_IMITATION_MIN && imitation <= FW_PAIR_IMITATION_MAX;
 }
 
 static bool is_zero(double x) { return x >= 0.0 && x <= 0.0; }
@@ -134,6 +137,7 @@ int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why
   p.shift.gain = fw_get_f64(b + 56);
   p.shift.centring = fw_get_f64(b + 64);
   p.shift.pairs = (uint32_t)shift_pairs;
+  p.shift.imitation = fw_get_f64(b + 80);  // 0 in files written before it: the greedy action counts once
   const uint32_t terms = fw_get_u32(b + 76);
   if (terms > FW_PAIR_TERMS_REVISION) {
     fw_errfmt(why, cap, "shift terms revision %u, expected at most %u (written by a newer controller)", (unsigned)terms,
@@ -145,9 +149,14 @@ int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why
     // a (g + bend) + (b - a) bend in today's terms, the same policy.
     p.shift.centring -= p.shift.gain;
   }
-  if (!fw_pair_shift_valid(p.shift.gain, p.shift.centring)) {
+  if (!fw_pair_shift_valid(p.shift.gain, p.shift.centring, 0.0)) {
     fw_errfmt(why, cap, "learned policy shift (%.17g, %.17g), expected finite values within +-%g", p.shift.gain,
         p.shift.centring, FW_PAIR_SHIFT_MAX);
+    return -1;
+  }
+  if (!fw_pair_shift_valid(0.0, 0.0, p.shift.imitation)) {
+    fw_errfmt(why, cap, "learned imitation weight %.17g, expected a finite value in [%g, %g]", p.shift.imitation,
+        FW_PAIR_IMITATION_MIN, FW_PAIR_IMITATION_MAX);
     return -1;
   }
   *out = p;

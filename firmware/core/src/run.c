@@ -121,6 +121,9 @@ static void pair_begin_run(fw_loop_t* L) {
   if (L->pair_member == 0) {
     L->pair_gain = L->cfg.pair_gain_sigma * tasks_rng_normal(&L->explore_rng);
     L->pair_centring = L->cfg.pair_centring_sigma * tasks_rng_normal(&L->explore_rng);
+    // Drawn only where it is perturbed, so that runs without it keep their noise.
+    L->pair_imitation =
+        L->cfg.pair_imitation_sigma > 0.0 ? L->cfg.pair_imitation_sigma * tasks_rng_normal(&L->explore_rng) : 0.0;
     L->pair_explore_rng = L->explore_rng;
   } else {
     L->explore_rng = L->pair_explore_rng;
@@ -135,8 +138,8 @@ uint32_t fw_pair_run_tag(int32_t run_id, uint32_t current) {
 }
 
 int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool examples, int32_t member, bool aborted,
-                           bool goal, int32_t steps, uint32_t tag, double gain, double centring, uint32_t tags[2],
-                           double weights[2]) {
+                           bool goal, int32_t steps, uint32_t tag, double gain, double centring, double imitation,
+                           uint32_t tags[2], double weights[2]) {
   // Runs of the example policy are imitated whole when the ranking goes into the shift: their +
   // and - perturbations cancel in the imitation, and the shift was not in their commands.
   const double imitated = examples && cfg->pair_shift_rate > 0.0 ? 1.0 : 0.0;
@@ -171,9 +174,11 @@ int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool exa
     sh->pairs += sh->pairs < UINT32_MAX ? 1U : 0U;
     const double step_gain = rate * u * gain;
     const double step_centring = rate * u * centring;
-    if (isfinite(step_gain) && isfinite(step_centring)) {  // (a damaged log's record: no step)
+    const double step_imitation = rate * u * imitation;
+    if (isfinite(step_gain) && isfinite(step_centring) && isfinite(step_imitation)) {  // (a damaged log's record: no step)
       sh->gain = fmin(FW_PAIR_SHIFT_MAX, fmax(-FW_PAIR_SHIFT_MAX, sh->gain + step_gain));
       sh->centring = fmin(FW_PAIR_SHIFT_MAX, fmax(-FW_PAIR_SHIFT_MAX, sh->centring + step_centring));
+      sh->imitation = fmin(FW_PAIR_IMITATION_MAX, fmax(FW_PAIR_IMITATION_MIN, sh->imitation + step_imitation));
     }
     return 2;
   }
@@ -230,6 +235,10 @@ double fw_pair_shift_at(const fw_pair_shift_t* shift, fw_task_t task, const doub
   return shift->gain * basis[0] + shift->centring * basis[1];
 }
 
+double fw_pair_policy_action(const fw_pair_shift_t* shift, fw_task_t task, const double* s, double greedy) {
+  return (1.0 + shift->imitation) * greedy + fw_pair_shift_at(shift, task, s);
+}
+
 // pair_runs: the run under way ended. A perturbed run is not imitated until its pair is ranked:
 // the first run's points weigh 0 at once (so the second run does not imitate it either), and so
 // do the points of a run that was aborted or is left without its pair. After the second run the
@@ -254,14 +263,15 @@ static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps
   L->pair_runs_missed += goal ? 0 : 1;
   const fw_pair_shift_t in_force = L->pair_ranker.shift;
   L->pair_weigh_n = fw_pair_ranker_end(&L->pair_ranker, &L->cfg, L->plan.phase == 1, L->pair_member, aborted, goal,
-                                       steps, L->run_tag, L->pair_gain, L->pair_centring, L->pair_weigh_tag,
-                                       L->pair_weigh_w);
+                                       steps, L->run_tag, L->pair_gain, L->pair_centring, L->pair_imitation,
+                                       L->pair_weigh_tag, L->pair_weigh_w);
   if (L->pair_weigh_n == 2 && L->cfg.pair_shift_vet) {
     // pair_shift_vet: the step waits for the vet between runs (learning.c), which puts in force
     // the step, a half, a quarter or an eighth of it, or none; the pair counts at once.
     L->shift_proposed = L->pair_ranker.shift;
     L->pair_ranker.shift.gain = in_force.gain;
     L->pair_ranker.shift.centring = in_force.centring;
+    L->pair_ranker.shift.imitation = in_force.imitation;
     L->shift_vet_pending = true;
   }
   L->pair_next_member = aborted || L->pair_member == 1 ? 0 : 1;
@@ -269,12 +279,13 @@ static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps
 }
 
 // pair_runs: the perturbation of the run under way at state s (g, c on the task's two terms,
-// fw_pair_basis); + in the pair's first run, - in its second [rad/s].
-static double pair_offset(const fw_loop_t* L) {
+// fw_pair_basis, m on `own`, the unperturbed policy's own action: the greedy action before the
+// shift, or the example's); + in the pair's first run, - in its second [rad/s].
+static double pair_offset(const fw_loop_t* L, double own) {
   const double sign = L->pair_member == 0 ? 1.0 : -1.0;
   double basis[2];
   fw_pair_basis((fw_task_t)L->cfg.task, L->s, basis);
-  return sign * (L->pair_gain * basis[0] + L->pair_centring * basis[1]);
+  return sign * (L->pair_gain * basis[0] + L->pair_centring * basis[1] + L->pair_imitation * own);
 }
 
 // pair_safety: a pair run's command a goes only if the recovery rollout (tasks/recovery.h) keeps
@@ -458,9 +469,11 @@ static void record_run_end(fw_loop_t* L, int8_t end_reason, int32_t stop_reason,
   r->pair_vetoed = L->pair_run_vetoed;
   r->pair_gain = L->pair_member >= 0 ? L->pair_gain : 0.0;
   r->pair_centring = L->pair_member >= 0 ? L->pair_centring : 0.0;
+  r->pair_imitation = L->pair_member >= 0 ? L->pair_imitation : 0.0;
   const fw_pair_shift_t* shift = &L->pair_ranker.shift;  // pair_finish_run, which may move it, comes after
   r->shift_gain = shift->gain;
   r->shift_centring = shift->centring;
+  r->shift_imitation = shift->imitation;
   r->shift_pairs = (int32_t)(shift->pairs <= (uint32_t)INT32_MAX ? shift->pairs : (uint32_t)INT32_MAX);
   L->run_end_ready = true;
 }
@@ -647,13 +660,16 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
   // transition into s (learned after the command), so it runs once.
   bool greedy_known = false;
   double greedy_action = 0.0;
+  double greedy_imitated = 0.0;  // HEDGER's greedy action itself, before the shift
   if (learned_policy) {
     double value = 0.0;
-    greedy_known = fw_learner_greedy(&L->learner, L->s, &greedy_action, &value);
+    greedy_known = fw_learner_greedy(&L->learner, L->s, &greedy_imitated, &value);
     if (greedy_known) {
-      // The learned policy: HEDGER's greedy action plus the shift the ranked pairs learned (0
-      // until a pair is ranked). The value stays the greedy action's (the learning target).
-      greedy_action = tasks_clamp_omega(greedy_action + fw_pair_shift_at(&L->pair_ranker.shift, (fw_task_t)L->cfg.task, L->s), L->omega_max);
+      // The learned policy: HEDGER's greedy action, weighted by 1 + the imitation's weight, plus
+      // the shift the ranked pairs learned (both 0 until a pair is ranked). The value stays the
+      // greedy action's (the learning target).
+      greedy_action = tasks_clamp_omega(
+          fw_pair_policy_action(&L->pair_ranker.shift, (fw_task_t)L->cfg.task, L->s, greedy_imitated), L->omega_max);
     }
     if (L->pending.active) {
       L->pending.need_greedy = false;
@@ -681,7 +697,7 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
       own_known = true;  // the example's command: the safety filter's first fallback in a pair run
       own_action = a;
       if (!evaluating && L->pair_member >= 0 && !L->pair_run_vetoed) {
-        a = tasks_clamp_omega(a + pair_offset(L), L->omega_max);  // a phase-one pair run
+        a = tasks_clamp_omega(a + pair_offset(L, advice), L->omega_max);  // a phase-one pair run
       }
     }
   } else if (greedy_known) {
@@ -691,7 +707,7 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
       // A pair run: the learned policy with the pair's perturbation, within the action bounds.
       // Once the safety filter has corrected it the run counts as failed: the learned policy
       // drives the rest of the way, which ends it sooner than the perturbation would.
-      a = tasks_clamp_omega(a + pair_offset(L), L->omega_max);
+      a = tasks_clamp_omega(a + pair_offset(L, greedy_imitated), L->omega_max);
       source = B21R_EXPERIENCE_T_SOURCE_EXPLORATION;
     }
     if (!evaluating && explore_offset(L, L->cfg.explore_sigma_radps, &offset)) {

@@ -81,7 +81,8 @@ void fw_shift_vet_begin(fw_shift_vet_t* vet, const fw_pair_shift_t* in_force, co
   vet->shift[2] = *in_force;  // the fraction under test, set when one is tried (candidate_dropped)
   vet->stage = 0;
   if (!(proposed->gain < in_force->gain || proposed->gain > in_force->gain ||
-        proposed->centring < in_force->centring || proposed->centring > in_force->centring)) {
+        proposed->centring < in_force->centring || proposed->centring > in_force->centring ||
+        proposed->imitation < in_force->imitation || proposed->imitation > in_force->imitation)) {
     decide(vet, FW_SHIFT_STEP_TAKEN);
   }
 }
@@ -159,6 +160,7 @@ static void candidate_dropped(fw_shift_vet_t* vet) {
     const fw_pair_shift_t* in_force = &vet->shift[1];
     vet->shift[2].gain = in_force->gain + fraction * (vet->shift[0].gain - in_force->gain);
     vet->shift[2].centring = in_force->centring + fraction * (vet->shift[0].centring - in_force->centring);
+    vet->shift[2].imitation = in_force->imitation + fraction * (vet->shift[0].imitation - in_force->imitation);
   } else {
     decide(vet, FW_SHIFT_STEP_REFUSED);
   }
@@ -219,10 +221,10 @@ bool fw_shift_vet_step(fw_shift_vet_t* vet, fw_shift_vet_greedy_fn greedy, void*
       double a = 0.0;
       double omega = 0.0;
       if (greedy(ctx, s, &a)) {
-        // The learned policy as run.c drives it: the greedy action plus the shift where an action
-        // is known, 0 (hold course) where none is.
+        // The learned policy as run.c drives it: the greedy action weighted by 1 + the imitation's
+        // weight plus the shift where an action is known, 0 (hold course) where none is.
         const fw_pair_shift_t* sh = &vet->shift[vet->checking_in_force ? 1 : (vet->stage == 0 ? 0 : 2)];
-        omega = tasks_clamp_omega(a + fw_pair_shift_at(sh, env->task, s), omega_max);
+        omega = tasks_clamp_omega(fw_pair_policy_action(sh, env->task, s, a), omega_max);
       }
       budget--;
       vet->periods++;

@@ -31,10 +31,18 @@ from b21r_log import read_log
 # 4 replay passes instead of the default 20: the sanitizer build is slow.
 # Phase one's example runs in ranked pairs from the 11th on (pair_phase_one, the default; set here
 # so that the test does not depend on it), so that the trainer's ranking of both phases' pairs and
-# its vet of their steps (pair_shift_vet) are checked.
+# its vet of their steps (pair_shift_vet) are checked; the pairs perturb the imitation's weight
+# too (pair_imitation_sigma), so that the trainer must learn it from the records as well.
 SESSION = {"phase_one_runs": 30, "eval_every_runs": 1000, "eval_starts": 1, "hedger_replay_passes": 4,
-           "pair_phase_one": "true"}
-TRAINER_SETS = ["--set", "hedger_replay_passes=4", "--set", "pair_phase_one=true"]
+           "pair_phase_one": "true", "pair_imitation_sigma": 0.25}
+TRAINER_SETS = ["--set", "hedger_replay_passes=4", "--set", "pair_phase_one=true", "--set", "pair_imitation_sigma=0.25"]
+# The learned policy's shift in the controller section (fw/progress.h): a, b (bytes 56-71), its
+# pairs (72), the terms revision (76) and the imitation's weight w (80-87).
+SHIFT = "<ddIId"
+
+
+def shift_of(path):
+    return struct.unpack_from(SHIFT, sections(path)[0], 56)
 
 
 def sections(path):
@@ -98,22 +106,23 @@ def main():
         fwtest.note("claim 1: the offline learned state equals the controller's after phase one, bit for bit")
         # pair_phase_one (set above) ran phase one's example runs from run 10 on in ranked pairs: their
         # points are imitated whole, so the experience log gives the same store, but only the full
-        # log's B21R_RUN records give the shift they learned (bytes 56-75 of the controller section).
-        shift_phase_one = struct.unpack_from("<ddI", sections(online)[0], 56)
-        if shift_phase_one[2] != 10 or shift_phase_one[:2] == (0.0, 0.0):
+        # log's B21R_RUN records give the shift they learned (bytes 56-87 of the controller section).
+        shift_phase_one = shift_of(online)
+        if shift_phase_one[2] != 10 or shift_phase_one[:2] == (0.0, 0.0) or shift_phase_one[4] == 0.0:
             fwtest.fail("phase one's 20 paired example runs should have ranked 10 pairs into the shift: %s" %
                         (shift_phase_one,))
         offline_full = os.path.join(d, "offline-full.ckpt")
         out1, _ = train(trainer, ["--set", "phase_one_runs=30", "--set", "eval_every_runs=1000", "--out",
                                   offline_full, log1])
         if (sections(offline_full)[1] != sections(online)[1] or
-                struct.unpack_from("<ddI", sections(offline_full)[0], 56) != shift_phase_one or
+                shift_of(offline_full) != shift_phase_one or
                 "10 pairs of runs ranked" not in out1):
             fwtest.fail("from the phase-one full log the trainer should reach the controller's store and shift %s, "
-                        "got %s:\n%s" % (shift_phase_one, struct.unpack_from("<ddI", sections(offline_full)[0], 56),
+                        "got %s:\n%s" % (shift_phase_one, shift_of(offline_full),
                                           out1))
         fwtest.note("claim 1, phase one's pairs: from the full log the trainer ranks the 10 pairs as the controller "
-                    "did and reaches its shift (%.4f, %.4f) bit for bit" % shift_phase_one[:2])
+                    "did and reaches its shift (%.4f, %.4f) and imitation weight %+.4f bit for bit" %
+                    (shift_phase_one[0], shift_phase_one[1], shift_phase_one[4]))
 
         # Claim 2: phase two from the offline checkpoint, the full log's (with phase one's shift: the
         # recommended input; without it phase two's first pairs start the shift again from zero).
@@ -158,16 +167,18 @@ def main():
             fwtest.fail("b21r-train did not rank the 2 pairs of the phase-two log:\n%s" % out)
         if sections(ranked)[1] != sections(offline)[1]:
             fwtest.fail("the offline learned state differs from the controller's own after phase two (pairs ranked)")
-        # The learned policy's shift and its pair count (controller section, bytes 56-75:
+        # The learned policy's shift, its pair count and the imitation's weight (controller section, bytes 56-87:
         # fw/progress.h) are the same too, phase one's 10 pairs and phase two's 2 (a pair whose runs
         # took equal steps leaves the shift where it was: the rule alone is tested in firmware.loop).
-        shift_online = struct.unpack_from("<ddI", sections(offline)[0], 56)
-        shift_offline = struct.unpack_from("<ddI", sections(ranked)[0], 56)
+        shift_online = shift_of(offline)
+        shift_offline = shift_of(ranked)
         if shift_online != shift_offline or shift_online[2] != shift_phase_one[2] + 2:
             fwtest.fail("the learned policy's shift: controller %r, b21r-train %r (expected equal, after %d pairs)" %
                         (shift_online, shift_offline, shift_phase_one[2] + 2))
         if "shift: %.4f rad/s per rad of target angle, %.4f" % shift_online[:2] not in out:
             fwtest.fail("b21r-train did not report the shift %r:\n%s" % (shift_online, out))
+        if "the greedy action counts %.4f times" % (1.0 + shift_online[4]) not in out:
+            fwtest.fail("b21r-train did not report the imitation's weight %r:\n%s" % (shift_online[4], out))
         # An experience log cannot say which runs were pairs: under a configuration that runs pairs
         # (the session's, here given as pair_runs = true: the same learner as auto) the trainer
         # learns them unranked and says so (and the state then differs from the controller's).
@@ -177,27 +188,26 @@ def main():
             fwtest.fail("an experience log of pair runs: expected the warning, got:\n%s" % err2)
         if sections(unranked)[1] == sections(offline)[1]:
             fwtest.fail("unranked pairs gave the ranked state")
-        if (struct.unpack_from("<ddI", sections(unranked)[0], 56)
-                != struct.unpack_from("<ddI", sections(before_two)[0], 56)):
+        if shift_of(unranked) != shift_of(before_two):
             fwtest.fail("an experience log moved the shift: it has no pair records to move it with")
         # --init carries the shift: training on from the controller's checkpoint after phase two
         # keeps its shift (an experience log has no pairs to move it).
         carried = os.path.join(d, "carried.ckpt")
         train(trainer, ["--set", "pair_runs=true", "--init", offline, "--out", carried, explog2])
-        if struct.unpack_from("<ddI", sections(carried)[0], 56) != shift_online:
+        if shift_of(carried) != shift_online:
             fwtest.fail("b21r-train --init lost the checkpoint's shift %r: wrote %r" %
-                        (shift_online, struct.unpack_from("<ddI", sections(carried)[0], 56)))
+                        (shift_online, shift_of(carried)))
         # A second pass over the full log takes the shift from its records instead of moving it
         # again, and says so.
         pairs_twice = os.path.join(d, "pairs-twice.ckpt")
         out2, _ = train(trainer, ["--init", before_two, "--passes", "2", "--out", pairs_twice, log])
-        if (struct.unpack_from("<ddI", sections(pairs_twice)[0], 56) != shift_online
+        if (shift_of(pairs_twice) != shift_online
                 or "follows the log's records" not in out2):
             fwtest.fail("two passes over the phase-two log: expected the controller's shift %r and the note, got %r:\n%s"
-                        % (shift_online, struct.unpack_from("<ddI", sections(pairs_twice)[0], 56), out2))
+                        % (shift_online, shift_of(pairs_twice), out2))
         fwtest.note("claim 1, phase two: the trainer ranks the pairs of the full log as the controller did, bit for "
-                    "bit, and reaches its shift (%.4f, %.4f, %d pairs); from an experience log it warns" %
-                    shift_online)
+                    "bit, and reaches its shift (%.4f, %.4f, %d pairs, imitation weight %+.4f); from an experience "
+                    "log it warns" % (shift_online[0], shift_online[1], shift_online[2], shift_online[4]))
 
         # Several logs, in order: the second pass learns the same data again (twice the updates).
         twice = os.path.join(d, "twice.ckpt")

@@ -145,10 +145,12 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
 
 /// pair_runs: the ranking of pairs as their runs end, kept by the controller (run.c) and by
 /// b21r-train on a log's B21R_RUN records, so that both weigh the same runs alike and reach the
-/// same shift. The shift is part of the learned state: the learned policy is HEDGER's greedy
-/// action plus a θ + b (lateral fraction − 0.5) in the corridor, a × the goal direction bent
-/// around the nearest obstacle + b × the bend among obstacles (fw_pair_shift_at), and
-/// checkpoints keep (a, b) and its pair count (fw/progress.h); b21r-train takes all three from each pair record's copy.
+/// same shift. The shift is part of the learned state: the learned policy is (1 + w) × HEDGER's
+/// greedy action plus a θ + b (lateral fraction − 0.5) in the corridor, a × the goal direction
+/// bent around the nearest obstacle + b × the bend among obstacles (fw_pair_policy_action,
+/// fw_pair_shift_at), w the imitation's weight (0 unless pair_imitation_sigma > 0), and
+/// checkpoints keep (a, b, w) and its pair count (fw/progress.h); b21r-train takes them from each
+/// pair record's copy.
 typedef struct fw_pair_ranker {
   bool first_pending;    ///< a pair's first run ended and the pair is not ranked yet
   bool first_goal;       ///< that run reached the goal (and was not corrected by the filter)
@@ -160,19 +162,21 @@ typedef struct fw_pair_ranker {
 /// A pair run ended: examples = the pair drove the example policy (phase one, pair_phase_one),
 /// member 0 or 1 (the run of its pair), aborted (safety stop, shutdown: its pair starts again),
 /// goal = it reached the goal and the safety filter did not correct it, steps, tag, the run's
-/// tag, and (gain, centring) = the pair's perturbation (g, c: the first run drove with +, the
-/// second with −). Settings from cfg: pair_shift_rate, pair_shift_tau_steps, pair_tau_steps.
+/// tag, and (gain, centring, imitation) = the pair's perturbation (g, c, m: the first run drove
+/// with +, the second with −; m weighs the unperturbed policy's own action). Settings from cfg:
+/// pair_shift_rate, pair_shift_tau_steps, pair_tau_steps.
 /// Writes the anchor weights to apply between runs into tags[]/weights[] and returns how many:
 /// - 1 for a first or an aborted run: it weighs 0 (a perturbed run is not imitated unranked);
 ///   runs of the examples weigh 1 when pair_shift_rate > 0 (they are imitated whole: their + and
 ///   − perturbations cancel in the imitation, and the shift was not in their commands);
 /// - 2 when a second run ranks its pair. With pair_shift_rate > 0 both runs weigh 0 (1 for the
 ///   examples) and the pair
-///   moves the shift: (a, b) += rate · u · (g, c), rate = pair_shift_rate · K / (K + n) after n
+///   moves the shift: (a, b, w) += rate · u · (g, c, m), rate = pair_shift_rate · K / (K + n) after n
 ///   pairs (K = pair_shift_decay_pairs; 0: the rate stays), u = tanh(d / pair_shift_tau_steps), d = the
 ///   second run's steps minus the first's; u = +1 when only the first reached the goal, −1 when
-///   only the second did, 0 when neither did; each component is then clamped to
-///   ±FW_PAIR_SHIFT_MAX (a non-finite step, from a damaged log record, is not taken). The step is
+///   only the second did, 0 when neither did; a and b are then clamped to ±FW_PAIR_SHIFT_MAX, w
+///   to [FW_PAIR_IMITATION_MIN, FW_PAIR_IMITATION_MAX] (a non-finite step, from a damaged log
+///   record, is not taken). The step is
 ///   a finite-difference estimate of the direction that shortens the runs, from two runs with the
 ///   same start and the same exploration noise; the falling rate lets the shift settle where the
 ///   pairs' noise alone would keep it wandering. With
@@ -182,8 +186,8 @@ typedef struct fw_pair_ranker {
 /// - 0 for a second run whose first run never ended here (a log that lost its record).
 /// O(1).
 int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool examples, int32_t member, bool aborted,
-                           bool goal, int32_t steps, uint32_t tag, double gain, double centring, uint32_t tags[2],
-                           double weights[2]);
+                           bool goal, int32_t steps, uint32_t tag, double gain, double centring, double imitation,
+                           uint32_t tags[2], double weights[2]);
 
 /// The obstacle task's second pair term acts within this distance of the nearest obstacle [m]: a
 /// little beyond the reference law's avoidance range (1.25 m), so a shift can change where the
@@ -219,6 +223,11 @@ void fw_pair_basis(fw_task_t task, const double* s, double basis[2]);
 /// basis[1] (fw_pair_basis) [rad/s], as the controller adds it to the greedy action and the vet's
 /// rollouts do (fw/shift_vet.h). Pure, O(1).
 double fw_pair_shift_at(const fw_pair_shift_t* shift, fw_task_t task, const double* s);
+
+/// The learned policy's action at a learner state s where HEDGER's greedy action is `greedy`:
+/// (1 + imitation) × greedy + fw_pair_shift_at [rad/s], not clamped (callers clamp to the action
+/// bounds), as the controller drives it and the vet's rollouts do. Pure, O(1).
+double fw_pair_policy_action(const fw_pair_shift_t* shift, fw_task_t task, const double* s, double greedy);
 
 /// pair_runs: the run tag of a training run with id run_id when the store's current tag is
 /// `current` (run.c; b21r-train uses the same rule): its id while ids run ahead of the tags, else

@@ -15,7 +15,8 @@
 ///        the goal direction bent around the obstacle]
 /// 64  8  its b [rad/s per corridor width, or per rad of the bend]  72  4  pairs that have moved it
 /// 76  4  the shift's terms revision (FW_PAIR_TERMS_REVISION)
-/// 80 16  reserved, 0
+/// 80  8  the imitation's weight w (IEEE-754 double) [1]
+/// 88  8  reserved, 0
 /// ```
 /// The shift (fw_pair_ranker_t, pair_runs) is part of the learned policy, so it travels with the
 /// learned state. Files written before it have zeros there: no shift, the policy they learned.
@@ -34,10 +35,13 @@
 /// - run id + 1 >= training runs (every training run started as a run);
 /// - the shift's a and b finite, each within ±FW_PAIR_SHIFT_MAX (fw_pair_shift_valid, after the
 ///   conversion of revision 0); its pairs in [0, INT32_MAX]; its terms revision at most
-///   FW_PAIR_TERMS_REVISION.
-/// Reserved bytes must be 0: later fields that read as "none" when 0 (as the shift did) may take
-/// them under the same magic; others need a new magic. A controller older than the shift refuses a
-/// file with one (reserved byte 56 not 0) rather than drive without it.
+///   FW_PAIR_TERMS_REVISION; the imitation's weight within [FW_PAIR_IMITATION_MIN,
+///   FW_PAIR_IMITATION_MAX] (files written before it have 0 there: the greedy action once, the
+///   policy they learned).
+/// Reserved bytes must be 0: later fields that read as "none" when 0 (as the shift and the
+/// imitation's weight did) may take them under the same magic; others need a new magic. A
+/// controller older than a field refuses a file with it set (its reserved byte not 0) rather than
+/// drive without it.
 ///
 /// Pure functions: no I/O, no allocation, O(1).
 #ifndef FW_PROGRESS_H
@@ -73,20 +77,32 @@ extern "C" {
 /// bearing; the corridor's terms are the same in both).
 #define FW_PAIR_TERMS_REVISION 1U
 
+/// pair_runs: bounds on the imitation's weight w (fw_pair_shift_t): −1 leaves the greedy action
+/// out (the shift's terms alone drive), +1 doubles it. With a person's examples the pairs settle
+/// below 0 (obstacles −1.0 to +0.2 over seeds 11-50, two of 40 at the bound; the corridor's
+/// Fig. 5 −0.3 to −0.9): a policy that follows the human's wide, wavy paths less and the shift's
+/// terms more (docs/LEARNING.md).
+#define FW_PAIR_IMITATION_MIN (-1.0)
+#define FW_PAIR_IMITATION_MAX 1.0
+
 /// pair_runs: the learned policy's shift, moved by the ranked pairs (fw_pair_ranker_t, fw/loop.h)
-/// and kept by checkpoints (here, because this section carries it): the learned policy is HEDGER's
-/// greedy action plus gain × (the task's first pair term) + centring × (its second)
-/// (fw_pair_basis): corridor gain θ + centring (lateral fraction − 0.5); obstacles gain × the goal
-/// direction bent around the nearest obstacle + centring × the bend [rad/s].
+/// and kept by checkpoints (here, because this section carries it): the learned policy is
+/// (1 + imitation) × HEDGER's greedy action plus gain × (the task's first pair term) + centring ×
+/// (its second) (fw_pair_policy_action, fw_pair_basis): corridor gain θ + centring (lateral
+/// fraction − 0.5); obstacles gain × the goal direction bent around the nearest obstacle +
+/// centring × the bend [rad/s]. The imitation's weight moves only where the pairs perturb it
+/// (pair_imitation_sigma > 0); one loaded from a checkpoint applies either way.
 typedef struct fw_pair_shift {
   double gain;       ///< a [rad/s per rad], |a| <= FW_PAIR_SHIFT_MAX
   double centring;   ///< b [rad/s per corridor width; obstacles rad/s per rad of bend], |b| <= FW_PAIR_SHIFT_MAX
+  double imitation;  ///< w, the imitation's weight: the greedy action counts (1 + w) times [1], w in [FW_PAIR_IMITATION_MIN, FW_PAIR_IMITATION_MAX]
   uint32_t pairs;    ///< pairs ranked into it, whatever pair_shift_vet made of their steps (its step size falls with them: pair_shift_decay_pairs)
 } fw_pair_shift_t;
 
-/// True when a and b are finite and within ±FW_PAIR_SHIFT_MAX (a shift the controller can have
-/// learned). Pure, O(1).
-bool fw_pair_shift_valid(double gain, double centring);
+/// True when a and b are finite and within ±FW_PAIR_SHIFT_MAX and the imitation's weight within
+/// [FW_PAIR_IMITATION_MIN, FW_PAIR_IMITATION_MAX] (a shift the controller can have learned).
+/// Pure, O(1).
+bool fw_pair_shift_valid(double gain, double centring, double imitation);
 
 /// What a checkpoint records besides the learned state.
 typedef struct fw_progress {

@@ -1,9 +1,9 @@
 // SPDX-License-Identifier: MIT
 /// fw/shift_vet.h — Is a step of the learned policy's shift safe to take? (pair_shift_vet)
 ///
-/// A ranked pair proposes a step of the shift (fw_pair_ranker_end): the learned policy, HEDGER's
-/// greedy action plus the shift (a, b) on the task's two pair terms (fw_pair_shift_at), would
-/// drive with (a, b) moved toward the faster run. The pair measured the step from one start pose on the perturbed policy of that
+/// A ranked pair proposes a step of the shift (fw_pair_ranker_end): the learned policy, (1 + w) ×
+/// HEDGER's greedy action plus the shift (a, b) on the task's two pair terms
+/// (fw_pair_policy_action), would drive with (a, b, w) moved toward the faster run. The pair measured the step from one start pose on the perturbed policy of that
 /// pair (in phase one the example policy's), not on the learned policy itself; and the first
 /// pairs, at the full rate, move the shift by up to a whole perturbation. A step can so turn the
 /// learned policy the wrong way where its own action is weak, at poses far off the axis. Before a
@@ -23,8 +23,9 @@
 /// The smaller steps keep a seed from stalling: among obstacles a step toward a faster pair often
 /// clips the obstacle on the model from one recent start by a few centimetres, and where the
 /// half step does too, every step was refused and the shift stayed near 0 (docs/LEARNING.md).
-/// A rollout drives the learned policy as the evaluations do: the greedy action plus the shift
-/// where an action is known, 0 where none is (tasks_clamp_omega to ±omega_max).
+/// A rollout drives the learned policy as the evaluations do: (1 + w) × the greedy action plus the
+/// shift where an action is known, 0 where none is (tasks_clamp_omega to ±omega_max). Fractions
+/// of a step cut all three terms alike.
 ///
 /// The controller runs the vet between runs, after the run's replay and the pair's weights, in
 /// slices of at most pair_shift_vet_periods_per_tick rollout periods (one greedy search each), so
@@ -137,7 +138,8 @@ void fw_shift_vet_env_init(fw_shift_vet_env_t* env, const fw_config_t* cfg);
 void fw_shift_vet_starts_add(fw_shift_vet_starts_t* starts, const fw_shift_vet_env_t* env, const double* state);
 
 /// Starts the vet of a step from `in_force` to `proposed` (pairs: the count after the step, the
-/// result carries it whatever the verdict). A step that moves nothing is taken at once. O(1).
+/// result carries it whatever the verdict). A step that moves none of a, b, w is taken at once.
+/// O(1).
 void fw_shift_vet_begin(fw_shift_vet_t* vet, const fw_pair_shift_t* in_force, const fw_pair_shift_t* proposed);
 
 /// The learned policy's unshifted action at a learner state s: true with *action [rad/s] where

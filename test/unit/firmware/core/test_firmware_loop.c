@@ -72,8 +72,9 @@ static void test_loop_learns_corridor_reaches_goal_from_all_poses(void** state) 
 }
 
 // The ranker's rule (fw_pair_ranker_end, tested alone below) applied by hand to a pair's two
-// B21R_RUN records (a: the first run, b: the second): moves shift[] as the controller should have.
-static void expect_pair_step(const fw_config_t* c, const b21r_run_t* a, const b21r_run_t* b, double shift[2]) {
+// B21R_RUN records (a: the first run, b: the second): moves shift[] (gain, centring, imitation) as
+// the controller should have (within the imitation's bounds; the others' are tested alone).
+static void expect_pair_step(const fw_config_t* c, const b21r_run_t* a, const b21r_run_t* b, double shift[3]) {
   const bool ga = a->end_reason == B21R_RUN_T_END_GOAL && !a->pair_vetoed;
   const bool gb = b->end_reason == B21R_RUN_T_END_GOAL && !b->pair_vetoed;
   const double u = ga && gb ? tanh((double)(b->steps - a->steps) / c->pair_shift_tau_steps)
@@ -82,18 +83,22 @@ static void expect_pair_step(const fw_config_t* c, const b21r_run_t* a, const b2
   const double rate = c->pair_shift_rate * k / (k + (double)a->shift_pairs);
   shift[0] += rate * u * a->pair_gain;
   shift[1] += rate * u * a->pair_centring;
+  shift[2] = fmin(FW_PAIR_IMITATION_MAX, fmax(FW_PAIR_IMITATION_MIN, shift[2] + rate * u * a->pair_imitation));
 }
 
 // pair_runs: phase two's training runs come in pairs from one start pose (the B21R_RUN start
 // poses of a pair are equal, those of different pairs differ), every pair's ranking reaches the
-// store between runs, and the same seed still gives the same experience stream.
+// store between runs, and the same seed still gives the same experience stream. The imitation's
+// weight is perturbed and moved only with pair_imitation_sigma > 0 (repetitions 2 and 3).
 static void test_loop_pair_runs_share_start_and_rank(void** state) {
   (void)state;
-  uint64_t hash[2];
-  for (int rep = 0; rep < 2; ++rep) {
+  uint64_t hash[4];
+  for (int rep = 0; rep < 4; ++rep) {
+    const bool imitation = rep >= 2;
     fw_config_t c;
     pair_session_schedule(&c, 6);
     c.pair_shift_vet = false;  // the ranker's rule alone (the vet: test_loop_shift_vet_runs_between_runs)
+    c.pair_imitation_sigma = imitation ? 0.25 : 0.0;
     assert_int_equal(harness_open(&g_h, &c, false, 9), 0);
     harness_run(&g_h, 200000);
     fw_loop_stats_t st;
@@ -117,19 +122,22 @@ static void test_loop_pair_runs_share_start_and_rank(void** state) {
     }
     // B21R_RUN carries each pair's perturbation and the shift in force; the shift moves by the
     // ranker's rule after each pair (fw_pair_ranker_end, tested alone below) and nowhere else.
-    double shift[2] = {0.0, 0.0};
+    double shift[3] = {0.0, 0.0, 0.0};
     for (int p = 0; p < 3; ++p) {
       const b21r_run_t* a = two[2 * p];
       const b21r_run_t* b = two[2 * p + 1];
-      assert_true(a->pair_gain == b->pair_gain && a->pair_centring == b->pair_centring);
+      assert_true(a->pair_gain == b->pair_gain && a->pair_centring == b->pair_centring &&
+                  a->pair_imitation == b->pair_imitation);
       assert_true(a->pair_gain != 0.0 && a->pair_centring != 0.0);
-      assert_true(a->shift_gain == shift[0] && a->shift_centring == shift[1]);
-      assert_true(b->shift_gain == shift[0] && b->shift_centring == shift[1]);
+      assert_true(imitation ? a->pair_imitation != 0.0 : a->pair_imitation == 0.0);
+      assert_true(a->shift_gain == shift[0] && a->shift_centring == shift[1] && a->shift_imitation == shift[2]);
+      assert_true(b->shift_gain == shift[0] && b->shift_centring == shift[1] && b->shift_imitation == shift[2]);
       assert_int_equal(a->shift_pairs, p);
       expect_pair_step(&c, a, b, shift);
     }
-    assert_true(st.shift.gain == shift[0] && st.shift.centring == shift[1]);
+    assert_true(st.shift.gain == shift[0] && st.shift.centring == shift[1] && st.shift.imitation == shift[2]);
     assert_true(shift[0] != 0.0 || shift[1] != 0.0);
+    assert_true(imitation ? shift[2] != 0.0 : shift[2] == 0.0);
     for (int p = 0; p < 3; ++p) {
       const b21r_run_t* a = two[2 * p];
       const b21r_run_t* b = two[2 * p + 1];
@@ -142,6 +150,8 @@ static void test_loop_pair_runs_share_start_and_rank(void** state) {
     harness_close(&g_h);
   }
   assert_true(hash[0] == hash[1]);
+  assert_true(hash[2] == hash[3]);
+  assert_true(hash[0] != hash[2]);  // the imitation's perturbation changed what the pairs drove
 }
 
 // pair_shift_vet in the controller, with perturbations far beyond the defaults (large steps):
@@ -158,6 +168,7 @@ static void test_loop_shift_vet_runs_between_runs(void** state) {
     pair_session_schedule(&c, 8);
     c.pair_gain_sigma = 3.0;
     c.pair_centring_sigma = 3.0;
+    c.pair_imitation_sigma = 0.5;
     c.pair_shift_vet = vet == 1;
     assert_int_equal(harness_open(&g_h, &c, false, 9), 0);
     harness_run(&g_h, 300000);
@@ -179,26 +190,37 @@ static void test_loop_shift_vet_runs_between_runs(void** state) {
       const b21r_run_t* a = pr[2 * p];
       assert_int_equal(a->pair_member, 0);
       assert_int_equal(pr[2 * p + 1]->pair_member, 1);
-      double rule[2] = {a->shift_gain, a->shift_centring};
+      const double before[3] = {a->shift_gain, a->shift_centring, a->shift_imitation};
+      double rule[3] = {before[0], before[1], before[2]};
       expect_pair_step(&c, a, pr[2 * p + 1], rule);
       for (int k = 0; k < 2; ++k) {
         rule[k] = fmin(FW_PAIR_SHIFT_MAX, fmax(-FW_PAIR_SHIFT_MAX, rule[k]));  // as the ranker bounds it
       }
       // The shift the next pair drove with (after the last pair: the session's).
       const bool last = p + 1 == st.pairs_ranked;
-      const double taken[2] = {last ? st.shift.gain : pr[2 * p + 2]->shift_gain,
-                               last ? st.shift.centring : pr[2 * p + 2]->shift_centring};
+      const double taken[3] = {last ? st.shift.gain : pr[2 * p + 2]->shift_gain,
+                               last ? st.shift.centring : pr[2 * p + 2]->shift_centring,
+                               last ? st.shift.imitation : pr[2 * p + 2]->shift_imitation};
       if (!last) {
         assert_int_equal(pr[2 * p + 2]->shift_pairs, p + 1);  // the pair counts whatever the verdict
       }
-      const bool whole = taken[0] == rule[0] && taken[1] == rule[1];
-      moved += rule[0] != a->shift_gain || rule[1] != a->shift_centring ? 1 : 0;
-      const bool none = taken[0] == a->shift_gain && taken[1] == a->shift_centring;
-      bool fraction = false;  // a half, a quarter or an eighth of the step (FW_SHIFT_VET_HALVINGS)
+      bool whole = true;
+      bool none = true;
+      bool rule_moves = false;
+      for (int k = 0; k < 3; ++k) {
+        whole = whole && taken[k] == rule[k];
+        none = none && taken[k] == before[k];
+        rule_moves = rule_moves || rule[k] != before[k];
+      }
+      moved += rule_moves ? 1 : 0;
+      bool fraction = false;  // a half, a quarter or an eighth of the step (FW_SHIFT_VET_HALVINGS), all three terms
       for (int k = 1; k <= FW_SHIFT_VET_HALVINGS; ++k) {
         const double f = ldexp(1.0, -k);
-        fraction = fraction || (fabs(taken[0] - (a->shift_gain + f * (rule[0] - a->shift_gain))) < 1e-12 &&
-                                fabs(taken[1] - (a->shift_centring + f * (rule[1] - a->shift_centring))) < 1e-12);
+        bool all = true;
+        for (int j = 0; j < 3; ++j) {
+          all = all && fabs(taken[j] - (before[j] + f * (rule[j] - before[j]))) < 1e-12;
+        }
+        fraction = fraction || all;
       }
       assert_true(whole || fraction || none);
       if (vet == 0) {
@@ -210,6 +232,7 @@ static void test_loop_shift_vet_runs_between_runs(void** state) {
     // With the vet every step that moves the shift was driven on the model from at least 10 starts
     // and their mirror images (at least 100 periods per rollout) before the next run; without it
     // nothing was.
+    assert_true(st.shift.imitation != 0.0);  // the imitation's weight moved too
     if (vet == 1) {
       assert_true(moved >= 1);
       assert_true(st.shift_vet_periods >= (int64_t)moved * 2 * 10 * 100);
@@ -227,10 +250,12 @@ static void test_loop_shift_vet_runs_between_runs(void** state) {
 // already has it, and phase two goes on counting from there. Before that run, and with
 // pair_phase_one = false, phase one is the plain examples. Paired from run 5 of 10, the last
 // phase-one run is left without its pair: phase two starts a pair of its own (a pair never spans
-// the switch).
+// the switch). With pair_imitation_sigma (variant 3, without the dither so that the example's
+// own action is the mean of the pair's first commands) the perturbation also weighs the
+// example's action by m.
 static void test_loop_phase_one_pairs(void** state) {
   (void)state;
-  for (int variant = 0; variant < 3; ++variant) {
+  for (int variant = 0; variant < 4; ++variant) {
     const bool on = variant > 0;
     const int32_t from_run = variant == 2 ? 5 : 4;
     const int32_t phase_one_pairs = on ? (10 - from_run) / 2 : 0;
@@ -239,6 +264,10 @@ static void test_loop_phase_one_pairs(void** state) {
     c.pair_shift_vet = false;  // the ranker's rule alone (the vet: test_loop_shift_vet_runs_between_runs)
     c.pair_phase_one = on;
     c.pair_phase_one_from_run = from_run;
+    if (variant == 3) {
+      c.pair_imitation_sigma = 0.25;
+      c.example_noise_radps = 0.0;
+    }
     assert_int_equal(harness_open(&g_h, &c, false, 9), 0);
     g_h.fake.lidar.noise_sigma_m = 0.0;  // a pair's two runs then see the same first state
     harness_run(&g_h, 200000);
@@ -264,17 +293,18 @@ static void test_loop_phase_one_pairs(void** state) {
     }
     assert_int_equal(n, 10);
     assert_int_equal(phase_two_runs, 2);
-    double shift[2] = {0.0, 0.0};
+    double shift[3] = {0.0, 0.0, 0.0};
     int compared = 0;
     for (int i = 0; i < 10; ++i) {
       const b21r_run_t* r = one[i];
       assert_int_equal(r->pair_member, on && i >= from_run ? (i - from_run) % 2 : -1);
-      assert_true(r->shift_gain == shift[0] && r->shift_centring == shift[1]);
+      assert_true(r->shift_gain == shift[0] && r->shift_centring == shift[1] && r->shift_imitation == shift[2]);
       if (r->pair_member != 1) {
         continue;
       }
       const b21r_run_t* a = one[i - 1];
       assert_true(a->pair_gain == r->pair_gain && a->pair_centring == r->pair_centring && a->pair_gain != 0.0);
+      assert_true(a->pair_imitation == r->pair_imitation && (variant == 3) == (a->pair_imitation != 0.0));
       assert_true(a->start_x_m == r->start_x_m && a->start_y_m == r->start_y_m &&
                   a->start_theta_rad == r->start_theta_rad);
       // The first commands: the same example action (gain, dither) plus and minus the perturbation
@@ -285,7 +315,8 @@ static void test_loop_phase_one_pairs(void** state) {
       const double a0 = g_h.run_first_action[a->run_id];
       const double a1 = g_h.run_first_action[r->run_id];
       if (fabs(a0) < 0.28 && fabs(a1) < 0.28) {
-        const double offset = a->pair_gain * s0[2] + a->pair_centring * (s0[1] - 0.5);
+        const double own = 0.5 * (a0 + a1);  // the example's action (variant 3: no dither)
+        const double offset = a->pair_gain * s0[2] + a->pair_centring * (s0[1] - 0.5) + a->pair_imitation * own;
         assert_true(fabs(0.5 * (a0 - a1) - offset) < 1e-12);
         compared++;
       }
@@ -293,12 +324,13 @@ static void test_loop_phase_one_pairs(void** state) {
     }
     assert_true(!on || shift[0] != 0.0 || shift[1] != 0.0);
     assert_true(variant != 1 || compared > 0);  // (seed 9: the first commands of a pair compared)
+    assert_true(variant != 3 || (compared > 0 && shift[2] != 0.0));
     // The evaluation after phase one drove with the shift phase one's pairs learned.
     int evaluated = 0;
     for (int i = 0; i < g_h.runs && i < 64 && evaluated == 0; ++i) {
       const b21r_run_t* r = &g_h.run[i];
       if (r->kind == B21R_RUN_T_KIND_EVALUATION) {
-        assert_true(r->shift_gain == shift[0] && r->shift_centring == shift[1]);
+        assert_true(r->shift_gain == shift[0] && r->shift_centring == shift[1] && r->shift_imitation == shift[2]);
         evaluated++;
       }
     }
@@ -334,36 +366,44 @@ static void test_pair_ranker_moves_the_shift(void** state) {
   uint32_t tags[2];
   double w[2];
   // First run (+perturbation) 140 steps, second (−) 142: the first was faster by 2.
-  assert_int_equal(fw_pair_ranker_end(&r, &c, false, 0, false, true, 140, 7, 0.2, -0.4, tags, w), 1);
+  assert_int_equal(fw_pair_ranker_end(&r, &c, false, 0, false, true, 140, 7, 0.2, -0.4, 0.1, tags, w), 1);
   assert_true(w[0] == 0.0 && tags[0] == 7);
-  assert_int_equal(fw_pair_ranker_end(&r, &c, false, 1, false, true, 142, 8, 0.2, -0.4, tags, w), 2);
+  assert_int_equal(fw_pair_ranker_end(&r, &c, false, 1, false, true, 142, 8, 0.2, -0.4, 0.1, tags, w), 2);
   assert_true(tags[0] == 7 && tags[1] == 8 && w[0] == 0.0 && w[1] == 0.0);
   assert_true(fabs(r.shift.gain - 0.2 * tanh(1.0)) < 1e-15 && fabs(r.shift.centring + 0.4 * tanh(1.0)) < 1e-15);
+  assert_true(fabs(r.shift.imitation - 0.1 * tanh(1.0)) < 1e-15);  // the imitation's weight by the same rule
   const double a1 = r.shift.gain;
+  const double w1 = r.shift.imitation;
   const double b1 = r.shift.centring;
   // The first run missed the goal (or the filter corrected it): the second's side, in full.
-  (void)fw_pair_ranker_end(&r, &c, false, 0, false, false, 300, 9, 0.5, 1.0, tags, w);
-  (void)fw_pair_ranker_end(&r, &c, false, 1, false, true, 150, 10, 0.5, 1.0, tags, w);
-  assert_true(r.shift.gain == a1 - 0.5 && r.shift.centring == b1 - 1.0);
+  (void)fw_pair_ranker_end(&r, &c, false, 0, false, false, 300, 9, 0.5, 1.0, -0.3, tags, w);
+  (void)fw_pair_ranker_end(&r, &c, false, 1, false, true, 150, 10, 0.5, 1.0, -0.3, tags, w);
+  assert_true(r.shift.gain == a1 - 0.5 && r.shift.centring == b1 - 1.0 && r.shift.imitation == w1 + 0.3);
   // Both missed: nothing is learned.
-  (void)fw_pair_ranker_end(&r, &c, false, 0, false, false, 300, 11, 0.5, 1.0, tags, w);
-  (void)fw_pair_ranker_end(&r, &c, false, 1, false, false, 300, 12, 0.5, 1.0, tags, w);
+  (void)fw_pair_ranker_end(&r, &c, false, 0, false, false, 300, 11, 0.5, 1.0, -0.3, tags, w);
+  (void)fw_pair_ranker_end(&r, &c, false, 1, false, false, 300, 12, 0.5, 1.0, -0.3, tags, w);
   assert_true(r.shift.gain == a1 - 0.5 && r.shift.centring == b1 - 1.0);
   // A second run without its first (an aborted first run) ranks nothing and moves nothing.
-  (void)fw_pair_ranker_end(&r, &c, false, 0, true, false, 20, 13, 3.0, 3.0, tags, w);
-  assert_int_equal(fw_pair_ranker_end(&r, &c, false, 1, false, true, 140, 14, 3.0, 3.0, tags, w), 0);
+  (void)fw_pair_ranker_end(&r, &c, false, 0, true, false, 20, 13, 3.0, 3.0, 3.0, tags, w);
+  assert_int_equal(fw_pair_ranker_end(&r, &c, false, 1, false, true, 140, 14, 3.0, 3.0, 3.0, tags, w), 0);
   assert_true(r.shift.gain == a1 - 0.5);
   // The bound: at most FW_PAIR_SHIFT_MAX per component.
   c.pair_shift_rate = 4.0;
   for (int i = 0; i < 4; ++i) {
-    (void)fw_pair_ranker_end(&r, &c, false, 0, false, true, 100, 20U + 2U * (uint32_t)i, 2.0, -2.0, tags, w);
-    (void)fw_pair_ranker_end(&r, &c, false, 1, false, true, 200, 21U + 2U * (uint32_t)i, 2.0, -2.0, tags, w);
+    (void)fw_pair_ranker_end(&r, &c, false, 0, false, true, 100, 20U + 2U * (uint32_t)i, 2.0, -2.0, 0.5, tags, w);
+    (void)fw_pair_ranker_end(&r, &c, false, 1, false, true, 200, 21U + 2U * (uint32_t)i, 2.0, -2.0, 0.5, tags, w);
   }
   assert_true(r.shift.gain == FW_PAIR_SHIFT_MAX && r.shift.centring == -FW_PAIR_SHIFT_MAX);
+  assert_true(r.shift.imitation == FW_PAIR_IMITATION_MAX);  // its own bounds, [-1, 1]
+  for (int i = 0; i < 4; ++i) {
+    (void)fw_pair_ranker_end(&r, &c, false, 0, false, true, 200, 30U + 2U * (uint32_t)i, 0.0, 0.0, 0.5, tags, w);
+    (void)fw_pair_ranker_end(&r, &c, false, 1, false, true, 100, 31U + 2U * (uint32_t)i, 0.0, 0.0, 0.5, tags, w);
+  }
+  assert_true(r.shift.imitation == FW_PAIR_IMITATION_MIN && r.shift.gain == FW_PAIR_SHIFT_MAX);
   // Rate 0: the ranking weighs the runs in the imitation and the shift stays.
   c.pair_shift_rate = 0.0;
-  (void)fw_pair_ranker_end(&r, &c, false, 0, false, true, 140, 40, 0.2, 0.4, tags, w);
-  (void)fw_pair_ranker_end(&r, &c, false, 1, false, true, 141, 41, 0.2, 0.4, tags, w);
+  (void)fw_pair_ranker_end(&r, &c, false, 0, false, true, 140, 40, 0.2, 0.4, 0.1, tags, w);
+  (void)fw_pair_ranker_end(&r, &c, false, 1, false, true, 141, 41, 0.2, 0.4, 0.1, tags, w);
   assert_true(fabs(w[0] - 2.0 / (1.0 + exp(-1.0 / c.pair_tau_steps))) < 1e-15 && fabs(w[0] + w[1] - 2.0) < 1e-15);
   assert_true(r.shift.gain == FW_PAIR_SHIFT_MAX && r.shift.centring == -FW_PAIR_SHIFT_MAX);
   // Pairs of the example policy (phase one): the same step, and both runs stay imitated (weight
@@ -372,16 +412,16 @@ static void test_pair_ranker_moves_the_shift(void** state) {
   memset(&e, 0, sizeof e);
   c.pair_shift_rate = 1.0;
   c.pair_shift_decay_pairs = 0.0;
-  assert_int_equal(fw_pair_ranker_end(&e, &c, true, 0, false, true, 140, 60, 0.2, -0.4, tags, w), 1);
+  assert_int_equal(fw_pair_ranker_end(&e, &c, true, 0, false, true, 140, 60, 0.2, -0.4, 0.1, tags, w), 1);
   assert_true(tags[0] == 60 && w[0] == 1.0);
-  assert_int_equal(fw_pair_ranker_end(&e, &c, true, 1, false, true, 142, 61, 0.2, -0.4, tags, w), 2);
+  assert_int_equal(fw_pair_ranker_end(&e, &c, true, 1, false, true, 142, 61, 0.2, -0.4, 0.1, tags, w), 2);
   assert_true(tags[0] == 60 && tags[1] == 61 && w[0] == 1.0 && w[1] == 1.0);
   assert_true(fabs(e.shift.gain - 0.2 * tanh(1.0)) < 1e-15 && fabs(e.shift.centring + 0.4 * tanh(1.0)) < 1e-15);
   assert_int_equal(e.shift.pairs, 1);
   c.pair_shift_rate = 0.0;
-  (void)fw_pair_ranker_end(&e, &c, true, 0, false, true, 140, 62, 0.2, 0.4, tags, w);
+  (void)fw_pair_ranker_end(&e, &c, true, 0, false, true, 140, 62, 0.2, 0.4, 0.1, tags, w);
   assert_true(w[0] == 0.0);
-  (void)fw_pair_ranker_end(&e, &c, true, 1, false, true, 141, 63, 0.2, 0.4, tags, w);
+  (void)fw_pair_ranker_end(&e, &c, true, 1, false, true, 141, 63, 0.2, 0.4, 0.1, tags, w);
   assert_true(fabs(w[0] - 2.0 / (1.0 + exp(-1.0 / c.pair_tau_steps))) < 1e-15 && fabs(w[0] + w[1] - 2.0) < 1e-15);
   assert_true(fabs(e.shift.gain - 0.2 * tanh(1.0)) < 1e-15);
   // The falling rate: after n pairs a pair moves the shift by rate * K / (K + n) of its side.
@@ -390,19 +430,27 @@ static void test_pair_ranker_moves_the_shift(void** state) {
   c.pair_shift_rate = 1.0;
   c.pair_shift_decay_pairs = 30.0;
   q.shift.pairs = 90;
-  (void)fw_pair_ranker_end(&q, &c, false, 0, false, false, 300, 50, 0.4, -0.8, tags, w);
-  (void)fw_pair_ranker_end(&q, &c, false, 1, false, true, 150, 51, 0.4, -0.8, tags, w);
+  (void)fw_pair_ranker_end(&q, &c, false, 0, false, false, 300, 50, 0.4, -0.8, 0.2, tags, w);
+  (void)fw_pair_ranker_end(&q, &c, false, 1, false, true, 150, 51, 0.4, -0.8, 0.2, tags, w);
   assert_true(fabs(q.shift.gain + 0.4 * 0.25) < 1e-15 && fabs(q.shift.centring - 0.8 * 0.25) < 1e-15);
   assert_int_equal(q.shift.pairs, 91);
   // A non-finite perturbation (a damaged log record) moves nothing.
-  (void)fw_pair_ranker_end(&q, &c, false, 0, false, true, 140, 52, NAN, 0.5, tags, w);
-  (void)fw_pair_ranker_end(&q, &c, false, 1, false, true, 150, 53, NAN, 0.5, tags, w);
+  (void)fw_pair_ranker_end(&q, &c, false, 0, false, true, 140, 52, NAN, 0.5, 0.1, tags, w);
+  (void)fw_pair_ranker_end(&q, &c, false, 1, false, true, 150, 53, NAN, 0.5, 0.1, tags, w);
   assert_true(fabs(q.shift.gain + 0.4 * 0.25) < 1e-15 && fabs(q.shift.centring - 0.8 * 0.25) < 1e-15);
-  // The shift at a state: a * target angle + b * (lateral fraction - 0.5).
+  const double q_imitation = q.shift.imitation;
+  (void)fw_pair_ranker_end(&q, &c, false, 0, false, true, 140, 54, 0.4, 0.5, NAN, tags, w);
+  (void)fw_pair_ranker_end(&q, &c, false, 1, false, true, 150, 55, 0.4, 0.5, NAN, tags, w);
+  assert_true(fabs(q.shift.gain + 0.4 * 0.25) < 1e-15 && q.shift.imitation == q_imitation);
+  // The shift at a state: a * target angle + b * (lateral fraction - 0.5); the learned policy
+  // (1 + w) * greedy plus that.
   r.shift.gain = 0.5;
   r.shift.centring = -2.0;
+  r.shift.imitation = -0.75;
   const double s[3] = {5.0, 0.75, 0.2};
   assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_CORRIDOR, s) - (0.5 * 0.2 - 2.0 * 0.25)) < 1e-15);
+  assert_true(fabs(fw_pair_policy_action(&r.shift, FW_TASK_CORRIDOR, s, 0.8) - (0.25 * 0.8 + 0.5 * 0.2 - 2.0 * 0.25)) <
+              1e-15);
   // Among obstacles: a * (goal bearing + bend) + b * bend, the bend the goal direction's turn to
   // the edge of the nearest obstacle's cone of half-angle asin(0.5 m / distance) on the goal's side.
   const double left_near[4] = {0.3, 3.0, 0.4, 0.6};  // the goal just right of the obstacle: bend right

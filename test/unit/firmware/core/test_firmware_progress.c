@@ -30,6 +30,7 @@ static fw_progress_t sample(void) {
   p.shift.gain = 0.8125;
   p.shift.centring = -1.5;
   p.shift.pairs = 17;
+  p.shift.imitation = -0.375;
   return p;
 }
 
@@ -72,7 +73,10 @@ static void test_progress_round_trip_and_layout(void** state) {
   assert_true(shift[0] == 0.8125 && shift[1] == -1.5);
   assert_int_equal(b[72], 17);  // pairs that moved the shift
   assert_int_equal(b[76], FW_PAIR_TERMS_REVISION);
-  for (size_t i = 80; i < FW_PROGRESS_BYTES; ++i) {
+  double imitation;
+  memcpy(&imitation, b + 80, sizeof imitation);
+  assert_true(imitation == -0.375);
+  for (size_t i = 88; i < FW_PROGRESS_BYTES; ++i) {
     assert_int_equal(b[i], 0);
   }
   fw_progress_t q;
@@ -131,14 +135,21 @@ static void test_progress_out_of_range_refused(void** state) {
     expect_refused(&q, 8, 1, "learned policy shift");
   }
   expect_refused(&p, 72, 0x80000000U, "pairs that moved the shift");
+  // The imitation's weight: finite and within [-1, 1] (an older file's zeros: weight 0).
+  const double bad_imitation[] = {NAN, INFINITY, -INFINITY, 1.0000001, -1.5};
+  for (size_t i = 0; i < sizeof bad_imitation / sizeof bad_imitation[0]; ++i) {
+    q = p;
+    q.shift.imitation = bad_imitation[i];
+    expect_refused(&q, 8, 1, "learned imitation weight");
+  }
   // Reserved bytes, size and magic.
   uint8_t b[FW_PROGRESS_BYTES];
   (void)fw_progress_encode(&p, b);
   fw_progress_t out;
   char why[FW_PROGRESS_WHY_MAX];
-  b[80] = 1;
+  b[88] = 1;
   assert_int_equal(fw_progress_decode(b, sizeof b, &out, why, sizeof why), -1);
-  assert_non_null(strstr(why, "reserved byte 80"));
+  assert_non_null(strstr(why, "reserved byte 88"));
   (void)fw_progress_encode(&p, b);
   assert_int_equal(fw_progress_decode(b, sizeof b - 1U, &out, why, sizeof why), -1);
   assert_non_null(strstr(why, "unknown format (95 bytes"));
@@ -151,9 +162,13 @@ static void test_progress_out_of_range_refused(void** state) {
   q.run_id = INT32_MAX - 1;
   q.shift.gain = 4.0;
   q.shift.centring = -4.0;
+  q.shift.imitation = -1.0;
   (void)fw_progress_encode(&q, b);
   assert_int_equal(fw_progress_decode(b, sizeof b, &out, why, sizeof why), 0);
   assert_int_equal(out.run_id, INT32_MAX - 1);
+  q.shift.imitation = 1.0;
+  (void)fw_progress_encode(&q, b);
+  assert_int_equal(fw_progress_decode(b, sizeof b, &out, why, sizeof why), 0);
 }
 
 // A file written before the terms revision (byte 76 = 0) keeps the policy it learned: the

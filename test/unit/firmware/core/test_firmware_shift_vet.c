@@ -4,7 +4,8 @@
 // keeps the law turning toward the axis is taken; one that makes it turn away is cut to a half, a
 // quarter or an eighth, the first of them that is safe, and refused when none is; a step is judged start by start against the shift in force
 // (mirrored starts included); where the model sees no difference the step is taken; the verdict
-// does not depend on how the work is sliced; the start ring keeps the last starts.
+// does not depend on how the work is sliced; the rollouts weigh the greedy action by 1 + the
+// imitation's weight; the start ring keeps the last starts.
 #include <b21r_test/alloc_counter.h>
 #include <features/features.h>
 #include <fw/config.h>
@@ -70,8 +71,8 @@ static bool nothing_known(void* ctx, const double* s, double* action) {
 }
 
 static fw_shift_vet_t vet_of(fw_shift_vet_greedy_fn greedy, double gain, double centring, uint32_t periods) {
-  const fw_pair_shift_t in_force = {0.0, 0.0, 3U};
-  const fw_pair_shift_t proposed = {gain, centring, 4U};
+  const fw_pair_shift_t in_force = {.gain = 0.0, .centring = 0.0, .pairs = 3U};
+  const fw_pair_shift_t proposed = {.gain = gain, .centring = centring, .pairs = 4U};
   fw_shift_vet_t vet;
   fw_shift_vet_begin(&vet, &in_force, &proposed);
   while (!fw_shift_vet_step(&vet, greedy, NULL, &g_env, &g_starts, periods)) {
@@ -158,6 +159,30 @@ static void test_vet_takes_what_it_cannot_tell_apart(void** state) {
   assert_int_equal(g_calls, 0);
 }
 
+// The imitation's weight: the vet's rollouts drive (1 + w) x the greedy action plus the shift, as
+// the controller does. w = -1 leaves the law out: holding course from starts turned by up to
+// 0.5 rad reaches a wall where the law does not, and the half (w = -0.5: 1 x target angle) turns
+// toward the axis from every start: halved. w = -1 with gain 2 is the law itself again: taken.
+// Doubling the law (w = +1: 4 x target angle) is safe too.
+static void test_vet_weighs_the_greedy_action(void** state) {
+  (void)state;
+  add_typical_starts();
+  const fw_pair_shift_t in_force = {.gain = 0.0, .centring = 0.0, .imitation = 0.0, .pairs = 3U};
+  const double step[3][2] = {{-1.0, 0.0}, {-1.0, 2.0}, {1.0, 0.0}};  // (imitation, gain)
+  const fw_shift_verdict_t expected[3] = {FW_SHIFT_STEP_HALVED, FW_SHIFT_STEP_TAKEN, FW_SHIFT_STEP_TAKEN};
+  for (int i = 0; i < 3; ++i) {
+    const fw_pair_shift_t proposed = {.gain = step[i][1], .centring = 0.0, .imitation = step[i][0], .pairs = 4U};
+    fw_shift_vet_t vet;
+    fw_shift_vet_begin(&vet, &in_force, &proposed);
+    while (!fw_shift_vet_step(&vet, law, NULL, &g_env, &g_starts, UINT32_MAX)) {
+    }
+    assert_int_equal(vet.verdict, expected[i]);
+    const double fraction = expected[i] == FW_SHIFT_STEP_HALVED ? 0.5 : 1.0;
+    assert_true(vet.result.imitation == fraction * step[i][0] && vet.result.gain == fraction * step[i][1]);
+    assert_int_equal(vet.failures[0], i == 0 ? 1 : 0);
+  }
+}
+
 // The work in slices (one period per call, as a tick with the budget 1) reaches the same verdict
 // and shift with the same number of policy calls, and never does more than its budget per call.
 static void check_slices(double gain, double centring, fw_shift_verdict_t verdict) {
@@ -166,8 +191,8 @@ static void check_slices(double gain, double centring, fw_shift_verdict_t verdic
   assert_int_equal(whole.verdict, verdict);
   const int whole_calls = g_calls;
   g_calls = 0;
-  const fw_pair_shift_t in_force = {0.0, 0.0, 3U};
-  const fw_pair_shift_t proposed = {gain, centring, 4U};
+  const fw_pair_shift_t in_force = {.gain = 0.0, .centring = 0.0, .pairs = 3U};
+  const fw_pair_shift_t proposed = {.gain = gain, .centring = centring, .pairs = 4U};
   fw_shift_vet_t sliced;
   fw_shift_vet_begin(&sliced, &in_force, &proposed);
   int slices = 0;
@@ -183,7 +208,8 @@ static void check_slices(double gain, double centring, fw_shift_verdict_t verdic
   assert_int_equal(g_calls, whole_calls);
   assert_true(slices >= whole_calls / 3);
   assert_int_equal(sliced.verdict, whole.verdict);
-  assert_true(sliced.result.gain == whole.result.gain && sliced.result.centring == whole.result.centring);
+  assert_true(sliced.result.gain == whole.result.gain && sliced.result.centring == whole.result.centring &&
+              sliced.result.imitation == whole.result.imitation);
   assert_int_equal(sliced.result.pairs, whole.result.pairs);
 }
 
@@ -202,8 +228,8 @@ static void test_vet_in_slices_decides_the_same(void** state) {
 static void test_vet_cuts_the_step_from_the_shift_in_force(void** state) {
   (void)state;
   add_typical_starts();
-  const fw_pair_shift_t in_force = {-0.5, 0.0, 3U};
-  const fw_pair_shift_t proposed = {-4.5, 0.0, 4U};
+  const fw_pair_shift_t in_force = {.gain = -0.5, .centring = 0.0, .pairs = 3U};
+  const fw_pair_shift_t proposed = {.gain = -4.5, .centring = 0.0, .pairs = 4U};
   fw_shift_vet_t vet;
   fw_shift_vet_begin(&vet, &in_force, &proposed);
   while (!fw_shift_vet_step(&vet, law, NULL, &g_env, &g_starts, UINT32_MAX)) {
@@ -271,8 +297,8 @@ static bool avoid_law(void* ctx, const double* s, double* action) {
 }
 
 static fw_shift_vet_t obstacles_vet_of(double gain, double centring) {
-  const fw_pair_shift_t in_force = {0.0, 0.0, 3U};
-  const fw_pair_shift_t proposed = {gain, centring, 4U};
+  const fw_pair_shift_t in_force = {.gain = 0.0, .centring = 0.0, .pairs = 3U};
+  const fw_pair_shift_t proposed = {.gain = gain, .centring = centring, .pairs = 4U};
   fw_shift_vet_t vet;
   fw_shift_vet_begin(&vet, &in_force, &proposed);
   while (!fw_shift_vet_step(&vet, avoid_law, NULL, &g_obstacles_env, &g_starts, 64U)) {
@@ -349,8 +375,8 @@ static void test_vet_among_obstacles(void** state) {
         s[2] = -s[2];  // obstacle bearing (visible from every evaluation pose)
       }
       fw_shift_vet_starts_add(&one, &alone, s);
-      const fw_pair_shift_t in_force = {0.0, 0.0, 3U};
-      const fw_pair_shift_t proposed = {0.2, -0.2, 4U};
+      const fw_pair_shift_t in_force = {.gain = 0.0, .centring = 0.0, .pairs = 3U};
+      const fw_pair_shift_t proposed = {.gain = 0.2, .centring = -0.2, .pairs = 4U};
       fw_shift_vet_begin(&vet, &in_force, &proposed);
       (void)fw_shift_vet_step(&vet, avoid_law, NULL, &alone, &one, UINT32_MAX);
       failed[m] = vet.failures[0] > 0;  // the proposed shift's one rollout
@@ -380,6 +406,7 @@ int main(void) {
       cmocka_unit_test_setup(test_vet_tries_a_quarter_and_an_eighth, setup),
       cmocka_unit_test_setup(test_vet_refuses_a_step_whose_eighth_reaches_a_wall, setup),
       cmocka_unit_test_setup(test_vet_takes_what_it_cannot_tell_apart, setup),
+      cmocka_unit_test_setup(test_vet_weighs_the_greedy_action, setup),
       cmocka_unit_test_setup(test_vet_in_slices_decides_the_same, setup),
       cmocka_unit_test_setup(test_vet_cuts_the_step_from_the_shift_in_force, setup),
       cmocka_unit_test_setup(test_vet_starts_keep_the_last_runs, setup),
