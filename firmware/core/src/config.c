@@ -314,7 +314,7 @@ static const key_desc_t k_keys[] = {
    "w stays as loaded, 0 by default; the experiments with a person's examples, obstacles and Fig. 5, set 0.25, "
    "where the pairs learn to follow them less)"},
   {NULL, "pair_shift_rate", KIND_DOUBLE, OFF(pair_shift_rate), 0, 4, false, false, NULL, "1",
-   "pair_runs: the learned policy is the greedy action plus a shift a * target angle + b * (lateral fraction - "
+   "pair_runs: the learned policy is (1 + w) times the greedy action plus a shift a * target angle + b * (lateral fraction - "
    "0.5) (obstacles: a * the bent goal direction + b * the bend) that the pairs move: each ranked pair adds pair_shift_rate * tanh(d / pair_shift_tau_steps) times its "
    "perturbation (g, c) to (a, b) (and m to the imitation's weight w, pair_imitation_sigma), d = the second run's steps minus the first's (a failed run counts as the "
    "slower), and phase two's runs then weigh 0 in the imitation (phase one's paired example runs 1); 0 = the "

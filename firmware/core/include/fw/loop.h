@@ -148,7 +148,8 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
 /// same shift. The shift is part of the learned state: the learned policy is (1 + w) × HEDGER's
 /// greedy action plus a θ + b (lateral fraction − 0.5) in the corridor, a × the goal direction
 /// bent around the nearest obstacle + b × the bend among obstacles (fw_pair_policy_action,
-/// fw_pair_shift_at), w the imitation's weight (0 unless pair_imitation_sigma > 0), and
+/// fw_pair_shift_at), w the imitation's weight (moved only where pair_imitation_sigma > 0; one
+/// loaded from a checkpoint applies either way), and
 /// checkpoints keep (a, b, w) and its pair count (fw/progress.h); b21r-train takes them from each
 /// pair record's copy.
 typedef struct fw_pair_ranker {

@@ -142,8 +142,9 @@ void fw_shift_vet_starts_add(fw_shift_vet_starts_t* starts, const fw_shift_vet_e
 /// O(1).
 void fw_shift_vet_begin(fw_shift_vet_t* vet, const fw_pair_shift_t* in_force, const fw_pair_shift_t* proposed);
 
-/// The learned policy's unshifted action at a learner state s: true with *action [rad/s] where
-/// one is known, false where none is (the policy then holds course).
+/// HEDGER's greedy action itself at a learner state s, before the imitation's weight and the
+/// shift (the vet applies both: returning the weighted action would apply w twice): true with
+/// *action [rad/s] where one is known, false where none is (the policy then holds course).
 typedef bool (*fw_shift_vet_greedy_fn)(void* ctx, const double* s, double* action);
 
 /// fw_shift_vet_greedy_fn of a HEDGER (ctx: hedger_t*): hedger_greedy, HEDGER_OK = known. The
