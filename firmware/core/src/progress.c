@@ -39,10 +39,17 @@ size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]
   return FW_PROGRESS_BYTES;
 }
 
+// The shift's two terms within ±FW_PAIR_SHIFT_MAX, and the imitation's weight within its bounds
+// (each false for NaN too).
+static bool terms_valid(double gain, double centring) {
+  return fabs(gain) <= FW_PAIR_SHIFT_MAX && fabs(centring) <= FW_PAIR_SHIFT_MAX;
+}
+static bool imitation_valid(double imitation) {
+  return imitation >= FW_PAIR_IMITATION_MIN && imitation <= FW_PAIR_IMITATION_MAX;
+}
+
 bool fw_pair_shift_valid(double gain, double centring, double imitation) {
-  // false for NaN too
-  return fabs(gain) <= FW_PAIR_SHIFT_MAX && fabs(centring) <= FW_PAIR_SHIFT_MAX &&
-         imitation >= FW_PAIR_IMITATION_MIN && imitation <= FW_PAIR_IMITATION_MAX;
+  return terms_valid(gain, centring) && imitation_valid(imitation);
 }
 
 static bool is_zero(double x) { return x >= 0.0 && x <= 0.0; }
@@ -149,12 +156,12 @@ int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why
     // a (g + bend) + (b - a) bend in today's terms, the same policy.
     p.shift.centring -= p.shift.gain;
   }
-  if (!fw_pair_shift_valid(p.shift.gain, p.shift.centring, 0.0)) {
+  if (!terms_valid(p.shift.gain, p.shift.centring)) {
     fw_errfmt(why, cap, "learned policy shift (%.17g, %.17g), expected finite values within +-%g", p.shift.gain,
         p.shift.centring, FW_PAIR_SHIFT_MAX);
     return -1;
   }
-  if (!fw_pair_shift_valid(0.0, 0.0, p.shift.imitation)) {
+  if (!imitation_valid(p.shift.imitation)) {
     fw_errfmt(why, cap, "learned imitation weight %.17g, expected a finite value in [%g, %g]", p.shift.imitation,
         FW_PAIR_IMITATION_MIN, FW_PAIR_IMITATION_MAX);
     return -1;

@@ -268,10 +268,10 @@ static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps
   if (L->pair_weigh_n == 2 && L->cfg.pair_shift_vet) {
     // pair_shift_vet: the step waits for the vet between runs (learning.c), which puts in force
     // the step, a half, a quarter or an eighth of it, or none; the pair counts at once.
+    // Every term waits; only the pair count moves now.
     L->shift_proposed = L->pair_ranker.shift;
-    L->pair_ranker.shift.gain = in_force.gain;
-    L->pair_ranker.shift.centring = in_force.centring;
-    L->pair_ranker.shift.imitation = in_force.imitation;
+    L->pair_ranker.shift = in_force;
+    L->pair_ranker.shift.pairs = L->shift_proposed.pairs;
     L->shift_vet_pending = true;
   }
   L->pair_next_member = aborted || L->pair_member == 1 ? 0 : 1;
