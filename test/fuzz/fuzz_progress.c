@@ -33,6 +33,9 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   FUZZ_CHECK(isfinite(p.shift.centring) && fabs(p.shift.centring) <= FW_PAIR_SHIFT_MAX);
   FUZZ_CHECK(p.shift.pairs <= (uint32_t)INT32_MAX);
   FUZZ_CHECK(p.shift.imitation >= FW_PAIR_IMITATION_MIN && p.shift.imitation <= FW_PAIR_IMITATION_MAX);
+  FUZZ_CHECK(p.obstacle_clearance_m == 0.0 ||
+             (p.task == FW_TASK_OBSTACLES && p.obstacle_clearance_m >= FW_PAIR_OBSTACLE_CLEARANCE_MIN_M &&
+              p.obstacle_clearance_m <= FW_PAIR_OBSTACLE_CLEARANCE_MAX_M));
   uint8_t again[FW_PROGRESS_BYTES];
   FUZZ_CHECK(fw_progress_encode(&p, again) == FW_PROGRESS_BYTES);
   const uint32_t terms = (uint32_t)data[76] | (uint32_t)data[77] << 8 | (uint32_t)data[78] << 16 |

@@ -106,10 +106,11 @@ def can_record(can_id: int, data: bytes, dlc=None) -> bytes:
 
 def progress(task: int, state_dim: int, phase: int, p1: int, p2: int, blocks: int, ex_runs: int,
              ex_sum: float, best: int, run_id: int, shift=(0.0, 0.0, 0), terms: int = 1,
-             imitation: float = 0.0) -> bytes:
-    body = b"FWMETA01" + struct.pack("<IIIIIIIIdIIddIId", task, state_dim, phase, p1 + p2, p1, p2, blocks,
-                                     ex_runs, ex_sum, best, run_id + 1, *shift, terms, imitation)
-    return body.ljust(96, b"\x00")
+             imitation: float = 0.0, clearance: float = 0.0) -> bytes:
+    body = b"FWMETA01" + struct.pack("<IIIIIIIIdIIddIIdd", task, state_dim, phase, p1 + p2, p1, p2, blocks,
+                                     ex_runs, ex_sum, best, run_id + 1, *shift, terms, imitation, clearance)
+    assert len(body) == 96
+    return body
 
 
 def teleop(seq: int, deadman: bool, rot: float, trans: float, offset_ms: int) -> bytes:
@@ -146,6 +147,8 @@ def more_seeds() -> None:
     write("progress", "obstacles_terms_0", progress(1, 5, 2, 30, 35, 13, 30, 30 * 139.0, 127, 194, (1.0625, 1.5, 17), 0))
     write("progress", "imitation_weight", progress(1, 5, 2, 30, 35, 13, 30, 30 * 139.0, 127, 194, (1.0625, 1.5, 17), 1,
                                                    -0.625))
+    write("progress", "obstacle_clearance", progress(1, 5, 2, 30, 35, 13, 30, 30 * 139.0, 127, 194, (1.0625, 1.5, 17),
+                                                     1, -0.625, 0.45))
     # Worlds: the ones the product ships.
     for w in sorted((ROOT / "sim/worlds").glob("*.world")):
         write("world", w.stem, w.read_bytes())

@@ -133,9 +133,14 @@ int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t er
     fw_progress_t g;
     char why[FW_PROGRESS_WHY_MAX];
     hedger_status_t hs = HEDGER_OK;
+    double learned_clearance_m = 0.0;
     if (fw_progress_decode((const uint8_t*)meta, meta_size, &g, why, sizeof why) != 0) {
       fw_errfmt(err, err_cap, "%s is corrupt (controller section: %s); give a checkpoint the controller or "
           "b21r-train wrote", path, why);
+    } else if (!fw_progress_clearance_fits(&g, t->cfg.pair_obstacle_clearance_m, &learned_clearance_m)) {
+      fw_errfmt(err, err_cap, "%s: its learned policy's shift bends around the obstacle at pair_obstacle_clearance_m = "
+          "%.15g, not %.15g: train with pair_obstacle_clearance_m = %.15g", path, learned_clearance_m,
+          t->cfg.pair_obstacle_clearance_m, learned_clearance_m);
     } else if ((hs = hedger_load(t->hedger, payload, payload_size)) == HEDGER_OK) {
       t->ranker.shift = g.shift;
       rc = 0;

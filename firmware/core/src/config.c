@@ -3,6 +3,7 @@
 // the parser, the error messages, --help and the reference file cannot drift apart.
 #include "fw/config.h"
 #include "fw/errfmt.h"
+#include "fw/progress.h"
 
 #include <hedger/hedger.h>
 
@@ -313,13 +314,19 @@ static const key_desc_t k_keys[] = {
    "learned policy is then (1 + w) times the greedy action plus the shift, w within [-1, 1] (0 = not perturbed: "
    "w stays as loaded, 0 by default; the experiments with a person's examples, obstacles and Fig. 5, set 0.25, "
    "where the pairs learn to follow them less)"},
+  {NULL, "pair_obstacle_clearance_m", KIND_DOUBLE, OFF(pair_obstacle_clearance_m), FW_PAIR_OBSTACLE_CLEARANCE_MIN_M,
+   FW_PAIR_OBSTACLE_CLEARANCE_MAX_M, false, false, NULL, "0.5",
+   "pair_runs, obstacle task: the clearance [m, from the robot's centre to the obstacle's nearest return] around "
+   "which the pair terms bend the goal direction (the cone of half-angle asin(clearance / distance)); the shift a "
+   "checkpoint carries was learned with one clearance and resumes only with it (the obstacle experiments set "
+   "0.45; the reference law keeps 0.40)"},
   {NULL, "pair_shift_rate", KIND_DOUBLE, OFF(pair_shift_rate), 0, 4, false, false, NULL, "1",
    "pair_runs: the learned policy is (1 + w) times the greedy action plus a shift a * target angle + b * (lateral fraction - "
    "0.5) (obstacles: a * the bent goal direction + b * the bend) that the pairs move: each ranked pair adds pair_shift_rate * tanh(d / pair_shift_tau_steps) times its "
    "perturbation (g, c) to (a, b) (and m to the imitation's weight w, pair_imitation_sigma), d = the second run's steps minus the first's (a failed run counts as the "
    "slower), and phase two's runs then weigh 0 in the imitation (phase one's paired example runs 1); 0 = the "
    "pairs do not move the shift (one loaded from a checkpoint still applies): the faster run's points weigh "
-   "more in the imitation instead, in both phases (pair_tau_steps)"},
+   "more in the imitation instead, in both phases (pair_tau_steps); the obstacle experiments set 2"},
   {NULL, "pair_shift_tau_steps", KIND_DOUBLE, OFF(pair_shift_tau_steps), 0.01, 1000, false, false, NULL, "2",
    "pair_runs: the difference in steps at which a pair moves the shift by 0.76 of pair_shift_rate times its "
    "perturbation"},

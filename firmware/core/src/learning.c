@@ -98,7 +98,8 @@ void fw_learning_config(const fw_loop_t* L, hedger_config_t* hc) {
 static size_t encode_meta(const fw_loop_t* L, uint8_t* p) {
   const fw_progress_t g = {
       .task = L->cfg.task, .state_dim = L->state_dim, .schedule = L->sched.p, .run_id = L->run_id,
-      .shift = L->pair_ranker.shift};
+      .shift = L->pair_ranker.shift,
+      .obstacle_clearance_m = fw_run_is_corridor(L) ? 0.0 : L->cfg.pair_obstacle_clearance_m};
   return fw_progress_encode(&g, p);
 }
 
@@ -203,6 +204,16 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
              "checkpoint %s was learned for another task (%s); to start fresh, move the file away (e.g. mv '%s' "
              "'%s.other')",
              path, g.task == FW_TASK_CORRIDOR ? "corridor" : "obstacles", path, path);
+    return -1;
+  }
+  double learned_clearance_m = 0.0;
+  if (!fw_progress_clearance_fits(&g, L->cfg.pair_obstacle_clearance_m, &learned_clearance_m)) {
+    free(payload);
+    snprintf(err, err_cap,
+             "checkpoint %s: its learned policy's shift bends around the obstacle at pair_obstacle_clearance_m = %.15g, "
+             "not %.15g; set pair_obstacle_clearance_m = %.15g to go on with it, or move the file away to start fresh "
+             "(e.g. mv '%s' '%s.other')",
+             path, learned_clearance_m, L->cfg.pair_obstacle_clearance_m, learned_clearance_m, path, path);
     return -1;
   }
   const hedger_status_t hs = hedger_load(L->learner.hedger, payload, payload_size);

@@ -14,7 +14,9 @@
 #include <string.h>
 
 #define MAGIC "FWMETA01"
-#define USED_BYTES 88U
+
+// Every byte is in use: the last field, the clearance, ends at 96.
+_Static_assert(FW_PROGRESS_BYTES == 96U, "fw_progress_encode fills bytes 0-95");
 
 size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]) {
   const fw_schedule_progress_t* g = &p->schedule;
@@ -36,6 +38,7 @@ size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]
   fw_put_u32(out + 72, p->shift.pairs);
   fw_put_u32(out + 76, FW_PAIR_TERMS_REVISION);
   fw_put_f64(out + 80, p->shift.imitation);
+  fw_put_f64(out + 88, p->obstacle_clearance_m);
   return FW_PROGRESS_BYTES;
 }
 
@@ -54,6 +57,15 @@ bool fw_pair_shift_valid(double gain, double centring, double imitation) {
 
 static bool is_zero(double x) { return x >= 0.0 && x <= 0.0; }
 
+bool fw_progress_clearance_fits(const fw_progress_t* p, double clearance_m, double* learned_m) {
+  const double learned = p->obstacle_clearance_m > 0.0 ? p->obstacle_clearance_m : FW_PROGRESS_CLEARANCE_UNRECORDED_M;
+  if (learned_m != NULL) {
+    *learned_m = learned;
+  }
+  return p->task != (int32_t)FW_TASK_OBSTACLES || (is_zero(p->shift.gain) && is_zero(p->shift.centring)) ||
+         (learned >= clearance_m && learned <= clearance_m);
+}
+
 // Reads a counter at off into *v; false (with the reason) when it exceeds INT32_MAX.
 static bool counter(const uint8_t* b, size_t off, const char* name, int32_t* v, char* why, size_t cap) {
   const uint32_t u = fw_get_u32(b + off);
@@ -70,12 +82,6 @@ int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why
     fw_errfmt(why, cap, "unknown format (%zu bytes%s, expected %u starting with " MAGIC ")", n,
         n >= 8 && memcmp(b, MAGIC, 8) != 0 ? ", other magic" : "", FW_PROGRESS_BYTES);
     return -1;
-  }
-  for (size_t i = USED_BYTES; i < FW_PROGRESS_BYTES; ++i) {
-    if (b[i] != 0) {
-      fw_errfmt(why, cap, "reserved byte %zu is 0x%02x, expected 0", i, b[i]);
-      return -1;
-    }
   }
   fw_progress_t p;
   memset(&p, 0, sizeof p);
@@ -164,6 +170,16 @@ int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why
   if (!imitation_valid(p.shift.imitation)) {
     fw_errfmt(why, cap, "learned imitation weight %.17g, expected a finite value in [%g, %g]", p.shift.imitation,
         FW_PAIR_IMITATION_MIN, FW_PAIR_IMITATION_MAX);
+    return -1;
+  }
+  p.obstacle_clearance_m = fw_get_f64(b + 88);
+  const bool clearance_ok =
+      is_zero(p.obstacle_clearance_m) ||
+      (p.task == (int32_t)FW_TASK_OBSTACLES && p.obstacle_clearance_m >= FW_PAIR_OBSTACLE_CLEARANCE_MIN_M &&
+       p.obstacle_clearance_m <= FW_PAIR_OBSTACLE_CLEARANCE_MAX_M);
+  if (!clearance_ok) {
+    fw_errfmt(why, cap, "obstacle pair clearance %.17g m, expected 0 or (obstacle task) within [%g, %g]",
+        p.obstacle_clearance_m, FW_PAIR_OBSTACLE_CLEARANCE_MIN_M, FW_PAIR_OBSTACLE_CLEARANCE_MAX_M);
     return -1;
   }
   *out = p;

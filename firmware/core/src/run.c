@@ -191,7 +191,7 @@ int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool exa
   return 2;
 }
 
-void fw_pair_basis(fw_task_t task, const double* s, double basis[2]) {
+void fw_pair_basis(fw_task_t task, double obstacle_clearance_m, const double* s, double basis[2]) {
   if (task == FW_TASK_CORRIDOR) {
     basis[0] = s[2];
     basis[1] = s[1] - 0.5;
@@ -216,7 +216,7 @@ void fw_pair_basis(fw_task_t task, const double* s, double basis[2]) {
   // No bend without an obstacle near (none visible: its distance is the features' far value) or
   // with it beyond the goal.
   if (obstacle_distance < FW_PAIR_OBSTACLE_RANGE_M && obstacle_distance < goal_distance) {
-    const double half_cone = tasks_obstacles_cone_half_angle_rad(FW_PAIR_OBSTACLE_CLEARANCE_M, obstacle_distance);
+    const double half_cone = tasks_obstacles_cone_half_angle_rad(obstacle_clearance_m, obstacle_distance);
     const double rel = features_angle_wrap(goal_bearing - obstacle_bearing);
     if (fabs(rel) < half_cone && fabs(rel) > 0.0) {
       // The goal direction passes the obstacle closer than the clearance: the target is the
@@ -229,14 +229,15 @@ void fw_pair_basis(fw_task_t task, const double* s, double basis[2]) {
   basis[1] = bend;
 }
 
-double fw_pair_shift_at(const fw_pair_shift_t* shift, fw_task_t task, const double* s) {
+double fw_pair_shift_at(const fw_pair_shift_t* shift, fw_task_t task, double obstacle_clearance_m, const double* s) {
   double basis[2];
-  fw_pair_basis(task, s, basis);
+  fw_pair_basis(task, obstacle_clearance_m, s, basis);
   return shift->gain * basis[0] + shift->centring * basis[1];
 }
 
-double fw_pair_policy_action(const fw_pair_shift_t* shift, fw_task_t task, const double* s, double greedy) {
-  return (1.0 + shift->imitation) * greedy + fw_pair_shift_at(shift, task, s);
+double fw_pair_policy_action(const fw_pair_shift_t* shift, fw_task_t task, double obstacle_clearance_m, const double* s,
+                             double greedy) {
+  return (1.0 + shift->imitation) * greedy + fw_pair_shift_at(shift, task, obstacle_clearance_m, s);
 }
 
 // pair_runs: the run under way ended. A perturbed run is not imitated until its pair is ranked:
@@ -284,7 +285,7 @@ static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps
 static double pair_offset(const fw_loop_t* L, double own) {
   const double sign = L->pair_member == 0 ? 1.0 : -1.0;
   double basis[2];
-  fw_pair_basis((fw_task_t)L->cfg.task, L->s, basis);
+  fw_pair_basis((fw_task_t)L->cfg.task, L->cfg.pair_obstacle_clearance_m, L->s, basis);
   return sign * (L->pair_gain * basis[0] + L->pair_centring * basis[1] + L->pair_imitation * own);
 }
 
@@ -669,7 +670,8 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
       // the shift the ranked pairs learned (both 0 until a pair is ranked). The value stays the
       // greedy action's (the learning target).
       greedy_action = tasks_clamp_omega(
-          fw_pair_policy_action(&L->pair_ranker.shift, (fw_task_t)L->cfg.task, L->s, greedy_imitated), L->omega_max);
+          fw_pair_policy_action(&L->pair_ranker.shift, (fw_task_t)L->cfg.task, L->cfg.pair_obstacle_clearance_m, L->s,
+                                greedy_imitated), L->omega_max);
     }
     if (L->pending.active) {
       L->pending.need_greedy = false;

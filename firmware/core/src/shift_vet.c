@@ -41,6 +41,7 @@ void fw_shift_vet_env_init(fw_shift_vet_env_t* env, const fw_config_t* cfg) {
   env->step_limit = corridor ? env->spec.step_limit : env->obstacles.step_limit;
   env->task_dim = corridor ? 3U : 4U;
   env->margin_m = corridor ? cfg->pair_safety_margin_m : FW_SHIFT_VET_OBSTACLES_MARGIN_M;
+  env->obstacle_clearance_m = cfg->pair_obstacle_clearance_m;
   env->mirror = corridor || obstacles_symmetric(&env->obstacles);
   env->state_rotation = cfg->state_rotation;
   const int32_t cap = cfg->pair_shift_vet_starts;
@@ -224,7 +225,7 @@ bool fw_shift_vet_step(fw_shift_vet_t* vet, fw_shift_vet_greedy_fn greedy, void*
         // The learned policy as run.c drives it: the greedy action weighted by 1 + the imitation's
         // weight plus the shift where an action is known, 0 (hold course) where none is.
         const fw_pair_shift_t* sh = &vet->shift[vet->checking_in_force ? 1 : (vet->stage == 0 ? 0 : 2)];
-        omega = tasks_clamp_omega(fw_pair_policy_action(sh, env->task, s, a), omega_max);
+        omega = tasks_clamp_omega(fw_pair_policy_action(sh, env->task, env->obstacle_clearance_m, s, a), omega_max);
       }
       budget--;
       vet->periods++;

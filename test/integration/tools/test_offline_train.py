@@ -22,6 +22,7 @@ import shutil
 import struct
 import subprocess
 import sys
+import zlib
 
 from b21r import experience_t
 
@@ -53,6 +54,17 @@ def sections(path):
         fwtest.fail("%s is not a checkpoint" % path)
     meta_n, payload_n = struct.unpack_from("<QQ", data, 16)
     return data[48:48 + meta_n], data[48 + meta_n:48 + meta_n + payload_n]
+
+
+def write_checkpoint(path, like, meta, payload):
+    """A checkpoint of the format of `like` holding meta and payload (fw/checkpoint.h layout, its CRC-32s)."""
+    with open(like, "rb") as f:
+        magic_version_size = f.read(16)
+    head = bytearray(magic_version_size + struct.pack("<QQIII", len(meta), len(payload), zlib.crc32(meta),
+                                                      zlib.crc32(payload), 0))
+    head += struct.pack("<I", zlib.crc32(bytes(head)))
+    with open(path, "wb") as f:
+        f.write(bytes(head) + meta + payload)
 
 
 def train(exe, args, expect_rc=0):
@@ -240,6 +252,19 @@ def main():
         _, err = train(trainer, ["--set", "hedger_k_mn=3", "--out", os.path.join(d, "z.ckpt"), explog], expect_rc=2)
         if "did you mean 'hedger_k_min'" not in err:
             fwtest.fail("a misspelt key: %s" % err)
+        # An obstacle shift resumes only with the clearance its terms bent around (bytes 88-95 of
+        # the controller section): the refusal names the setting. The checkpoint is this session's,
+        # its controller section made an obstacle one learned at 0.45 m (checked before the state).
+        meta, payload = sections(offline)
+        meta = bytearray(meta)
+        struct.pack_into("<II", meta, 8, 1, 5)  # task obstacles, its state dimension
+        struct.pack_into("<d", meta, 88, 0.45)
+        obstacle = os.path.join(d, "obstacle-0.45.ckpt")
+        write_checkpoint(obstacle, offline, bytes(meta), payload)
+        _, err = train(trainer, ["--set", "task=obstacles", "--init", obstacle, "--out", os.path.join(d, "o.ckpt"),
+                                 explog], expect_rc=1)
+        if obstacle not in err or "train with pair_obstacle_clearance_m = 0.45" not in err:
+            fwtest.fail("an obstacle shift learned at another clearance: %s" % err)
         fwtest.note("claim 3: errors name the file and the fix")
         ok = True
     finally:

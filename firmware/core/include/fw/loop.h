@@ -195,19 +195,14 @@ int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool exa
 /// robot starts to go round; farther off the first term is the goal bearing itself.
 #define FW_PAIR_OBSTACLE_RANGE_M 1.5
 
-/// The clearance that the obstacle task's second pair term bends the goal direction around
-/// [m, from the robot's centre to the obstacle's nearest return]: between the reference law's
-/// 0.40 m and the example policy's 0.55 m (chosen on seeds 11-50 among 0.4-0.7, docs/LEARNING.md).
-#define FW_PAIR_OBSTACLE_CLEARANCE_M 0.5
-
 /// The two terms of the pairs' perturbation family and of the shift at a learner state s
 /// (fw_pair_ranker_t), per task:
 /// - corridor: basis[0] = target angle s[2] [rad], basis[1] = lateral fraction s[1] − 0.5;
 /// - obstacles: basis[0] = the goal direction bent around the nearest obstacle, goal bearing
 ///   s[0] + bend [rad, within ±π], basis[1] = the bend [rad]: where the obstacle (bearing s[2],
 ///   distance s[3]) is nearer than FW_PAIR_OBSTACLE_RANGE_M and than the goal (distance s[1]) and
-///   the goal direction lies inside the cone of half-angle asin(FW_PAIR_OBSTACLE_CLEARANCE_M /
-///   s[3]) around it (π/2 within the clearance), the angle from the goal direction to the cone's
+///   the goal direction lies inside the cone of half-angle asin(obstacle_clearance_m / s[3])
+///   around it (π/2 within the clearance), the angle from the goal direction to the cone's
 ///   edge on the goal's side; 0 elsewhere and for a goal exactly behind the obstacle. basis[0] is
 ///   then the goal-side edge of the reference law's cone (tasks_driver_obstacles), which the law
 ///   itself steers for only with the obstacle nearly dead ahead (off to one side it passes on the
@@ -217,18 +212,21 @@ int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool exa
 ///   the side the bend changes sign where the goal direction crosses the obstacle's bearing, and
 ///   it drops to 0 at the range's edge (from 0.34 rad at most). (Until checkpoint terms revision
 ///   1, fw/progress.h, basis[0] was the goal bearing itself; docs/LEARNING.md.)
-/// Pure, O(1).
-void fw_pair_basis(fw_task_t task, const double* s, double basis[2]);
+/// obstacle_clearance_m: pair_obstacle_clearance_m [m, from the robot's centre to the obstacle's
+/// nearest return; the corridor ignores it]. (It was fixed at 0.5 m until checkpoints recorded
+/// it, fw/progress.h; the obstacle experiments set 0.45 m, docs/LEARNING.md.) Pure, O(1).
+void fw_pair_basis(fw_task_t task, double obstacle_clearance_m, const double* s, double basis[2]);
 
 /// The learned policy's shift at a learner state s of the task: gain × basis[0] + centring ×
 /// basis[1] (fw_pair_basis) [rad/s], as the controller adds it to the greedy action and the vet's
 /// rollouts do (fw/shift_vet.h). Pure, O(1).
-double fw_pair_shift_at(const fw_pair_shift_t* shift, fw_task_t task, const double* s);
+double fw_pair_shift_at(const fw_pair_shift_t* shift, fw_task_t task, double obstacle_clearance_m, const double* s);
 
 /// The learned policy's action at a learner state s where HEDGER's greedy action is `greedy`:
 /// (1 + imitation) × greedy + fw_pair_shift_at [rad/s], not clamped (callers clamp to the action
 /// bounds), as the controller drives it and the vet's rollouts do. Pure, O(1).
-double fw_pair_policy_action(const fw_pair_shift_t* shift, fw_task_t task, const double* s, double greedy);
+double fw_pair_policy_action(const fw_pair_shift_t* shift, fw_task_t task, double obstacle_clearance_m, const double* s,
+                             double greedy);
 
 /// pair_runs: the run tag of a training run with id run_id when the store's current tag is
 /// `current` (run.c; b21r-train uses the same rule): its id while ids run ahead of the tags, else

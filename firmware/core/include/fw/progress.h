@@ -16,7 +16,8 @@
 /// 64  8  its b [rad/s per corridor width, or per rad of the bend]  72  4  pairs that have moved it
 /// 76  4  the shift's terms revision (FW_PAIR_TERMS_REVISION)
 /// 80  8  the imitation's weight w (IEEE-754 double) [1]
-/// 88  8  reserved, 0
+/// 88  8  the clearance the obstacle task's shift terms bend around (IEEE-754 double) [m]; 0 in
+///        the corridor's files and in files written before it (FW_PROGRESS_CLEARANCE_UNRECORDED_M)
 /// ```
 /// The shift (fw_pair_ranker_t, pair_runs) is part of the learned policy, so it travels with the
 /// learned state. Files written before it have zeros there: no shift, the policy they learned.
@@ -37,11 +38,15 @@
 ///   conversion of revision 0); its pairs in [0, INT32_MAX]; its terms revision at most
 ///   FW_PAIR_TERMS_REVISION; the imitation's weight within [FW_PAIR_IMITATION_MIN,
 ///   FW_PAIR_IMITATION_MAX] (files written before it have 0 there: the greedy action once, the
-///   policy they learned).
-/// Reserved bytes must be 0: later fields that read as "none" when 0 (as the shift and the
-/// imitation's weight did) may take them under the same magic; others need a new magic. A
-/// controller older than a field refuses a file with it set (its reserved byte not 0) rather than
-/// drive without it.
+///   policy they learned); the clearance 0 or within [FW_PAIR_OBSTACLE_CLEARANCE_MIN_M,
+///   FW_PAIR_OBSTACLE_CLEARANCE_MAX_M], and 0 in a corridor file.
+/// The obstacle task's shift means a policy only with the clearance its terms bent around
+/// (pair_obstacle_clearance_m, fw_pair_basis): a controller or b21r-train resumes a shift only
+/// with the clearance it was learned with (fw_progress_clearance_fits) and names the setting
+/// otherwise.
+/// Every byte is in use (the last, 88-95, since the clearance: a controller older than a field
+/// refused a file with it set, its reserved byte not 0, rather than drive without it); a later
+/// field needs a new magic or a larger section.
 ///
 /// Pure functions: no I/O, no allocation, O(1).
 #ifndef FW_PROGRESS_H
@@ -85,6 +90,15 @@ extern "C" {
 #define FW_PAIR_IMITATION_MIN (-1.0)
 #define FW_PAIR_IMITATION_MAX 1.0
 
+/// pair_obstacle_clearance_m's range [m, from the robot's centre to the obstacle's nearest return]:
+/// above the B21r's radius (0.26 m) and below the obstacle pair term's range (FW_PAIR_OBSTACLE_RANGE_M).
+#define FW_PAIR_OBSTACLE_CLEARANCE_MIN_M 0.3
+#define FW_PAIR_OBSTACLE_CLEARANCE_MAX_M 1.2
+
+/// The clearance of an obstacle shift whose file does not record one (bytes 88-95 zero: written
+/// before the field, when it was fixed) [m].
+#define FW_PROGRESS_CLEARANCE_UNRECORDED_M 0.5
+
 /// pair_runs: the learned policy's shift, moved by the ranked pairs (fw_pair_ranker_t, fw/loop.h)
 /// and kept by checkpoints (here, because this section carries it): the learned policy is
 /// (1 + imitation) × HEDGER's greedy action plus gain × (the task's first pair term) + centring ×
@@ -111,7 +125,16 @@ typedef struct fw_progress {
   fw_schedule_progress_t schedule;  ///< schedule progress (fw/schedule.h)
   int32_t run_id;                   ///< last run started, -1 = none
   fw_pair_shift_t shift;            ///< the learned policy's shift
+  /// obstacles: the clearance its terms bend around (pair_obstacle_clearance_m) [m]; 0 = not
+  /// recorded (the corridor; an obstacle file written before the field: FW_PROGRESS_CLEARANCE_UNRECORDED_M)
+  double obstacle_clearance_m;
 } fw_progress_t;
+
+/// True when p's shift may resume under a configuration whose pair_obstacle_clearance_m is
+/// clearance_m: always in the corridor and for a shift whose terms are both 0 (nothing learned on
+/// them), else where the clearance it was learned with (FW_PROGRESS_CLEARANCE_UNRECORDED_M when
+/// not recorded) is clearance_m. *learned_m receives that clearance (may be NULL). Pure, O(1).
+bool fw_progress_clearance_fits(const fw_progress_t* p, double clearance_m, double* learned_m);
 
 /// Writes p into out[0..FW_PROGRESS_BYTES). Returns FW_PROGRESS_BYTES. Does not validate: a
 /// value outside the ranges above is written as is (and refused by the decoder).

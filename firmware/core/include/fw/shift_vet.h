@@ -99,6 +99,7 @@ typedef struct fw_shift_vet_env {
   /// closer to a wall (or an obstacle) counts as a failure [m]: pair_safety_margin_m in the
   /// corridor, FW_SHIFT_VET_OBSTACLES_MARGIN_M among obstacles
   double margin_m;
+  double obstacle_clearance_m;  ///< pair_obstacle_clearance_m: the obstacle task's pair terms' clearance [m]
   bool mirror;                  ///< the task is mirror-symmetric: each start is also driven mirrored
   bool state_rotation;          ///< the learner's state ends with the rotation in force
   uint32_t capacity;            ///< pair_shift_vet_starts: the starts kept

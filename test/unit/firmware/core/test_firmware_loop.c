@@ -448,38 +448,46 @@ static void test_pair_ranker_moves_the_shift(void** state) {
   r.shift.centring = -2.0;
   r.shift.imitation = -0.75;
   const double s[3] = {5.0, 0.75, 0.2};
-  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_CORRIDOR, s) - (0.5 * 0.2 - 2.0 * 0.25)) < 1e-15);
-  assert_true(fabs(fw_pair_policy_action(&r.shift, FW_TASK_CORRIDOR, s, 0.8) - (0.25 * 0.8 + 0.5 * 0.2 - 2.0 * 0.25)) <
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_CORRIDOR, 0.5, s) - (0.5 * 0.2 - 2.0 * 0.25)) < 1e-15);
+  assert_true(fabs(fw_pair_policy_action(&r.shift, FW_TASK_CORRIDOR, 0.5, s, 0.8) - (0.25 * 0.8 + 0.5 * 0.2 - 2.0 * 0.25)) <
               1e-15);
   // Among obstacles: a * (goal bearing + bend) + b * bend, the bend the goal direction's turn to
-  // the edge of the nearest obstacle's cone of half-angle asin(0.5 m / distance) on the goal's side.
+  // the edge of the nearest obstacle's cone of half-angle asin(clearance / distance) on the goal's
+  // side, the clearance 0.5 m (pair_obstacle_clearance_m's default).
+  const double cl = 0.5;
   const double left_near[4] = {0.3, 3.0, 0.4, 0.6};  // the goal just right of the obstacle: bend right
-  const double bend = -(asin(FW_PAIR_OBSTACLE_CLEARANCE_M / 0.6) - 0.1);
+  const double bend = -(asin(cl / 0.6) - 0.1);
   double basis[2];
-  fw_pair_basis(FW_TASK_OBSTACLES, left_near, basis);
-  assert_true(fabs(basis[0] - (0.4 - asin(FW_PAIR_OBSTACLE_CLEARANCE_M / 0.6))) < 1e-15);  // the cone's right edge
+  fw_pair_basis(FW_TASK_OBSTACLES, cl, left_near, basis);
+  assert_true(fabs(basis[0] - (0.4 - asin(cl / 0.6))) < 1e-15);  // the cone's right edge
   assert_true(fabs(basis[1] - bend) < 1e-15);
-  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, left_near) - (0.5 * (0.3 + bend) - 2.0 * bend)) < 1e-15);
+  // A tighter clearance narrows the cone: the same state bends less.
+  fw_pair_basis(FW_TASK_OBSTACLES, 0.45, left_near, basis);
+  assert_true(fabs(basis[1] + (asin(0.45 / 0.6) - 0.1)) < 1e-15 && fabs(basis[1]) < fabs(bend));
+  assert_true(fabs(basis[0] - (0.4 - asin(0.45 / 0.6))) < 1e-15);
+  fw_pair_basis(FW_TASK_CORRIDOR, 0.45, s, basis);  // the corridor's terms ignore it
+  assert_true(basis[0] == 0.2 && basis[1] == 0.25);
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, cl, left_near) - (0.5 * (0.3 + bend) - 2.0 * bend)) < 1e-15);
   const double right_near[4] = {-0.3, 3.0, -0.4, 0.6};  // its mirror image
-  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, right_near) - (-0.5 * (0.3 + bend) + 2.0 * bend)) < 1e-15);
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, cl, right_near) - (-0.5 * (0.3 + bend) + 2.0 * bend)) < 1e-15);
   const double within[4] = {0.3, 3.0, -0.5, 0.4};  // nearer than the clearance: the cone is a right angle
   const double bend_within = 0.5 * 3.141592653589793 - 0.8;
-  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, within) -
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, cl, within) -
                    (0.5 * (0.3 + bend_within) - 2.0 * bend_within)) < 1e-14);
   const double clear[4] = {1.2, 3.0, 0.0, 1.0};  // the goal direction outside the cone (0.52 rad): no bend
-  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, clear) - 0.5 * 1.2) < 1e-15);
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, cl, clear) - 0.5 * 1.2) < 1e-15);
   const double behind[4] = {0.2, 3.0, 0.2, 1.0};  // the goal exactly behind it: no side, no bend
-  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, behind) - 0.5 * 0.2) < 1e-15);
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, cl, behind) - 0.5 * 0.2) < 1e-15);
   const double beyond_goal[4] = {0.3, 0.8, 0.4, 1.0};  // the obstacle farther than the goal
-  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, beyond_goal) - 0.5 * 0.3) < 1e-15);
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, cl, beyond_goal) - 0.5 * 0.3) < 1e-15);
   const double far[4] = {0.3, 3.0, 0.4, 2.0};  // beyond FW_PAIR_OBSTACLE_RANGE_M: the goal bearing alone
-  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, far) - 0.5 * 0.3) < 1e-15);
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, cl, far) - 0.5 * 0.3) < 1e-15);
   const double hidden[4] = {0.3, 3.0, 3.141592653589793, 8.0};
-  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, hidden) - 0.5 * 0.3) < 1e-15);
+  assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_OBSTACLES, cl, hidden) - 0.5 * 0.3) < 1e-15);
   // The bent direction stays within +-pi: an obstacle at the edge of the view, within the
   // clearance, the goal behind on its far side.
   const double edge_of_view[4] = {3.0, 3.0, 1.5, 0.3};
-  fw_pair_basis(FW_TASK_OBSTACLES, edge_of_view, basis);
+  fw_pair_basis(FW_TASK_OBSTACLES, cl, edge_of_view, basis);
   assert_true(fabs(basis[0] - (1.5 + 0.5 * 3.141592653589793)) < 1e-15 && basis[0] <= 3.141592653589793);
 }
 
@@ -942,6 +950,104 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
   assert_int_equal(system(cmd), 0);
 }
 
+// The obstacle task's shift is a policy only with the clearance its terms bent around
+// (pair_obstacle_clearance_m): a checkpoint resumes its shift only with that clearance, and a
+// refusal names the setting that resumes it and loads nothing. A file that does not record the
+// clearance (written before the field) learned with 0.5 m; a shift still at 0 resumes under any
+// clearance; the corridor records none and ignores the setting.
+static int load_with_clearance(const fw_config_t* c, const fw_progress_t* g, double configured_m, char* err,
+                               size_t err_cap, fw_loop_stats_t* st) {
+  hedger_config_t hc;
+  fw_loop_learner_config(c, &hc);
+  hedger_t* hd = NULL;
+  assert_int_equal(hedger_create(&hd, &hc), HEDGER_OK);
+  static uint8_t payload[4096];  // an empty learned state of this configuration's shape
+  size_t ps = 0;
+  assert_int_equal(hedger_save(hd, payload, sizeof payload, &ps), HEDGER_OK);
+  hedger_destroy(hd);
+  uint8_t meta[FW_PROGRESS_BYTES];
+  (void)fw_progress_encode(g, meta);
+  assert_int_equal(fw_checkpoint_write(c->checkpoint_file, meta, sizeof meta, payload, ps, err, err_cap), 0);
+  fw_config_t ci = *c;
+  ci.pair_obstacle_clearance_m = configured_m;
+  assert_int_equal(harness_open(&g_h, &ci, false, 3), 0);
+  err[0] = '\0';
+  const int r = fw_loop_load_checkpoint(g_h.loop, err, err_cap);
+  fw_loop_get_stats(g_h.loop, st);
+  harness_close(&g_h);
+  return r;
+}
+
+static void test_loop_checkpoint_obstacle_clearance(void** state) {
+  (void)state;
+  char dir[] = "/tmp/b21r-loopclear-XXXXXX";
+  assert_non_null(mkdtemp(dir));
+  fw_config_t c;
+  harness_config(&c);
+  c.task = FW_TASK_OBSTACLES;
+  snprintf(c.checkpoint_file, sizeof c.checkpoint_file, "%s/hedger.ckpt", dir);
+  hedger_config_t hc;
+  fw_loop_learner_config(&c, &hc);
+  fw_progress_t g;
+  memset(&g, 0, sizeof g);
+  g.task = FW_TASK_OBSTACLES;
+  g.state_dim = hc.state_dim;
+  g.schedule.phase = 2;
+  g.schedule.training_runs = 40;
+  g.schedule.phase_one_runs = 30;
+  g.schedule.phase_two_runs = 10;
+  g.run_id = 50;
+  g.shift.imitation = -0.5;
+  g.shift.pairs = 5;
+  struct {
+    double recorded_m;    // bytes 88-95 (0: not recorded)
+    double configured_m;  // pair_obstacle_clearance_m
+    double gain;          // the shift's a and b (0: nothing learned on the terms)
+    int expect;           // fw_loop_load_checkpoint's result
+  } const cases[] = {
+      {0.45, 0.45, 1.25, 1}, {0.45, 0.5, 1.25, -1}, {0.0, 0.5, 1.25, 1}, {0.0, 0.45, 1.25, -1}, {0.5, 0.45, 0.0, 1},
+  };
+  char err[FW_LOOP_ERR_MAX];
+  fw_loop_stats_t st;
+  for (size_t i = 0; i < sizeof cases / sizeof cases[0]; ++i) {
+    g.obstacle_clearance_m = cases[i].recorded_m;
+    g.shift.gain = cases[i].gain;
+    g.shift.centring = cases[i].gain;
+    const int r = load_with_clearance(&c, &g, cases[i].configured_m, err, sizeof err, &st);
+    if (r != cases[i].expect) {
+      fail_msg("case %zu: recorded %g, configured %g, a %g: load gave %d (%s)", i, cases[i].recorded_m,
+               cases[i].configured_m, cases[i].gain, r, err);
+    }
+    if (r == 1) {
+      assert_true(st.shift.gain == g.shift.gain && st.shift.imitation == g.shift.imitation);
+      assert_int_equal(st.training_runs, 40);
+    } else {
+      char want[96];
+      snprintf(want, sizeof want, "set pair_obstacle_clearance_m = %g to go on with it",
+               cases[i].recorded_m > 0.0 ? cases[i].recorded_m : 0.5);
+      if (strstr(err, want) == NULL || strstr(err, c.checkpoint_file) == NULL) {
+        fail_msg("case %zu: '%s' does not say '%s'", i, err, want);
+      }
+      assert_int_equal(st.training_runs, 0);  // nothing loaded
+      assert_true(st.shift.gain == 0.0 && st.shift.imitation == 0.0);
+    }
+  }
+  // The corridor's shift loads whatever pair_obstacle_clearance_m says.
+  fw_config_t cc;
+  harness_config(&cc);
+  snprintf(cc.checkpoint_file, sizeof cc.checkpoint_file, "%s/hedger.ckpt", dir);
+  fw_loop_learner_config(&cc, &hc);
+  g.task = FW_TASK_CORRIDOR;
+  g.state_dim = hc.state_dim;
+  g.obstacle_clearance_m = 0.0;
+  g.shift.gain = 0.75;
+  g.shift.centring = -1.0;
+  assert_int_equal(load_with_clearance(&cc, &g, 0.45, err, sizeof err, &st), 1);
+  assert_true(st.shift.gain == 0.75);
+  assert_int_equal(remove(c.checkpoint_file), 0);
+  assert_int_equal(remove(dir), 0);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_loop_learns_corridor_reaches_goal_from_all_poses),
@@ -958,6 +1064,7 @@ int main(void) {
       cmocka_unit_test(test_loop_canopen_stream_independent_of_answer_lag),
       cmocka_unit_test(test_loop_tick_allocates_nothing),
       cmocka_unit_test(test_loop_checkpoint_restart_resumes),
+      cmocka_unit_test(test_loop_checkpoint_obstacle_clearance),
   };
   return cmocka_run_group_tests_name("firmware.loop", tests, NULL, NULL);
 }

@@ -31,6 +31,7 @@ static fw_progress_t sample(void) {
   p.shift.centring = -1.5;
   p.shift.pairs = 17;
   p.shift.imitation = -0.375;
+  p.obstacle_clearance_m = 0.45;
   return p;
 }
 
@@ -76,9 +77,10 @@ static void test_progress_round_trip_and_layout(void** state) {
   double imitation;
   memcpy(&imitation, b + 80, sizeof imitation);
   assert_true(imitation == -0.375);
-  for (size_t i = 88; i < FW_PROGRESS_BYTES; ++i) {
-    assert_int_equal(b[i], 0);
-  }
+  double clearance;
+  memcpy(&clearance, b + 88, sizeof clearance);
+  assert_true(clearance == 0.45);
+  assert_int_equal(FW_PROGRESS_BYTES, 96);  // every byte in use
   fw_progress_t q;
   assert_int_equal(fw_progress_decode(b, sizeof b, &q, NULL, 0), 0);
   assert_memory_equal(&q, &p, sizeof p);
@@ -142,14 +144,23 @@ static void test_progress_out_of_range_refused(void** state) {
     q.shift.imitation = bad_imitation[i];
     expect_refused(&q, 8, 1, "learned imitation weight");
   }
-  // Reserved bytes, size and magic.
+  // The obstacle shift's clearance: 0 (not recorded) or within pair_obstacle_clearance_m's
+  // range, and 0 in a corridor file.
+  const double bad_clearance[] = {NAN, INFINITY, -0.45, 0.29, 1.2000001, 5e-324};
+  for (size_t i = 0; i < sizeof bad_clearance / sizeof bad_clearance[0]; ++i) {
+    q = p;
+    q.obstacle_clearance_m = bad_clearance[i];
+    expect_refused(&q, 8, 1, "obstacle pair clearance");
+  }
+  q = p;
+  q.task = FW_TASK_CORRIDOR;
+  q.state_dim = 3;
+  expect_refused(&q, 8, 0, "obstacle pair clearance 0.45");
+  // Size and magic.
   uint8_t b[FW_PROGRESS_BYTES];
   (void)fw_progress_encode(&p, b);
   fw_progress_t out;
   char why[FW_PROGRESS_WHY_MAX];
-  b[88] = 1;
-  assert_int_equal(fw_progress_decode(b, sizeof b, &out, why, sizeof why), -1);
-  assert_non_null(strstr(why, "reserved byte 88"));
   (void)fw_progress_encode(&p, b);
   assert_int_equal(fw_progress_decode(b, sizeof b - 1U, &out, why, sizeof why), -1);
   assert_non_null(strstr(why, "unknown format (95 bytes"));
@@ -167,8 +178,35 @@ static void test_progress_out_of_range_refused(void** state) {
   assert_int_equal(fw_progress_decode(b, sizeof b, &out, why, sizeof why), 0);
   assert_int_equal(out.run_id, INT32_MAX - 1);
   q.shift.imitation = 1.0;
+  q.obstacle_clearance_m = FW_PAIR_OBSTACLE_CLEARANCE_MIN_M;
   (void)fw_progress_encode(&q, b);
   assert_int_equal(fw_progress_decode(b, sizeof b, &out, why, sizeof why), 0);
+  q.obstacle_clearance_m = FW_PAIR_OBSTACLE_CLEARANCE_MAX_M;
+  (void)fw_progress_encode(&q, b);
+  assert_int_equal(fw_progress_decode(b, sizeof b, &out, why, sizeof why), 0);
+  assert_true(out.obstacle_clearance_m == FW_PAIR_OBSTACLE_CLEARANCE_MAX_M);
+}
+
+// Which clearance a shift resumes with (fw_progress_clearance_fits): the one recorded, 0.5 m where
+// none is (a file written before the field), any for a shift whose terms are 0 or in the corridor.
+static void test_progress_clearance_fits(void** state) {
+  (void)state;
+  fw_progress_t p = sample();  // obstacles, a 0.8125, b -1.5, learned at 0.45 m
+  double learned = 0.0;
+  assert_true(fw_progress_clearance_fits(&p, 0.45, &learned) && learned == 0.45);
+  assert_false(fw_progress_clearance_fits(&p, 0.5, &learned));
+  assert_false(fw_progress_clearance_fits(&p, 0.45000000000000007, NULL));
+  p.obstacle_clearance_m = 0.0;
+  assert_true(fw_progress_clearance_fits(&p, FW_PROGRESS_CLEARANCE_UNRECORDED_M, &learned) && learned == 0.5);
+  assert_false(fw_progress_clearance_fits(&p, 0.45, NULL));
+  p.shift.gain = 0.0;
+  assert_false(fw_progress_clearance_fits(&p, 0.45, NULL));  // the bend's coefficient alone is a policy too
+  p.shift.centring = 0.0;
+  assert_true(fw_progress_clearance_fits(&p, 0.45, NULL));   // nothing learned on the terms
+  p = sample();
+  p.task = FW_TASK_CORRIDOR;
+  p.obstacle_clearance_m = 0.0;
+  assert_true(fw_progress_clearance_fits(&p, 0.45, NULL) && fw_progress_clearance_fits(&p, 0.5, NULL));
 }
 
 // A file written before the terms revision (byte 76 = 0) keeps the policy it learned: the
@@ -186,6 +224,7 @@ static void test_progress_terms_revision(void** state) {
   assert_true(q.shift.gain == 0.8125 && q.shift.centring == -1.5 - 0.8125);
   p.task = FW_TASK_CORRIDOR;
   p.state_dim = 3;
+  p.obstacle_clearance_m = 0.0;
   (void)fw_progress_encode(&p, b);
   put_u32(b, 76, 0U);
   assert_int_equal(fw_progress_decode(b, sizeof b, &q, why, sizeof why), 0);
@@ -203,6 +242,7 @@ int main(void) {
       cmocka_unit_test(test_progress_round_trip_and_layout),
       cmocka_unit_test(test_progress_out_of_range_refused),
       cmocka_unit_test(test_progress_terms_revision),
+      cmocka_unit_test(test_progress_clearance_fits),
   };
   return cmocka_run_group_tests_name("firmware.progress", tests, NULL, NULL);
 }

@@ -291,7 +291,7 @@ static bool avoid_law(void* ctx, const double* s, double* action) {
   (void)ctx;
   g_calls++;
   double basis[2];
-  fw_pair_basis(FW_TASK_OBSTACLES, s, basis);
+  fw_pair_basis(FW_TASK_OBSTACLES, 0.5, s, basis);  // pair_obstacle_clearance_m's default, as the vet's
   *action = 1.5 * basis[0];
   return true;
 }
