@@ -249,8 +249,8 @@ def write(out, fig_dir, path, configs_dir):
                                                        fmt_ci(*S["switch_after"][:2]), "baseline" if v not in same else ("yes" if same[v] else "no")))
         doc.add("", "Each variant against its own references from the same poses (final block, paired by seed; "
                 "the example policy at its nominal gain, the middle of the gains its runs drew):", "",
-                "| variant | final block, successful runs | example policy, same poses | learned minus example | "
-                "learned minus optimal |", "|---|---|---|---|---|")
+                "| variant | final block, successful runs | example policy, same poses | learned minus example "
+                "(final block, failures at the limit) | learned minus optimal (the same) |", "|---|---|---|---|---|")
         for v, S in summ.items():
             R = analysis.against_references(S)
             missing = "not evaluated"

@@ -137,6 +137,9 @@ int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t er
     if (fw_progress_decode((const uint8_t*)meta, meta_size, &g, why, sizeof why) != 0) {
       fw_errfmt(err, err_cap, "%s is corrupt (controller section: %s); give a checkpoint the controller or "
           "b21r-train wrote", path, why);
+    } else if (g.task != t->cfg.task) {
+      fw_errfmt(err, err_cap, "%s was learned for another task (%s): train with task = %s", path,
+          g.task == FW_TASK_CORRIDOR ? "corridor" : "obstacles", g.task == FW_TASK_CORRIDOR ? "corridor" : "obstacles");
     } else if (!fw_progress_clearance_fits(&g, t->cfg.pair_obstacle_clearance_m, &learned_clearance_m)) {
       fw_errfmt(err, err_cap, "%s: its learned policy's shift bends around the obstacle at pair_obstacle_clearance_m = "
           "%.15g, not %.15g: train with pair_obstacle_clearance_m = %.15g", path, learned_clearance_m,
@@ -520,6 +523,7 @@ int trainer_write_checkpoint(trainer_t* t, const char* path, bool overwrite, cha
     return -1;
   }
   g.shift = t->ranker.shift;
+  fw_progress_record_clearance(&g, t->cfg.pair_obstacle_clearance_m);
   (void)fw_progress_encode(&g, meta);
   const size_t cap = hedger_serialized_size(t->hedger);
   void* payload = malloc(cap);

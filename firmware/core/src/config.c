@@ -294,8 +294,8 @@ static const key_desc_t k_keys[] = {
   {NULL, "pair_runs", KIND_ENUM, OFF(pair_runs_mode), 0, 0, false, false, k_pair_runs, "auto",
    "phase two (and phase one's example runs, pair_phase_one): training runs come in pairs from one start "
    "pose; the first adds a perturbation g * target angle + c * (lateral fraction - 0.5) to the greedy action "
-   "(obstacles: g * the goal direction bent to the edge of the cone that keeps 0.5 m from the nearest obstacle "
-   "within 1.5 m + c * the bend; "
+   "(obstacles: g * the goal direction bent around the nearest obstacle within 1.5 m, "
+   "pair_obstacle_clearance_m, + c * the bend; "
    "phase one: the example's), the second subtracts it, with the same exploration noise; the pair's difference "
    "in steps moves the learned policy's shift toward the faster run (pair_shift_rate; docs/LEARNING.md); in the "
    "corridor pair_safety vets every perturbed command. auto = on for learner = hedger, hedger_greedy_method = "

@@ -96,10 +96,10 @@ void fw_learning_config(const fw_loop_t* L, hedger_config_t* hc) {
 // ---- checkpoints --------------------------------------------------------------------------
 
 static size_t encode_meta(const fw_loop_t* L, uint8_t* p) {
-  const fw_progress_t g = {
+  fw_progress_t g = {
       .task = L->cfg.task, .state_dim = L->state_dim, .schedule = L->sched.p, .run_id = L->run_id,
-      .shift = L->pair_ranker.shift,
-      .obstacle_clearance_m = fw_run_is_corridor(L) ? 0.0 : L->cfg.pair_obstacle_clearance_m};
+      .shift = L->pair_ranker.shift};
+  fw_progress_record_clearance(&g, L->cfg.pair_obstacle_clearance_m);
   return fw_progress_encode(&g, p);
 }
 

@@ -57,6 +57,11 @@ bool fw_pair_shift_valid(double gain, double centring, double imitation) {
 
 static bool is_zero(double x) { return x >= 0.0 && x <= 0.0; }
 
+void fw_progress_record_clearance(fw_progress_t* p, double clearance_m) {
+  const bool learned = !is_zero(p->shift.gain) || !is_zero(p->shift.centring);
+  p->obstacle_clearance_m = p->task == (int32_t)FW_TASK_OBSTACLES && learned ? clearance_m : 0.0;
+}
+
 bool fw_progress_clearance_fits(const fw_progress_t* p, double clearance_m, double* learned_m) {
   const double learned = p->obstacle_clearance_m > 0.0 ? p->obstacle_clearance_m : FW_PROGRESS_CLEARANCE_UNRECORDED_M;
   if (learned_m != NULL) {

@@ -14,7 +14,8 @@ Claims checked:
    the advisor), and the evaluation block after its phase-two runs, where the learned policy
    drives alone, reaches the goal from all 10 evaluation poses, as the online-trained
    controller does in firmware.learn_rflex.
-3. Errors name the file and the fix: another task, an existing output, a file that is not a log.
+3. Errors name the file and the fix: another task, an existing output, a file that is not a log, an
+   obstacle shift learned at another pair_obstacle_clearance_m (--init).
 Also: two logs, --passes 2 and --init from the first pass's checkpoint give the same state.
 usage: test_offline_train.py CONTROLLER SIM WORLD TRAIN"""
 import os

@@ -136,6 +136,12 @@ typedef struct fw_progress {
 /// not recorded) is clearance_m. *learned_m receives that clearance (may be NULL). Pure, O(1).
 bool fw_progress_clearance_fits(const fw_progress_t* p, double clearance_m, double* learned_m);
 
+/// Sets p->obstacle_clearance_m for a shift learned under pair_obstacle_clearance_m =
+/// clearance_m: clearance_m for an obstacle shift whose a or b is not 0, else 0 (the corridor, or
+/// nothing learned on the terms: such a file stays readable by controllers older than the field).
+/// Pure, O(1).
+void fw_progress_record_clearance(fw_progress_t* p, double clearance_m);
+
 /// Writes p into out[0..FW_PROGRESS_BYTES). Returns FW_PROGRESS_BYTES. Does not validate: a
 /// value outside the ranges above is written as is (and refused by the decoder).
 size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]);

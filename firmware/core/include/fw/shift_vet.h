@@ -130,7 +130,7 @@ typedef struct fw_shift_vet {
 
 /// The environment from cfg: the task and its spec (corridor length, period, step limit, action
 /// bound), the command limits, the margin, whether the task is mirror-symmetric,
-/// state_rotation, pair_shift_vet_starts. O(obstacles²).
+/// state_rotation, pair_shift_vet_starts, pair_obstacle_clearance_m. O(obstacles²).
 void fw_shift_vet_env_init(fw_shift_vet_env_t* env, const fw_config_t* cfg);
 
 /// A training run's first state (the learner's state vector: the task's state, then the

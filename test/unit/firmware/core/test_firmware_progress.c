@@ -207,6 +207,31 @@ static void test_progress_clearance_fits(void** state) {
   p.task = FW_TASK_CORRIDOR;
   p.obstacle_clearance_m = 0.0;
   assert_true(fw_progress_clearance_fits(&p, 0.45, NULL) && fw_progress_clearance_fits(&p, 0.5, NULL));
+  // -0.0 is "not recorded" too, and round-trips as written.
+  p = sample();
+  p.obstacle_clearance_m = -0.0;
+  uint8_t b[FW_PROGRESS_BYTES];
+  (void)fw_progress_encode(&p, b);
+  fw_progress_t q;
+  assert_int_equal(fw_progress_decode(b, sizeof b, &q, NULL, 0), 0);
+  assert_true(fw_progress_clearance_fits(&q, 0.5, &learned) && learned == 0.5);
+  // What a writer records (fw_progress_record_clearance): the clearance with an obstacle shift
+  // learned on the terms, else 0 (so a file with nothing learned on them stays readable by a
+  // controller older than the field).
+  p = sample();
+  fw_progress_record_clearance(&p, 0.45);
+  assert_true(p.obstacle_clearance_m == 0.45);
+  p.shift.gain = 0.0;
+  fw_progress_record_clearance(&p, 0.45);
+  assert_true(p.obstacle_clearance_m == 0.45);  // b alone is learned too
+  p.shift.centring = 0.0;
+  p.shift.imitation = -0.5;                     // the weight does not depend on the clearance
+  fw_progress_record_clearance(&p, 0.45);
+  assert_true(p.obstacle_clearance_m == 0.0);
+  p = sample();
+  p.task = FW_TASK_CORRIDOR;
+  fw_progress_record_clearance(&p, 0.45);
+  assert_true(p.obstacle_clearance_m == 0.0);
 }
 
 // A file written before the terms revision (byte 76 = 0) keeps the policy it learned: the
