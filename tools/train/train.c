@@ -138,8 +138,8 @@ int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t er
       fw_errfmt(err, err_cap, "%s is corrupt (controller section: %s); give a checkpoint the controller or "
           "b21r-train wrote", path, why);
     } else if (g.task != t->cfg.task) {
-      fw_errfmt(err, err_cap, "%s was learned for another task (%s): train with task = %s", path,
-          g.task == FW_TASK_CORRIDOR ? "corridor" : "obstacles", g.task == FW_TASK_CORRIDOR ? "corridor" : "obstacles");
+      const char* task = g.task == FW_TASK_CORRIDOR ? "corridor" : "obstacles";
+      fw_errfmt(err, err_cap, "%s was learned for another task (%s): train with task = %s", path, task, task);
     } else if (!fw_progress_clearance_fits(&g, t->cfg.pair_obstacle_clearance_m, &learned_clearance_m)) {
       fw_errfmt(err, err_cap, "%s: its learned policy's shift bends around the obstacle at pair_obstacle_clearance_m = "
           "%.15g, not %.15g: train with pair_obstacle_clearance_m = %.15g", path, learned_clearance_m,

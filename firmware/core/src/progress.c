@@ -57,9 +57,14 @@ bool fw_pair_shift_valid(double gain, double centring, double imitation) {
 
 static bool is_zero(double x) { return x >= 0.0 && x <= 0.0; }
 
+// An obstacle shift with something learned on its terms (a or b not 0): the only shift whose
+// policy depends on the clearance (the imitation's weight does not).
+static bool obstacle_terms_learned(const fw_progress_t* p) {
+  return p->task == (int32_t)FW_TASK_OBSTACLES && !(is_zero(p->shift.gain) && is_zero(p->shift.centring));
+}
+
 void fw_progress_record_clearance(fw_progress_t* p, double clearance_m) {
-  const bool learned = !is_zero(p->shift.gain) || !is_zero(p->shift.centring);
-  p->obstacle_clearance_m = p->task == (int32_t)FW_TASK_OBSTACLES && learned ? clearance_m : 0.0;
+  p->obstacle_clearance_m = obstacle_terms_learned(p) ? clearance_m : 0.0;
 }
 
 bool fw_progress_clearance_fits(const fw_progress_t* p, double clearance_m, double* learned_m) {
@@ -67,8 +72,7 @@ bool fw_progress_clearance_fits(const fw_progress_t* p, double clearance_m, doub
   if (learned_m != NULL) {
     *learned_m = learned;
   }
-  return p->task != (int32_t)FW_TASK_OBSTACLES || (is_zero(p->shift.gain) && is_zero(p->shift.centring)) ||
-         (learned >= clearance_m && learned <= clearance_m);
+  return !obstacle_terms_learned(p) || (learned >= clearance_m && learned <= clearance_m);
 }
 
 // Reads a counter at off into *v; false (with the reason) when it exceeds INT32_MAX.
