@@ -149,14 +149,15 @@ static void rollout_step(fw_shift_vet_t* vet, const fw_shift_vet_env_t* env, dou
   }
 }
 
-// The candidate under test fails from a start where the shift in force reaches the goal: not
-// taken. After the proposed shift half the step is tried, then a quarter, then an eighth (each
-// from the first start again; the shift in force's verdicts per start are kept, it is the same
-// shift); after the last the shift stays.
+// The candidate under test is not taken: after the proposed shift half the step is tried, then a
+// quarter, then an eighth (each from the first start again; the shift in force's verdicts per
+// start are kept, it is the same shift); after the last the shift stays.
 static void candidate_dropped(fw_shift_vet_t* vet) {
   if (vet->stage < FW_SHIFT_VET_HALVINGS) {
     vet->stage++;
     vet->start = 0;
+    vet->lost = 0;
+    memset(vet->candidate_failed, 0, sizeof vet->candidate_failed);
     const double fraction = ldexp(1.0, -vet->stage);
     const fw_pair_shift_t* in_force = &vet->shift[1];
     vet->shift[2].gain = in_force->gain + fraction * (vet->shift[0].gain - in_force->gain);
@@ -167,32 +168,95 @@ static void candidate_dropped(fw_shift_vet_t* vet) {
   }
 }
 
-// A rollout ended (status failed or not): what the vet does next.
-static void rollout_finished(fw_shift_vet_t* vet, bool failed) {
-  vet->rolling = false;
-  const int32_t candidate = vet->stage == 0 ? 0 : 2;
-  const uint32_t k = vet->start;
-  if (vet->checking_in_force) {
-    vet->checking_in_force = false;
-    vet->failures[1] += failed ? 1 : 0;
-    vet->in_force_failed[k] = failed ? 1 : -1;
-    if (!failed) {
-      candidate_dropped(vet);
-      return;
-    }
-    vet->start++;
-    return;
+// The first start the shift in force has not been driven from, at or after k (n when none is).
+static uint32_t next_unknown_in_force(const fw_shift_vet_t* vet, uint32_t k, uint32_t n) {
+  while (k < n && vet->in_force_failed[k] != 0) {
+    k++;
   }
-  vet->failures[candidate] += failed ? 1 : 0;
-  if (failed && vet->in_force_failed[k] == 0) {
-    vet->checking_in_force = true;  // the shift in force from the same start decides
-    return;
-  }
-  if (failed && vet->in_force_failed[k] < 0) {
+  return k;
+}
+
+// The candidate lost a start the shift in force reaches the goal from. It can still be taken
+// only by rescuing more starts than it loses, which needs starts the shift in force fails from:
+// with no more of those than it has lost, it is dropped at once (with a shift in force that
+// fails nowhere, at its first lost start, as a rule of "no new failure" would).
+static void candidate_lost_a_start(fw_shift_vet_t* vet) {
+  vet->lost++;
+  if (vet->lost >= vet->in_force_failures) {
     candidate_dropped(vet);
     return;
   }
   vet->start++;
+}
+
+// The candidate was driven from every start: taken where it lost none, or where it rescued more
+// starts (reaching the goal where the shift in force fails) than it lost; else dropped.
+static void candidate_judged(fw_shift_vet_t* vet, uint32_t n) {
+  int32_t rescued = 0;
+  for (uint32_t k = 0U; k < n; ++k) {
+    rescued += vet->candidate_failed[k] < 0 && vet->in_force_failed[k] > 0 ? 1 : 0;
+  }
+  if (vet->lost == 0 || vet->lost < rescued) {
+    decide(vet, vet->stage == 0 ? FW_SHIFT_STEP_TAKEN : FW_SHIFT_STEP_HALVED);
+  } else {
+    candidate_dropped(vet);
+  }
+}
+
+// A rollout ended (status failed or not): what the vet does next.
+static void rollout_finished(fw_shift_vet_t* vet, bool failed, uint32_t n) {
+  vet->rolling = false;
+  const uint32_t k = vet->start;
+  switch (vet->driving) {
+    case FW_SHIFT_VET_DRIVING_ALL_IN_FORCE: {
+      // The shift in force from every start it was not driven from, once per vet: the starts it
+      // fails from are the most the candidate can rescue.
+      vet->failures[1] += failed ? 1 : 0;
+      vet->in_force_failures += failed ? 1 : 0;
+      vet->in_force_failed[vet->in_force_next] = failed ? 1 : -1;
+      vet->in_force_next = next_unknown_in_force(vet, vet->in_force_next + 1U, n);
+      if (vet->in_force_next >= n) {
+        vet->driving = FW_SHIFT_VET_DRIVING_CANDIDATE;
+        candidate_lost_a_start(vet);
+      }
+      return;
+    }
+    case FW_SHIFT_VET_DRIVING_IN_FORCE: {
+      // The shift in force from the start the candidate failed from decides whether it lost it.
+      vet->driving = FW_SHIFT_VET_DRIVING_CANDIDATE;
+      vet->failures[1] += failed ? 1 : 0;
+      vet->in_force_failures += failed ? 1 : 0;
+      vet->in_force_failed[k] = failed ? 1 : -1;
+      if (failed) {
+        vet->start++;
+        return;
+      }
+      break;  // lost: below
+    }
+    case FW_SHIFT_VET_DRIVING_CANDIDATE:
+    default: {
+      const int32_t candidate = vet->stage == 0 ? 0 : 2;
+      vet->failures[candidate] += failed ? 1 : 0;
+      vet->candidate_failed[k] = failed ? 1 : -1;
+      if (!failed || vet->in_force_failed[k] > 0) {
+        vet->start++;
+        return;
+      }
+      if (vet->in_force_failed[k] == 0) {
+        vet->driving = FW_SHIFT_VET_DRIVING_IN_FORCE;
+        return;
+      }
+      break;  // lost: below
+    }
+  }
+  // The candidate lost start k. The first time in a vet, the shift in force is driven from every
+  // start it has not been yet (its failures bound what the candidate can rescue).
+  vet->in_force_next = next_unknown_in_force(vet, 0U, n);
+  if (vet->in_force_next < n) {
+    vet->driving = FW_SHIFT_VET_DRIVING_ALL_IN_FORCE;
+    return;
+  }
+  candidate_lost_a_start(vet);
 }
 
 bool fw_shift_vet_hedger_greedy(void* hedger, const double* s, double* action) {
@@ -206,12 +270,12 @@ bool fw_shift_vet_step(fw_shift_vet_t* vet, fw_shift_vet_greedy_fn greedy, void*
   uint32_t budget = periods;
   while (vet->stage >= 0) {
     if (!vet->rolling) {
-      if (vet->start >= n_rollouts) {
-        // The candidate failed nowhere the shift in force did not.
-        decide(vet, vet->stage == 0 ? FW_SHIFT_STEP_TAKEN : FW_SHIFT_STEP_HALVED);
-        break;
+      if (vet->driving == FW_SHIFT_VET_DRIVING_CANDIDATE && vet->start >= n_rollouts) {
+        candidate_judged(vet, n_rollouts);
+        continue;
       }
-      begin_rollout(vet, env, starts, vet->start);
+      begin_rollout(vet, env, starts,
+                    vet->driving == FW_SHIFT_VET_DRIVING_ALL_IN_FORCE ? vet->in_force_next : vet->start);
     }
     if (budget == 0U) {
       return false;
@@ -224,7 +288,8 @@ bool fw_shift_vet_step(fw_shift_vet_t* vet, fw_shift_vet_greedy_fn greedy, void*
       if (greedy(ctx, s, &a)) {
         // The learned policy as run.c drives it: the greedy action weighted by 1 + the imitation's
         // weight plus the shift where an action is known, 0 (hold course) where none is.
-        const fw_pair_shift_t* sh = &vet->shift[vet->checking_in_force ? 1 : (vet->stage == 0 ? 0 : 2)];
+        const fw_pair_shift_t* sh =
+            &vet->shift[vet->driving != FW_SHIFT_VET_DRIVING_CANDIDATE ? 1 : (vet->stage == 0 ? 0 : 2)];
         omega = tasks_clamp_omega(fw_pair_policy_action(sh, env->task, env->obstacle_clearance_m, s, a), omega_max);
       }
       budget--;
@@ -233,7 +298,7 @@ bool fw_shift_vet_step(fw_shift_vet_t* vet, fw_shift_vet_greedy_fn greedy, void*
     }
     const int32_t status = rollout_status(vet, env);
     if (status != TASKS_ROLLOUT_RUNNING) {
-      rollout_finished(vet, status != TASKS_ROLLOUT_GOAL);
+      rollout_finished(vet, status != TASKS_ROLLOUT_GOAL, n_rollouts);
     }
   }
   return true;

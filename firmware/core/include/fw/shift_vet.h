@@ -14,12 +14,22 @@
 ///   1. the proposed shift, start by start. Where a rollout fails (closer than the margin to a
 ///      wall or an obstacle, the step limit, nothing predictable: among obstacles also a start
 ///      without a visible obstacle, whose pose the state does not fix), the shift in force is
-///      driven from the same
-///      start; if that one reaches the goal, the proposed shift is not taken (go to 2). If it
-///      fails nowhere the shift in force does not, the step is taken;
+///      driven from the same start; where that one reaches the goal, the proposed shift has lost
+///      the start. The step is taken if it loses no start, or if it rescues more starts than it
+///      loses (reaching the goal where the shift in force fails); else it is not (go to 2). At
+///      its first lost start the shift in force is driven from every start (once per vet), and
+///      the candidate is dropped as soon as it has lost as many starts as the shift in force
+///      fails from (it cannot rescue more): with a shift in force that fails nowhere, at its
+///      first lost start;
 ///   2. half the step, likewise, then a quarter, then an eighth (FW_SHIFT_VET_HALVINGS): the
-///      first that fails nowhere the shift in force does not is taken (halved), or
+///      first that is taken by the same rule is put in force (halved), or
 ///   3. the shift stays where it is (the pair still counts, so the rate falls).
+/// Why a rescue may pay for a loss: a learned policy that fails on the model from several recent
+/// starts (a seed whose imitation brushes the obstacle, with the shift still near 0) had every
+/// step refused by a rule of "no new failure", since any step that moves the course loses some
+/// start; the shift then stayed near 0 for all of phase two (docs/LEARNING.md, "A step that
+/// rescues more starts than it loses"). A lost start is still never traded for nothing: where
+/// the shift in force fails nowhere the rule is "no new failure".
 /// The smaller steps keep a seed from stalling: among obstacles a step toward a faster pair often
 /// clips the obstacle on the model from one recent start by a few centimetres, and where the
 /// half step does too, every step was refused and the shift stayed near 0 (docs/LEARNING.md).
@@ -35,9 +45,10 @@
 /// its own runs since (b21r-train empties its ring at each log and where seq starts again at 0).
 ///
 /// Memory: fixed (the structures below, no allocation). Cost per vet: usually 2 × starts
-/// rollouts of about 140 periods (the obstacle task: about 100); at most
-/// (2 + FW_SHIFT_VET_HALVINGS) × 2 × starts rollouts (proposed, its fractions, in force: the last
-/// driven once per start) of at most step_limit periods.
+/// rollouts of about 140 periods (the obstacle task: about 100), and 2 × starts more for the
+/// shift in force once a candidate loses a start; at most (2 + FW_SHIFT_VET_HALVINGS) × 2 ×
+/// starts rollouts (proposed, its fractions, in force: the last driven once per start) of at
+/// most step_limit periods.
 #ifndef FW_SHIFT_VET_H
 #define FW_SHIFT_VET_H
 
@@ -112,14 +123,25 @@ typedef enum fw_shift_verdict {
   FW_SHIFT_STEP_REFUSED = 2,  ///< the shift stays
 } fw_shift_verdict_t;
 
+/// What the rollout under way drives.
+typedef enum fw_shift_vet_driving {
+  FW_SHIFT_VET_DRIVING_CANDIDATE = 0,     ///< the candidate (proposed shift or fraction) from `start`
+  FW_SHIFT_VET_DRIVING_IN_FORCE = 1,      ///< the shift in force from `start`, where the candidate failed
+  FW_SHIFT_VET_DRIVING_ALL_IN_FORCE = 2,  ///< the shift in force from `in_force_next` (after the first lost start)
+} fw_shift_vet_driving_t;
+
 /// One vet under way. Plain data; fw_shift_vet_begin fills it.
 typedef struct fw_shift_vet {
   fw_pair_shift_t shift[3];   ///< [0] the proposed shift, [1] the one in force, [2] the fraction of the step under test (or last tested)
   int32_t failures[3];        ///< rollouts of each that failed (a wall, the step limit, nothing predictable); [2] summed over the fractions
-  int8_t in_force_failed[2 * FW_SHIFT_VET_STARTS_MAX];  ///< per rollout start: 0 not driven, 1 failed, -1 reached the goal
+  int8_t in_force_failed[2 * FW_SHIFT_VET_STARTS_MAX];   ///< per rollout start: 0 not driven, 1 failed, -1 reached the goal
+  int8_t candidate_failed[2 * FW_SHIFT_VET_STARTS_MAX];  ///< the same for the candidate under test
+  int32_t lost;               ///< starts the candidate under test failed from where the shift in force reaches the goal
+  int32_t in_force_failures;  ///< starts the shift in force failed from, of those it was driven from
   int32_t stage;              ///< 0: the proposed shift under test, k = 1..FW_SHIFT_VET_HALVINGS: 2^-k of the step; -1 once decided
   uint32_t start;             ///< the rollout start under test (start k / 2, mirrored when k is odd)
-  bool checking_in_force;     ///< the rollout under way drives the shift in force (the candidate failed there)
+  uint32_t in_force_next;     ///< FW_SHIFT_VET_DRIVING_ALL_IN_FORCE: the start under way
+  uint8_t driving;            ///< fw_shift_vet_driving_t of the rollout under way (or next)
   bool rolling;               ///< a rollout is under way
   uint32_t periods;           ///< rollout periods driven so far (policy calls)
   tasks_corridor_rollout_t ro;            ///< the rollout under way (corridor)

@@ -3,7 +3,8 @@
 // on the model is known: the recovery law (2 x target angle) as the "greedy" action. A shift that
 // keeps the law turning toward the axis is taken; one that makes it turn away is cut to a half, a
 // quarter or an eighth, the first of them that is safe, and refused when none is; a step is judged start by start against the shift in force
-// (mirrored starts included); where the model sees no difference the step is taken; the verdict
+// (mirrored starts included), and one that rescues more starts than it loses is taken; where the
+// model sees no difference the step is taken; the verdict
 // does not depend on how the work is sliced; the rollouts weigh the greedy action by 1 + the
 // imitation's weight; the start ring keeps the last starts.
 #include <b21r_test/alloc_counter.h>
@@ -240,6 +241,92 @@ static void test_vet_cuts_the_step_from_the_shift_in_force(void** state) {
   assert_int_equal(vet.failures[2], 1);  // the half
 }
 
+// ---------------------------------------------------------------------------------------------
+// Rescues against losses: which rollouts fail is set by a table, per start and per shift. The
+// "greedy" action reads from the vet under way which shift its rollout drives and from which
+// start, and returns the law (which reaches the goal from every typical start) or its opposite
+// (-2 x target angle, which turns away and reaches a wall from each of them); the step is 1e-9 in
+// gain, so the shift itself changes nothing on the model.
+
+typedef struct verdict_table {
+  const fw_shift_vet_t* vet;
+  uint32_t in_force_fails;   // bit k: the shift in force fails from rollout start k
+  uint32_t candidate_fails;  // bit k: the proposed shift (and each fraction) fails from start k
+} verdict_table_t;
+
+static bool tabled(void* ctx, const double* s, double* action) {
+  const verdict_table_t* t = (const verdict_table_t*)ctx;
+  const fw_shift_vet_t* v = t->vet;
+  const bool in_force = v->driving != FW_SHIFT_VET_DRIVING_CANDIDATE;
+  const uint32_t k = v->driving == FW_SHIFT_VET_DRIVING_ALL_IN_FORCE ? v->in_force_next : v->start;
+  const bool fails = (((in_force ? t->in_force_fails : t->candidate_fails) >> k) & 1U) != 0U;
+  g_calls++;
+  *action = (fails ? -2.0 : 2.0) * s[2];
+  return true;
+}
+
+static fw_shift_vet_t tabled_vet(uint32_t in_force_fails, uint32_t candidate_fails) {
+  const fw_pair_shift_t in_force = {.gain = 0.0, .centring = 0.0, .pairs = 3U};
+  const fw_pair_shift_t proposed = {.gain = 1e-9, .centring = 0.0, .pairs = 4U};
+  fw_shift_vet_t vet;
+  verdict_table_t table = {.vet = &vet, .in_force_fails = in_force_fails, .candidate_fails = candidate_fails};
+  fw_shift_vet_begin(&vet, &in_force, &proposed);
+  while (!fw_shift_vet_step(&vet, tabled, &table, &g_env, &g_starts, 7U)) {
+  }
+  return vet;
+}
+
+// A step that rescues more starts than it loses is taken: the shift in force fails from starts
+// 0, 1 and 2 (of 8: four starts and their mirror images), the proposed shift from 5 alone. The
+// shift in force is driven once from every start, after the first lost one.
+static void test_vet_takes_a_step_that_rescues_more_than_it_loses(void** state) {
+  (void)state;
+  add_typical_starts();
+  const fw_shift_vet_t vet = tabled_vet(0x07U, 0x20U);
+  assert_int_equal(vet.verdict, FW_SHIFT_STEP_TAKEN);
+  assert_true(vet.result.gain == 1e-9 && vet.result.pairs == 4U);
+  assert_int_equal(vet.lost, 1);
+  assert_int_equal(vet.failures[0], 1);
+  assert_int_equal(vet.failures[1], 3);
+  for (int k = 0; k < 8; ++k) {
+    assert_int_equal(vet.in_force_failed[k], k < 3 ? 1 : -1);
+    assert_int_equal(vet.candidate_failed[k], k == 5 ? 1 : -1);
+  }
+  // Where the shift in force fails too, the candidate's failure is no loss: no other start is
+  // needed, and the shift in force is driven from that start alone.
+  const fw_shift_vet_t same = tabled_vet(0x10U, 0x10U);
+  assert_int_equal(same.verdict, FW_SHIFT_STEP_TAKEN);
+  assert_int_equal(same.lost, 0);
+  assert_int_equal(same.failures[1], 1);
+  assert_int_equal(same.in_force_failed[0], 0);
+}
+
+// As many rescues as losses, or fewer, do not pay: each fraction is dropped as soon as it has lost
+// as many starts as the shift in force fails from (it cannot rescue more), and the step is
+// refused. The shift in force is driven from each start once for the whole vet, not once per
+// fraction.
+static void test_vet_refuses_a_step_that_loses_as_many_as_it_rescues(void** state) {
+  (void)state;
+  add_typical_starts();
+  const uint32_t cases[3][2] = {{0x03U, 0x30U}, {0x01U, 0x02U}, {0x01U, 0x06U}};  // (in force, candidate) fails
+  const int32_t lost_at_drop[3] = {2, 1, 1};
+  for (int i = 0; i < 3; ++i) {
+    g_calls = 0;
+    const fw_shift_vet_t vet = tabled_vet(cases[i][0], cases[i][1]);
+    assert_int_equal(vet.verdict, FW_SHIFT_STEP_REFUSED);
+    assert_true(vet.result.gain == 0.0 && vet.result.pairs == 4U);
+    assert_int_equal(vet.lost, lost_at_drop[i]);
+    assert_int_equal(vet.failures[1], __builtin_popcount(cases[i][0]));
+    assert_int_equal(vet.failures[0], lost_at_drop[i]);
+    assert_int_equal(vet.failures[2], FW_SHIFT_VET_HALVINGS * lost_at_drop[i]);
+    assert_true(vet.stage < 0);
+  }
+  // The same losses against more rescues: taken (two lost, three rescued).
+  const fw_shift_vet_t vet = tabled_vet(0x07U, 0x30U);
+  assert_int_equal(vet.verdict, FW_SHIFT_STEP_TAKEN);
+  assert_int_equal(vet.lost, 2);
+}
+
 // The ring keeps the last pair_shift_vet_starts starts (20 by default), oldest out first, and
 // drops non-finite states.
 static void test_vet_starts_keep_the_last_runs(void** state) {
@@ -409,6 +496,8 @@ int main(void) {
       cmocka_unit_test_setup(test_vet_weighs_the_greedy_action, setup),
       cmocka_unit_test_setup(test_vet_in_slices_decides_the_same, setup),
       cmocka_unit_test_setup(test_vet_cuts_the_step_from_the_shift_in_force, setup),
+      cmocka_unit_test_setup(test_vet_takes_a_step_that_rescues_more_than_it_loses, setup),
+      cmocka_unit_test_setup(test_vet_refuses_a_step_that_loses_as_many_as_it_rescues, setup),
       cmocka_unit_test_setup(test_vet_starts_keep_the_last_runs, setup),
       cmocka_unit_test_setup(test_vet_among_obstacles, setup_obstacles),
   };
