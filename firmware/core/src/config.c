@@ -367,9 +367,9 @@ static const key_desc_t k_keys[] = {
    "with it drives whole runs on the safety filter's kinematic model (obstacles: the same unicycle among the "
    "obstacle and the walls) from the first states of the last pair_shift_vet_starts training runs, each also "
    "mirrored; where it comes closer than pair_safety_margin_m to a wall (obstacles: touches the obstacle or a "
-   "wall) or runs out of steps from a start from which the shift in force does not (unless it reaches the goal "
-   "from more starts the shift in force fails from), a half, a quarter and an eighth of the step are tried in "
-   "turn, and then none (docs/LEARNING.md)"},
+   "wall) or runs out of steps from a start from which the shift in force does not (unless it rescues more "
+   "starts than it loses: reaches the goal from more starts the shift in force fails from), a half, a quarter "
+   "and an eighth of the step are tried in turn, and then none (docs/LEARNING.md)"},
   {NULL, "pair_shift_vet_starts", KIND_INT, OFF(pair_shift_vet_starts), 1, 32, false, false, NULL, "20",
    "pair_shift_vet: the training runs whose first states the vet drives from (the last ones; each also mirrored)"},
   {NULL, "pair_shift_vet_periods_per_tick", KIND_INT, OFF(pair_shift_vet_periods_per_tick), 1, 100000, false, false,

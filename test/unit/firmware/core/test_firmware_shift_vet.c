@@ -99,7 +99,9 @@ static void test_vet_takes_a_safe_step(void** state) {
 }
 
 // Gain -2.6 turns the law away from the axis (-0.6 x target angle): the first start ends on a
-// wall where the shift in force reaches the goal, and the proposed shift is dropped at once. Half
+// wall where the shift in force reaches the goal, and the proposed shift is dropped at once (after
+// the shift in force is driven from the other starts: it fails from none, so nothing can be
+// rescued). Half
 // of it (-1.3: 0.7 x target angle) still turns toward the axis from every start: halved.
 static void test_vet_halves_a_step_that_reaches_a_wall(void** state) {
   (void)state;
@@ -128,7 +130,7 @@ static void test_vet_tries_a_quarter_and_an_eighth(void** state) {
   assert_int_equal(vet.verdict, FW_SHIFT_STEP_HALVED);
   assert_true(vet.result.gain == -1.5 && vet.result.pairs == 4U);
   assert_int_equal(vet.failures[2], 2);  // the half and the quarter
-  assert_int_equal(vet.failures[1], 0);  // the shift in force, driven once from the failing start
+  assert_int_equal(vet.failures[1], 0);  // the shift in force, driven once per start for the whole vet
 }
 
 // Gain -20: even an eighth of it (-2.5) turns away: the shift stays, and the pair still counts.
@@ -311,7 +313,6 @@ static void test_vet_refuses_a_step_that_loses_as_many_as_it_rescues(void** stat
   const uint32_t cases[3][2] = {{0x03U, 0x30U}, {0x01U, 0x02U}, {0x01U, 0x06U}};  // (in force, candidate) fails
   const int32_t lost_at_drop[3] = {2, 1, 1};
   for (int i = 0; i < 3; ++i) {
-    g_calls = 0;
     const fw_shift_vet_t vet = tabled_vet(cases[i][0], cases[i][1]);
     assert_int_equal(vet.verdict, FW_SHIFT_STEP_REFUSED);
     assert_true(vet.result.gain == 0.0 && vet.result.pairs == 4U);
