@@ -168,6 +168,12 @@ static void candidate_dropped(fw_shift_vet_t* vet) {
   }
 }
 
+// The shift in force's verdict from start k (driven once per vet: each start at most once).
+static void record_in_force(fw_shift_vet_t* vet, uint32_t k, bool failed) {
+  vet->failures[1] += failed ? 1 : 0;
+  vet->in_force_failed[k] = failed ? 1 : -1;
+}
+
 // The first start the shift in force has not been driven from, at or after k (n when none is).
 static uint32_t next_unknown_in_force(const fw_shift_vet_t* vet, uint32_t k, uint32_t n) {
   while (k < n && vet->in_force_failed[k] != 0) {
@@ -182,7 +188,7 @@ static uint32_t next_unknown_in_force(const fw_shift_vet_t* vet, uint32_t k, uin
 // fails nowhere, at its first lost start, as a rule of "no new failure" would).
 static void candidate_lost_a_start(fw_shift_vet_t* vet) {
   vet->lost++;
-  if (vet->lost >= vet->in_force_failures) {
+  if (vet->lost >= vet->failures[1]) {
     candidate_dropped(vet);
     return;
   }
@@ -211,9 +217,7 @@ static void rollout_finished(fw_shift_vet_t* vet, bool failed, uint32_t n) {
     case FW_SHIFT_VET_DRIVING_ALL_IN_FORCE: {
       // The shift in force from every start it was not driven from, once per vet: the starts it
       // fails from are the most the candidate can rescue.
-      vet->failures[1] += failed ? 1 : 0;
-      vet->in_force_failures += failed ? 1 : 0;
-      vet->in_force_failed[vet->in_force_next] = failed ? 1 : -1;
+      record_in_force(vet, vet->in_force_next, failed);
       vet->in_force_next = next_unknown_in_force(vet, vet->in_force_next + 1U, n);
       if (vet->in_force_next >= n) {
         vet->driving = FW_SHIFT_VET_DRIVING_CANDIDATE;
@@ -224,9 +228,7 @@ static void rollout_finished(fw_shift_vet_t* vet, bool failed, uint32_t n) {
     case FW_SHIFT_VET_DRIVING_IN_FORCE: {
       // The shift in force from the start the candidate failed from decides whether it lost it.
       vet->driving = FW_SHIFT_VET_DRIVING_CANDIDATE;
-      vet->failures[1] += failed ? 1 : 0;
-      vet->in_force_failures += failed ? 1 : 0;
-      vet->in_force_failed[k] = failed ? 1 : -1;
+      record_in_force(vet, k, failed);
       if (failed) {
         vet->start++;
         return;

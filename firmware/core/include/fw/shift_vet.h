@@ -133,11 +133,13 @@ typedef enum fw_shift_vet_driving {
 /// One vet under way. Plain data; fw_shift_vet_begin fills it.
 typedef struct fw_shift_vet {
   fw_pair_shift_t shift[3];   ///< [0] the proposed shift, [1] the one in force, [2] the fraction of the step under test (or last tested)
-  int32_t failures[3];        ///< rollouts of each that failed (a wall, the step limit, nothing predictable); [2] summed over the fractions
+  /// rollouts of each that failed (a wall, the step limit, nothing predictable): [0] the proposed
+  /// shift, [1] the shift in force (driven from each start at most once per vet, so the starts it
+  /// fails from, of those driven: the most a candidate can rescue), [2] summed over the fractions
+  int32_t failures[3];
   int8_t in_force_failed[2 * FW_SHIFT_VET_STARTS_MAX];   ///< per rollout start: 0 not driven, 1 failed, -1 reached the goal
   int8_t candidate_failed[2 * FW_SHIFT_VET_STARTS_MAX];  ///< the same for the candidate under test
   int32_t lost;               ///< starts the candidate under test failed from where the shift in force reaches the goal
-  int32_t in_force_failures;  ///< starts the shift in force failed from, of those it was driven from
   int32_t stage;              ///< 0: the proposed shift under test, k = 1..FW_SHIFT_VET_HALVINGS: 2^-k of the step; -1 once decided
   uint32_t start;             ///< the rollout start under test (start k / 2, mirrored when k is odd)
   uint32_t in_force_next;     ///< FW_SHIFT_VET_DRIVING_ALL_IN_FORCE: the start under way
