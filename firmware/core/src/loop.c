@@ -326,6 +326,7 @@ static sensed_t sense(fw_loop_t* L, int64_t now_us) {
   fw_run_odometry_update(L, in.run_starting);
   if (in.run_starting) {
     tasks_episode_begin(&L->ep, L->start_pose, fw_run_odom_pose(L));  // the run's frame
+    fw_pass_hold_reset(&L->pass_hold);
   }
   if (L->scan_new && (in.running || in.run_starting)) {
     in.state_ok = fw_run_observe(L) && all_finite(L->s, L->state_dim);

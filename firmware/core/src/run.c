@@ -41,7 +41,12 @@ bool fw_run_observe(fw_loop_t* L) {
     // the odometry's noisy rate, so a lockstep run stays a function of its inputs.
     L->s[L->ep.state_dim] = L->cmd_w;
   }
-  return tasks_episode_observe(&L->ep, &L->scan, fw_run_odom_pose(L), L->s) == 1;
+  if (tasks_episode_observe(&L->ep, &L->scan, fw_run_odom_pose(L), L->s) != 1) {
+    return false;
+  }
+  L->pass_held = fw_pass_hold_observe(&L->pass_hold, (fw_task_t)L->cfg.task, L->s,
+                                      (uint32_t)L->cfg.obstacle_pass_hold_steps);
+  return true;
 }
 
 static const char* run_kind_name(const fw_loop_t* L) {
@@ -177,7 +182,11 @@ int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool exa
     const double step_imitation = rate * u * imitation;
     if (isfinite(step_gain) && isfinite(step_centring) && isfinite(step_imitation)) {  // (a damaged log's record: no step)
       sh->gain = fmin(FW_PAIR_SHIFT_MAX, fmax(-FW_PAIR_SHIFT_MAX, sh->gain + step_gain));
-      sh->centring = fmin(FW_PAIR_SHIFT_MAX, fmax(-FW_PAIR_SHIFT_MAX, sh->centring + step_centring));
+      // Among obstacles the bend's coefficient only widens the berth (b >= 0): a negative one
+      // aims inside the cone pair_obstacle_clearance_m keeps, closer than the clearance, where
+      // the model and the emulator part (FW_PAIR_OBSTACLE_CENTRING_MIN, fw/progress.h).
+      const double centring_min = cfg->task == FW_TASK_OBSTACLES ? FW_PAIR_OBSTACLE_CENTRING_MIN : -FW_PAIR_SHIFT_MAX;
+      sh->centring = fmin(FW_PAIR_SHIFT_MAX, fmax(centring_min, sh->centring + step_centring));
       sh->imitation = fmin(FW_PAIR_IMITATION_MAX, fmax(FW_PAIR_IMITATION_MIN, sh->imitation + step_imitation));
     }
     return 2;
@@ -236,7 +245,10 @@ double fw_pair_shift_at(const fw_pair_shift_t* shift, fw_task_t task, double obs
 }
 
 double fw_pair_policy_action(const fw_pair_shift_t* shift, fw_task_t task, double obstacle_clearance_m, const double* s,
-                             double greedy) {
+                             double greedy, bool held) {
+  if (held) {
+    return 0.0;
+  }
   return (1.0 + shift->imitation) * greedy + fw_pair_shift_at(shift, task, obstacle_clearance_m, s);
 }
 
@@ -671,7 +683,7 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
       // greedy action's (the learning target).
       greedy_action = tasks_clamp_omega(
           fw_pair_policy_action(&L->pair_ranker.shift, (fw_task_t)L->cfg.task, L->cfg.pair_obstacle_clearance_m, L->s,
-                                greedy_imitated), L->omega_max);
+                                greedy_imitated, L->pass_held), L->omega_max);
     }
     if (L->pending.active) {
       L->pending.need_greedy = false;
@@ -705,10 +717,11 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
   } else if (greedy_known) {
     a = greedy_action;
     source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
-    if (!evaluating && L->pair_member >= 0 && !L->pair_run_vetoed) {
+    if (!evaluating && L->pair_member >= 0 && !L->pair_run_vetoed && !L->pass_held) {
       // A pair run: the learned policy with the pair's perturbation, within the action bounds.
       // Once the safety filter has corrected it the run counts as failed: the learned policy
-      // drives the rest of the way, which ends it sooner than the perturbation would.
+      // drives the rest of the way, which ends it sooner than the perturbation would. (Held
+      // past an obstacle, the pair's runs hold course alike.)
       a = tasks_clamp_omega(a + pair_offset(L, greedy_imitated), L->omega_max);
       source = B21R_EXPERIENCE_T_SOURCE_EXPLORATION;
     }

@@ -42,6 +42,7 @@ void fw_shift_vet_env_init(fw_shift_vet_env_t* env, const fw_config_t* cfg) {
   env->task_dim = corridor ? 3U : 4U;
   env->margin_m = corridor ? cfg->pair_safety_margin_m : FW_SHIFT_VET_OBSTACLES_MARGIN_M;
   env->obstacle_clearance_m = cfg->pair_obstacle_clearance_m;
+  env->pass_hold_steps = cfg->obstacle_pass_hold_steps > 0 ? (uint32_t)cfg->obstacle_pass_hold_steps : 0U;
   env->mirror = corridor || obstacles_symmetric(&env->obstacles);
   env->state_rotation = cfg->state_rotation;
   const int32_t cap = cfg->pair_shift_vet_starts;
@@ -93,6 +94,31 @@ bool fw_shift_vet_done(const fw_shift_vet_t* vet) { return vet->stage < 0; }
 // Rollouts per start: 2 where the task is mirror-symmetric (the start and its mirror image).
 static uint32_t rollouts_per_start(const fw_shift_vet_env_t* env) { return env->mirror ? 2U : 1U; }
 
+void fw_pass_hold_reset(fw_pass_hold_t* h) {
+  h->steps_left = 0U;
+  h->near_before = false;
+}
+
+bool fw_pass_hold_observe(fw_pass_hold_t* h, fw_task_t task, const double* s, uint32_t hold_steps) {
+  if (task == FW_TASK_CORRIDOR || hold_steps == 0U) {
+    fw_pass_hold_reset(h);
+    return false;
+  }
+  // A visible obstacle's bearing lies within ±π/2 (the laser's 180°); an empty slot's is π.
+  const double half_pi = 1.57079632679489661923;
+  const bool in_view = fabs(s[2]) <= half_pi;
+  const bool near = in_view && s[3] < FW_PAIR_OBSTACLE_RANGE_M;
+  if (in_view) {
+    h->steps_left = 0U;  // back in view (or another one): the state says where it is
+  } else if (h->near_before) {
+    h->steps_left = hold_steps;
+  } else if (h->steps_left > 0U) {
+    h->steps_left--;
+  }
+  h->near_before = near;
+  return h->steps_left > 0U;
+}
+
 // Rollout k of a start set: start k / 2, mirrored when k is odd (with env->mirror; else start k).
 // The mirror image: corridor lateral fraction 1 - l, target angle negated; obstacles both
 // bearings negated (a visible obstacle's bearing is within +-pi/2; a hidden one's start has no
@@ -120,6 +146,7 @@ static void begin_rollout(fw_shift_vet_t* vet, const fw_shift_vet_env_t* env, co
   } else {
     (void)tasks_obstacles_rollout_begin(&vet->ro_obstacles, &env->obstacles, &env->obstacles_features, s, omega);
   }
+  fw_pass_hold_reset(&vet->pass_hold);
   vet->rolling = true;
 }
 
@@ -285,14 +312,17 @@ bool fw_shift_vet_step(fw_shift_vet_t* vet, fw_shift_vet_greedy_fn greedy, void*
     if (rollout_status(vet, env) == TASKS_ROLLOUT_RUNNING) {
       double s[FW_SHIFT_VET_TASK_DIM_MAX + 1];
       rollout_state(vet, env, s);
+      const bool held = fw_pass_hold_observe(&vet->pass_hold, env->task, s, env->pass_hold_steps);
       double a = 0.0;
       double omega = 0.0;
       if (greedy(ctx, s, &a)) {
         // The learned policy as run.c drives it: the greedy action weighted by 1 + the imitation's
-        // weight plus the shift where an action is known, 0 (hold course) where none is.
+        // weight plus the shift where an action is known (held past an obstacle: none), 0 (hold
+        // course) where none is.
         const fw_pair_shift_t* sh =
             &vet->shift[vet->driving != FW_SHIFT_VET_DRIVING_CANDIDATE ? 1 : (vet->stage == 0 ? 0 : 2)];
-        omega = tasks_clamp_omega(fw_pair_policy_action(sh, env->task, env->obstacle_clearance_m, s, a), omega_max);
+        omega = tasks_clamp_omega(fw_pair_policy_action(sh, env->task, env->obstacle_clearance_m, s, a, held),
+                                  omega_max);
       }
       budget--;
       vet->periods++;

@@ -19,8 +19,6 @@
 #define OPTIMAL_OBSTACLES_CLEARANCE_M 0.40
 #define OPTIMAL_OBSTACLES_RANGE_M 1.25
 
-// Steps to hold course after an avoided obstacle left the field of view (1 s at 10 Hz).
-#define PASS_HOLD_STEPS 10U
 
 // Fixed avoidance geometry of the example (proportional) obstacle policy.
 #define EXAMPLE_OBSTACLES_CLEARANCE_M 0.55
@@ -164,7 +162,7 @@ static double obstacle_target(tasks_driver_t* d, const features_obstacles_t* f) 
     if (d->avoid_side != 0 && o->visible == 0U) {
       // The obstacle slipped out of view beside the robot while being avoided: it is still
       // there, so hold the course a little before turning to the goal.
-      d->pass_steps = PASS_HOLD_STEPS;
+      d->pass_steps = TASKS_OBSTACLES_PASS_HOLD_STEPS;
     }
     d->avoid_side = 0;
     if (d->pass_steps > 0U) {

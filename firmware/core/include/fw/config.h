@@ -232,6 +232,7 @@ typedef struct fw_config {
   double pair_gain_sigma;          ///< pair_runs: std-dev of the perturbation's gain on θ (obstacles: the bent goal direction) [rad/s per rad]
   double pair_centring_sigma;      ///< pair_runs: std-dev of its term on (lateral fraction − 0.5) [rad/s per corridor width] (obstacles: on the bend [rad/s per rad])
   double pair_imitation_sigma;     ///< pair_runs: std-dev of its weight on the unperturbed policy's own action [1] (0 = the imitation's weight is not learned)
+  int32_t obstacle_pass_hold_steps;  ///< obstacles: states the learned policy holds course for after a near obstacle slipped out of view (fw_pass_hold_observe); 0 = never
   double pair_obstacle_clearance_m;  ///< pair_runs, obstacles: the clearance the pair terms bend the goal direction around [m, robot centre to the obstacle's nearest return] (fw_pair_basis)
   double pair_tau_steps;           ///< pair_runs: scale of the weights' response to the steps' difference
   double pair_recency_runs;        ///< pair_runs: imitation fades a point stored N runs ago by e^(−N/this)

@@ -224,9 +224,10 @@ double fw_pair_shift_at(const fw_pair_shift_t* shift, fw_task_t task, double obs
 
 /// The learned policy's action at a learner state s where HEDGER's greedy action is `greedy`:
 /// (1 + imitation) × greedy + fw_pair_shift_at [rad/s], not clamped (callers clamp to the action
-/// bounds), as the controller drives it and the vet's rollouts do. Pure, O(1).
+/// bounds), as the controller drives it and the vet's rollouts do; 0 (hold course) where `held`,
+/// the verdict of fw_pass_hold_observe at s. Pure, O(1).
 double fw_pair_policy_action(const fw_pair_shift_t* shift, fw_task_t task, double obstacle_clearance_m, const double* s,
-                             double greedy);
+                             double greedy, bool held);
 
 /// pair_runs: the run tag of a training run with id run_id when the store's current tag is
 /// `current` (run.c; b21r-train uses the same rule): its id while ids run ahead of the tags, else

@@ -77,6 +77,16 @@ extern "C" {
 /// docs/LEARNING.md).
 #define FW_PAIR_SHIFT_MAX 4.0
 
+/// The least coefficient a ranked pair's step leaves on the obstacle task's bend (the shift's
+/// centring term): the bend only widens the berth around the cone that pair_obstacle_clearance_m
+/// keeps. A negative coefficient undoes part of the bend and aims closer than the clearance; on
+/// the vet's model such a course still clears the obstacle, in the emulator it touched it from
+/// some evaluation poses (dev seeds 11-160 at 0.4 m: final blocks with failed runs on seeds whose
+/// b ended at -1.2 to -2.2; with the bound 6 failed phase-two evaluations of 10,500 against 21,
+/// docs/LEARNING.md). A shift loaded with b < 0 (learned before the bound) keeps it until its
+/// next ranked step. The corridor's centring keeps ±FW_PAIR_SHIFT_MAX.
+#define FW_PAIR_OBSTACLE_CENTRING_MIN 0.0
+
 /// Revision of the pair terms (fw_pair_basis) that checkpoints record with the shift: 1 = the
 /// obstacle task's first term is the goal direction bent around the nearest obstacle (0: the goal
 /// bearing; the corridor's terms are the same in both).

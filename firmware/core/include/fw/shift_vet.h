@@ -97,6 +97,29 @@ typedef struct fw_shift_vet_starts {
 } fw_shift_vet_starts_t;
 
 /// What the rollouts need from the configuration (fw_shift_vet_env_init).
+/// The obstacle task's hold past an obstacle (obstacle_pass_hold_steps). The laser sees 180°
+/// forward from 0.15 m ahead of the robot's centre, so an obstacle being passed leaves its view
+/// while the skirt is still centimetres from it, and the state then says "no obstacle" (bearing
+/// π): a policy of the state alone turns to the goal there and clips it (on the vet's model, 137
+/// of 173 failed rollouts of one traced session, docs/LEARNING.md). For hold_steps states after
+/// a near obstacle (in view, nearer than FW_PAIR_OBSTACLE_RANGE_M, fw/loop.h) slips out of view, the learned
+/// policy holds course, as the reference law does (TASKS_OBSTACLES_PASS_HOLD_STEPS). Plain data,
+/// one per run (the controller, run.c) or rollout (the vet, below); 8 bytes.
+typedef struct fw_pass_hold {
+  uint32_t steps_left;  ///< held states still to come, the latest one included
+  bool near_before;     ///< the previous state had a near obstacle in view
+} fw_pass_hold_t;
+
+/// Forgets the states before (a run or a rollout begins). O(1).
+void fw_pass_hold_reset(fw_pass_hold_t* h);
+
+/// Takes the next state s of the task (obstacles: goal bearing, goal distance, obstacle bearing,
+/// obstacle distance, as features_obstacles_state writes them; an obstacle out of view has
+/// bearing π) and returns true when the learned policy holds course at s: the near obstacle of
+/// the state before is out of view in s, or was within the hold_steps − 1 states before s and
+/// has not come back into view. Always false in the corridor and for hold_steps 0. O(1).
+bool fw_pass_hold_observe(fw_pass_hold_t* h, fw_task_t task, const double* s, uint32_t hold_steps);
+
 typedef struct fw_shift_vet_env {
   fw_task_t task;               ///< the task the rollouts drive
   tasks_corridor_spec_t spec;   ///< the corridor as the controller configures it
@@ -111,6 +134,7 @@ typedef struct fw_shift_vet_env {
   /// corridor, FW_SHIFT_VET_OBSTACLES_MARGIN_M among obstacles
   double margin_m;
   double obstacle_clearance_m;  ///< pair_obstacle_clearance_m: the obstacle task's pair terms' clearance [m]
+  uint32_t pass_hold_steps;     ///< obstacle_pass_hold_steps: the rollouts hold past an obstacle as the controller does
   bool mirror;                  ///< the task is mirror-symmetric: each start is also driven mirrored
   bool state_rotation;          ///< the learner's state ends with the rotation in force
   uint32_t capacity;            ///< pair_shift_vet_starts: the starts kept
@@ -148,13 +172,14 @@ typedef struct fw_shift_vet {
   uint32_t periods;           ///< rollout periods driven so far (policy calls)
   tasks_corridor_rollout_t ro;            ///< the rollout under way (corridor)
   tasks_obstacles_rollout_t ro_obstacles; ///< (obstacle task)
+  fw_pass_hold_t pass_hold;               ///< the rollout's memory of a passed obstacle (obstacle task)
   fw_shift_verdict_t verdict; ///< once decided
   fw_pair_shift_t result;     ///< once decided: the shift to put in force
 } fw_shift_vet_t;
 
 /// The environment from cfg: the task and its spec (corridor length, period, step limit, action
 /// bound), the command limits, the margin, whether the task is mirror-symmetric,
-/// state_rotation, pair_shift_vet_starts, pair_obstacle_clearance_m. O(obstacles²).
+/// state_rotation, pair_shift_vet_starts, pair_obstacle_clearance_m, obstacle_pass_hold_steps. O(obstacles²).
 void fw_shift_vet_env_init(fw_shift_vet_env_t* env, const fw_config_t* cfg);
 
 /// A training run's first state (the learner's state vector: the task's state, then the

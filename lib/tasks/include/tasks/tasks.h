@@ -314,6 +314,13 @@ void tasks_driver_begin_run(tasks_driver_t* d, tasks_driver_kind_t kind, tasks_t
 /// and optimal drivers; the human keeps the stick. Advances the human's state.
 double tasks_driver_corridor(tasks_driver_t* d, const features_corridor_t* f);
 
+/// Steps the obstacle drivers' law holds course after the obstacle it was avoiding slipped out of
+/// the laser's view beside the robot (1 s at 10 Hz): the LMS200 sees 180° forward from 0.15 m ahead
+/// of the centre, so an obstacle being passed leaves its view while the skirt is still centimetres
+/// from it, and turning to the goal at once would clip it. The controller's learned policy holds
+/// the same way (obstacle_pass_hold_steps, fw_pass_hold_observe).
+#define TASKS_OBSTACLES_PASS_HOLD_STEPS 10U
+
 /// Half-angle of the cone around an obstacle at distance_m [m, robot centre to its nearest
 /// return] that a course must stay outside to pass it clearance_m away [rad]:
 /// asin(clearance_m / distance_m), or pi/2 at or within the clearance. The obstacle drivers' law

@@ -438,6 +438,30 @@ static void test_pair_ranker_moves_the_shift(void** state) {
   (void)fw_pair_ranker_end(&q, &c, false, 0, false, true, 140, 52, NAN, 0.5, 0.1, tags, w);
   (void)fw_pair_ranker_end(&q, &c, false, 1, false, true, 150, 53, NAN, 0.5, 0.1, tags, w);
   assert_true(fabs(q.shift.gain + 0.4 * 0.25) < 1e-15 && fabs(q.shift.centring - 0.8 * 0.25) < 1e-15);
+  // Among obstacles a step leaves the bend's coefficient at FW_PAIR_OBSTACLE_CENTRING_MIN at
+  // least (0: the bend only widens the berth), where the corridor's goes down to
+  // -FW_PAIR_SHIFT_MAX; the gain moves as in the corridor, and a step up is taken whole.
+  fw_pair_ranker_t o;
+  memset(&o, 0, sizeof o);
+  fw_config_t oc = c;
+  oc.task = FW_TASK_OBSTACLES;
+  oc.pair_shift_decay_pairs = 0.0;
+  o.shift.centring = 0.3;
+  (void)fw_pair_ranker_end(&o, &oc, false, 0, false, true, 140, 70, 0.4, -0.8, 0.0, tags, w);
+  (void)fw_pair_ranker_end(&o, &oc, false, 1, false, true, 150, 71, 0.4, -0.8, 0.0, tags, w);
+  const double u = tanh(10.0 / oc.pair_shift_tau_steps);
+  assert_true(o.shift.centring == FW_PAIR_OBSTACLE_CENTRING_MIN && fabs(o.shift.gain - 0.4 * u) < 1e-15);
+  (void)fw_pair_ranker_end(&o, &oc, false, 0, false, true, 140, 72, 0.0, 0.5, 0.0, tags, w);
+  (void)fw_pair_ranker_end(&o, &oc, false, 1, false, true, 150, 73, 0.0, 0.5, 0.0, tags, w);
+  assert_true(fabs(o.shift.centring - 0.5 * u) < 1e-15);
+  fw_pair_ranker_t k;
+  memset(&k, 0, sizeof k);
+  fw_config_t kc = oc;
+  kc.task = FW_TASK_CORRIDOR;
+  k.shift.centring = 0.3;
+  (void)fw_pair_ranker_end(&k, &kc, false, 0, false, true, 140, 74, 0.4, -0.8, 0.0, tags, w);
+  (void)fw_pair_ranker_end(&k, &kc, false, 1, false, true, 150, 75, 0.4, -0.8, 0.0, tags, w);
+  assert_true(fabs(k.shift.centring - (0.3 - 0.8 * u)) < 1e-15 && k.shift.centring < 0.0);
   const double q_imitation = q.shift.imitation;
   (void)fw_pair_ranker_end(&q, &c, false, 0, false, true, 140, 54, 0.4, 0.5, NAN, tags, w);
   (void)fw_pair_ranker_end(&q, &c, false, 1, false, true, 150, 55, 0.4, 0.5, NAN, tags, w);
@@ -449,7 +473,7 @@ static void test_pair_ranker_moves_the_shift(void** state) {
   r.shift.imitation = -0.75;
   const double s[3] = {5.0, 0.75, 0.2};
   assert_true(fabs(fw_pair_shift_at(&r.shift, FW_TASK_CORRIDOR, 0.5, s) - (0.5 * 0.2 - 2.0 * 0.25)) < 1e-15);
-  assert_true(fabs(fw_pair_policy_action(&r.shift, FW_TASK_CORRIDOR, 0.5, s, 0.8) - (0.25 * 0.8 + 0.5 * 0.2 - 2.0 * 0.25)) <
+  assert_true(fabs(fw_pair_policy_action(&r.shift, FW_TASK_CORRIDOR, 0.5, s, 0.8, false) - (0.25 * 0.8 + 0.5 * 0.2 - 2.0 * 0.25)) <
               1e-15);
   // Among obstacles: a * (goal bearing + bend) + b * bend, the bend the goal direction's turn to
   // the edge of the nearest obstacle's cone of half-angle asin(clearance / distance) on the goal's
