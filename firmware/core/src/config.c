@@ -292,10 +292,12 @@ static const key_desc_t k_keys[] = {
    "the learner's state ends with the rotation the base executes, the last command sent [rad/s]: the "
    "acceleration limit ties the next rotation to it (false = the paper's task features alone)"},
   {NULL, "obstacle_pass_hold_steps", KIND_INT, OFF(obstacle_pass_hold_steps), 0, 100, false, false, NULL, "10",
-   "obstacle task: the learned policy holds course (rotation 0) for this many steps after a near obstacle "
-   "(in view within 1.5 m) slips out of the laser's 180° view beside the robot, as the reference law does, "
+   "obstacle task: the learned policy holds course (rotation 0; training runs keep their exploration noise) "
+   "for this many steps (control periods) after a near obstacle (in view within 1.5 m) slips out of the "
+   "laser's view (laser_fov_deg) beside the robot, as the reference law does, "
    "since the state then says 'no obstacle' while the skirt is still centimetres from it; the vet's model "
-   "holds alike (0 = never: the policy turns to the goal at once; docs/LEARNING.md)"},
+   "holds alike, and b21r-train needs the controller's value to reproduce its shift (0 = never: the policy "
+   "turns to the goal at once; docs/LEARNING.md)"},
   {NULL, "pair_runs", KIND_ENUM, OFF(pair_runs_mode), 0, 0, false, false, k_pair_runs, "auto",
    "phase two (and phase one's example runs, pair_phase_one): training runs come in pairs from one start "
    "pose; the first adds a perturbation g * target angle + c * (lateral fraction - 0.5) to the greedy action "
@@ -324,7 +326,7 @@ static const key_desc_t k_keys[] = {
    "pair_runs, obstacle task: the clearance [m, from the robot's centre to the obstacle's nearest return] around "
    "which the pair terms bend the goal direction (the cone of half-angle asin(clearance / distance)); the shift a "
    "checkpoint carries was learned with one clearance and resumes only with it (the obstacle experiments set "
-   "0.45; the reference law keeps 0.40)"},
+   "0.4, the reference law's)"},
   {NULL, "pair_shift_rate", KIND_DOUBLE, OFF(pair_shift_rate), 0, 4, false, false, NULL, "1",
    "pair_runs: the learned policy is (1 + w) times the greedy action plus a shift a * target angle + b * (lateral fraction - "
    "0.5) (obstacles: a * the bent goal direction + b * the bend) that the pairs move: each ranked pair adds pair_shift_rate * tanh(d / pair_shift_tau_steps) times its "

@@ -721,7 +721,8 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
       // A pair run: the learned policy with the pair's perturbation, within the action bounds.
       // Once the safety filter has corrected it the run counts as failed: the learned policy
       // drives the rest of the way, which ends it sooner than the perturbation would. (Held
-      // past an obstacle, the pair's runs hold course alike.)
+      // past an obstacle, both runs of the pair hold course unperturbed; the exploration noise
+      // below still applies, as everywhere in training.)
       a = tasks_clamp_omega(a + pair_offset(L, greedy_imitated), L->omega_max);
       source = B21R_EXPERIENCE_T_SOURCE_EXPLORATION;
     }

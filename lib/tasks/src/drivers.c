@@ -19,7 +19,6 @@
 #define OPTIMAL_OBSTACLES_CLEARANCE_M 0.40
 #define OPTIMAL_OBSTACLES_RANGE_M 1.25
 
-
 // Fixed avoidance geometry of the example (proportional) obstacle policy.
 #define EXAMPLE_OBSTACLES_CLEARANCE_M 0.55
 #define EXAMPLE_OBSTACLES_RANGE_M 1.5

@@ -175,7 +175,8 @@ typedef struct fw_pair_ranker {
 ///   moves the shift: (a, b, w) += rate · u · (g, c, m), rate = pair_shift_rate · K / (K + n) after n
 ///   pairs (K = pair_shift_decay_pairs; 0: the rate stays), u = tanh(d / pair_shift_tau_steps), d = the
 ///   second run's steps minus the first's; u = +1 when only the first reached the goal, −1 when
-///   only the second did, 0 when neither did; a and b are then clamped to ±FW_PAIR_SHIFT_MAX, w
+///   only the second did, 0 when neither did; a and b are then clamped to ±FW_PAIR_SHIFT_MAX (among
+///   obstacles b to [FW_PAIR_OBSTACLE_CENTRING_MIN, FW_PAIR_SHIFT_MAX]: the bend only widens), w
 ///   to [FW_PAIR_IMITATION_MIN, FW_PAIR_IMITATION_MAX] (a non-finite step, from a damaged log
 ///   record, is not taken). The step is
 ///   a finite-difference estimate of the direction that shortens the runs, from two runs with the
@@ -214,7 +215,7 @@ int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool exa
 ///   1, fw/progress.h, basis[0] was the goal bearing itself; docs/LEARNING.md.)
 /// obstacle_clearance_m: pair_obstacle_clearance_m [m, from the robot's centre to the obstacle's
 /// nearest return; the corridor ignores it]. (It was fixed at 0.5 m until checkpoints recorded
-/// it, fw/progress.h; the obstacle experiments set 0.45 m, docs/LEARNING.md.) Pure, O(1).
+/// it, fw/progress.h; the obstacle experiments set 0.4 m, docs/LEARNING.md.) Pure, O(1).
 void fw_pair_basis(fw_task_t task, double obstacle_clearance_m, const double* s, double basis[2]);
 
 /// The learned policy's shift at a learner state s of the task: gain × basis[0] + centring ×

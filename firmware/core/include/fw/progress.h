@@ -81,10 +81,13 @@ extern "C" {
 /// centring term): the bend only widens the berth around the cone that pair_obstacle_clearance_m
 /// keeps. A negative coefficient undoes part of the bend and aims closer than the clearance; on
 /// the vet's model such a course still clears the obstacle, in the emulator it touched it from
-/// some evaluation poses (dev seeds 11-160 at 0.4 m: final blocks with failed runs on seeds whose
-/// b ended at -1.2 to -2.2; with the bound 6 failed phase-two evaluations of 10,500 against 21,
-/// docs/LEARNING.md). A shift loaded with b < 0 (learned before the bound) keeps it until its
-/// next ranked step. The corridor's centring keeps ±FW_PAIR_SHIFT_MAX.
+/// some evaluation poses (dev seeds 11-160 with the hold past the obstacle: final blocks with
+/// failed runs on seeds whose b ended at -0.7 to -2.2; with the bound at 0.4 m 6 failed phase-two
+/// evaluations of 10,500 against 21, docs/LEARNING.md). A shift loaded with b < 0 (learned before
+/// the bound) is applied as it is; a ranked step proposes b at 0 or above, of which the vet may
+/// take a fraction or none. The corridor's centring keeps ±FW_PAIR_SHIFT_MAX. The hold past the
+/// obstacle (obstacle_pass_hold_steps), which the shift is learned and vetted with, is not
+/// recorded: a controller or b21r-train resuming it takes its configuration's.
 #define FW_PAIR_OBSTACLE_CENTRING_MIN 0.0
 
 /// Revision of the pair terms (fw_pair_basis) that checkpoints record with the shift: 1 = the

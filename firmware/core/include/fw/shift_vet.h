@@ -96,15 +96,22 @@ typedef struct fw_shift_vet_starts {
   uint32_t next;  ///< the slot the next start goes to
 } fw_shift_vet_starts_t;
 
-/// What the rollouts need from the configuration (fw_shift_vet_env_init).
-/// The obstacle task's hold past an obstacle (obstacle_pass_hold_steps). The laser sees 180°
-/// forward from 0.15 m ahead of the robot's centre, so an obstacle being passed leaves its view
-/// while the skirt is still centimetres from it, and the state then says "no obstacle" (bearing
-/// π): a policy of the state alone turns to the goal there and clips it (on the vet's model, 137
-/// of 173 failed rollouts of one traced session, docs/LEARNING.md). For hold_steps states after
-/// a near obstacle (in view, nearer than FW_PAIR_OBSTACLE_RANGE_M, fw/loop.h) slips out of view, the learned
-/// policy holds course, as the reference law does (TASKS_OBSTACLES_PASS_HOLD_STEPS). Plain data,
-/// one per run (the controller, run.c) or rollout (the vet, below); 8 bytes.
+/// The obstacle task's hold past an obstacle (obstacle_pass_hold_steps). The laser sees its field
+/// (180° by default, laser_fov_deg) forward from 0.15 m ahead of the robot's centre, so an
+/// obstacle being passed leaves its view while the skirt is still centimetres from it, and the
+/// state then says "no obstacle" (bearing π): a policy of the state alone turns to the goal there
+/// and clips it (on the vet's model, 137 of 173 failed rollouts of one traced session,
+/// docs/LEARNING.md). For hold_steps states (control periods: 1 s at 10 steps) after a near
+/// obstacle (in view, nearer than FW_PAIR_OBSTACLE_RANGE_M, fw/loop.h) slips out of view, the
+/// learned policy holds course (rotation 0; in training runs the phase-two exploration noise still
+/// applies on top, as everywhere). Like the reference law's hold (TASKS_OBSTACLES_PASS_HOLD_STEPS),
+/// except that the law holds only for an obstacle it was steering around and counts on through
+/// states where one is in view beyond its range; here any near obstacle starts the hold, wherever
+/// it was last seen (an obstacle whose returns a scan loses ahead of the robot too: holding only
+/// for one last seen abeam, 45° or more off the heading, cost 1.2 ± 0.6 steps on dev seeds, so
+/// the emulator loses obstacles nearer the heading where the hold helps; on the robot such a
+/// dropout means a straight second), and any obstacle back in view ends it. Plain data, one per
+/// run (the controller, run.c) or rollout (the vet, below); 8 bytes.
 typedef struct fw_pass_hold {
   uint32_t steps_left;  ///< held states still to come, the latest one included
   bool near_before;     ///< the previous state had a near obstacle in view
@@ -116,10 +123,12 @@ void fw_pass_hold_reset(fw_pass_hold_t* h);
 /// Takes the next state s of the task (obstacles: goal bearing, goal distance, obstacle bearing,
 /// obstacle distance, as features_obstacles_state writes them; an obstacle out of view has
 /// bearing π) and returns true when the learned policy holds course at s: the near obstacle of
-/// the state before is out of view in s, or was within the hold_steps − 1 states before s and
-/// has not come back into view. Always false in the corridor and for hold_steps 0. O(1).
+/// the state before is out of view in s, or was within the hold_steps − 1 states before s and no
+/// obstacle has come into view since. Always false in the corridor and for hold_steps 0.
+/// O(1).
 bool fw_pass_hold_observe(fw_pass_hold_t* h, fw_task_t task, const double* s, uint32_t hold_steps);
 
+/// What the rollouts need from the configuration (fw_shift_vet_env_init).
 typedef struct fw_shift_vet_env {
   fw_task_t task;               ///< the task the rollouts drive
   tasks_corridor_spec_t spec;   ///< the corridor as the controller configures it

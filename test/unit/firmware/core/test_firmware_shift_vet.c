@@ -524,9 +524,10 @@ static void test_vet_holds_past_an_obstacle(void** state) {
 }
 
 // The hold past an obstacle (obstacle_pass_hold_steps): after a near obstacle in view slips out of
-// view the learned policy holds course for exactly hold_steps states; an obstacle that leaves the
-// view from beyond FW_PAIR_OBSTACLE_RANGE_M holds nothing; one back in view ends the hold; the
-// mirror image (bearing -pi) holds alike; the corridor and hold_steps 0 never hold.
+// view the learned policy holds course for exactly hold_steps states, wherever it was last seen;
+// an obstacle that leaves the view from beyond FW_PAIR_OBSTACLE_RANGE_M holds nothing; one back in
+// view ends the hold; the mirror image (bearing -pi) holds alike; the corridor and hold_steps 0
+// never hold.
 static void test_pass_hold_counts_states(void** state) {
   (void)state;
   const double pi = 3.141592653589793;
@@ -534,6 +535,7 @@ static void test_pass_hold_counts_states(void** state) {
   const double hidden[4] = {-0.6, 1.9, pi, 8.0};       // out of view (features' empty slot)
   const double hidden_mirror[4] = {0.6, 1.9, -pi, 8.0};
   const double far[4] = {0.2, 2.0, -1.2, 1.6};         // in view beyond the range
+  const double ahead[4] = {0.2, 2.0, 0.5, 0.6};        // in view, near, 0.5 rad off the heading
   fw_pass_hold_t h;
   fw_pass_hold_reset(&h);
   assert_false(fw_pass_hold_observe(&h, FW_TASK_OBSTACLES, hidden, 3U));  // never seen
@@ -548,6 +550,10 @@ static void test_pass_hold_counts_states(void** state) {
   assert_false(fw_pass_hold_observe(&h, FW_TASK_OBSTACLES, far, 3U));
   // Leaving the view from beyond the range: nothing to hold for.
   assert_false(fw_pass_hold_observe(&h, FW_TASK_OBSTACLES, hidden, 3U));
+  // Lost from view nearer the heading (its returns dropped from a scan): held as well.
+  assert_false(fw_pass_hold_observe(&h, FW_TASK_OBSTACLES, ahead, 3U));
+  assert_true(fw_pass_hold_observe(&h, FW_TASK_OBSTACLES, hidden, 3U));
+  fw_pass_hold_reset(&h);
   // A new run forgets the obstacle of the last one.
   assert_false(fw_pass_hold_observe(&h, FW_TASK_OBSTACLES, near, 3U));
   fw_pass_hold_reset(&h);
