@@ -252,7 +252,6 @@ struct fw_loop {
   int64_t pair_safety_overrides; // pair-run commands the safety filter replaced
   bool pair_run_vetoed;          // the safety filter replaced a command of the run under way
   fw_pass_hold_t pass_hold;      // obstacle_pass_hold_steps: the run's memory of a passed obstacle
-  bool pass_held;                // the learned policy holds course at the latest state (fw_pass_hold_observe)
   int32_t pair_runs_vetoed;      // pair runs the filter corrected
   int32_t pair_runs_missed;      // pair runs ranked as having missed the goal (vetoed ones included)
   int64_t pair_safety_short;     // corrections where even the recovery law missed the margin

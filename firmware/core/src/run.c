@@ -44,8 +44,8 @@ bool fw_run_observe(fw_loop_t* L) {
   if (tasks_episode_observe(&L->ep, &L->scan, fw_run_odom_pose(L), L->s) != 1) {
     return false;
   }
-  L->pass_held = fw_pass_hold_observe(&L->pass_hold, (fw_task_t)L->cfg.task, L->s,
-                                      (uint32_t)L->cfg.obstacle_pass_hold_steps);
+  (void)fw_pass_hold_observe(&L->pass_hold, (fw_task_t)L->cfg.task, L->s,
+                             (uint32_t)L->cfg.obstacle_pass_hold_steps);
   return true;
 }
 
@@ -683,7 +683,7 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
       // greedy action's (the learning target).
       greedy_action = tasks_clamp_omega(
           fw_pair_policy_action(&L->pair_ranker.shift, (fw_task_t)L->cfg.task, L->cfg.pair_obstacle_clearance_m, L->s,
-                                greedy_imitated, L->pass_held), L->omega_max);
+                                greedy_imitated, fw_pass_hold_active(&L->pass_hold)), L->omega_max);
     }
     if (L->pending.active) {
       L->pending.need_greedy = false;
@@ -717,7 +717,7 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
   } else if (greedy_known) {
     a = greedy_action;
     source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
-    if (!evaluating && L->pair_member >= 0 && !L->pair_run_vetoed && !L->pass_held) {
+    if (!evaluating && L->pair_member >= 0 && !L->pair_run_vetoed && !fw_pass_hold_active(&L->pass_hold)) {
       // A pair run: the learned policy with the pair's perturbation, within the action bounds.
       // Once the safety filter has corrected it the run counts as failed: the learned policy
       // drives the rest of the way, which ends it sooner than the perturbation would. (Held

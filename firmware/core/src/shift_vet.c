@@ -116,8 +116,10 @@ bool fw_pass_hold_observe(fw_pass_hold_t* h, fw_task_t task, const double* s, ui
     h->steps_left--;
   }
   h->near_before = near;
-  return h->steps_left > 0U;
+  return fw_pass_hold_active(h);
 }
+
+bool fw_pass_hold_active(const fw_pass_hold_t* h) { return h->steps_left > 0U; }
 
 // Rollout k of a start set: start k / 2, mirrored when k is odd (with env->mirror; else start k).
 // The mirror image: corridor lateral fraction 1 - l, target angle negated; obstacles both

@@ -128,6 +128,10 @@ void fw_pass_hold_reset(fw_pass_hold_t* h);
 /// O(1).
 bool fw_pass_hold_observe(fw_pass_hold_t* h, fw_task_t task, const double* s, uint32_t hold_steps);
 
+/// True while the hold is in force at the latest state observed (what fw_pass_hold_observe
+/// returned for it; false after fw_pass_hold_reset). O(1).
+bool fw_pass_hold_active(const fw_pass_hold_t* h);
+
 /// What the rollouts need from the configuration (fw_shift_vet_env_init).
 typedef struct fw_shift_vet_env {
   fw_task_t task;               ///< the task the rollouts drive

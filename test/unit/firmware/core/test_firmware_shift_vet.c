@@ -542,8 +542,10 @@ static void test_pass_hold_counts_states(void** state) {
   assert_false(fw_pass_hold_observe(&h, FW_TASK_OBSTACLES, near, 3U));
   for (int i = 0; i < 3; ++i) {
     assert_true(fw_pass_hold_observe(&h, FW_TASK_OBSTACLES, i % 2 == 0 ? hidden : hidden_mirror, 3U));
+    assert_true(fw_pass_hold_active(&h));  // the verdict at the latest state, as the controller reads it
   }
   assert_false(fw_pass_hold_observe(&h, FW_TASK_OBSTACLES, hidden, 3U));
+  assert_false(fw_pass_hold_active(&h));
   // Back in view during the hold: the state says where it is, and the hold ends.
   assert_false(fw_pass_hold_observe(&h, FW_TASK_OBSTACLES, near, 3U));
   assert_true(fw_pass_hold_observe(&h, FW_TASK_OBSTACLES, hidden, 3U));
@@ -556,7 +558,9 @@ static void test_pass_hold_counts_states(void** state) {
   fw_pass_hold_reset(&h);
   // A new run forgets the obstacle of the last one.
   assert_false(fw_pass_hold_observe(&h, FW_TASK_OBSTACLES, near, 3U));
+  assert_true(fw_pass_hold_observe(&h, FW_TASK_OBSTACLES, hidden, 3U));
   fw_pass_hold_reset(&h);
+  assert_false(fw_pass_hold_active(&h));
   assert_false(fw_pass_hold_observe(&h, FW_TASK_OBSTACLES, hidden, 3U));
   // hold_steps 0 and the corridor never hold.
   assert_false(fw_pass_hold_observe(&h, FW_TASK_OBSTACLES, near, 0U));
