@@ -135,11 +135,11 @@ static void write_seeds(const char* dir) {
     g.schedule.best_example_steps = k == 0 ? 0 : 126;
     g.run_id = k == 0 ? -1 : g.schedule.training_runs + 10 * k;
     uint8_t meta[FW_PROGRESS_BYTES];
-    (void)fw_progress_encode(&g, meta);
+    const size_t meta_n = fw_progress_encode(&g, meta);
     char tmp[512];
     snprintf(tmp, sizeof tmp, "%s/.seed.ckpt", dir);
     char err[FW_CHECKPOINT_ERR_MAX];
-    FUZZ_CHECK(fw_checkpoint_write(tmp, meta, sizeof meta, payload, n, err, sizeof err) == 0);
+    FUZZ_CHECK(fw_checkpoint_write(tmp, meta, meta_n, payload, n, err, sizeof err) == 0);
     FILE* in = fopen(tmp, "rb");
     FUZZ_CHECK(in != NULL);
     static uint8_t file[1 << 20];

@@ -106,10 +106,12 @@ def can_record(can_id: int, data: bytes, dlc=None) -> bytes:
 
 def progress(task: int, state_dim: int, phase: int, p1: int, p2: int, blocks: int, ex_runs: int,
              ex_sum: float, best: int, run_id: int, shift=(0.0, 0.0, 0), terms: int = 1,
-             imitation: float = 0.0, clearance: float = 0.0) -> bytes:
+             imitation: float = 0.0, clearance: float = 0.0, pass_hold=None) -> bytes:
     body = b"FWMETA01" + struct.pack("<IIIIIIIIdIIddIIdd", task, state_dim, phase, p1 + p2, p1, p2, blocks,
                                      ex_runs, ex_sum, best, run_id + 1, *shift, terms, imitation, clearance)
     assert len(body) == 96
+    if pass_hold is not None:  # a section that records the hold past the obstacle (104 bytes)
+        body += struct.pack("<II", pass_hold + 1, 0)
     return body
 
 
@@ -149,6 +151,8 @@ def more_seeds() -> None:
                                                    -0.625))
     write("progress", "obstacle_clearance", progress(1, 5, 2, 30, 35, 13, 30, 30 * 139.0, 127, 194, (1.0625, 1.5, 17),
                                                      1, -0.625, 0.45))
+    write("progress", "obstacle_pass_hold", progress(1, 5, 2, 30, 35, 13, 30, 30 * 139.0, 127, 194, (1.0625, 1.5, 17),
+                                                     1, -0.625, 0.4, 10))
     # Worlds: the ones the product ships.
     for w in sorted((ROOT / "sim/worlds").glob("*.world")):
         write("world", w.stem, w.read_bytes())

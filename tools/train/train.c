@@ -134,6 +134,7 @@ int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t er
     char why[FW_PROGRESS_WHY_MAX];
     hedger_status_t hs = HEDGER_OK;
     double learned_clearance_m = 0.0;
+    int32_t learned_hold_steps = 0;
     if (fw_progress_decode((const uint8_t*)meta, meta_size, &g, why, sizeof why) != 0) {
       fw_errfmt(err, err_cap, "%s is corrupt (controller section: %s); give a checkpoint the controller or "
           "b21r-train wrote", path, why);
@@ -144,6 +145,10 @@ int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t er
       fw_errfmt(err, err_cap, "%s: its learned policy's shift bends around the obstacle at pair_obstacle_clearance_m = "
           "%.15g, not %.15g: train with pair_obstacle_clearance_m = %.15g", path, learned_clearance_m,
           t->cfg.pair_obstacle_clearance_m, learned_clearance_m);
+    } else if (!fw_progress_pass_hold_fits(&g, t->cfg.obstacle_pass_hold_steps, &learned_hold_steps)) {
+      fw_errfmt(err, err_cap, "%s: its learned policy's shift was learned holding course past the obstacle for "
+          "obstacle_pass_hold_steps = %d, not %d: train with obstacle_pass_hold_steps = %d", path,
+          (int)learned_hold_steps, (int)t->cfg.obstacle_pass_hold_steps, (int)learned_hold_steps);
     } else if ((hs = hedger_load(t->hedger, payload, payload_size)) == HEDGER_OK) {
       t->ranker.shift = g.shift;
       rc = 0;
@@ -510,7 +515,7 @@ int trainer_write_checkpoint(trainer_t* t, const char* path, bool overwrite, cha
   }
   uint8_t* meta = NULL;
   char why[FW_LOOP_ERR_MAX];
-  const size_t meta_size = phase_two_meta(&t->cfg, dir, &meta, why, sizeof why);
+  size_t meta_size = phase_two_meta(&t->cfg, dir, &meta, why, sizeof why);
   if (meta_size == 0) {
     fw_errfmt(err, err_cap, "%s: cannot build the controller's section of the checkpoint: %s", path, why);
     return -1;
@@ -524,7 +529,8 @@ int trainer_write_checkpoint(trainer_t* t, const char* path, bool overwrite, cha
   }
   g.shift = t->ranker.shift;
   fw_progress_record_clearance(&g, t->cfg.pair_obstacle_clearance_m);
-  (void)fw_progress_encode(&g, meta);
+  fw_progress_record_pass_hold(&g, t->cfg.obstacle_pass_hold_steps);
+  meta_size = fw_progress_encode(&g, meta);  // the section grows where it records the hold
   const size_t cap = hedger_serialized_size(t->hedger);
   void* payload = malloc(cap);
   size_t written = 0;

@@ -291,12 +291,13 @@ static const key_desc_t k_keys[] = {
   {NULL, "state_rotation", KIND_BOOL, OFF(state_rotation), 0, 0, false, false, NULL, "true",
    "the learner's state ends with the rotation the base executes, the last command sent [rad/s]: the "
    "acceleration limit ties the next rotation to it (false = the paper's task features alone)"},
-  {NULL, "obstacle_pass_hold_steps", KIND_INT, OFF(obstacle_pass_hold_steps), 0, 100, false, false, NULL, "10",
+  {NULL, "obstacle_pass_hold_steps", KIND_INT, OFF(obstacle_pass_hold_steps), 0, FW_PROGRESS_PASS_HOLD_STEPS_MAX, false, false, NULL, "10",
    "obstacle task: the learned policy holds course (rotation 0; training runs keep their exploration noise) "
    "for this many steps (control periods) after a near obstacle (in view within 1.5 m) slips out of the "
    "laser's view (laser_fov_deg) beside the robot, as the reference law does, "
    "since the state then says 'no obstacle' while the skirt is still centimetres from it; the vet's model "
-   "holds alike, and b21r-train needs the controller's value to reproduce its shift (0 = never: the policy "
+   "holds alike, and b21r-train needs the controller's value to reproduce its shift; a checkpoint records "
+   "it with an obstacle shift and resumes that shift only with the same value (0 = never: the policy "
    "turns to the goal at once; docs/LEARNING.md)"},
   {NULL, "pair_runs", KIND_ENUM, OFF(pair_runs_mode), 0, 0, false, false, k_pair_runs, "auto",
    "phase two (and phase one's example runs, pair_phase_one): training runs come in pairs from one start "

@@ -100,6 +100,7 @@ static size_t encode_meta(const fw_loop_t* L, uint8_t* p) {
       .task = L->cfg.task, .state_dim = L->state_dim, .schedule = L->sched.p, .run_id = L->run_id,
       .shift = L->pair_ranker.shift};
   fw_progress_record_clearance(&g, L->cfg.pair_obstacle_clearance_m);
+  fw_progress_record_pass_hold(&g, L->cfg.obstacle_pass_hold_steps);
   return fw_progress_encode(&g, p);
 }
 
@@ -214,6 +215,16 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
              "not %.15g; set pair_obstacle_clearance_m = %.15g to go on with it, or move the file away to start fresh "
              "(e.g. mv '%s' '%s.other')",
              path, learned_clearance_m, L->cfg.pair_obstacle_clearance_m, learned_clearance_m, path, path);
+    return -1;
+  }
+  int32_t learned_hold_steps = 0;
+  if (!fw_progress_pass_hold_fits(&g, L->cfg.obstacle_pass_hold_steps, &learned_hold_steps)) {
+    free(payload);
+    snprintf(err, err_cap,
+             "checkpoint %s: its learned policy's shift was learned holding course past the obstacle for "
+             "obstacle_pass_hold_steps = %d, not %d; set obstacle_pass_hold_steps = %d to go on with it, or move the "
+             "file away to start fresh (e.g. mv '%s' '%s.other')",
+             path, (int)learned_hold_steps, (int)L->cfg.obstacle_pass_hold_steps, (int)learned_hold_steps, path, path);
     return -1;
   }
   const hedger_status_t hs = hedger_load(L->learner.hedger, payload, payload_size);

@@ -15,8 +15,9 @@
 
 #define MAGIC "FWMETA01"
 
-// Every byte is in use: the last field, the clearance, ends at 96.
-_Static_assert(FW_PROGRESS_BYTES == 96U, "fw_progress_encode fills bytes 0-95");
+// Bytes 0-95 are all in use (the clearance ends at 96); the hold and the reserved word end at 104.
+_Static_assert(FW_PROGRESS_BYTES_BASE == 96U, "fw_progress_encode fills bytes 0-95 in every section");
+_Static_assert(FW_PROGRESS_BYTES == 104U, "and bytes 96-103 in one that records the hold");
 
 size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]) {
   const fw_schedule_progress_t* g = &p->schedule;
@@ -39,6 +40,10 @@ size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]
   fw_put_u32(out + 76, FW_PAIR_TERMS_REVISION);
   fw_put_f64(out + 80, p->shift.imitation);
   fw_put_f64(out + 88, p->obstacle_clearance_m);
+  if (!p->pass_hold_recorded) {
+    return FW_PROGRESS_BYTES_BASE;
+  }
+  fw_put_u32(out + 96, (uint32_t)p->obstacle_pass_hold_steps + 1U);
   return FW_PROGRESS_BYTES;
 }
 
@@ -67,6 +72,26 @@ void fw_progress_record_clearance(fw_progress_t* p, double clearance_m) {
   p->obstacle_clearance_m = obstacle_terms_learned(p) ? clearance_m : 0.0;
 }
 
+// An obstacle shift that moved at all (a, b or w not 0): every step of it was vetted with the
+// hold past the obstacle in the rollouts, the imitation's weight's too.
+static bool obstacle_shift_moved(const fw_progress_t* p) {
+  return p->task == (int32_t)FW_TASK_OBSTACLES &&
+         !(is_zero(p->shift.gain) && is_zero(p->shift.centring) && is_zero(p->shift.imitation));
+}
+
+void fw_progress_record_pass_hold(fw_progress_t* p, int32_t hold_steps) {
+  p->pass_hold_recorded = obstacle_shift_moved(p);
+  p->obstacle_pass_hold_steps = p->pass_hold_recorded ? hold_steps : 0;
+}
+
+bool fw_progress_pass_hold_fits(const fw_progress_t* p, int32_t hold_steps, int32_t* learned_steps) {
+  const int32_t learned = p->pass_hold_recorded ? p->obstacle_pass_hold_steps : FW_PROGRESS_PASS_HOLD_UNRECORDED_STEPS;
+  if (learned_steps != NULL) {
+    *learned_steps = learned;
+  }
+  return !obstacle_shift_moved(p) || learned == hold_steps;
+}
+
 bool fw_progress_clearance_fits(const fw_progress_t* p, double clearance_m, double* learned_m) {
   const double learned = p->obstacle_clearance_m > 0.0 ? p->obstacle_clearance_m : FW_PROGRESS_CLEARANCE_UNRECORDED_M;
   if (learned_m != NULL) {
@@ -87,9 +112,9 @@ static bool counter(const uint8_t* b, size_t off, const char* name, int32_t* v, 
 }
 
 int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why, size_t cap) {
-  if (n != FW_PROGRESS_BYTES || memcmp(b, MAGIC, 8) != 0) {
-    fw_errfmt(why, cap, "unknown format (%zu bytes%s, expected %u starting with " MAGIC ")", n,
-        n >= 8 && memcmp(b, MAGIC, 8) != 0 ? ", other magic" : "", FW_PROGRESS_BYTES);
+  if ((n != FW_PROGRESS_BYTES_BASE && n != FW_PROGRESS_BYTES) || memcmp(b, MAGIC, 8) != 0) {
+    fw_errfmt(why, cap, "unknown format (%zu bytes%s, expected %u or %u starting with " MAGIC ")", n,
+        n >= 8 && memcmp(b, MAGIC, 8) != 0 ? ", other magic" : "", FW_PROGRESS_BYTES_BASE, FW_PROGRESS_BYTES);
     return -1;
   }
   fw_progress_t p;
@@ -190,6 +215,22 @@ int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why
     fw_errfmt(why, cap, "obstacle pair clearance %.17g m, expected 0 or (obstacle task) within [%g, %g]",
         p.obstacle_clearance_m, FW_PAIR_OBSTACLE_CLEARANCE_MIN_M, FW_PAIR_OBSTACLE_CLEARANCE_MAX_M);
     return -1;
+  }
+  if (n == FW_PROGRESS_BYTES) {
+    const uint32_t hold_plus_1 = fw_get_u32(b + 96);
+    const uint32_t reserved = fw_get_u32(b + 100);
+    if (p.task != (int32_t)FW_TASK_OBSTACLES || hold_plus_1 < 1U ||
+        hold_plus_1 > (uint32_t)FW_PROGRESS_PASS_HOLD_STEPS_MAX + 1U) {
+      fw_errfmt(why, cap, "obstacle pass hold + 1 = %u, expected (obstacle task) 1..%d", (unsigned)hold_plus_1,
+          FW_PROGRESS_PASS_HOLD_STEPS_MAX + 1);
+      return -1;
+    }
+    if (reserved != 0U) {
+      fw_errfmt(why, cap, "reserved bytes 100-103 not 0 (written by a newer controller)");
+      return -1;
+    }
+    p.pass_hold_recorded = true;
+    p.obstacle_pass_hold_steps = (int32_t)(hold_plus_1 - 1U);
   }
   *out = p;
   return 0;

@@ -18,7 +18,16 @@
 /// 80  8  the imitation's weight w (IEEE-754 double) [1]
 /// 88  8  the clearance the obstacle task's shift terms bend around (IEEE-754 double) [m]; 0 in
 ///        the corridor's files and in files written before it (FW_PROGRESS_CLEARANCE_UNRECORDED_M)
+/// -- bytes 96-103 only in a section that records the hold past the obstacle (104 bytes): --
+/// 96  4  obstacle_pass_hold_steps the obstacle task's shift was learned and vetted with, + 1
+///        (1..FW_PROGRESS_PASS_HOLD_STEPS_MAX + 1)
+/// 100 4  reserved, 0
 /// ```
+/// A section is 96 bytes (FW_PROGRESS_BYTES_BASE) where nothing records the hold: the corridor,
+/// an obstacle file whose shift never moved, and files written before the field (their obstacle
+/// shift was learned without a hold: FW_PROGRESS_PASS_HOLD_UNRECORDED_STEPS). Such a file stays
+/// readable by controllers older than the field; one that records the hold is refused by them
+/// ("unknown format"), rather than driven without it.
 /// The shift (fw_pair_ranker_t, pair_runs) is part of the learned policy, so it travels with the
 /// learned state. Files written before it have zeros there: no shift, the policy they learned.
 /// Terms revision 0 (files written before the field) had the obstacle task's first term the goal
@@ -40,13 +49,15 @@
 ///   FW_PAIR_IMITATION_MAX] (files written before it have 0 there: the greedy action once, the
 ///   policy they learned); the clearance 0 or within [FW_PAIR_OBSTACLE_CLEARANCE_MIN_M,
 ///   FW_PAIR_OBSTACLE_CLEARANCE_MAX_M], and 0 in a corridor file.
+///   The hold, where recorded, within [0, FW_PROGRESS_PASS_HOLD_STEPS_MAX], and only in an
+///   obstacle file; the reserved bytes 0.
 /// The obstacle task's shift means a policy only with the clearance its terms bent around
-/// (pair_obstacle_clearance_m, fw_pair_basis): a controller or b21r-train resumes a shift only
-/// with the clearance it was learned with (fw_progress_clearance_fits) and names the setting
-/// otherwise.
-/// Every byte is in use (the last, 88-95, since the clearance: a controller older than a field
-/// refused a file with it set, its reserved byte not 0, rather than drive without it); a later
-/// field needs a new magic or a larger section.
+/// (pair_obstacle_clearance_m, fw_pair_basis) and with the hold past the obstacle it was learned
+/// and vetted with (obstacle_pass_hold_steps, fw/shift_vet.h): a controller or b21r-train resumes
+/// a shift only with the clearance and the hold it was learned with (fw_progress_clearance_fits,
+/// fw_progress_pass_hold_fits) and names the setting otherwise.
+/// Bytes 0-95 are all in use; the hold took a larger section (above). A later field needs a new
+/// magic or a larger section again (the reserved bytes 100-103 must stay 0 for older decoders).
 ///
 /// Pure functions: no I/O, no allocation, O(1).
 #ifndef FW_PROGRESS_H
@@ -62,8 +73,11 @@
 extern "C" {
 #endif
 
-/// Size of the encoded section.
-#define FW_PROGRESS_BYTES 96U
+/// Size of the largest encoded section (one that records the hold past the obstacle); a buffer
+/// this large holds any section.
+#define FW_PROGRESS_BYTES 104U
+/// Size of a section that does not record the hold (and of every section written before it).
+#define FW_PROGRESS_BYTES_BASE 96U
 /// Capacity of fw_progress_decode()'s reason text, including the NUL.
 #define FW_PROGRESS_WHY_MAX 160U
 
@@ -85,9 +99,7 @@ extern "C" {
 /// failed runs on seeds whose b ended at -0.7 to -2.2; with the bound at 0.4 m 6 failed phase-two
 /// evaluations of 10,500 against 21, docs/LEARNING.md). A shift loaded with b < 0 (learned before
 /// the bound) is applied as it is; a ranked step proposes b at 0 or above, of which the vet may
-/// take a fraction or none. The corridor's centring keeps ±FW_PAIR_SHIFT_MAX. The hold past the
-/// obstacle (obstacle_pass_hold_steps), which the shift is learned and vetted with, is not
-/// recorded: a controller or b21r-train resuming it takes its configuration's.
+/// take a fraction or none. The corridor's centring keeps ±FW_PAIR_SHIFT_MAX.
 #define FW_PAIR_OBSTACLE_CENTRING_MIN 0.0
 
 /// Revision of the pair terms (fw_pair_basis) that checkpoints record with the shift: 1 = the
@@ -111,6 +123,13 @@ extern "C" {
 /// The clearance of an obstacle shift whose file does not record one (bytes 88-95 zero: written
 /// before the field, when it was fixed) [m].
 #define FW_PROGRESS_CLEARANCE_UNRECORDED_M 0.5
+
+/// obstacle_pass_hold_steps' range [control periods]; a recorded hold is refused beyond it.
+#define FW_PROGRESS_PASS_HOLD_STEPS_MAX 100
+
+/// The hold past the obstacle of an obstacle shift whose file does not record one (written before
+/// the hold existed: learned and vetted with none) [control periods].
+#define FW_PROGRESS_PASS_HOLD_UNRECORDED_STEPS 0
 
 /// pair_runs: the learned policy's shift, moved by the ranked pairs (fw_pair_ranker_t, fw/loop.h)
 /// and kept by checkpoints (here, because this section carries it): the learned policy is
@@ -141,6 +160,12 @@ typedef struct fw_progress {
   /// obstacles: the clearance its terms bend around (pair_obstacle_clearance_m) [m]; 0 = not
   /// recorded (the corridor; an obstacle file written before the field: FW_PROGRESS_CLEARANCE_UNRECORDED_M)
   double obstacle_clearance_m;
+  /// obstacles: whether the file records the hold past the obstacle the shift was learned and
+  /// vetted with (fw_progress_record_pass_hold; a 104-byte section)
+  bool pass_hold_recorded;
+  /// that hold (obstacle_pass_hold_steps) [control periods], 0..FW_PROGRESS_PASS_HOLD_STEPS_MAX;
+  /// 0 when not recorded
+  int32_t obstacle_pass_hold_steps;
 } fw_progress_t;
 
 /// True when p's shift may resume under a configuration whose pair_obstacle_clearance_m is
@@ -155,11 +180,25 @@ bool fw_progress_clearance_fits(const fw_progress_t* p, double clearance_m, doub
 /// Pure, O(1).
 void fw_progress_record_clearance(fw_progress_t* p, double clearance_m);
 
-/// Writes p into out[0..FW_PROGRESS_BYTES). Returns FW_PROGRESS_BYTES. Does not validate: a
-/// value outside the ranges above is written as is (and refused by the decoder).
+/// True when p's shift may resume under a configuration whose obstacle_pass_hold_steps is
+/// hold_steps: always in the corridor and for an obstacle shift that never moved (a, b and w all
+/// 0), else where the hold it was learned with (FW_PROGRESS_PASS_HOLD_UNRECORDED_STEPS when not
+/// recorded) is hold_steps. *learned_steps receives that hold (may be NULL). Pure, O(1).
+bool fw_progress_pass_hold_fits(const fw_progress_t* p, int32_t hold_steps, int32_t* learned_steps);
+
+/// Records in p the hold past the obstacle (obstacle_pass_hold_steps = hold_steps) for an obstacle
+/// shift that moved (a, b or w not 0: the vet took its steps with the hold in its rollouts), else
+/// records none (the corridor, or an obstacle shift that never moved: such a file keeps the
+/// 96-byte section older controllers read). Pure, O(1).
+void fw_progress_record_pass_hold(fw_progress_t* p, int32_t hold_steps);
+
+/// Writes p into out[0..FW_PROGRESS_BYTES). Returns the section's size: FW_PROGRESS_BYTES where p
+/// records the hold past the obstacle, FW_PROGRESS_BYTES_BASE otherwise (out beyond it is 0).
+/// Does not validate: a value outside the ranges above is written as is (and refused by the
+/// decoder).
 size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]);
 
-/// Decodes and validates n bytes. Returns 0 with *out filled, or -1 with a one-line reason in
+/// Decodes and validates n bytes (FW_PROGRESS_BYTES_BASE or FW_PROGRESS_BYTES). Returns 0 with *out filled, or -1 with a one-line reason in
 /// why (e.g. "phase 7, expected 1 or 2"; capacity why_cap, may be 0) and *out untouched.
 int fw_progress_decode(const uint8_t* bytes, size_t n, fw_progress_t* out, char* why, size_t why_cap);
 

@@ -845,8 +845,8 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
   assert_int_equal(g.schedule.training_runs, 3);  // written by the first session
   g.schedule.phase = 7;
   uint8_t bad[FW_PROGRESS_BYTES];
-  (void)fw_progress_encode(&g, bad);
-  assert_int_equal(fw_checkpoint_write(c.checkpoint_file, bad, sizeof bad, payload, ps, err, sizeof err), 0);
+  const size_t bad_n = fw_progress_encode(&g, bad);
+  assert_int_equal(fw_checkpoint_write(c.checkpoint_file, bad, bad_n, payload, ps, err, sizeof err), 0);
   assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
   assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), -1);
   assert_non_null(strstr(err, c.checkpoint_file));
@@ -901,8 +901,8 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
     gs.shift.gain = with_shift ? 0.75 : 0.0;
     gs.shift.centring = with_shift ? -1.25 : 0.0;
     uint8_t shifted[FW_PROGRESS_BYTES];
-    (void)fw_progress_encode(&gs, shifted);
-    assert_int_equal(fw_checkpoint_write(c.checkpoint_file, shifted, sizeof shifted, payload, ps, err, sizeof err), 0);
+    size_t shifted_n = fw_progress_encode(&gs, shifted);
+    assert_int_equal(fw_checkpoint_write(c.checkpoint_file, shifted, shifted_n, payload, ps, err, sizeof err), 0);
     fw_config_t ce = c;
     ce.mode = FW_MODE_EVALUATE;
     ce.evaluate_policy = FW_EVAL_LEARNED;
@@ -922,9 +922,8 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
     harness_close(&g_h);
     if (with_shift) {
       gs.shift.gain = FW_PAIR_SHIFT_MAX * 1.5;
-      (void)fw_progress_encode(&gs, shifted);
-      assert_int_equal(fw_checkpoint_write(c.checkpoint_file, shifted, sizeof shifted, payload, ps, err, sizeof err),
-                       0);
+      shifted_n = fw_progress_encode(&gs, shifted);
+      assert_int_equal(fw_checkpoint_write(c.checkpoint_file, shifted, shifted_n, payload, ps, err, sizeof err), 0);
       assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
       assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), -1);
       assert_non_null(strstr(err, "learned policy shift"));
@@ -974,13 +973,13 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
   assert_int_equal(system(cmd), 0);
 }
 
-// The obstacle task's shift is a policy only with the clearance its terms bent around
-// (pair_obstacle_clearance_m): a checkpoint resumes its shift only with that clearance, and a
-// refusal names the setting that resumes it and loads nothing. A file that does not record the
-// clearance (written before the field) learned with 0.5 m; a shift still at 0 resumes under any
-// clearance; the corridor records none and ignores the setting.
-static int load_with_clearance(const fw_config_t* c, const fw_progress_t* g, double configured_m, char* err,
-                               size_t err_cap, fw_loop_stats_t* st) {
+// Writes a checkpoint of g and an empty learned state to c's checkpoint_file, then loads it into
+// a controller of c with pair_obstacle_clearance_m = configured_m and obstacle_pass_hold_steps =
+// configured_hold. Returns fw_loop_load_checkpoint's result (err its message, st the loop's
+// statistics after it). With rewrite_path, a loaded controller then shuts down writing its own
+// checkpoint there.
+static int load_with(const fw_config_t* c, const fw_progress_t* g, double configured_m, int32_t configured_hold,
+                     const char* rewrite_path, char* err, size_t err_cap, fw_loop_stats_t* st) {
   hedger_config_t hc;
   fw_loop_learner_config(c, &hc);
   hedger_t* hd = NULL;
@@ -990,16 +989,39 @@ static int load_with_clearance(const fw_config_t* c, const fw_progress_t* g, dou
   assert_int_equal(hedger_save(hd, payload, sizeof payload, &ps), HEDGER_OK);
   hedger_destroy(hd);
   uint8_t meta[FW_PROGRESS_BYTES];
-  (void)fw_progress_encode(g, meta);
-  assert_int_equal(fw_checkpoint_write(c->checkpoint_file, meta, sizeof meta, payload, ps, err, err_cap), 0);
+  const size_t meta_n = fw_progress_encode(g, meta);
+  assert_int_equal(fw_checkpoint_write(c->checkpoint_file, meta, meta_n, payload, ps, err, err_cap), 0);
   fw_config_t ci = *c;
   ci.pair_obstacle_clearance_m = configured_m;
+  ci.obstacle_pass_hold_steps = configured_hold;
   assert_int_equal(harness_open(&g_h, &ci, false, 3), 0);
   err[0] = '\0';
   const int r = fw_loop_load_checkpoint(g_h.loop, err, err_cap);
   fw_loop_get_stats(g_h.loop, st);
+  fw_ckpt_writer_t* w = NULL;
+  if (r == 1 && rewrite_path != NULL) {
+    size_t meta_cap = 0;
+    size_t payload_cap = 0;
+    fw_loop_checkpoint_capacity(g_h.loop, &meta_cap, &payload_cap);
+    w = fw_ckpt_writer_create(rewrite_path, meta_cap, payload_cap, err, err_cap);
+    assert_non_null(w);
+    fw_loop_attach_checkpoints(g_h.loop, w);
+    assert_int_equal(fw_loop_shutdown(g_h.loop), 0);
+  }
   harness_close(&g_h);
+  fw_ckpt_writer_destroy(w);
   return r;
+}
+
+// The obstacle task's shift is a policy only with the clearance its terms bent around
+// (pair_obstacle_clearance_m): a checkpoint resumes its shift only with that clearance, and a
+// refusal names the setting that resumes it and loads nothing. A file that does not record the
+// clearance (written before the field) learned with 0.5 m; a shift still at 0 resumes under any
+// clearance; the corridor records none and ignores the setting.
+static int load_with_clearance(const fw_config_t* c, const fw_progress_t* g, double configured_m, char* err,
+                               size_t err_cap, fw_loop_stats_t* st) {
+  return load_with(c, g, configured_m, g->pass_hold_recorded ? g->obstacle_pass_hold_steps : c->obstacle_pass_hold_steps,
+                   NULL, err, err_cap, st);
 }
 
 static void test_loop_checkpoint_obstacle_clearance(void** state) {
@@ -1023,6 +1045,8 @@ static void test_loop_checkpoint_obstacle_clearance(void** state) {
   g.run_id = 50;
   g.shift.imitation = -0.5;
   g.shift.pairs = 5;
+  g.pass_hold_recorded = true;  // the configuration's hold: this test is about the clearance
+  g.obstacle_pass_hold_steps = c.obstacle_pass_hold_steps;
   struct {
     double recorded_m;    // bytes 88-95 (0: not recorded)
     double configured_m;  // pair_obstacle_clearance_m
@@ -1064,10 +1088,97 @@ static void test_loop_checkpoint_obstacle_clearance(void** state) {
   g.task = FW_TASK_CORRIDOR;
   g.state_dim = hc.state_dim;
   g.obstacle_clearance_m = 0.0;
+  g.pass_hold_recorded = false;
+  g.obstacle_pass_hold_steps = 0;
   g.shift.gain = 0.75;
   g.shift.centring = -1.0;
   assert_int_equal(load_with_clearance(&cc, &g, 0.45, err, sizeof err, &st), 1);
   assert_true(st.shift.gain == 0.75);
+  assert_int_equal(remove(c.checkpoint_file), 0);
+  assert_int_equal(remove(dir), 0);
+}
+
+// The obstacle task's shift is learned and vetted with the hold past the obstacle
+// (obstacle_pass_hold_steps): a checkpoint resumes a shift that moved only with that hold, and a
+// refusal names the setting and loads nothing. A file that does not record the hold (written
+// before the field) learned with none; a shift that never moved resumes under any hold. The
+// controller's own checkpoint records the hold it ran with (104-byte section), and a shift that
+// never moved keeps the 96-byte section.
+static void test_loop_checkpoint_obstacle_pass_hold(void** state) {
+  (void)state;
+  char dir[] = "/tmp/b21r-loophold-XXXXXX";
+  assert_non_null(mkdtemp(dir));
+  fw_config_t c;
+  harness_config(&c);
+  c.task = FW_TASK_OBSTACLES;
+  snprintf(c.checkpoint_file, sizeof c.checkpoint_file, "%s/hedger.ckpt", dir);
+  char rewritten[sizeof c.checkpoint_file + 16];
+  snprintf(rewritten, sizeof rewritten, "%s/again.ckpt", dir);
+  hedger_config_t hc;
+  fw_loop_learner_config(&c, &hc);
+  fw_progress_t g;
+  memset(&g, 0, sizeof g);
+  g.task = FW_TASK_OBSTACLES;
+  g.state_dim = hc.state_dim;
+  g.schedule.phase = 2;
+  g.schedule.training_runs = 40;
+  g.schedule.phase_one_runs = 30;
+  g.schedule.phase_two_runs = 10;
+  g.run_id = 50;
+  g.shift.pairs = 5;
+  struct {
+    int32_t recorded;    // bytes 96-99 - 1 (-1: a 96-byte section, not recorded)
+    int32_t configured;  // obstacle_pass_hold_steps
+    double imitation;    // the shift's w (a = b = 0 throughout: the weight alone was vetted with the hold)
+    int expect;          // fw_loop_load_checkpoint's result
+  } const cases[] = {
+      {10, 10, -0.5, 1}, {10, 6, -0.5, -1}, {0, 0, -0.5, 1}, {0, 10, -0.5, -1},
+      {-1, 0, -0.5, 1},  {-1, 10, -0.5, -1}, {-1, 10, 0.0, 1},
+  };
+  char err[FW_LOOP_ERR_MAX];
+  fw_loop_stats_t st;
+  for (size_t i = 0; i < sizeof cases / sizeof cases[0]; ++i) {
+    g.pass_hold_recorded = cases[i].recorded >= 0;
+    g.obstacle_pass_hold_steps = cases[i].recorded >= 0 ? cases[i].recorded : 0;
+    g.shift.imitation = cases[i].imitation;
+    (void)remove(rewritten);
+    const int r = load_with(&c, &g, c.pair_obstacle_clearance_m, cases[i].configured, rewritten, err, sizeof err, &st);
+    if (r != cases[i].expect) {
+      fail_msg("case %zu: recorded %d, configured %d, w %g: load gave %d (%s)", i, (int)cases[i].recorded,
+               (int)cases[i].configured, cases[i].imitation, r, err);
+    }
+    if (r == 1) {
+      assert_true(st.shift.imitation == g.shift.imitation);
+      assert_int_equal(st.training_runs, 40);
+      // The controller's own checkpoint records the hold it ran with where the shift moved.
+      uint8_t meta[FW_PROGRESS_BYTES + 1];
+      size_t ms = 0;
+      static uint8_t payload[1 << 16];
+      size_t ps = 0;
+      assert_int_equal(fw_checkpoint_read(rewritten, meta, sizeof meta, &ms, payload, sizeof payload, &ps, err,
+                                          sizeof err),
+                       1);
+      fw_progress_t again;
+      assert_int_equal(fw_progress_decode(meta, ms, &again, NULL, 0), 0);
+      const bool moved = cases[i].imitation != 0.0;
+      if (ms != (moved ? FW_PROGRESS_BYTES : FW_PROGRESS_BYTES_BASE) || again.pass_hold_recorded != moved ||
+          again.obstacle_pass_hold_steps != (moved ? cases[i].configured : 0)) {
+        fail_msg("case %zu: the controller wrote a %zu-byte section, hold %s %d (shift w %g)", i, ms,
+                 again.pass_hold_recorded ? "recorded" : "not recorded", (int)again.obstacle_pass_hold_steps,
+                 again.shift.imitation);
+      }
+    } else {
+      char want[96];
+      snprintf(want, sizeof want, "set obstacle_pass_hold_steps = %d to go on with it",
+               cases[i].recorded >= 0 ? (int)cases[i].recorded : FW_PROGRESS_PASS_HOLD_UNRECORDED_STEPS);
+      if (strstr(err, want) == NULL || strstr(err, c.checkpoint_file) == NULL) {
+        fail_msg("case %zu: '%s' does not say '%s'", i, err, want);
+      }
+      assert_int_equal(st.training_runs, 0);  // nothing loaded
+      assert_true(st.shift.imitation == 0.0);
+    }
+  }
+  (void)remove(rewritten);
   assert_int_equal(remove(c.checkpoint_file), 0);
   assert_int_equal(remove(dir), 0);
 }
@@ -1089,6 +1200,7 @@ int main(void) {
       cmocka_unit_test(test_loop_tick_allocates_nothing),
       cmocka_unit_test(test_loop_checkpoint_restart_resumes),
       cmocka_unit_test(test_loop_checkpoint_obstacle_clearance),
+      cmocka_unit_test(test_loop_checkpoint_obstacle_pass_hold),
   };
   return cmocka_run_group_tests_name("firmware.loop", tests, NULL, NULL);
 }

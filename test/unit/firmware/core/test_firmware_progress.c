@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
-// The checkpoint's controller section: exact round trips, the byte layout, and every field out
-// of its documented range refused with the field named.
+// The checkpoint's controller section: exact round trips, the byte layout (96 bytes, or 104 with
+// the hold past the obstacle), every field out of its documented range refused with the field
+// named, and which clearance and hold a shift resumes with.
 #include "fw/config.h"
 #include "fw/progress.h"
 
@@ -32,6 +33,8 @@ static fw_progress_t sample(void) {
   p.shift.pairs = 17;
   p.shift.imitation = -0.375;
   p.obstacle_clearance_m = 0.45;
+  p.pass_hold_recorded = true;
+  p.obstacle_pass_hold_steps = 10;
   return p;
 }
 
@@ -44,12 +47,12 @@ static void put_u32(uint8_t* b, size_t off, uint32_t v) {
 // Encodes p, applies the edit (offset, 32-bit value), decodes: expects a refusal naming `what`.
 static void expect_refused(const fw_progress_t* p, size_t off, uint32_t v, const char* what) {
   uint8_t b[FW_PROGRESS_BYTES];
-  (void)fw_progress_encode(p, b);
+  const size_t n = fw_progress_encode(p, b);
   put_u32(b, off, v);
   fw_progress_t out = sample();
   out.run_id = -77;
   char why[FW_PROGRESS_WHY_MAX];
-  assert_int_equal(fw_progress_decode(b, sizeof b, &out, why, sizeof why), -1);
+  assert_int_equal(fw_progress_decode(b, n, &out, why, sizeof why), -1);
   if (strstr(why, what) == NULL) {
     fail_msg("offset %zu value %u: reason '%s' does not name '%s'", off, (unsigned)v, why, what);
   }
@@ -62,7 +65,8 @@ static void test_progress_round_trip_and_layout(void** state) {
   (void)state;
   const fw_progress_t p = sample();
   uint8_t b[FW_PROGRESS_BYTES];
-  assert_int_equal(fw_progress_encode(&p, b), FW_PROGRESS_BYTES);
+  size_t bn = fw_progress_encode(&p, b);
+  assert_int_equal(bn, FW_PROGRESS_BYTES);  // it records the hold: 104 bytes
   assert_memory_equal(b, "FWMETA01", 8);
   assert_int_equal(b[8], 1);    // task
   assert_int_equal(b[12], 4);   // state dimension
@@ -80,9 +84,10 @@ static void test_progress_round_trip_and_layout(void** state) {
   double clearance;
   memcpy(&clearance, b + 88, sizeof clearance);
   assert_true(clearance == 0.45);
-  assert_int_equal(FW_PROGRESS_BYTES, 96);  // every byte in use
+  assert_int_equal(b[96], 11);  // the hold past the obstacle + 1
+  assert_int_equal(b[100] | b[101] | b[102] | b[103], 0);  // reserved
   fw_progress_t q;
-  assert_int_equal(fw_progress_decode(b, sizeof b, &q, NULL, 0), 0);
+  assert_int_equal(fw_progress_decode(b, bn, &q, NULL, 0), 0);
   assert_memory_equal(&q, &p, sizeof p);
   fw_progress_t fresh;
   memset(&fresh, 0, sizeof fresh);
@@ -90,9 +95,26 @@ static void test_progress_round_trip_and_layout(void** state) {
   fresh.state_dim = 3;
   fresh.schedule.phase = 1;
   fresh.run_id = -1;
-  (void)fw_progress_encode(&fresh, b);
-  assert_int_equal(fw_progress_decode(b, sizeof b, &q, NULL, 0), 0);
+  bn = fw_progress_encode(&fresh, b);
+  assert_int_equal(bn, FW_PROGRESS_BYTES_BASE);  // no hold recorded: the 96 bytes older controllers read
+  assert_int_equal(fw_progress_decode(b, bn, &q, NULL, 0), 0);
   assert_memory_equal(&q, &fresh, sizeof fresh);
+  // An obstacle section without the hold (written before the field) decodes as not recorded.
+  fw_progress_t unrecorded = p;
+  unrecorded.pass_hold_recorded = false;
+  unrecorded.obstacle_pass_hold_steps = 0;
+  bn = fw_progress_encode(&unrecorded, b);
+  assert_int_equal(bn, FW_PROGRESS_BYTES_BASE);
+  assert_int_equal(fw_progress_decode(b, bn, &q, NULL, 0), 0);
+  assert_memory_equal(&q, &unrecorded, sizeof unrecorded);
+  // A hold of 0 (never hold) is recorded as 1: distinct from "not recorded".
+  fw_progress_t never = p;
+  never.obstacle_pass_hold_steps = 0;
+  bn = fw_progress_encode(&never, b);
+  assert_int_equal(bn, FW_PROGRESS_BYTES);
+  assert_int_equal(b[96], 1);
+  assert_int_equal(fw_progress_decode(b, bn, &q, NULL, 0), 0);
+  assert_true(q.pass_hold_recorded && q.obstacle_pass_hold_steps == 0);
 }
 
 // Every field outside its documented range is refused, with the field in the reason.
@@ -156,16 +178,31 @@ static void test_progress_out_of_range_refused(void** state) {
   q.task = FW_TASK_CORRIDOR;
   q.state_dim = 3;
   expect_refused(&q, 8, 0, "obstacle pair clearance 0.45");
-  // Size and magic.
+  // The hold past the obstacle: 1..FW_PROGRESS_PASS_HOLD_STEPS_MAX + 1 in a 104-byte section, and
+  // only in an obstacle file; the reserved word 0.
+  expect_refused(&p, 96, 0U, "obstacle pass hold + 1 = 0");
+  expect_refused(&p, 96, FW_PROGRESS_PASS_HOLD_STEPS_MAX + 2U, "obstacle pass hold + 1 = 102");
+  expect_refused(&p, 96, 0xFFFFFFFFU, "obstacle pass hold");
+  expect_refused(&p, 100, 1U, "reserved bytes 100-103");
+  q = p;
+  q.task = FW_TASK_CORRIDOR;
+  q.state_dim = 3;
+  q.obstacle_clearance_m = 0.0;
+  expect_refused(&q, 8, 0, "obstacle pass hold + 1 = 11, expected (obstacle task)");
   uint8_t b[FW_PROGRESS_BYTES];
-  (void)fw_progress_encode(&p, b);
+  size_t bn = 0;
+  bn = fw_progress_encode(&p, b);
   fw_progress_t out;
   char why[FW_PROGRESS_WHY_MAX];
-  (void)fw_progress_encode(&p, b);
-  assert_int_equal(fw_progress_decode(b, sizeof b - 1U, &out, why, sizeof why), -1);
+  bn = fw_progress_encode(&p, b);
+  assert_int_equal(fw_progress_decode(b, bn - 1U, &out, why, sizeof why), -1);
+  assert_non_null(strstr(why, "unknown format (103 bytes"));
+  assert_int_equal(fw_progress_decode(b, FW_PROGRESS_BYTES_BASE - 1U, &out, why, sizeof why), -1);
   assert_non_null(strstr(why, "unknown format (95 bytes"));
+  assert_int_equal(fw_progress_decode(b, FW_PROGRESS_BYTES_BASE + 4U, &out, why, sizeof why), -1);
+  assert_non_null(strstr(why, "expected 96 or 104"));
   b[0] = 'X';
-  assert_int_equal(fw_progress_decode(b, sizeof b, &out, why, sizeof why), -1);
+  assert_int_equal(fw_progress_decode(b, bn, &out, why, sizeof why), -1);
   assert_non_null(strstr(why, "other magic"));
   // The edges of the ranges are accepted.
   q = p;
@@ -174,17 +211,63 @@ static void test_progress_out_of_range_refused(void** state) {
   q.shift.gain = 4.0;
   q.shift.centring = -4.0;
   q.shift.imitation = -1.0;
-  (void)fw_progress_encode(&q, b);
-  assert_int_equal(fw_progress_decode(b, sizeof b, &out, why, sizeof why), 0);
+  bn = fw_progress_encode(&q, b);
+  assert_int_equal(fw_progress_decode(b, bn, &out, why, sizeof why), 0);
   assert_int_equal(out.run_id, INT32_MAX - 1);
   q.shift.imitation = 1.0;
   q.obstacle_clearance_m = FW_PAIR_OBSTACLE_CLEARANCE_MIN_M;
-  (void)fw_progress_encode(&q, b);
-  assert_int_equal(fw_progress_decode(b, sizeof b, &out, why, sizeof why), 0);
+  bn = fw_progress_encode(&q, b);
+  assert_int_equal(fw_progress_decode(b, bn, &out, why, sizeof why), 0);
   q.obstacle_clearance_m = FW_PAIR_OBSTACLE_CLEARANCE_MAX_M;
-  (void)fw_progress_encode(&q, b);
-  assert_int_equal(fw_progress_decode(b, sizeof b, &out, why, sizeof why), 0);
+  bn = fw_progress_encode(&q, b);
+  assert_int_equal(fw_progress_decode(b, bn, &out, why, sizeof why), 0);
   assert_true(out.obstacle_clearance_m == FW_PAIR_OBSTACLE_CLEARANCE_MAX_M);
+  q.obstacle_pass_hold_steps = FW_PROGRESS_PASS_HOLD_STEPS_MAX;
+  bn = fw_progress_encode(&q, b);
+  assert_int_equal(fw_progress_decode(b, bn, &out, why, sizeof why), 0);
+  assert_int_equal(out.obstacle_pass_hold_steps, FW_PROGRESS_PASS_HOLD_STEPS_MAX);
+}
+
+// Which hold past the obstacle a shift resumes with (fw_progress_pass_hold_fits): the one
+// recorded, none (0) where the file records none (written before the field), any for an obstacle
+// shift that never moved or in the corridor; and what a writer records (fw_progress_record_pass_hold).
+static void test_progress_pass_hold_fits(void** state) {
+  (void)state;
+  fw_progress_t p = sample();  // obstacles, a 0.8125, b -1.5, w -0.375, learned holding 10 steps
+  int32_t learned = -1;
+  assert_true(fw_progress_pass_hold_fits(&p, 10, &learned) && learned == 10);
+  learned = -1;
+  assert_false(fw_progress_pass_hold_fits(&p, 9, &learned));
+  assert_int_equal(learned, 10);
+  assert_false(fw_progress_pass_hold_fits(&p, 0, NULL));
+  p.pass_hold_recorded = false;
+  p.obstacle_pass_hold_steps = 0;
+  assert_true(fw_progress_pass_hold_fits(&p, FW_PROGRESS_PASS_HOLD_UNRECORDED_STEPS, &learned) && learned == 0);
+  assert_false(fw_progress_pass_hold_fits(&p, 10, NULL));
+  p.shift.gain = 0.0;
+  p.shift.centring = 0.0;
+  assert_false(fw_progress_pass_hold_fits(&p, 10, NULL));  // the weight alone was vetted with the hold too
+  p.shift.imitation = 0.0;
+  assert_true(fw_progress_pass_hold_fits(&p, 10, NULL));   // a shift that never moved
+  p = sample();
+  p.task = FW_TASK_CORRIDOR;
+  p.pass_hold_recorded = false;
+  assert_true(fw_progress_pass_hold_fits(&p, 10, NULL) && fw_progress_pass_hold_fits(&p, 0, NULL));
+  // Recording: with an obstacle shift that moved (any of a, b, w), else none.
+  p = sample();
+  fw_progress_record_pass_hold(&p, 7);
+  assert_true(p.pass_hold_recorded && p.obstacle_pass_hold_steps == 7);
+  p.shift.gain = 0.0;
+  p.shift.centring = 0.0;
+  fw_progress_record_pass_hold(&p, 0);
+  assert_true(p.pass_hold_recorded && p.obstacle_pass_hold_steps == 0);
+  p.shift.imitation = 0.0;
+  fw_progress_record_pass_hold(&p, 7);
+  assert_true(!p.pass_hold_recorded && p.obstacle_pass_hold_steps == 0);
+  p = sample();
+  p.task = FW_TASK_CORRIDOR;
+  fw_progress_record_pass_hold(&p, 7);
+  assert_false(p.pass_hold_recorded);
 }
 
 // Which clearance a shift resumes with (fw_progress_clearance_fits): the one recorded, 0.5 m where
@@ -211,9 +294,10 @@ static void test_progress_clearance_fits(void** state) {
   p = sample();
   p.obstacle_clearance_m = -0.0;
   uint8_t b[FW_PROGRESS_BYTES];
-  (void)fw_progress_encode(&p, b);
+  size_t bn = 0;
+  bn = fw_progress_encode(&p, b);
   fw_progress_t q;
-  assert_int_equal(fw_progress_decode(b, sizeof b, &q, NULL, 0), 0);
+  assert_int_equal(fw_progress_decode(b, bn, &q, NULL, 0), 0);
   assert_true(fw_progress_clearance_fits(&q, 0.5, &learned) && learned == 0.5);
   // What a writer records (fw_progress_record_clearance): the clearance with an obstacle shift
   // learned on the terms, else 0 (so a file with nothing learned on them stays readable by a
@@ -241,18 +325,21 @@ static void test_progress_terms_revision(void** state) {
   (void)state;
   fw_progress_t p = sample();  // obstacles: a 0.8125, b -1.5
   uint8_t b[FW_PROGRESS_BYTES];
-  (void)fw_progress_encode(&p, b);
+  size_t bn = 0;
+  bn = fw_progress_encode(&p, b);
   put_u32(b, 76, 0U);
   fw_progress_t q;
   char why[FW_PROGRESS_WHY_MAX];
-  assert_int_equal(fw_progress_decode(b, sizeof b, &q, why, sizeof why), 0);
+  assert_int_equal(fw_progress_decode(b, bn, &q, why, sizeof why), 0);
   assert_true(q.shift.gain == 0.8125 && q.shift.centring == -1.5 - 0.8125);
   p.task = FW_TASK_CORRIDOR;
   p.state_dim = 3;
   p.obstacle_clearance_m = 0.0;
-  (void)fw_progress_encode(&p, b);
+  p.pass_hold_recorded = false;
+  p.obstacle_pass_hold_steps = 0;
+  bn = fw_progress_encode(&p, b);
   put_u32(b, 76, 0U);
-  assert_int_equal(fw_progress_decode(b, sizeof b, &q, why, sizeof why), 0);
+  assert_int_equal(fw_progress_decode(b, bn, &q, why, sizeof why), 0);
   assert_true(q.shift.gain == 0.8125 && q.shift.centring == -1.5);
   p = sample();
   p.shift.gain = 3.0;
@@ -268,6 +355,7 @@ int main(void) {
       cmocka_unit_test(test_progress_out_of_range_refused),
       cmocka_unit_test(test_progress_terms_revision),
       cmocka_unit_test(test_progress_clearance_fits),
+      cmocka_unit_test(test_progress_pass_hold_fits),
   };
   return cmocka_run_group_tests_name("firmware.progress", tests, NULL, NULL);
 }
