@@ -514,7 +514,7 @@ int exp_run_learn(const exp_settings_t* s, const fw_config_t* cfg_in, const exp_
     json_begin(&w, f);
     json_object(&w, NULL);
     exp_write_header(&w, s, &cfg, task);
-    json_str(&w, "task", cfg.task == FW_TASK_CORRIDOR ? "corridor" : "obstacles");
+    json_str(&w, "task", fw_task_name(cfg.task));
     json_str(&w, "world", world.name);
     json_int(&w, "sim_seed", (int64_t)task->seed);
     json_num(&w, "dt_s", dt_s);

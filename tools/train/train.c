@@ -139,7 +139,7 @@ int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t er
       fw_errfmt(err, err_cap, "%s is corrupt (controller section: %s); give a checkpoint the controller or "
           "b21r-train wrote", path, why);
     } else if (g.task != t->cfg.task) {
-      const char* task = g.task == FW_TASK_CORRIDOR ? "corridor" : "obstacles";
+      const char* task = fw_task_name(g.task);
       fw_errfmt(err, err_cap, "%s was learned for another task (%s): train with task = %s", path, task, task);
     } else if (!fw_progress_clearance_fits(&g, t->cfg.pair_obstacle_clearance_m, &learned_clearance_m)) {
       fw_errfmt(err, err_cap, "%s: its learned policy's shift bends around the obstacle at pair_obstacle_clearance_m = "
@@ -199,8 +199,7 @@ static int learn(trainer_t* t, const b21r_experience_t* e, const char* path, cha
     fw_errfmt(err, err_cap,
         "%s: experience seq %lld is of task %s with %d state dimensions, but the configuration says task = %s (%u): "
         "give the configuration the controller ran with (--config, or --set task = ... and state_rotation = ...)",
-        path, (long long)e->seq, e->task == 0 ? "corridor" : "obstacles", (int)e->state_dim,
-        t->cfg.task == FW_TASK_CORRIDOR ? "corridor" : "obstacles", t->hc.state_dim);
+        path, (long long)e->seq, fw_task_name(e->task), (int)e->state_dim, fw_task_name(t->cfg.task), t->hc.state_dim);
     return -1;
   }
   const bool restart = t->next_seq > 0 && e->seq == 0;

@@ -1073,6 +1073,15 @@ static origin_buf_t origin_of(const fw_config_t* cfg, const char* key) {
   return o;
 }
 
+const char* fw_task_name(int32_t task) {
+  for (const choice_t* c = k_task; c->name != NULL; ++c) {
+    if (c->value == task) {
+      return c->name;
+    }
+  }
+  return "unknown";
+}
+
 bool fw_config_pair_learner(const fw_config_t* cfg) {
   if (cfg->pair_runs_mode == FW_PAIR_RUNS_ON) {
     return true;  // fw_config_validate refuses it outside HEDGER and state_model
@@ -1187,7 +1196,7 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
     fw_errfmt(err, err_cap,
         "%s: hedger_input_scale has %d values; task %s (set at %s) needs %d (state dimensions%s, then the action)",
         origin_of(cfg, "hedger_input_scale").text, (int)cfg->hedger_input_scale_n,
-        cfg->task == FW_TASK_CORRIDOR ? "corridor" : "obstacles", origin_of(cfg, "task").text, (int)dims,
+        fw_task_name(cfg->task), origin_of(cfg, "task").text, (int)dims,
         cfg->state_rotation ? ", the last one the executed rotation of state_rotation" : "");
     return -1;
   }

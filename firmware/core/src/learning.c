@@ -204,7 +204,7 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
     snprintf(err, err_cap,
              "checkpoint %s was learned for another task (%s); to start fresh, move the file away (e.g. mv '%s' "
              "'%s.other')",
-             path, g.task == FW_TASK_CORRIDOR ? "corridor" : "obstacles", path, path);
+             path, fw_task_name(g.task), path, path);
     return -1;
   }
   double learned_clearance_m = 0.0;

@@ -50,6 +50,9 @@ extern "C" {
 
 /// Learning task (ARCHITECTURE.md, "The experiments of the paper").
 typedef enum fw_task { FW_TASK_CORRIDOR = 0, FW_TASK_OBSTACLES = 1 } fw_task_t;
+/// The task's name as the task key takes it ("corridor", "obstacles"); "unknown" for any other
+/// value (a log or file written by something else). Pure, O(1); a static string.
+const char* fw_task_name(int32_t task);
 /// Wire protocol of the base.
 typedef enum fw_base_protocol { FW_BASE_RFLEX = 0, FW_BASE_CANOPEN = 1 } fw_base_protocol_t;
 /// Who drives in phase one.

@@ -757,6 +757,21 @@ static void test_config_learner_key(void** state) {
   assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
 }
 
+// fw_task_name: the task key's own names, and "unknown" for a value no configuration can hold
+// (a log's task byte written by something else).
+static void test_config_task_name(void** state) {
+  (void)state;
+  assert_string_equal(fw_task_name(FW_TASK_CORRIDOR), "corridor");
+  assert_string_equal(fw_task_name(FW_TASK_OBSTACLES), "obstacles");
+  assert_string_equal(fw_task_name(2), "unknown");
+  assert_string_equal(fw_task_name(-1), "unknown");
+  fw_config_t c;
+  fw_config_defaults(&c);
+  char err[FW_CONFIG_ERR_MAX];
+  assert_int_equal(fw_config_set(&c, "task", fw_task_name(FW_TASK_OBSTACLES), "test", err, sizeof err), 0);
+  assert_int_equal(c.task, FW_TASK_OBSTACLES);
+}
+
 int main(int argc, char** argv) {
   g_reference_path = argc > 1 ? argv[1] : NULL;
   const struct CMUnitTest tests[] = {
@@ -780,6 +795,7 @@ int main(int argc, char** argv) {
       cmocka_unit_test(test_config_pair_runs_needs_hedger_state_model),
       cmocka_unit_test(test_config_program_refuses_joystick_without_operator),
       cmocka_unit_test(test_config_learner_key),
+      cmocka_unit_test(test_config_task_name),
   };
   return cmocka_run_group_tests_name("firmware.config", tests, setup, teardown);
 }
