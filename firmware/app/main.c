@@ -245,6 +245,9 @@ int main(int argc, char** argv) {
       fprintf(stderr, "b21r-controller: %s %s (phase %d, %d training runs, %d evaluation blocks, %u samples)\n",
               r == 1 ? "resumed from" : "no checkpoint yet at", cfg.checkpoint_file, st.phase, st.training_runs,
               st.eval_blocks, st.store_fill);
+      if (r == 1 && err[0] != '\0') {
+        fprintf(stderr, "b21r-controller: %s\n", err);
+      }
       size_t meta_cap = 0;
       size_t payload_cap = 0;
       fw_loop_checkpoint_capacity(loop, &meta_cap, &payload_cap);

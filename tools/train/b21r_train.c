@@ -195,6 +195,13 @@ int main(int argc, char** argv) {
               "the imitation's weight: its pairs cannot be ranked; its experiences are learned)\n",
               (unsigned long long)s.pairs_unmatched, (unsigned long long)s.run_records_undecodable);
     }
+    if (s.init_pass_hold_unrecorded) {
+      fprintf(stderr,
+              "b21r-train: warning: %s does not record the hold past the obstacle its shift was learned with (written "
+              "before the field: with none by controllers older than the hold, with their obstacle_pass_hold_steps "
+              "after); training went on with obstacle_pass_hold_steps = %d, which the output records\n",
+              init, (int)cfg.obstacle_pass_hold_steps);
+    }
     if (s.run_records_invalid > 0) {
       fprintf(stderr,
               "b21r-train: warning: %llu pair-run B21R_RUN records with a non-finite perturbation or shift (a "

@@ -151,6 +151,7 @@ int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t er
           (int)learned_hold_steps, (int)t->cfg.obstacle_pass_hold_steps, (int)learned_hold_steps);
     } else if ((hs = hedger_load(t->hedger, payload, payload_size)) == HEDGER_OK) {
       t->ranker.shift = g.shift;
+      t->stats.init_pass_hold_unrecorded = fw_progress_pass_hold_unknown(&g);
       rc = 0;
     } else {
       fw_errfmt(err, err_cap,

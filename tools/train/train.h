@@ -71,6 +71,9 @@ typedef struct train_stats {
   uint64_t shift_taken_from_log;
   uint64_t shift_steps_halved;   ///< pair_shift_vet: ranked pairs whose step of the shift the vet cut (to a half, a quarter or an eighth)
   uint64_t shift_steps_refused;  ///< and whose step it refused (fw/shift_vet.h, as the controller)
+  /// --init's obstacle shift moved but its file does not record the hold past the obstacle it was
+  /// learned with (fw_progress_pass_hold_unknown): it goes on under the configuration's hold
+  bool init_pass_hold_unrecorded;
   double seconds;             ///< wall time spent reading and training
   fw_pair_shift_t shift;      ///< the learned policy's shift after training; it goes into the checkpoint written
 } train_stats_t;

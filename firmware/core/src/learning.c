@@ -240,6 +240,14 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
   fw_schedule_init(&L->sched, &sc, &g.schedule);
   L->run_id = g.run_id;
   L->pair_ranker.shift = g.shift;  // the learned policy's shift goes with its state
+  err[0] = '\0';
+  if (fw_progress_pass_hold_unknown(&g)) {
+    snprintf(err, err_cap,
+             "note: checkpoint %s does not record the hold past the obstacle its shift was learned with (written "
+             "before the field: with none by controllers older than the hold, with their obstacle_pass_hold_steps "
+             "after); it goes on with obstacle_pass_hold_steps = %d, and its next checkpoint records that",
+             path, (int)L->cfg.obstacle_pass_hold_steps);
+  }
   return 1;
 }
 

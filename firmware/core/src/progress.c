@@ -85,11 +85,14 @@ void fw_progress_record_pass_hold(fw_progress_t* p, int32_t hold_steps) {
 }
 
 bool fw_progress_pass_hold_fits(const fw_progress_t* p, int32_t hold_steps, int32_t* learned_steps) {
-  const int32_t learned = p->pass_hold_recorded ? p->obstacle_pass_hold_steps : FW_PROGRESS_PASS_HOLD_UNRECORDED_STEPS;
   if (learned_steps != NULL) {
-    *learned_steps = learned;
+    *learned_steps = p->pass_hold_recorded ? p->obstacle_pass_hold_steps : -1;
   }
-  return !obstacle_shift_moved(p) || learned == hold_steps;
+  return !obstacle_shift_moved(p) || !p->pass_hold_recorded || p->obstacle_pass_hold_steps == hold_steps;
+}
+
+bool fw_progress_pass_hold_unknown(const fw_progress_t* p) {
+  return obstacle_shift_moved(p) && !p->pass_hold_recorded;
 }
 
 bool fw_progress_clearance_fits(const fw_progress_t* p, double clearance_m, double* learned_m) {

@@ -266,18 +266,17 @@ def main():
                                  explog], expect_rc=1)
         if obstacle not in err or "train with pair_obstacle_clearance_m = 0.45" not in err:
             fwtest.fail("an obstacle shift learned at another clearance: %s" % err)
-        # ... and with the hold past the obstacle it was learned and vetted with: a 96-byte section
-        # (written before the field) learned with none, a 104-byte one records it (bytes 96-99,
-        # the hold + 1). The clearance is the trainer's (pair_obstacle_clearance_m, set below).
+        # ... and with the hold past the obstacle it was learned and vetted with, where a 104-byte
+        # section records it (bytes 96-99, the hold + 1). The clearance is the trainer's
+        # (pair_obstacle_clearance_m, set below). (tools.train_checkpoint: the other cases.)
         struct.pack_into("<d", meta, 88, 0.45)
-        for hold_bytes, learned in ((b"", 0), (struct.pack("<II", 6 + 1, 0), 6)):
-            held = os.path.join(d, "obstacle-hold-%d.ckpt" % learned)
-            write_checkpoint(held, offline, bytes(meta) + hold_bytes, payload)
-            _, err = train(trainer, ["--set", "task=obstacles", "--set", "pair_obstacle_clearance_m=0.45",
-                                     "--set", "obstacle_pass_hold_steps=10", "--init", held,
-                                     "--out", os.path.join(d, "h.ckpt"), explog], expect_rc=1)
-            if held not in err or "train with obstacle_pass_hold_steps = %d" % learned not in err:
-                fwtest.fail("an obstacle shift learned with another hold (%d): %s" % (learned, err))
+        held = os.path.join(d, "obstacle-hold-6.ckpt")
+        write_checkpoint(held, offline, bytes(meta) + struct.pack("<II", 6 + 1, 0), payload)
+        _, err = train(trainer, ["--set", "task=obstacles", "--set", "pair_obstacle_clearance_m=0.45",
+                                 "--set", "obstacle_pass_hold_steps=10", "--init", held,
+                                 "--out", os.path.join(d, "h.ckpt"), explog], expect_rc=1)
+        if held not in err or "train with obstacle_pass_hold_steps = 6" not in err:
+            fwtest.fail("an obstacle shift learned with another hold: %s" % err)
         fwtest.note("claim 3: errors name the file and the fix")
         ok = True
     finally:

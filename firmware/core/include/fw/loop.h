@@ -251,8 +251,10 @@ void fw_loop_checkpoint_capacity(const fw_loop_t* loop, size_t* meta_bytes, size
 void fw_loop_attach_checkpoints(fw_loop_t* loop, fw_ckpt_writer_t* writer);
 
 /// Loads the checkpoint at cfg->checkpoint_file (if set and present): the learned state and
-/// the schedule's progress. Returns 1 (resumed), 0 (nothing to load: fresh start), -1 (corrupt
-/// or incompatible: err says what and how to start fresh; the loop is unchanged).
+/// the schedule's progress. Returns 1 (resumed; err holds a note for the operator, or is empty:
+/// an obstacle shift whose file does not record the hold past the obstacle it was learned with),
+/// 0 (nothing to load: fresh start), -1 (corrupt or incompatible: err says what and how to start
+/// fresh; the loop is unchanged).
 int fw_loop_load_checkpoint(fw_loop_t* loop, char* err, size_t err_cap);
 
 /// Device start-up: base (rFLEX: odometry and DIO reports on, defaults, brake release, status

@@ -24,10 +24,13 @@
 /// 100 4  reserved, 0
 /// ```
 /// A section is 96 bytes (FW_PROGRESS_BYTES_BASE) where nothing records the hold: the corridor,
-/// an obstacle file whose shift never moved, and files written before the field (their obstacle
-/// shift was learned without a hold: FW_PROGRESS_PASS_HOLD_UNRECORDED_STEPS). Such a file stays
+/// an obstacle file whose shift never moved, and files written before the field. Such a file stays
 /// readable by controllers older than the field; one that records the hold is refused by them
-/// ("unknown format"), rather than driven without it.
+/// ("unknown format"), rather than driven without it. An obstacle shift of a file written before
+/// the field was learned with no hold (by a controller older than the hold) or with that
+/// controller's obstacle_pass_hold_steps (default 10, by one between the hold and this field): the
+/// file cannot tell which, so it resumes under the configuration's hold, and the controller and
+/// b21r-train say so (fw_progress_pass_hold_unknown).
 /// The shift (fw_pair_ranker_t, pair_runs) is part of the learned policy, so it travels with the
 /// learned state. Files written before it have zeros there: no shift, the policy they learned.
 /// Terms revision 0 (files written before the field) had the obstacle task's first term the goal
@@ -127,10 +130,6 @@ extern "C" {
 /// obstacle_pass_hold_steps' range [control periods]; a recorded hold is refused beyond it.
 #define FW_PROGRESS_PASS_HOLD_STEPS_MAX 100
 
-/// The hold past the obstacle of an obstacle shift whose file does not record one (written before
-/// the hold existed: learned and vetted with none) [control periods].
-#define FW_PROGRESS_PASS_HOLD_UNRECORDED_STEPS 0
-
 /// pair_runs: the learned policy's shift, moved by the ranked pairs (fw_pair_ranker_t, fw/loop.h)
 /// and kept by checkpoints (here, because this section carries it): the learned policy is
 /// (1 + imitation) × HEDGER's greedy action plus gain × (the task's first pair term) + centring ×
@@ -181,10 +180,16 @@ bool fw_progress_clearance_fits(const fw_progress_t* p, double clearance_m, doub
 void fw_progress_record_clearance(fw_progress_t* p, double clearance_m);
 
 /// True when p's shift may resume under a configuration whose obstacle_pass_hold_steps is
-/// hold_steps: always in the corridor and for an obstacle shift that never moved (a, b and w all
-/// 0), else where the hold it was learned with (FW_PROGRESS_PASS_HOLD_UNRECORDED_STEPS when not
-/// recorded) is hold_steps. *learned_steps receives that hold (may be NULL). Pure, O(1).
+/// hold_steps: always in the corridor, for an obstacle shift that never moved (a, b and w all 0)
+/// and where the file does not record the hold (fw_progress_pass_hold_unknown), else where the
+/// hold it was learned with is hold_steps. *learned_steps receives that hold, -1 where not
+/// recorded (may be NULL). Pure, O(1).
 bool fw_progress_pass_hold_fits(const fw_progress_t* p, int32_t hold_steps, int32_t* learned_steps);
+
+/// True for an obstacle shift that moved (a, b or w not 0) in a file that does not record the hold
+/// past the obstacle it was learned with (written before the field; see the layout above): it
+/// resumes under the configuration's hold, which cannot be checked. Pure, O(1).
+bool fw_progress_pass_hold_unknown(const fw_progress_t* p);
 
 /// Records in p the hold past the obstacle (obstacle_pass_hold_steps = hold_steps) for an obstacle
 /// shift that moved (a, b or w not 0: the vet took its steps with the hold in its rollouts), else

@@ -1101,7 +1101,8 @@ static void test_loop_checkpoint_obstacle_clearance(void** state) {
 // The obstacle task's shift is learned and vetted with the hold past the obstacle
 // (obstacle_pass_hold_steps): a checkpoint resumes a shift that moved only with that hold, and a
 // refusal names the setting and loads nothing. A file that does not record the hold (written
-// before the field) learned with none; a shift that never moved resumes under any hold. The
+// before the field: with none or with 10, it cannot say) resumes under the configured hold with a
+// note; a shift that never moved resumes under any hold without one. The
 // controller's own checkpoint records the hold it ran with (104-byte section), and a shift that
 // never moved keeps the 96-byte section.
 static void test_loop_checkpoint_obstacle_pass_hold(void** state) {
@@ -1133,7 +1134,7 @@ static void test_loop_checkpoint_obstacle_pass_hold(void** state) {
     int expect;          // fw_loop_load_checkpoint's result
   } const cases[] = {
       {10, 10, -0.5, 1}, {10, 6, -0.5, -1}, {0, 0, -0.5, 1}, {0, 10, -0.5, -1},
-      {-1, 0, -0.5, 1},  {-1, 10, -0.5, -1}, {-1, 10, 0.0, 1},
+      {-1, 0, -0.5, 1},  {-1, 10, -0.5, 1}, {-1, 10, 0.0, 1},
   };
   char err[FW_LOOP_ERR_MAX];
   fw_loop_stats_t st;
@@ -1150,6 +1151,13 @@ static void test_loop_checkpoint_obstacle_pass_hold(void** state) {
     if (r == 1) {
       assert_true(st.shift.imitation == g.shift.imitation);
       assert_int_equal(st.training_runs, 40);
+      // A shift that moved with no hold recorded resumes under the configured one, with a note.
+      const bool unknown = cases[i].recorded < 0 && cases[i].imitation != 0.0;
+      char note[96];
+      snprintf(note, sizeof note, "it goes on with obstacle_pass_hold_steps = %d", (int)cases[i].configured);
+      if (unknown ? strstr(err, note) == NULL || strstr(err, "does not record the hold") == NULL : err[0] != '\0') {
+        fail_msg("case %zu: note '%s'", i, err);
+      }
       // The controller's own checkpoint records the hold it ran with where the shift moved.
       uint8_t meta[FW_PROGRESS_BYTES + 1];
       size_t ms = 0;
@@ -1169,8 +1177,7 @@ static void test_loop_checkpoint_obstacle_pass_hold(void** state) {
       }
     } else {
       char want[96];
-      snprintf(want, sizeof want, "set obstacle_pass_hold_steps = %d to go on with it",
-               cases[i].recorded >= 0 ? (int)cases[i].recorded : FW_PROGRESS_PASS_HOLD_UNRECORDED_STEPS);
+      snprintf(want, sizeof want, "set obstacle_pass_hold_steps = %d to go on with it", (int)cases[i].recorded);
       if (strstr(err, want) == NULL || strstr(err, c.checkpoint_file) == NULL) {
         fail_msg("case %zu: '%s' does not say '%s'", i, err, want);
       }

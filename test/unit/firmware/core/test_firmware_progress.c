@@ -229,8 +229,9 @@ static void test_progress_out_of_range_refused(void** state) {
 }
 
 // Which hold past the obstacle a shift resumes with (fw_progress_pass_hold_fits): the one
-// recorded, none (0) where the file records none (written before the field), any for an obstacle
-// shift that never moved or in the corridor; and what a writer records (fw_progress_record_pass_hold).
+// recorded; any where the file records none (written before the field: unknown,
+// fw_progress_pass_hold_unknown), for an obstacle shift that never moved and in the corridor; and
+// what a writer records (fw_progress_record_pass_hold).
 static void test_progress_pass_hold_fits(void** state) {
   (void)state;
   fw_progress_t p = sample();  // obstacles, a 0.8125, b -1.5, w -0.375, learned holding 10 steps
@@ -240,19 +241,34 @@ static void test_progress_pass_hold_fits(void** state) {
   assert_false(fw_progress_pass_hold_fits(&p, 9, &learned));
   assert_int_equal(learned, 10);
   assert_false(fw_progress_pass_hold_fits(&p, 0, NULL));
-  p.pass_hold_recorded = false;
-  p.obstacle_pass_hold_steps = 0;
-  assert_true(fw_progress_pass_hold_fits(&p, FW_PROGRESS_PASS_HOLD_UNRECORDED_STEPS, &learned) && learned == 0);
-  assert_false(fw_progress_pass_hold_fits(&p, 10, NULL));
+  assert_false(fw_progress_pass_hold_unknown(&p));
   p.shift.gain = 0.0;
   p.shift.centring = 0.0;
-  assert_false(fw_progress_pass_hold_fits(&p, 10, NULL));  // the weight alone was vetted with the hold too
+  assert_false(fw_progress_pass_hold_fits(&p, 9, NULL));  // the weight alone was vetted with the hold too
+  // Not recorded (a file written before the field): learned with none or with 10, the file cannot
+  // say which; it resumes under any hold, and the caller says so.
+  p = sample();
+  p.pass_hold_recorded = false;
+  p.obstacle_pass_hold_steps = 0;
+  assert_true(fw_progress_pass_hold_fits(&p, 0, &learned) && learned == -1);
+  assert_true(fw_progress_pass_hold_fits(&p, 10, NULL));
+  assert_true(fw_progress_pass_hold_unknown(&p));
+  p.shift.gain = 0.0;
+  p.shift.centring = 0.0;
+  assert_true(fw_progress_pass_hold_unknown(&p));  // w alone moved
   p.shift.imitation = 0.0;
-  assert_true(fw_progress_pass_hold_fits(&p, 10, NULL));   // a shift that never moved
+  assert_true(fw_progress_pass_hold_fits(&p, 10, NULL));  // a shift that never moved: nothing to know
+  assert_false(fw_progress_pass_hold_unknown(&p));
+  p = sample();
+  p.shift.imitation = 0.0;
+  p.shift.gain = 0.0;
+  p.shift.centring = 0.0;
+  assert_true(fw_progress_pass_hold_fits(&p, 3, NULL));   // recorded, but the shift never moved
   p = sample();
   p.task = FW_TASK_CORRIDOR;
   p.pass_hold_recorded = false;
   assert_true(fw_progress_pass_hold_fits(&p, 10, NULL) && fw_progress_pass_hold_fits(&p, 0, NULL));
+  assert_false(fw_progress_pass_hold_unknown(&p));
   // Recording: with an obstacle shift that moved (any of a, b, w), else none.
   p = sample();
   fw_progress_record_pass_hold(&p, 7);
