@@ -113,7 +113,10 @@ static void write_seeds(const char* dir) {
   static const int points[3] = {0, 12, 40};
   for (int k = 0; k < 3; ++k) {
     for (int i = (int)hedger_size(h); i < points[k]; ++i) {
-      const double s[3] = {0.25 * i, 0.1 * (i % 7) - 0.3, 0.05 * (i % 5)};
+      double s[HEDGER_MAX_STATE_DIM] = {0.0};  // hc.state_dim entries (the executed rotation 0)
+      s[0] = 0.25 * i;
+      s[1] = 0.1 * (i % 7) - 0.3;
+      s[2] = 0.05 * (i % 5);
       FUZZ_CHECK(hedger_insert(h, s, 0.1 * (i % 9) - 0.4, 0.5 + 0.01 * i, i % 11 == 0 ? 1U : 0U, NULL) == HEDGER_OK);
     }
     if (k > 0) {
@@ -208,6 +211,7 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     return 0;
   }
   FUZZ_CHECK(r == 1);
+  FUZZ_CHECK(memchr(err, '\0', sizeof err) != NULL && (err[0] == '\0' || strstr(err, g_file.path) != NULL));
   FUZZ_CHECK(after.phase == 1 || after.phase == 2);
   FUZZ_CHECK(after.training_runs >= 0 && after.eval_blocks >= 0 && after.run_id >= -1);
   FUZZ_CHECK(after.store_fill <= (uint32_t)g_cfg.hedger_capacity);

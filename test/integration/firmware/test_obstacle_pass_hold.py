@@ -85,7 +85,8 @@ def ramps_to_zero(window, step):
     """The command never grows, falls by at most the acceleration limit's step, and is exactly 0 from
     the first state it can be (|command| / step states in) to the window's end."""
     for k in range(1, len(window)):
-        if abs(window[k]) > abs(window[k - 1]) + 1e-12:
+        fall = abs(window[k - 1]) - abs(window[k])
+        if fall < -1e-12 or fall > step + 1e-9:
             return False
     first_zero = math.ceil(abs(window[0]) / step - 1e-9) if window else 0
     return all(a == 0.0 for a in window[first_zero:])
