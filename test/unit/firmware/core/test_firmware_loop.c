@@ -1024,6 +1024,21 @@ static int load_with_clearance(const fw_config_t* c, const fw_progress_t* g, dou
                    NULL, err, err_cap, st);
 }
 
+// The controller section of an obstacle session in phase two (40 training runs, run id 50) with
+// no shift and nothing recorded: the cases below set the shift, the clearance and the hold.
+static fw_progress_t obstacle_phase_two_progress(uint32_t state_dim) {
+  fw_progress_t g;
+  memset(&g, 0, sizeof g);
+  g.task = FW_TASK_OBSTACLES;
+  g.state_dim = state_dim;
+  g.schedule.phase = 2;
+  g.schedule.training_runs = 40;
+  g.schedule.phase_one_runs = 30;
+  g.schedule.phase_two_runs = 10;
+  g.run_id = 50;
+  return g;
+}
+
 static void test_loop_checkpoint_obstacle_clearance(void** state) {
   (void)state;
   char dir[] = "/tmp/b21r-loopclear-XXXXXX";
@@ -1034,15 +1049,7 @@ static void test_loop_checkpoint_obstacle_clearance(void** state) {
   snprintf(c.checkpoint_file, sizeof c.checkpoint_file, "%s/hedger.ckpt", dir);
   hedger_config_t hc;
   fw_loop_learner_config(&c, &hc);
-  fw_progress_t g;
-  memset(&g, 0, sizeof g);
-  g.task = FW_TASK_OBSTACLES;
-  g.state_dim = hc.state_dim;
-  g.schedule.phase = 2;
-  g.schedule.training_runs = 40;
-  g.schedule.phase_one_runs = 30;
-  g.schedule.phase_two_runs = 10;
-  g.run_id = 50;
+  fw_progress_t g = obstacle_phase_two_progress(hc.state_dim);
   g.shift.imitation = -0.5;
   g.shift.pairs = 5;
   g.pass_hold_recorded = true;  // the configuration's hold: this test is about the clearance
@@ -1117,15 +1124,7 @@ static void test_loop_checkpoint_obstacle_pass_hold(void** state) {
   snprintf(rewritten, sizeof rewritten, "%s/again.ckpt", dir);
   hedger_config_t hc;
   fw_loop_learner_config(&c, &hc);
-  fw_progress_t g;
-  memset(&g, 0, sizeof g);
-  g.task = FW_TASK_OBSTACLES;
-  g.state_dim = hc.state_dim;
-  g.schedule.phase = 2;
-  g.schedule.training_runs = 40;
-  g.schedule.phase_one_runs = 30;
-  g.schedule.phase_two_runs = 10;
-  g.run_id = 50;
+  fw_progress_t g = obstacle_phase_two_progress(hc.state_dim);
   g.shift.pairs = 5;
   struct {
     int32_t recorded;    // bytes 96-99 - 1 (-1: a 96-byte section, not recorded)
