@@ -33,7 +33,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from b21r_log import read_log, runs_from_experiences, runs_from_records  # noqa: E402
+from b21r_log import read_log, runs_from_experiences  # noqa: E402
 
 # Student-t quantiles for 9 degrees of freedom (10 poses): 0.95 one-sided, 0.975 two-sided.
 T95_ONE_SIDED_DF9 = 1.833
@@ -51,12 +51,6 @@ def paired(a, b):
     se = sd / math.sqrt(n) if n > 0 else 0.0
     t = m / se if se > 0 else (math.inf if m > 0 else (-math.inf if m < 0 else 0.0))
     return m, T975_DF9 * se, t
-
-
-def weighted_greedy(imitation):
-    """How the learned policy weighs the greedy action: (1 + w) x it, w the imitation weight the
-    pairs learned (pair_imitation_sigma; 0 when not learned)."""
-    return "the greedy action" if imitation == 0.0 else "%.3f x the greedy action" % (1.0 + imitation)
 
 
 def mean_all(block):
@@ -145,17 +139,6 @@ def main():
     for r in runs:
         r["sources"] = {SOURCE_NAMES.get(k, str(k)): n for k, n in r["sources"].items()}
     train = [r for r in runs if not r["evaluating"]]
-    # B21R_RUN says which training runs were ranked pairs (pair_runs) and which the safety filter
-    # corrected. A log without B21R_RUN of this layout (read_log skips other fingerprints) reads as
-    # no pairs. Run ids repeat after a controller restart: the last record of an id is taken.
-    run_records = runs_from_records([m for _, _, m in read_log(args.log, {"B21R_RUN"})])
-    pair_of = {r["run_id"]: (r["pair_member"], r["pair_vetoed"]) for r in run_records}
-    # The learned policy's shift (pair_runs) in force in the last evaluation run: what was evaluated.
-    final_shift = next((r["shift"] for r in reversed(run_records) if r["evaluating"]), None)
-    # ... and in the last evaluation of phase one (phase one's pairs, pair_phase_one).
-    shift_after_one = next((r["shift"] for r in reversed(run_records) if r["evaluating"] and r["phase"] == 1), None)
-    for r in train:
-        r["pair_member"], r["pair_vetoed"] = pair_of.get(r["run_id"], (-1, False))
     p1 = [r for r in train if r["phase"] == 1]
     p1_goal = [r["steps"] for r in p1 if r["goal"]]
     best_example = min(p1_goal) if p1_goal else None
@@ -190,15 +173,13 @@ def main():
     verdicts = claims(blocks, optimal, examples, train)
     # Who drove each training run (the controller's experience sources).
     drivers = [{"run_id": r["run_id"], "phase": r["phase"], "steps": r["steps"], "goal": r["goal"],
-                "sources": r["sources"], "pair_member": r["pair_member"], "pair_vetoed": r["pair_vetoed"]}
+                "sources": r["sources"]}
                for r in train]
     switch_after = next((b["training_runs"] for b in blocks if b["phase"] == 2), None)
     p2_blocks = [b for b in blocks if b["phase"] == 2]
     summary = {
         "blocks": blocks,
         "training_runs": len(train),
-        "shift": list(final_shift) if final_shift is not None else None,
-        "shift_after_phase_one": list(shift_after_one) if shift_after_one is not None else None,
         "phase_one_runs": len(p1),
         "phase_two_runs": len(train) - len(p1),
         "phase_two_first_block_after_runs": switch_after,
@@ -249,7 +230,7 @@ def main():
     lines = ["Two-phase learning: %s" % args.title,
              "training runs: %d (phase one %d, phase two %d); experiences %d, sequence gaps %d" %
              (len(train), len(p1), len(train) - len(p1), len(exps), gaps),
-             "best phase-one run: %s steps; mean phase-one run: %s steps (the examples; in pairs, perturbed)" %
+             "best phase-one run: %s steps; mean phase-one run: %s steps (the examples)" %
              (best_example, "%.1f" % mean_example if mean_example is not None else None)]
     if optimal is not None:
         lines.append("optimal controller: %d/%d reached, %.1f +- %.1f steps" %
@@ -276,28 +257,6 @@ def main():
         tot = sum(agg.values())
         lines.append("phase %d training steps by driver: %s" % (phase, ", ".join(
             "%s %d (%.1f %%)" % (src, n, 100.0 * n / tot) for src, n in sorted(agg.items()))))
-    # pair_runs: phase two's runs in ranked pairs, and (pair_phase_one) phase one's example runs from
-    # pair_phase_one_from_run on; each phase's pairs on a line of their own.
-    for phase, policy in ((1, "the example policy"), (2, "the learned policy")):
-        in_pairs = [r for r in train if r["pair_member"] >= 0 and r["phase"] == phase]
-        if not in_pairs:
-            continue
-        lines.append("phase %s in ranked pairs (pair_runs%s): %d of %d phase-%s training runs; each pair starts "
-                     "twice from one pose, %s plus then minus a perturbation (%s); %d runs corrected by the "
-                     "safety filter (ranked as failed; the recovery law's steps count as advisor), %d reached the "
-                     "goal" %
-                     ("one" if phase == 1 else "two", ", pair_phase_one" if phase == 1 else "", len(in_pairs),
-                      sum(1 for r in train if r["phase"] == phase), "one" if phase == 1 else "two", policy,
-                      "counted as the example's above" if phase == 1 else "counted as exploration above",
-                      sum(1 for r in in_pairs if r["pair_vetoed"]), sum(1 for r in in_pairs if r["goal"])))
-    if any(r["pair_member"] >= 0 and r["phase"] == 1 for r in train) and shift_after_one is not None:
-        lines.append("the learned policy after phase one (its last phase-one evaluation): %s plus the "
-                     "shift phase one's pairs learned, %+.3f x target angle %+.3f x (lateral fraction - 0.5) "
-                     "[rad/s]" % ((weighted_greedy(shift_after_one[2]),) + tuple(shift_after_one[:2])))
-    if any(r["pair_member"] >= 0 for r in train) and final_shift is not None:
-        lines.append("the learned policy in the last evaluation block: %s plus the shift the pairs "
-                     "learned, %+.3f x target angle %+.3f x (lateral fraction - 0.5) [rad/s]" %
-                     ((weighted_greedy(final_shift[2]),) + tuple(final_shift[:2])))
     lines.append("claims (paired over the same poses, 95 %; this seed only, see docs/RESULTS.md for 10 seeds):")
     for c, ok, n in verdicts:
         lines.append("  %-3s %s: %s" % ("yes" if ok else "NO", c, n))

@@ -126,11 +126,7 @@ SOURCE_NAMES = ("example", "joystick", "greedy", "exploration", "advisor")
 
 def runs_from_records(records, experiences=()):
     """One dict per B21R_RUN end record, in order: run_id, phase, evaluating, steps, end (END_NAMES),
-    detail, return, sources ({source name: steps}), pair_member (-1: not a pair run; 0, 1: first
-    or second run of a ranked pair), pair_vetoed, perturbation (the pair's g, c, m; zeros for other
-    runs), shift (the learned policy's shift a, b and imitation weight w in force during the run),
-    start (x, y, theta),
-    experiences (as the
+    detail, return, sources ({source name: steps}), start (x, y, theta), experiences (as the
     controller produced them), received (experiences of the run present in `experiences`) and
     complete: False when fewer were received than produced (only judged when experiences are
     given). A controller restart (seq of 0 again) starts a new segment of run ids."""
@@ -159,9 +155,6 @@ def runs_from_records(records, experiences=()):
                      "end": END_NAMES.get(r.end_reason, str(r.end_reason)), "detail": r.detail,
                      "return": r.total_reward,
                      "sources": {SOURCE_NAMES[i]: n for i, n in enumerate(r.steps_by_source) if n},
-                     "pair_member": r.pair_member, "pair_vetoed": bool(r.pair_vetoed),
-                     "perturbation": (r.pair_gain, r.pair_centring, r.pair_imitation),
-                     "shift": (r.shift_gain, r.shift_centring, r.shift_imitation),
                      "start": (r.start_x_m, r.start_y_m, r.start_theta_rad), "experiences": r.experiences,
                      "received": received, "complete": received is None or received == r.experiences})
     return runs

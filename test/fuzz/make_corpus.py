@@ -105,8 +105,17 @@ def can_record(can_id: int, data: bytes, dlc=None) -> bytes:
 
 
 def progress(task: int, state_dim: int, phase: int, p1: int, p2: int, blocks: int, ex_runs: int,
-             ex_sum: float, best: int, run_id: int, shift=(0.0, 0.0, 0), terms: int = 1,
-             imitation: float = 0.0, clearance: float = 0.0, pass_hold=None) -> bytes:
+             ex_sum: float, best: int, run_id: int) -> bytes:
+    body = b"FWMETA02" + struct.pack("<IIIIIIIIdII", task, state_dim, phase, p1 + p2, p1, p2, blocks,
+                                     ex_runs, ex_sum, best, run_id + 1)
+    assert len(body) == 56
+    return body
+
+
+def progress_v1(task: int, state_dim: int, phase: int, p1: int, p2: int, blocks: int, ex_runs: int,
+                ex_sum: float, best: int, run_id: int, shift=(0.0, 0.0, 0), terms: int = 1,
+                imitation: float = 0.0, clearance: float = 0.0, pass_hold=None) -> bytes:
+    """Revision 1 of the section (older controllers', with their policy shift), still read."""
     body = b"FWMETA01" + struct.pack("<IIIIIIIIdIIddIIdd", task, state_dim, phase, p1 + p2, p1, p2, blocks,
                                      ex_runs, ex_sum, best, run_id + 1, *shift, terms, imitation, clearance)
     assert len(body) == 96
@@ -145,14 +154,10 @@ def more_seeds() -> None:
     write("progress", "fresh", progress(0, 3, 1, 0, 0, 0, 0, 0.0, 0, -1))
     write("progress", "phase_two", progress(1, 4, 2, 30, 12, 9, 27, 27 * 130.0 + 17, 126, 130))
     write("progress", "bad_phase", progress(0, 3, 7, 3, 0, 1, 2, 300.0, 140, 5))
-    write("progress", "shifted", progress(0, 4, 2, 30, 35, 13, 30, 30 * 139.0, 127, 194, (1.0625, 1.5, 17)))
-    write("progress", "obstacles_terms_0", progress(1, 5, 2, 30, 35, 13, 30, 30 * 139.0, 127, 194, (1.0625, 1.5, 17), 0))
-    write("progress", "imitation_weight", progress(1, 5, 2, 30, 35, 13, 30, 30 * 139.0, 127, 194, (1.0625, 1.5, 17), 1,
-                                                   -0.625))
-    write("progress", "obstacle_clearance", progress(1, 5, 2, 30, 35, 13, 30, 30 * 139.0, 127, 194, (1.0625, 1.5, 17),
-                                                     1, -0.625, 0.45))
-    write("progress", "obstacle_pass_hold", progress(1, 5, 2, 30, 35, 13, 30, 30 * 139.0, 127, 194, (1.0625, 1.5, 17),
-                                                     1, -0.625, 0.4, 10))
+    write("progress", "v1_phase_two", progress_v1(1, 4, 2, 30, 12, 9, 27, 27 * 130.0 + 17, 126, 130))
+    write("progress", "v1_shifted", progress_v1(0, 4, 2, 30, 35, 13, 30, 30 * 139.0, 127, 194, (1.0625, 1.5, 17)))
+    write("progress", "v1_obstacle_pass_hold", progress_v1(1, 5, 2, 30, 35, 13, 30, 30 * 139.0, 127, 194,
+                                                           (1.0625, 1.5, 17), 1, -0.625, 0.4, 10))
     # Worlds: the ones the product ships.
     for w in sorted((ROOT / "sim/worlds").glob("*.world")):
         write("world", w.stem, w.read_bytes())

@@ -259,9 +259,8 @@ def write(out, fig_dir, path, configs_dir):
                 fmt_paired(R["example"]["diff"]) if "example" in R else missing,
                 fmt_paired(R["optimal"]["diff"]) if "optimal" in R else missing))
         doc.add("", "Phase-one data are identical across variants unless the variant changes phase one itself (the "
-                "automatic phase switch ends it at another run; from the 11th example run phase one's ranked pairs, "
-                "`pair_phase_one`, perturb the examples only where the variant runs pairs: not with `pair_runs=false`, "
-                "LWA or the tabular learner; other teachers drive other examples): for a seed the example policy's gains and start "
+                "automatic phase switch ends it at another run; other teachers drive other examples): for a seed the "
+                "example policy's gains and start "
                 "poses are the same, each run's sensor noise starts from its run id, each run integrates its own "
                 "odometry, and the emulator places the robot only once the learner is done, so the learner-driven "
                 "evaluation runs in between leave nothing behind (`experiments.learner_variants` checks it).", "",

@@ -36,8 +36,6 @@ typedef struct run_rec {
   bool last_terminal;
   int64_t sources[N_SOURCES];
   uint32_t store_fill;     // after the run (and its backward replay)
-  fw_pair_shift_t shift;   // the learned policy's shift after the run and its between-run work (the
-                           // vet of a pair's step, pair_shift_vet): the next run's; 0 without pairs
 } run_rec_t;
 
 typedef struct block_rec {
@@ -128,10 +126,6 @@ static void take_experience(session_t* S, const b21r_experience_t* e) {
 // After a tick: a run that ended gets its outcome from the loop's counters.
 static void take_run_end(session_t* S, const fw_loop_stats_t* before, const fw_loop_stats_t* after) {
   if (!S->have_current) {
-    if (S->n_runs > 0) {
-      // Between runs: the vet may still move the shift after the run that ranked its pair.
-      S->runs[S->n_runs - 1].shift = after->shift;
-    }
     return;
   }
   run_rec_t* r = &S->runs[S->n_runs - 1];
@@ -143,7 +137,6 @@ static void take_run_end(session_t* S, const fw_loop_stats_t* before, const fw_l
     return;
   }
   r->store_fill = after->store_fill;
-  r->shift = after->shift;
   if (!r->eval && r->outcome != OUT_ABORTED) {
     r->training_index = S->training_done++;
   }
@@ -381,9 +374,6 @@ static void write_learning(json_writer_t* w, const session_t* S, double dt_s) {
     json_num(w, "return", r->ret);
     write_sources(w, "sources", r->sources);
     json_int(w, "store_fill", r->store_fill);
-    json_num(w, "shift_gain", r->shift.gain);
-    json_num(w, "shift_centring", r->shift.centring);
-    json_num(w, "shift_imitation", r->shift.imitation);
     json_end_object(w);
   }
   json_end_array(w);
@@ -406,19 +396,6 @@ static void write_learning(json_writer_t* w, const session_t* S, double dt_s) {
   json_int(w, "runs_aborted", S->final.runs_aborted);
   json_int(w, "safety_stops", S->final.safety_stops);
   json_int(w, "held_ticks", S->final.held_ticks);
-  json_int(w, "pairs_ranked", S->final.pairs_ranked);
-  json_int(w, "pair_safety_overrides", S->final.pair_safety_overrides);
-  json_int(w, "pair_runs_vetoed", S->final.pair_runs_vetoed);
-  json_int(w, "pair_runs_missed", S->final.pair_runs_missed);
-  json_int(w, "shift_steps_halved", S->final.shift_steps_halved);
-  json_int(w, "shift_steps_refused", S->final.shift_steps_refused);
-  json_int(w, "shift_vet_periods", S->final.shift_vet_periods);
-  json_int(w, "pair_safety_short", S->final.pair_safety_short);
-  json_int(w, "pair_safety_held", S->final.pair_safety_held);
-  json_num(w, "shift_gain", S->final.shift.gain);
-  json_num(w, "shift_centring", S->final.shift.centring);
-  json_num(w, "shift_imitation", S->final.shift.imitation);
-  json_int(w, "anchor_unweighted", (int64_t)S->final.anchor_unweighted);
   json_end_object(w);
   char hex[24];
   snprintf(hex, sizeof hex, "%016llx", (unsigned long long)S->phase_one_digest);

@@ -22,12 +22,7 @@ static void usage(FILE* f) {
           "  --config FILE    controller settings, as b21r-controller reads them (several apply in order)\n"
           "  --set KEY=VALUE  override one setting (after the files); the HEDGER settings (hedger_*, alpha,\n"
           "                   gamma, task, max_rotation_radps, seed, hedger_replay) are derived exactly as\n"
-          "                   the controller derives them; with pair runs the shift's vet (pair_shift_vet)\n"
-          "                   also uses the corridor, the command limits, tick_rate_hz, max_steps_per_run,\n"
-          "                   pair_safety_margin_m, pair_shift_vet_starts and (obstacles)\n"
-          "                   pair_obstacle_clearance_m and obstacle_pass_hold_steps: give the\n"
-          "                   controller's file (a checkpoint records the last two with an obstacle\n"
-          "                   shift, and --init refuses another value, naming the setting)\n"
+          "                   the controller derives them: give the controller's file\n"
           "  --out FILE       checkpoint to write (atomically)\n"
           "  --force          replace --out if it exists\n"
           "  --init FILE      start from the learned state of this checkpoint instead of an empty one\n"
@@ -163,56 +158,11 @@ int main(int argc, char** argv) {
       printf("b21r-train: %llu experiences of evaluation runs left out (--include-eval learns them too)\n",
              (unsigned long long)s.skipped_eval);
     }
-    if (s.pairs_ranked > 0) {
-      printf("b21r-train: %llu pairs of runs ranked from B21R_RUN (pair_runs); the learned policy's "
-             "shift: %.4f rad/s per rad of %s, %.4f rad/s %s\n",
-             (unsigned long long)s.pairs_ranked, s.shift.gain,
-             cfg.task == FW_TASK_CORRIDOR ? "target angle" : "the bent goal direction", s.shift.centring,
-             cfg.task == FW_TASK_CORRIDOR ? "per corridor width" : "per rad of the bend");
-      if (s.shift.imitation < 0.0 || s.shift.imitation > 0.0 || cfg.pair_imitation_sigma > 0.0) {
-        printf("b21r-train: the imitation's weight the pairs learned: the greedy action counts %.4f times (w = "
-               "%+.4f, pair_imitation_sigma)\n",
-               1.0 + s.shift.imitation, s.shift.imitation);
-      }
-      if (s.shift_steps_halved > 0 || s.shift_steps_refused > 0) {
-        printf("b21r-train: of their steps of the shift, %llu cut (to 1/2, 1/4 or 1/8) and %llu refused by the vet on the kinematic "
-               "model (pair_shift_vet)\n",
-               (unsigned long long)s.shift_steps_halved, (unsigned long long)s.shift_steps_refused);
-      }
-    }
-    if (s.paired_unranked > 0) {
+    if (s.init_legacy_shift) {
       fprintf(stderr,
-              "b21r-train: warning: the learner ranks pair runs under this configuration (pair_runs), but %llu experiences "
-              "of phases that run pairs (phase two; phase one too with pair_phase_one and the example policy) come "
-              "from logs without B21R_RUN records (an experience log): their pair runs, if any, are learned unranked "
-              "and do not move the shift; give the controller's full log (log_file) to rank them\n",
-              (unsigned long long)s.paired_unranked);
-    }
-    if (s.pairs_unmatched > 0 || s.run_records_undecodable > 0) {
-      fprintf(stderr,
-              "b21r-train: warning: %llu pair runs left unranked (their first run's B21R_RUN is missing from the "
-              "log); %llu B21R_RUN records of another layout skipped (an older controller's, before pair_member or "
-              "the imitation's weight: its pairs cannot be ranked; its experiences are learned)\n",
-              (unsigned long long)s.pairs_unmatched, (unsigned long long)s.run_records_undecodable);
-    }
-    if (s.init_pass_hold_unrecorded) {
-      fprintf(stderr,
-              "b21r-train: warning: %s does not record the hold past the obstacle its shift was learned with (written "
-              "before the field: with none by controllers older than the hold, with their obstacle_pass_hold_steps "
-              "after); training went on with obstacle_pass_hold_steps = %d, which the output records\n",
-              init, (int)cfg.obstacle_pass_hold_steps);
-    }
-    if (s.run_records_invalid > 0) {
-      fprintf(stderr,
-              "b21r-train: warning: %llu pair-run B21R_RUN records with a non-finite perturbation or shift (a "
-              "damaged log) were not ranked\n",
-              (unsigned long long)s.run_records_invalid);
-    }
-    if (s.shift_taken_from_log > 0) {
-      printf("b21r-train: the learned policy's shift follows the log's records (%llu pair runs drove with another "
-             "shift than the one learned so far here: logs of separate sessions, a second pass, or an --init that "
-             "held these pairs already)\n",
-             (unsigned long long)s.shift_taken_from_log);
+              "b21r-train: note: %s was written by an older controller whose learned policy added a shift learned "
+              "from ranked pairs of runs; its learned values are trained on, and the output holds no shift\n",
+              init);
     }
     if (s.seq_gaps > 0 || s.refused > 0 || s.undecodable > 0) {
       fprintf(stderr,

@@ -9,10 +9,8 @@
 #include <fw/io.h>
 #include <fw/loop.h>
 #include <fw/pubq.h>
-#include <fw/shift_vet.h>
 
 #include <b21r/b21r_experience_t.h>
-#include <b21r/b21r_run_t.h>
 #include <lcm/eventlog.h>
 
 #include <errno.h>
@@ -32,21 +30,6 @@ struct trainer {
   bool in_run;
   bool run_learned;      // at least one experience of it went through hedger_update
   int32_t run_id;
-  // The learner configured for pairs (fw_config_pair_learner): the run tag of the training run
-  // under way (fw_pair_run_tag, the controller's rule), and the pair's first run until it is
-  // ranked (fw_pair_ranker_end, the controller's ranking).
-  bool pairs;
-  bool pairs_ran;            // cfg runs pairs in phase two (fw_config_pair_runs_active)
-  bool pairs_in_phase_one;   // and in phase one (fw_config_pair_phase_one_active)
-  uint32_t run_tag;
-  fw_pair_ranker_t ranker;
-  // pair_shift_vet: the controller's vet of each step of the shift, from the same starts (the first
-  // state of each training run's first experience; emptied where a controller session begins: a
-  // log, or seq starting again at 0).
-  fw_shift_vet_env_t vet_env;
-  fw_shift_vet_starts_t vet_starts;
-  bool log_has_run_records;  // the log being read has B21R_RUN (a full log)
-  uint64_t log_paired;       // training experiences of phases that run pairs, learned from the log being read
   int64_t next_seq;      // expected seq of the next experience (-1: none yet in this log)
   double progress_next_s;
   double started_s;
@@ -85,10 +68,6 @@ trainer_t* trainer_create(const fw_config_t* cfg, const train_options_t* opt, ch
     free(t);
     return NULL;
   }
-  t->pairs = fw_config_pair_learner(cfg);
-  t->pairs_ran = fw_config_pair_runs_active(cfg);
-  t->pairs_in_phase_one = fw_config_pair_phase_one_active(cfg);
-  fw_shift_vet_env_init(&t->vet_env, cfg);
   t->next_seq = -1;
   t->started_s = now_s();
   t->progress_next_s = t->started_s + t->opt.progress_period_s;
@@ -105,11 +84,7 @@ void trainer_destroy(trainer_t* t) {
 
 hedger_t* trainer_hedger(trainer_t* t) { return t->hedger; }
 
-train_stats_t trainer_stats(const trainer_t* t) {
-  train_stats_t s = t->stats;
-  s.shift = t->ranker.shift;
-  return s;
-}
+train_stats_t trainer_stats(const trainer_t* t) { return t->stats; }
 
 int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t err_cap) {
   size_t meta_size = 0;
@@ -128,30 +103,18 @@ int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t er
     fw_errfmt(err, err_cap, "%s: cannot allocate %zu bytes", path, meta_size + payload_size);
   } else if (fw_checkpoint_read(path, meta, meta_size + 1U, &meta_size, payload, payload_size + 1U, &payload_size,
                                 err, err_cap) == 1) {
-    // The controller's section carries the learned policy's shift (pair_runs): validated before
-    // the learner is touched; training then continues from that shift as the controller would.
+    // The controller's section is validated before the learner is touched.
     fw_progress_t g;
     char why[FW_PROGRESS_WHY_MAX];
     hedger_status_t hs = HEDGER_OK;
-    double learned_clearance_m = 0.0;
-    int32_t learned_hold_steps = 0;
     if (fw_progress_decode((const uint8_t*)meta, meta_size, &g, why, sizeof why) != 0) {
       fw_errfmt(err, err_cap, "%s is corrupt (controller section: %s); give a checkpoint the controller or "
           "b21r-train wrote", path, why);
     } else if (g.task != t->cfg.task) {
       const char* task = fw_task_name(g.task);
       fw_errfmt(err, err_cap, "%s was learned for another task (%s): train with task = %s", path, task, task);
-    } else if (!fw_progress_clearance_fits(&g, t->cfg.pair_obstacle_clearance_m, &learned_clearance_m)) {
-      fw_errfmt(err, err_cap, "%s: its learned policy's shift bends around the obstacle at pair_obstacle_clearance_m = "
-          "%.15g, not %.15g: train with pair_obstacle_clearance_m = %.15g", path, learned_clearance_m,
-          t->cfg.pair_obstacle_clearance_m, learned_clearance_m);
-    } else if (!fw_progress_pass_hold_fits(&g, t->cfg.obstacle_pass_hold_steps, &learned_hold_steps)) {
-      fw_errfmt(err, err_cap, "%s: its learned policy's shift was learned holding course past the obstacle for "
-          "obstacle_pass_hold_steps = %d, not %d: train with obstacle_pass_hold_steps = %d", path,
-          (int)learned_hold_steps, (int)t->cfg.obstacle_pass_hold_steps, (int)learned_hold_steps);
     } else if ((hs = hedger_load(t->hedger, payload, payload_size)) == HEDGER_OK) {
-      t->ranker.shift = g.shift;
-      t->stats.init_pass_hold_unrecorded = fw_progress_pass_hold_unknown(&g);
+      t->stats.init_legacy_shift = g.legacy_shift;
       rc = 0;
     } else {
       fw_errfmt(err, err_cap,
@@ -208,98 +171,24 @@ static int learn(trainer_t* t, const b21r_experience_t* e, const char* path, cha
     t->stats.seq_gaps++;
   }
   t->next_seq = e->seq + 1;
-  if (restart) {
-    // A controller that started again (seq from 0 in one log): its vet starts with no starts.
-    memset(&t->vet_starts, 0, sizeof t->vet_starts);
-  }
   if (!t->in_run || restart || e->run_id != t->run_id) {
     end_run(t);
     t->in_run = true;
     t->run_id = e->run_id;
-    if (t->pairs && !e->evaluating) {
-      t->run_tag = fw_pair_run_tag(e->run_id, hedger_run_tag(t->hedger));
-      (void)hedger_set_run_tag(t->hedger, t->run_tag);
-    }
   }
   if (e->evaluating && !t->opt.include_eval) {
     t->stats.skipped_eval++;
     return 0;
-  }
-  if (!e->evaluating && e->step_id == 0) {
-    fw_shift_vet_starts_add(&t->vet_starts, &t->vet_env, e->s);
   }
   const hedger_status_t hs =
       hedger_update(t->hedger, e->s, e->action_radps, e->reward, e->s_next, e->terminal ? 1 : 0, NULL);
   if (hs == HEDGER_OK) {
     t->stats.used++;
     t->run_learned = true;
-    t->log_paired += e->phase == 2 || (e->phase == 1 && t->pairs_in_phase_one) ? 1U : 0U;
   } else {
     t->stats.refused++;
   }
   return 0;
-}
-
-// Exact comparison of two finite doubles (the log's copies are bit-exact).
-static bool differs(double a, double b) { return a < b || a > b; }
-
-// pair_runs: a B21R_RUN record of a pair run (it follows the run's last experience). As in the
-// controller, the run's replay comes first, then its weights: a first run weighs 0 until its pair
-// is ranked, an aborted run 0 (its pair starts again), and the second run ranks the pair and
-// proposes a step of the learned policy's shift (fw_pair_ranker_end, the controller's rule; the
-// record's phase 1 marks a pair of example runs, which keeps weight 1), which the vet then takes,
-// cuts (to 1/2, 1/4 or 1/8) or refuses (pair_shift_vet, fw/shift_vet.h) on the store the replay and weights left.
-static void rank_pair_run(trainer_t* t, const b21r_run_t* r) {
-  if (!t->pairs || r->kind != B21R_RUN_T_KIND_TRAINING || r->pair_member < 0 || !t->in_run ||
-      r->run_id != t->run_id) {
-    return;
-  }
-  end_run(t);
-  // The pair's perturbation and the shift in force come from the log: a record with values the
-  // controller cannot have written (non-finite, or a shift beyond its bound) ranks nothing.
-  if (!isfinite(r->pair_gain) || !isfinite(r->pair_centring) || !isfinite(r->pair_imitation) ||
-      !fw_pair_shift_valid(r->shift_gain, r->shift_centring, r->shift_imitation)) {
-    t->stats.run_records_invalid++;
-    return;
-  }
-  // The shift the controller drove with is the log's, exactly: the trainer takes it (another
-  // session's log, a second pass over the same log or an --init that already holds these pairs
-  // would otherwise move it again) and counts where its own differed.
-  fw_pair_shift_t* shift = &t->ranker.shift;
-  if (differs(r->shift_gain, shift->gain) || differs(r->shift_centring, shift->centring) ||
-      differs(r->shift_imitation, shift->imitation) || r->shift_pairs < 0 || (uint32_t)r->shift_pairs != shift->pairs) {
-    t->stats.shift_taken_from_log++;
-    shift->gain = r->shift_gain;
-    shift->centring = r->shift_centring;
-    shift->imitation = r->shift_imitation;
-    shift->pairs = r->shift_pairs > 0 ? (uint32_t)r->shift_pairs : 0U;
-  }
-  const bool aborted = r->end_reason == B21R_RUN_T_END_SAFETY_STOP || r->end_reason == B21R_RUN_T_END_SHUTDOWN;
-  const bool goal = r->end_reason == B21R_RUN_T_END_GOAL && !r->pair_vetoed;
-  uint32_t tags[2];
-  double weights[2];
-  const fw_pair_shift_t in_force = *shift;
-  const int32_t n = fw_pair_ranker_end(&t->ranker, &t->cfg, r->phase == 1, r->pair_member, aborted, goal, r->steps,
-                                       t->run_tag, r->pair_gain, r->pair_centring, r->pair_imitation, tags, weights);
-  for (int32_t i = 0; i < n; ++i) {
-    (void)hedger_weight_run(t->hedger, tags[i], weights[i], NULL);
-  }
-  if (n == 2 && t->cfg.pair_shift_vet) {
-    // The controller's vet of the step, after the replay and the weights as there (at once here).
-    fw_shift_vet_t vet;
-    fw_shift_vet_begin(&vet, &in_force, shift);
-    (void)fw_shift_vet_step(&vet, fw_shift_vet_hedger_greedy, t->hedger, &t->vet_env, &t->vet_starts, UINT32_MAX);
-    *shift = vet.result;
-    t->stats.shift_steps_halved += vet.verdict == FW_SHIFT_STEP_HALVED ? 1U : 0U;
-    t->stats.shift_steps_refused += vet.verdict == FW_SHIFT_STEP_REFUSED ? 1U : 0U;
-  }
-  if (n == 2) {
-    t->stats.pairs_ranked++;
-  } else if (n == 0) {
-    // The first run's record is missing (a recording that lost it): the pair cannot be ranked,
-    // and this run stays unweighted rather than be ranked against another pair's first run.
-    t->stats.pairs_unmatched++;
-  }
 }
 
 int trainer_add_log(trainer_t* t, const char* path, char* err, size_t err_cap) {
@@ -310,10 +199,6 @@ int trainer_add_log(trainer_t* t, const char* path, char* err, size_t err_cap) {
   }
   end_run(t);  // a log starts with a run of its own
   t->next_seq = -1;
-  // A log is one controller session, whose vet began with no starts (they are not checkpointed).
-  memset(&t->vet_starts, 0, sizeof t->vet_starts);
-  t->log_has_run_records = false;
-  t->log_paired = 0;
   const double t0 = now_s();
   uint64_t events_here = 0;
   int rc = 0;
@@ -333,15 +218,6 @@ int trainer_add_log(trainer_t* t, const char* path, char* err, size_t err_cap) {
         rc = learn(t, &e, path, err, err_cap);
         b21r_experience_t_decode_cleanup(&e);
       }
-    } else if (strcmp(ev->channel, "B21R_RUN") == 0) {
-      t->log_has_run_records = true;
-      b21r_run_t r;
-      if (b21r_run_t_decode(ev->data, 0, ev->datalen, &r) >= 0) {
-        rank_pair_run(t, &r);
-        b21r_run_t_decode_cleanup(&r);
-      } else {
-        t->stats.run_records_undecodable++;  // another layout: an older controller's (pair_member, the imitation's weight)
-      }
     }
     lcm_eventlog_free_event(ev);
     if (rc != 0) {
@@ -350,9 +226,6 @@ int trainer_add_log(trainer_t* t, const char* path, char* err, size_t err_cap) {
     report_progress(t, path, false);
   }
   lcm_eventlog_destroy(log);
-  if (t->pairs_ran && !t->log_has_run_records) {
-    t->stats.paired_unranked += t->log_paired;
-  }
   t->stats.seconds += now_s() - t0;
   if (rc == 0 && events_here == 0) {
     FILE* f = fopen(path, "rb");
@@ -520,17 +393,6 @@ int trainer_write_checkpoint(trainer_t* t, const char* path, bool overwrite, cha
     fw_errfmt(err, err_cap, "%s: cannot build the controller's section of the checkpoint: %s", path, why);
     return -1;
   }
-  // The controller's section with the shift the pairs learned (fw/progress.h).
-  fw_progress_t g;
-  if (fw_progress_decode(meta, meta_size, &g, why, sizeof why) != 0) {
-    free(meta);
-    fw_errfmt(err, err_cap, "%s: the controller's section of the checkpoint is invalid: %s", path, why);
-    return -1;
-  }
-  g.shift = t->ranker.shift;
-  fw_progress_record_clearance(&g, t->cfg.pair_obstacle_clearance_m);
-  fw_progress_record_pass_hold(&g, t->cfg.obstacle_pass_hold_steps);
-  meta_size = fw_progress_encode(&g, meta);  // the section grows where it records the hold
   const size_t cap = hedger_serialized_size(t->hedger);
   void* payload = malloc(cap);
   size_t written = 0;

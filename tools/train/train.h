@@ -6,12 +6,9 @@
 /// The trainer feeds the logs' B21R_EXPERIENCE messages, in file order, through exactly the calls
 /// the controller makes online (hedger_update per experience, hedger_end_run after each run, so
 /// the backward replay of hedger_replay too), with the HEDGER settings the controller derives from
-/// the same configuration (fw_loop_learner_config), the run tags of pair_runs and, from a full log
-/// (its B21R_RUN records), the ranking of its pairs. Training from the log of a session therefore
-/// gives the learned state that session ended with, bit for bit (with pairs: from its full log);
-/// training from several logs gives the state of one controller that had lived through them all
-/// in order (run tags keep increasing where run ids start again). With include_eval an
-/// evaluation run's points carry the tag, and so the pair weight, of the training run before it.
+/// the same configuration (fw_loop_learner_config). Training from the log of a session therefore
+/// gives the learned state that session ended with, bit for bit; training from several logs gives
+/// the state of one controller that had lived through them all in order.
 ///
 /// By default only the experiences the controller learned from are used (training runs; not
 /// evaluation runs, where learning is off); train_options_t.include_eval adds those too.
@@ -55,27 +52,10 @@ typedef struct train_stats {
   uint64_t seq_gaps;          ///< gaps in the experiences' seq (lost messages in the recording)
   uint64_t runs;              ///< runs ended (hedger_end_run calls)
   uint64_t replayed;          ///< updates done by backward replay at run ends
-  /// the learner configured for pairs: pairs of training runs ranked from the log's B21R_RUN
-  /// records (a full log, log_file; an experience log has none), as the controller ranked them
-  uint64_t pairs_ranked;
-  /// cfg runs pairs (fw_config_pair_runs_active): training experiences of logs without B21R_RUN
-  /// records from phases that run pairs (phase two; phase one with pair_phase_one and the example
-  /// policy); whether they came from pair runs cannot be told, so any pair among them is not
-  /// ranked (weight 1, no shift)
-  uint64_t paired_unranked;
-  uint64_t pairs_unmatched;          ///< second runs of a pair whose first run's record is missing
-  uint64_t run_records_undecodable;  ///< B21R_RUN records of another layout (an older controller)
-  uint64_t run_records_invalid;      ///< pair-run records with a non-finite perturbation or shift: not ranked
-  /// pair records whose shift in force differed from the trainer's (it then takes the log's):
-  /// logs of different sessions, a second pass, an --init that already held the log's pairs
-  uint64_t shift_taken_from_log;
-  uint64_t shift_steps_halved;   ///< pair_shift_vet: ranked pairs whose step of the shift the vet cut (to a half, a quarter or an eighth)
-  uint64_t shift_steps_refused;  ///< and whose step it refused (fw/shift_vet.h, as the controller)
-  /// --init's obstacle shift moved but its file does not record the hold past the obstacle it was
-  /// learned with (fw_progress_pass_hold_unknown): it goes on under the configuration's hold
-  bool init_pass_hold_unrecorded;
+  /// --init's file was written by an older controller whose policy added a shift learned from
+  /// ranked pairs of runs (fw_progress_t.legacy_shift): its values are trained on, the shift is gone
+  bool init_legacy_shift;
   double seconds;             ///< wall time spent reading and training
-  fw_pair_shift_t shift;      ///< the learned policy's shift after training; it goes into the checkpoint written
 } train_stats_t;
 
 typedef struct trainer trainer_t;
@@ -89,10 +69,7 @@ trainer_t* trainer_create(const fw_config_t* cfg, const train_options_t* opt, ch
 int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t err_cap);
 
 /// Trains on one LCM event log, streamed in file order. A run ends where the run id changes, the
-/// controller restarted (seq back to 0), or the log ends. Where cfg configures the learner for
-/// pairs (fw_config_pair_learner: the default for both tasks), every training run's points
-/// carry its run tag as in the controller, and each pair of phase-two runs is ranked from the
-/// B21R_RUN records of a full log (fw_pair_ranker_end) after the second run's replay. Call it once
+/// controller restarted (seq back to 0), or the log ends. Call it once
 /// per log (and again for further passes over the data). Returns 0, or -1 with a message naming
 /// the file: unreadable, not an LCM log, or experiences of another task / state dimension than
 /// cfg (the fix is named); the experiences before the error have been learned.

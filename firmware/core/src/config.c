@@ -75,8 +75,6 @@ static const choice_t k_rt_scheduler[] = {
     {"other", FW_RT_OTHER}, {"fifo", FW_RT_FIFO}, {"rr", FW_RT_RR}, {NULL, 0}};
 static const choice_t k_learner[] = {
     {"hedger", FW_LEARNER_HEDGER}, {"lwa", FW_LEARNER_LWA}, {"tabular", FW_LEARNER_TABULAR}, {NULL, 0}};
-static const choice_t k_pair_runs[] = {
-    {"auto", FW_PAIR_RUNS_AUTO}, {"true", FW_PAIR_RUNS_ON}, {"false", FW_PAIR_RUNS_OFF}, {NULL, 0}};
 static const choice_t k_switch[] = {
     {"runs", FW_SWITCH_RUNS}, {"operator", FW_SWITCH_OPERATOR}, {"auto", FW_SWITCH_AUTO}, {NULL, 0}};
 
@@ -291,99 +289,6 @@ static const key_desc_t k_keys[] = {
   {NULL, "state_rotation", KIND_BOOL, OFF(state_rotation), 0, 0, false, false, NULL, "true",
    "the learner's state ends with the rotation the base executes, the last command sent [rad/s]: the "
    "acceleration limit ties the next rotation to it (false = the paper's task features alone)"},
-  {NULL, "obstacle_pass_hold_steps", KIND_INT, OFF(obstacle_pass_hold_steps), 0, FW_PROGRESS_PASS_HOLD_STEPS_MAX, false, false, NULL, "10",
-   "obstacle task: the learned policy holds course (rotation 0; training runs keep their exploration noise) "
-   "for this many steps (control periods) after a near obstacle (in view within 1.5 m) slips out of the "
-   "laser's view (laser_fov_deg) beside the robot, as the reference law does, "
-   "since the state then says 'no obstacle' while the skirt is still centimetres from it; the vet's model "
-   "holds alike, and b21r-train needs the controller's value to reproduce its shift; a checkpoint records "
-   "it with an obstacle shift and resumes that shift only with the same value (0 = never: the policy "
-   "turns to the goal at once; docs/LEARNING.md)"},
-  {NULL, "pair_runs", KIND_ENUM, OFF(pair_runs_mode), 0, 0, false, false, k_pair_runs, "auto",
-   "phase two (and phase one's example runs, pair_phase_one): training runs come in pairs from one start "
-   "pose; the first adds a perturbation g * target angle + c * (lateral fraction - 0.5) to the greedy action "
-   "(obstacles: g * the goal direction bent around the nearest obstacle within 1.5 m, "
-   "pair_obstacle_clearance_m, + c * the bend; "
-   "phase one: the example's), the second subtracts it, with the same exploration noise; the pair's difference "
-   "in steps moves the learned policy's shift toward the faster run (pair_shift_rate; docs/LEARNING.md); in the "
-   "corridor pair_safety vets every perturbed command. auto = on for learner = hedger, hedger_greedy_method = "
-   "state_model and reposition = emulator (where it was measured to help), off elsewhere (the learner still "
-   "tags its runs and fades old points wherever hedger and state_model apply); true = on (hedger, state_model only; on the robot only in the corridor, with pair_safety at "
-   "least at its default margin and horizon: the obstacle task has no safety filter)"},
-  {NULL, "pair_gain_sigma", KIND_DOUBLE, OFF(pair_gain_sigma), 0, 4, false, false, NULL, "0.25",
-   "pair_runs: standard deviation of the perturbation's gain g on the target angle (obstacles: the bent goal "
-   "direction; the obstacle experiments set 0.5) [rad/s per rad]"},
-  {NULL, "pair_centring_sigma", KIND_DOUBLE, OFF(pair_centring_sigma), 0, 8, false, false, NULL, "0.5",
-   "pair_runs: standard deviation of the perturbation's factor c on the lateral fraction's offset from the "
-   "centre line [rad/s per corridor width] (obstacles: on the goal direction's bend around the obstacle [rad/s per rad])"},
-  {NULL, "pair_imitation_sigma", KIND_DOUBLE, OFF(pair_imitation_sigma), 0, 1, false, false, NULL, "0",
-   "pair_runs: standard deviation of the perturbation's weight m on the unperturbed policy's own action (the "
-   "greedy action; phase one: the example's), so that the pairs also learn the imitation's weight w: the "
-   "learned policy is then (1 + w) times the greedy action plus the shift, w within [-1, 1] (0 = not perturbed: "
-   "w stays as loaded, 0 by default; the experiments with a person's examples, obstacles and Fig. 5, set 0.25, "
-   "where the pairs learn to follow them less)"},
-  {NULL, "pair_obstacle_clearance_m", KIND_DOUBLE, OFF(pair_obstacle_clearance_m), FW_PAIR_OBSTACLE_CLEARANCE_MIN_M,
-   FW_PAIR_OBSTACLE_CLEARANCE_MAX_M, false, false, NULL, "0.5",
-   "pair_runs, obstacle task: the clearance [m, from the robot's centre to the obstacle's nearest return] around "
-   "which the pair terms bend the goal direction (the cone of half-angle asin(clearance / distance)); the shift a "
-   "checkpoint carries was learned with one clearance and resumes only with it (the obstacle experiments set "
-   "0.4, the reference law's)"},
-  {NULL, "pair_shift_rate", KIND_DOUBLE, OFF(pair_shift_rate), 0, 4, false, false, NULL, "1",
-   "pair_runs: the learned policy is (1 + w) times the greedy action plus a shift a * target angle + b * (lateral fraction - "
-   "0.5) (obstacles: a * the bent goal direction + b * the bend) that the pairs move: each ranked pair adds pair_shift_rate * tanh(d / pair_shift_tau_steps) times its "
-   "perturbation (g, c) to (a, b) (and m to the imitation's weight w, pair_imitation_sigma), d = the second run's steps minus the first's (a failed run counts as the "
-   "slower), and phase two's runs then weigh 0 in the imitation (phase one's paired example runs 1); 0 = the "
-   "pairs do not move the shift (one loaded from a checkpoint still applies): the faster run's points weigh "
-   "more in the imitation instead, in both phases (pair_tau_steps); the obstacle experiments set 2"},
-  {NULL, "pair_shift_tau_steps", KIND_DOUBLE, OFF(pair_shift_tau_steps), 0.01, 1000, false, false, NULL, "2",
-   "pair_runs: the difference in steps at which a pair moves the shift by 0.76 of pair_shift_rate times its "
-   "perturbation"},
-  {NULL, "pair_shift_decay_pairs", KIND_DOUBLE, OFF(pair_shift_decay_pairs), 0, 1e6, false, false, NULL, "30",
-   "pair_runs: after n pairs have moved the shift its rate is pair_shift_rate * K / (K + n), K = this, so that "
-   "the shift settles instead of wandering with the pairs' noise (0 = constant rate)"},
-  {NULL, "pair_tau_steps", KIND_DOUBLE, OFF(pair_tau_steps), 0.01, 1000, false, false, NULL, "1",
-   "pair_runs with pair_shift_rate = 0: the faster run's points weigh 2 / (1 + exp(-d / pair_tau_steps)), the "
-   "slower run's 2 minus that, d = the two runs' difference in steps (a failed run counts at the step limit)"},
-  {NULL, "pair_recency_runs", KIND_DOUBLE, OFF(pair_recency_runs), 0, 1e6, false, false, NULL, "150",
-   "pair_runs: in the imitation (the anchor) a point stored N runs ago (evaluation runs counted) weighs exp(-N / "
-   "pair_recency_runs), in both phases (0 = no fading)"},
-  {NULL, "pair_phase_one", KIND_BOOL, OFF(pair_phase_one), 0, 0, false, false, NULL, "true",
-   "pair_runs with phase_one_driver = example: phase one's runs come in pairs too, the example policy plus "
-   "and minus the pair's perturbation from one start pose with the same example gain and dither, and their "
-   "ranking moves the learned policy's shift as in phase two, whose pairs go on counting from there; both runs "
-   "are imitated (their perturbations cancel in the imitation; with pair_shift_rate = 0 they are ranked into "
-   "its weights instead). The examples still drive every step (counted as the example's); a person's runs "
-   "(phase_one_driver = human, joystick) are never paired. With it the policy after phase one beats the "
-   "examples' best gain (Fig. 4); each step of the shift is vetted on the kinematic model first (pair_shift_vet), "
-   "without which its first steps drove some evaluations into a wall (docs/LEARNING.md)"},
-  {NULL, "pair_phase_one_from_run", KIND_INT, OFF(pair_phase_one_from_run), 0, 1000000, false, false, NULL, "10",
-   "pair_phase_one: the first phase-one training run (counted from 0) that starts a pair; the runs before it "
-   "are the plain examples, each from its own pose, so that the first evaluations find a policy"},
-  {NULL, "pair_safety", KIND_BOOL, OFF(pair_safety), 0, 0, false, false, NULL, "true",
-   "pair_runs in the corridor: a safety filter vets every perturbed command before it is sent: a kinematic "
-   "rollout (the command for one period, then the recovery law 2 x target angle, under the velocity and acceleration limits) must keep "
-   "pair_safety_margin_m between the robot's skirt and both walls for pair_safety_horizon_s; otherwise the "
-   "unperturbed policy's command goes if it passes (phase two: the greedy action; phase one: the example's), else "
-   "the recovery law's (source advisor)"},
-  {NULL, "pair_safety_margin_m", KIND_DOUBLE, OFF(pair_safety_margin_m), 0, 0.5, false, false, NULL, "0.1",
-   "pair_safety: least predicted clearance between the skirt and a wall a command must keep [m] (covers sensing "
-   "error and actuation lag the rollout leaves out)"},
-  {NULL, "pair_safety_horizon_s", KIND_DOUBLE, OFF(pair_safety_horizon_s), 0.1, 20, false, false, NULL, "3",
-   "pair_safety: length of the rollout [s] (the recovery law settles in about 3 s)"},
-  {NULL, "pair_shift_vet", KIND_BOOL, OFF(pair_shift_vet), 0, 0, false, false, NULL, "true",
-   "pair_runs with pair_shift_rate > 0: before a ranked pair's step of the shift is taken, the learned policy "
-   "with it drives whole runs on the safety filter's kinematic model (obstacles: the same unicycle among the "
-   "obstacle and the walls) from the first states of the last pair_shift_vet_starts training runs, each also "
-   "mirrored; where it comes closer than pair_safety_margin_m to a wall (obstacles: touches the obstacle or a "
-   "wall) or runs out of steps from a start from which the shift in force does not (unless it rescues more "
-   "starts than it loses: reaches the goal from more starts the shift in force fails from), a half, a quarter "
-   "and an eighth of the step are tried in turn, and then none (docs/LEARNING.md)"},
-  {NULL, "pair_shift_vet_starts", KIND_INT, OFF(pair_shift_vet_starts), 1, 32, false, false, NULL, "20",
-   "pair_shift_vet: the training runs whose first states the vet drives from (the last ones; each also mirrored)"},
-  {NULL, "pair_shift_vet_periods_per_tick", KIND_INT, OFF(pair_shift_vet_periods_per_tick), 1, 100000, false, false,
-   NULL, "16",
-   "between runs (the robot stands): pair_shift_vet's rollout periods per tick, one greedy search each; bounds "
-   "the tick's time (a search costs less than a replay update)"},
 
   {"Output", "lcm_url", KIND_STRING, OFF(lcm_url), 0, 0, false, false, NULL, "",
    "LCM provider (\"\" = LCM's default or $LCM_DEFAULT_URL; \"none\" = no LCM)"},
@@ -867,9 +772,34 @@ static int set_value(fw_config_t* cfg, const key_desc_t* k, const char* value) {
   return -1;
 }
 
+// Keys of earlier controllers that no longer exist, with why: a file that sets one meant a
+// behaviour this controller does not have, so it is refused with the fix rather than ignored.
+static const char* const k_retired_pairs[] = {
+    "pair_runs", "pair_gain_sigma", "pair_centring_sigma", "pair_imitation_sigma", "pair_obstacle_clearance_m",
+    "pair_tau_steps", "pair_recency_runs", "pair_shift_rate", "pair_shift_tau_steps", "pair_shift_decay_pairs",
+    "pair_phase_one", "pair_phase_one_from_run", "pair_safety", "pair_safety_margin_m", "pair_safety_horizon_s",
+    "pair_shift_vet", "pair_shift_vet_starts", "pair_shift_vet_periods_per_tick", "obstacle_pass_hold_steps", NULL};
+
+static bool retired(const char* key) {
+  for (const char* const* r = k_retired_pairs; *r != NULL; ++r) {
+    if (strcmp(*r, key) == 0) {
+      return true;
+    }
+  }
+  return false;
+}
+
 int fw_config_set(fw_config_t* cfg, const char* key, const char* value, const char* source, char* err,
                   size_t err_cap) {
   const key_desc_t* k = find_key(key);
+  if (k == NULL && retired(key)) {
+    fw_errfmt(err, err_cap,
+              "%s: key '%s' no longer exists: the ranked pairs of runs, their policy shift and the hold past the "
+              "obstacle were removed (the learned policy now comes from the learned values alone, docs/LEARNING.md); "
+              "delete the line",
+              source, key);
+    return -1;
+  }
   if (k == NULL) {
     const key_desc_t* near = nearest_key(key);
     if (near != NULL) {
@@ -1082,59 +1012,8 @@ const char* fw_task_name(int32_t task) {
   return "unknown";
 }
 
-bool fw_config_pair_learner(const fw_config_t* cfg) {
-  if (cfg->pair_runs_mode == FW_PAIR_RUNS_ON) {
-    return true;  // fw_config_validate refuses it outside HEDGER and state_model
-  }
-  return cfg->pair_runs_mode == FW_PAIR_RUNS_AUTO && cfg->learner == FW_LEARNER_HEDGER &&
-         cfg->hedger_greedy_method == (int32_t)HEDGER_GREEDY_STATE_MODEL;
-}
-
-bool fw_config_pair_runs_active(const fw_config_t* cfg) {
-  return fw_config_pair_learner(cfg) &&
-         (cfg->pair_runs_mode == FW_PAIR_RUNS_ON || cfg->reposition == FW_REPOSITION_EMULATOR);
-}
-
-bool fw_config_pair_phase_one_active(const fw_config_t* cfg) {
-  return fw_config_pair_runs_active(cfg) && cfg->pair_phase_one && cfg->phase_driver == FW_DRIVER_EXAMPLE;
-}
-
 int fw_config_validate_program(const fw_config_t* cfg, char* err, size_t err_cap) {
   if (fw_config_validate(cfg, err, err_cap) != 0) {
-    return -1;
-  }
-  if (fw_config_pair_runs_active(cfg) && cfg->task == FW_TASK_OBSTACLES && cfg->mode == FW_MODE_LEARN &&
-      cfg->reposition != FW_REPOSITION_EMULATOR) {
-    // The safety filter (pair_safety) is the corridor's: among obstacles nothing vets a perturbed
-    // command, and about a quarter of the perturbed training runs end on the obstacle in the emulator.
-    fw_errfmt(err, err_cap,
-        "%s: pair_runs with task = obstacles (set at %s) is for the emulator only (reposition = emulator needed, "
-        "set at %s): the obstacle task has no safety filter for the perturbed runs, and about a quarter of them end "
-        "on the obstacle in the emulator; set pair_runs = auto (off on the robot) or false",
-        origin_of(cfg, "pair_runs").text, origin_of(cfg, "task").text, origin_of(cfg, "reposition").text);
-    return -1;
-  }
-  if (fw_config_pair_runs_active(cfg) && !cfg->pair_safety && cfg->mode == FW_MODE_LEARN && cfg->reposition != FW_REPOSITION_EMULATOR) {
-    // Half of the pair runs drive a deliberately worse policy: without the safety filter about a
-    // third of the phase-two training runs end on a wall in the emulator (docs/LEARNING.md).
-    fw_errfmt(err, err_cap,
-        "%s: pair_runs without its safety filter is for the emulator only (pair_safety = false set at %s; reposition "
-        "= emulator needed, set at %s): unvetted, about a third of its perturbed phase-two training runs end on a "
-        "wall; set pair_safety = true on the robot, or pair_runs = auto (off on the robot)",
-        origin_of(cfg, "pair_runs").text, origin_of(cfg, "pair_safety").text, origin_of(cfg, "reposition").text);
-    return -1;
-  }
-  if (fw_config_pair_runs_active(cfg) && cfg->mode == FW_MODE_LEARN && cfg->reposition != FW_REPOSITION_EMULATOR &&
-      (cfg->pair_safety_margin_m < FW_PAIR_SAFETY_ROBOT_MARGIN_M || cfg->pair_safety_horizon_s < FW_PAIR_SAFETY_ROBOT_HORIZON_S)) {
-    // The filter has been measured in the emulator only (in lockstep, between walls at the nominal
-    // width): the robot's sensing error and latency need at least the default margin and horizon.
-    fw_errfmt(err, err_cap,
-        "%s: pair_runs on the robot (reposition set at %s) needs pair_safety_margin_m >= %.2f (set at %s) and "
-        "pair_safety_horizon_s >= %.1f (set at %s): the safety filter has been measured in the emulator only; raise "
-        "them or set pair_runs = auto (off on the robot) or false",
-        origin_of(cfg, "pair_runs").text, origin_of(cfg, "reposition").text, FW_PAIR_SAFETY_ROBOT_MARGIN_M,
-        origin_of(cfg, "pair_safety_margin_m").text, FW_PAIR_SAFETY_ROBOT_HORIZON_S,
-        origin_of(cfg, "pair_safety_horizon_s").text);
     return -1;
   }
   if (cfg->mode != FW_MODE_LEARN || cfg->phase_driver != FW_DRIVER_JOYSTICK) {
@@ -1198,16 +1077,6 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
         origin_of(cfg, "hedger_input_scale").text, (int)cfg->hedger_input_scale_n,
         fw_task_name(cfg->task), origin_of(cfg, "task").text, (int)dims,
         cfg->state_rotation ? ", the last one the executed rotation of state_rotation" : "");
-    return -1;
-  }
-  if (cfg->pair_runs_mode == FW_PAIR_RUNS_ON && (cfg->learner != FW_LEARNER_HEDGER ||
-                         cfg->hedger_greedy_method != (int32_t)HEDGER_GREEDY_STATE_MODEL)) {
-    fw_errfmt(err, err_cap,
-        "%s: pair_runs needs learner = hedger (set at %s) and hedger_greedy_method = state_model (set at %s: the "
-        "pairs steer that search's policy); set pair_runs = auto (on only where it applies) or false, or change "
-        "those keys",
-        origin_of(cfg, "pair_runs").text, origin_of(cfg, "learner").text,
-        origin_of(cfg, "hedger_greedy_method").text);
     return -1;
   }
   if (cfg->learner == FW_LEARNER_TABULAR && cfg->checkpoint_file[0] != '\0') {

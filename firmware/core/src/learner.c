@@ -157,16 +157,6 @@ void fw_learner_end_run_begin(fw_learner_t* lr) {
   }
 }
 
-bool fw_learner_set_run_tag(fw_learner_t* lr, uint32_t tag) {
-  return lr->hedger != NULL && hedger_set_run_tag(lr->hedger, tag) == HEDGER_OK;
-}
-
-uint32_t fw_learner_run_tag(const fw_learner_t* lr) { return lr->hedger != NULL ? hedger_run_tag(lr->hedger) : 0U; }
-
-bool fw_learner_weight_run(fw_learner_t* lr, uint32_t tag, double weight) {
-  return lr->hedger != NULL && hedger_weight_run(lr->hedger, tag, weight, NULL) == HEDGER_OK;
-}
-
 uint32_t fw_learner_end_run_step(fw_learner_t* lr, uint32_t max_updates) {
   uint32_t remaining = 0;
   if (lr->tabq != NULL) {

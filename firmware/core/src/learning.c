@@ -90,17 +90,13 @@ void fw_learning_config(const fw_loop_t* L, hedger_config_t* hc) {
   const double task_reach = fw_run_is_corridor(L) ? 8.0 : 3.0;
   hc->greedy_reach = L->cfg.hedger_greedy_reach > 0.0 ? L->cfg.hedger_greedy_reach : task_reach;
   hc->local_model = L->cfg.learner == FW_LEARNER_LWA ? HEDGER_LOCAL_LWA : HEDGER_LOCAL_LWR;
-  hc->anchor_recency_runs = fw_config_pair_learner(&L->cfg) ? L->cfg.pair_recency_runs : 0.0;
 }
 
 // ---- checkpoints --------------------------------------------------------------------------
 
 static size_t encode_meta(const fw_loop_t* L, uint8_t* p) {
-  fw_progress_t g = {
-      .task = L->cfg.task, .state_dim = L->state_dim, .schedule = L->sched.p, .run_id = L->run_id,
-      .shift = L->pair_ranker.shift};
-  fw_progress_record_clearance(&g, L->cfg.pair_obstacle_clearance_m);
-  fw_progress_record_pass_hold(&g, L->cfg.obstacle_pass_hold_steps);
+  const fw_progress_t g = {
+      .task = L->cfg.task, .state_dim = L->state_dim, .schedule = L->sched.p, .run_id = L->run_id};
   return fw_progress_encode(&g, p);
 }
 
@@ -167,7 +163,7 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
   if (r <= 0) {
     return r;
   }
-  uint8_t meta[FW_PROGRESS_BYTES];
+  uint8_t meta[FW_PROGRESS_READ_MAX];
   // At most the largest learned state this configuration can hold, whatever the header claims:
   // fw_checkpoint_read refuses a larger (or corrupt) size with a message instead.
   const size_t payload_cap = payload_size < L->learner.save_max ? payload_size : L->learner.save_max;
@@ -207,26 +203,6 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
              path, fw_task_name(g.task), path, path);
     return -1;
   }
-  double learned_clearance_m = 0.0;
-  if (!fw_progress_clearance_fits(&g, L->cfg.pair_obstacle_clearance_m, &learned_clearance_m)) {
-    free(payload);
-    snprintf(err, err_cap,
-             "checkpoint %s: its learned policy's shift bends around the obstacle at pair_obstacle_clearance_m = %.15g, "
-             "not %.15g; set pair_obstacle_clearance_m = %.15g to go on with it, or move the file away to start fresh "
-             "(e.g. mv '%s' '%s.other')",
-             path, learned_clearance_m, L->cfg.pair_obstacle_clearance_m, learned_clearance_m, path, path);
-    return -1;
-  }
-  int32_t learned_hold_steps = 0;
-  if (!fw_progress_pass_hold_fits(&g, L->cfg.obstacle_pass_hold_steps, &learned_hold_steps)) {
-    free(payload);
-    snprintf(err, err_cap,
-             "checkpoint %s: its learned policy's shift was learned holding course past the obstacle for "
-             "obstacle_pass_hold_steps = %d, not %d; set obstacle_pass_hold_steps = %d to go on with it, or move the "
-             "file away to start fresh (e.g. mv '%s' '%s.other')",
-             path, (int)learned_hold_steps, (int)L->cfg.obstacle_pass_hold_steps, (int)learned_hold_steps, path, path);
-    return -1;
-  }
   const hedger_status_t hs = hedger_load(L->learner.hedger, payload, payload_size);
   free(payload);
   if (hs != HEDGER_OK) {
@@ -239,14 +215,13 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
   const fw_schedule_config_t sc = L->sched.cfg;  // a copy: init clears the schedule first
   fw_schedule_init(&L->sched, &sc, &g.schedule);
   L->run_id = g.run_id;
-  L->pair_ranker.shift = g.shift;  // the learned policy's shift goes with its state
   err[0] = '\0';
-  if (fw_progress_pass_hold_unknown(&g)) {
+  if (g.legacy_shift) {
     snprintf(err, err_cap,
-             "note: checkpoint %s does not record the hold past the obstacle its shift was learned with (written "
-             "before the field: with none by controllers older than the hold, with their obstacle_pass_hold_steps "
-             "after); it goes on with obstacle_pass_hold_steps = %d, and its next checkpoint records that",
-             path, (int)L->cfg.obstacle_pass_hold_steps);
+             "note: checkpoint %s was written by an older controller whose learned policy added a shift learned "
+             "from ranked pairs of runs; this controller drives with the learned values alone, and its next "
+             "checkpoint no longer holds the shift",
+             path);
   }
   return 1;
 }
@@ -287,10 +262,6 @@ static void learn_pending(fw_loop_t* L) {
     q = 0.0;
     kind = HEDGER_KIND_UNKNOWN;
   }
-  if (p->learning && p->step_id == 0) {
-    // pair_shift_vet: a training run's first state is a start the vet drives from.
-    fw_shift_vet_starts_add(&L->shift_vet_starts, &L->shift_vet_env, p->s);
-  }
   fw_out_experience(L, p, q, kind);
   p->active = false;
 }
@@ -326,36 +297,8 @@ static void save_slice(fw_loop_t* L) {
   }
 }
 
-// pair_runs: the anchor weights run.c decided at the end of a pair run (a first run's 0 until its
-// pair is ranked, or the ranked pair's two weights; phase one's example pairs 1: fw_pair_ranker_end).
-static void weigh_pair(fw_loop_t* L) {
-  for (int32_t i = 0; i < L->pair_weigh_n; ++i) {
-    (void)fw_learner_weight_run(&L->learner, L->pair_weigh_tag[i], L->pair_weigh_w[i]);
-  }
-  if (L->pair_weigh_n == 2) {
-    L->pairs_ranked++;
-  }
-  L->pair_weigh_n = 0;
-}
-
-// pair_shift_vet: at most `periods` rollout periods of the vet under way; once it has decided,
-// its shift goes in force. True when done.
-static bool vet_shift(fw_loop_t* L, uint32_t periods) {
-  if (!fw_shift_vet_step(&L->shift_vet, fw_shift_vet_hedger_greedy, L->learner.hedger, &L->shift_vet_env,
-                         &L->shift_vet_starts, periods)) {
-    return false;
-  }
-  L->pair_ranker.shift = L->shift_vet.result;
-  L->shift_steps_halved += L->shift_vet.verdict == FW_SHIFT_STEP_HALVED ? 1 : 0;
-  L->shift_steps_refused += L->shift_vet.verdict == FW_SHIFT_STEP_REFUSED ? 1 : 0;
-  L->shift_vet_periods += L->shift_vet.periods;
-  L->shift_vet_pending = false;
-  return true;
-}
-
-// One slice of the between-run work: at most learn_updates_per_tick replay updates, then (pair_runs)
-// the ended pair's weights, then (pair_shift_vet) at most pair_shift_vet_periods_per_tick periods
-// of the vet of its step, then at most checkpoint_points_per_tick points of the save.
+// One slice of the between-run work: at most learn_updates_per_tick replay updates, then at most
+// checkpoint_points_per_tick points of the save.
 static void between_runs_slice(fw_loop_t* L) {
   if (L->end_run_pending) {
     L->end_run_pending = false;
@@ -373,23 +316,6 @@ static void between_runs_slice(fw_loop_t* L) {
       return;
     }
     L->learn_stage = FW_LEARN_SAVE;
-    if (L->shift_vet_pending) {
-      fw_shift_vet_begin(&L->shift_vet, &L->pair_ranker.shift, &L->shift_proposed);
-      L->learn_stage = FW_LEARN_VET;
-    }
-    if (L->pair_weigh_n > 0) {
-      // A pair has ended: its ranking goes into the store in this slice (two O(fill) passes, the
-      // robot standing) and is part of the checkpoint that follows.
-      weigh_pair(L);
-      return;
-    }
-  }
-  if (L->learn_stage == FW_LEARN_VET) {
-    // The vet drives the learned policy the pair's weights left, the one the next run drives.
-    if (vet_shift(L, (uint32_t)L->cfg.pair_shift_vet_periods_per_tick)) {
-      L->learn_stage = FW_LEARN_SAVE;
-    }
-    return;
   }
   save_slice(L);
 }
@@ -413,15 +339,6 @@ void fw_learning_finish_now(fw_loop_t* L) {
     fw_learner_end_run_begin(&L->learner);
   }
   (void)fw_learner_end_run_step(&L->learner, UINT32_MAX);
-  if (L->pair_weigh_n > 0) {
-    weigh_pair(L);
-  }
-  if (L->shift_vet_pending) {
-    if (L->learn_stage != FW_LEARN_VET) {
-      fw_shift_vet_begin(&L->shift_vet, &L->pair_ranker.shift, &L->shift_proposed);
-    }
-    (void)vet_shift(L, UINT32_MAX);
-  }
   if (L->learn_stage == FW_LEARN_SAVE && L->save_handle >= 0) {
     // A slice-wise save was under way: finish it at once.
     size_t written = 0;

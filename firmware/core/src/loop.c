@@ -62,7 +62,6 @@ static void setup_task(fw_loop_t* L) {
                      &obstacles);
   L->state_dim = L->ep.state_dim + (cfg->state_rotation ? 1U : 0U);
   L->gamma = cfg->gamma > 0.0 ? cfg->gamma : tasks_episode_gamma(&L->ep);
-  fw_shift_vet_env_init(&L->shift_vet_env, cfg);
 }
 
 // Every random stream derives from the one root seed, in this order.
@@ -177,7 +176,6 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
   fw_schedule_init(&L->sched, &schc, NULL);
   L->mode = B21R_STATUS_T_MODE_STARTING;
   L->run_id = -1;
-  L->pair_member = -1;
   L->last_block.block = -1;
   L->status_countdown = 0;
   return L;
@@ -326,7 +324,6 @@ static sensed_t sense(fw_loop_t* L, int64_t now_us) {
   fw_run_odometry_update(L, in.run_starting);
   if (in.run_starting) {
     tasks_episode_begin(&L->ep, L->start_pose, fw_run_odom_pose(L));  // the run's frame
-    fw_pass_hold_reset(&L->pass_hold);
   }
   if (L->scan_new && (in.running || in.run_starting)) {
     in.state_ok = fw_run_observe(L) && all_finite(L->s, L->state_dim);
@@ -427,13 +424,10 @@ static void decide(fw_loop_t* L, fw_safety_event_t ev, const sensed_t* in, comma
       fw_run_step(L, 0, &cmd->v_mps, &cmd->w_radps);
       cmd->stopping = !fw_run_running(L);
     } else {
-      // No new scan (or features unusable) this tick: hold the command (a pair run: its recovery
-      // law, dead-reckoned), learn nothing.
+      // No new scan (or features unusable) this tick: hold the command, learn nothing.
       L->held_ticks++;
-      if (!fw_run_pair_hold(L, &cmd->v_mps, &cmd->w_radps)) {
-        cmd->v_mps = L->cmd_v;
-        cmd->w_radps = L->cmd_w;
-      }
+      cmd->v_mps = L->cmd_v;
+      cmd->w_radps = L->cmd_w;
       cmd->stopping = false;
     }
   }
@@ -703,17 +697,6 @@ void fw_loop_get_stats(const fw_loop_t* L, fw_loop_stats_t* out) {
   out->last_run_goal = L->last_run_goal;
   out->learn_ticks = L->learn_ticks;
   out->checkpoints_submitted = L->checkpoints_submitted;
-  out->pairs_ranked = L->pairs_ranked;
-  out->shift = L->pair_ranker.shift;
-  out->anchor_unweighted = L->learner.hedger != NULL ? hedger_counters(L->learner.hedger)->anchor_unweighted : 0U;
-  out->pair_safety_overrides = L->pair_safety_overrides;
-  out->pair_safety_short = L->pair_safety_short;
-  out->pair_runs_vetoed = L->pair_runs_vetoed;
-  out->pair_runs_missed = L->pair_runs_missed;
-  out->shift_steps_halved = L->shift_steps_halved;
-  out->shift_steps_refused = L->shift_steps_refused;
-  out->shift_vet_periods = L->shift_vet_periods;
-  out->pair_safety_held = L->pair_safety_held;
   const fw_timing_t* t = &L->timing;
   out->tick_max_ever_us = t->max_ever_us;
   out->tick_overruns = t->overruns;

@@ -14,7 +14,6 @@
 
 #include "fw/loop.h"
 #include "fw/safety.h"
-#include "fw/shift_vet.h"
 #include "fw/timing.h"
 
 #include <features/features.h>
@@ -89,7 +88,6 @@ typedef enum fw_learn_stage {
   FW_LEARN_IDLE = 0,     ///< nothing to do between runs
   FW_LEARN_REPLAY = 1,   ///< backward replay of the finished training run, in slices
   FW_LEARN_SAVE = 2,     ///< serialising the learned state into the checkpoint writer, in slices
-  FW_LEARN_VET = 3,      ///< pair_shift_vet: the ranked pair's step of the shift, rollouts in slices
 } fw_learn_stage_t;
 
 /// A transition waiting to be learned (and published) after this tick's command was sent.
@@ -230,48 +228,6 @@ struct fw_loop {
   tasks_start_cycle_t start_cycle;
   int32_t explore_steps_left;  // of the exploration segment under way
   double explore_offset;       // its action offset [rad/s]
-  // pair_runs (phase two, and phase one with pair_phase_one): the pair under way (run.c);
-  // its anchor weights are applied between runs, after the second run's replay (learning.c), and
-  // its ranking moves the shift.
-  int32_t pair_next_member;      // 0: the next paired training run starts a pair; 1: it ends one
-  int32_t pair_member;           // of the run under way; -1 = not a pair run
-  double pair_gain;              // the pair's perturbation on the task's first pair term (fw_pair_basis) [rad/s per rad]
-  double pair_centring;          // and on its second [rad/s]
-  double pair_imitation;         // and its weight on the unperturbed policy's own action [1]
-  uint32_t run_tag;              // run tag of the training run under way (its id, or later)
-  fw_pair_ranker_t pair_ranker;  // the pair's first run until it is ranked; the learned policy's
-                                 // shift (learned state: checkpointed, fw/progress.h)
-  features_pose_t pair_pose;     // the pair's start pose
-  tasks_rng_t pair_explore_rng;  // explore_rng as the first run began: the second run's noise
-  int32_t pair_phase;            // the phase of the pair under way (a pair stays in one phase)
-  uint64_t pair_driver_seed;     // pair_phase_one: the first run's example stream (its gain), for the second
-  int32_t pair_weigh_n;          // weights to apply between runs (0: none)
-  uint32_t pair_weigh_tag[2];    // run tags
-  double pair_weigh_w[2];        // and their anchor weights
-  int32_t pairs_ranked;          // pairs whose weights were applied
-  int64_t pair_safety_overrides; // pair-run commands the safety filter replaced
-  bool pair_run_vetoed;          // the safety filter replaced a command of the run under way
-  fw_pass_hold_t pass_hold;      // obstacle_pass_hold_steps: the run's memory of a passed obstacle
-  int32_t pair_runs_vetoed;      // pair runs the filter corrected
-  int32_t pair_runs_missed;      // pair runs ranked as having missed the goal (vetoed ones included)
-  int64_t pair_safety_short;     // corrections where even the recovery law missed the margin
-  int64_t pair_safety_held;      // periods without a scan in which the recovery law drove
-  features_corridor_t pair_model;  // pair run: the state at the last decision (dead reckoning)
-  double pair_model_v;           // and the command in force before it [m/s]
-  double pair_model_w;           // [rad/s]
-  bool pair_model_ok;            // pair_model holds this run's last decision
-  int32_t pair_model_periods;    // periods dead-reckoned since that decision
-  // pair_shift_vet (fw/shift_vet.h): a ranked pair's step of the shift waits for the vet between
-  // runs; the starts are the first states of the last training runs.
-  fw_shift_vet_env_t shift_vet_env;
-  fw_shift_vet_starts_t shift_vet_starts;
-  fw_shift_vet_t shift_vet;
-  bool shift_vet_pending;        // a step waits: shift_proposed, from the shift in force
-  fw_pair_shift_t shift_proposed;
-  int32_t shift_steps_halved;    // vets that took a half, a quarter or an eighth of the step
-  int32_t shift_steps_refused;   // and that kept the shift
-  int64_t shift_vet_periods;     // rollout periods the vets drove (one greedy search each)
-
   // Run state.
   int32_t mode;                // b21r_status_t MODE_*
   fw_run_plan_t plan;
@@ -386,10 +342,6 @@ void fw_run_begin_repositioning(fw_loop_t* L);
 bool fw_run_reposition(fw_loop_t* L, bool state_ok, double* v, double* w);
 /// One step of a running run (a new, usable state this tick); contact = the bumper fired.
 void fw_run_step(fw_loop_t* L, uint8_t contact, double* v, double* w);
-// pair_safety, a period without a new scan in a pair run: the recovery law's command at the
-// state dead-reckoned from the last decision (what the filter's rollout assumed), instead of
-// holding the vetted command. False (hold as usual) outside pair runs. O(1).
-bool fw_run_pair_hold(fw_loop_t* L, double* v, double* w);
 /// Ends a running run that has no terminal state: end_reason B21R_RUN_T_END_*, stop_reason the
 /// fw_stop_reason_t of a safety stop (else 0), why a static string (kept by B21R_RUN).
 void fw_run_abort(fw_loop_t* L, int8_t end_reason, int32_t stop_reason, const char* why);
@@ -409,18 +361,11 @@ bool fw_learner_learn(fw_learner_t* lr, const double* s, double a, double r, con
 bool fw_learner_predict(fw_learner_t* lr, const double* s, double a, double* q, hedger_kind_t* kind);
 /// The finished run's backward replay: begin, then steps of at most max_updates (returns those left).
 void fw_learner_end_run_begin(fw_learner_t* lr);
-// pair_runs: tags the points stored from now on with the run id (HEDGER only; false otherwise).
-bool fw_learner_set_run_tag(fw_learner_t* lr, uint32_t tag);
-// The learner's current run tag (0 without HEDGER): a resumed store may be ahead of the run ids.
-uint32_t fw_learner_run_tag(const fw_learner_t* lr);
-// pair_runs: the anchor weight of a tagged run's points (HEDGER only). O(store fill).
-bool fw_learner_weight_run(fw_learner_t* lr, uint32_t tag, double weight);
 uint32_t fw_learner_end_run_step(fw_learner_t* lr, uint32_t max_updates);
 fw_learner_stats_t fw_learner_stats(const fw_learner_t* lr);
 
 // ---- loop.c ----
-/// The task's specs and command limits as cfg configures them (the loop's set-up and the shift's
-/// vet, fw_shift_vet_env_init). O(1).
+/// The task's specs and command limits as cfg configures them (the loop's set-up). O(1).
 void fw_loop_task_specs(const fw_config_t* cfg, tasks_corridor_spec_t* corridor, tasks_obstacles_spec_t* obstacles,
                         tasks_command_limits_t* limits);
 
@@ -432,9 +377,8 @@ void fw_learning_after_command(fw_loop_t* L);
 void fw_learning_run_ended(fw_loop_t* L);
 /// True when no between-run work is left (a run may start).
 bool fw_learning_idle(const fw_loop_t* L);
-/// Finishes all between-run work at once (shutdown; not for the tick): the replay, the pair's
-/// weights and the vet of its step (at most (2 + FW_SHIFT_VET_HALVINGS) x 2 x pair_shift_vet_starts
-/// rollouts of at most the step limit; usually well under a second), so that the checkpoint holds the vetted shift.
+/// Finishes all between-run work at once (shutdown; not for the tick): the replay (at most
+/// hedger_replay_passes × the run's length updates), so that the checkpoint holds it.
 void fw_learning_finish_now(fw_loop_t* L);
 /// Serialises the learned state and the schedule's progress into the writer at once (shutdown).
 void fw_learning_checkpoint_now(fw_loop_t* L);

@@ -5,8 +5,6 @@
 #include <math.h>
 #include <string.h>
 
-#include "tasks/recovery.h"
-
 bool fw_run_is_corridor(const fw_loop_t* L) { return L->cfg.task == FW_TASK_CORRIDOR; }
 
 uint32_t fw_run_step_limit(const fw_loop_t* L) { return tasks_episode_step_limit(&L->ep); }
@@ -41,12 +39,7 @@ bool fw_run_observe(fw_loop_t* L) {
     // the odometry's noisy rate, so a lockstep run stays a function of its inputs.
     L->s[L->ep.state_dim] = L->cmd_w;
   }
-  if (tasks_episode_observe(&L->ep, &L->scan, fw_run_odom_pose(L), L->s) != 1) {
-    return false;
-  }
-  (void)fw_pass_hold_observe(&L->pass_hold, (fw_task_t)L->cfg.task, L->s,
-                             (uint32_t)L->cfg.obstacle_pass_hold_steps);
-  return true;
+  return tasks_episode_observe(&L->ep, &L->scan, fw_run_odom_pose(L), L->s) == 1;
 }
 
 static const char* run_kind_name(const fw_loop_t* L) {
@@ -68,303 +61,11 @@ static const char* run_kind_name(const fw_loop_t* L) {
   return "train";
 }
 
-// pair_runs: a phase-two training run (pair_phase_one: also a phase-one example run from
-// pair_phase_one_from_run on) that starts a pair draws its pose; the one that ends the pair
-// starts from the same pose (and replays the same exploration noise and, in phase one, the same
-// example gain), so that the two runs differ mainly by their perturbation (the sensor noise of
-// each run is its own).
-static bool pair_run_planned(const fw_loop_t* L, const fw_run_plan_t* plan) {
-  if (L->cfg.mode != FW_MODE_LEARN || plan->kind != FW_RUN_TRAINING) {
-    return false;
-  }
-  if (plan->phase == 1) {
-    return fw_config_pair_phase_one_active(&L->cfg) && plan->training_index >= L->cfg.pair_phase_one_from_run;
-  }
-  return plan->phase == 2 && fw_config_pair_runs_active(&L->cfg);
-}
-
-// Whether a planned pair run is the second of the pair under way: a pair never spans the switch
-// from phase one to phase two (a first run left then stays without its pair).
-static bool pair_continues(const fw_loop_t* L, const fw_run_plan_t* plan) {
-  return L->pair_next_member == 1 && plan->phase == L->pair_phase;
-}
-
 static features_pose_t next_start_pose(fw_loop_t* L, const fw_run_plan_t* plan) {
   if (plan->kind == FW_RUN_EVAL) {
     return tasks_episode_eval_start(&L->ep, (uint32_t)plan->eval_index);
   }
-  if (pair_run_planned(L, plan) && pair_continues(L, plan)) {
-    return L->pair_pose;
-  }
-  const features_pose_t pose = tasks_episode_training_start(&L->ep, &L->pose_rng);
-  if (pair_run_planned(L, plan)) {
-    L->pair_pose = pose;
-  }
-  return pose;
-}
-
-// pair_runs: the run under way is one of a pair. The first run draws the perturbation and keeps
-// the exploration stream's state; the second replays that stream (common random numbers: the
-// same exploration noise, so the pair's difference in steps measures the perturbation).
-static void pair_begin_run(fw_loop_t* L) {
-  L->pair_member = -1;
-  L->pair_run_vetoed = false;
-  L->pair_model_ok = false;
-  if (!fw_config_pair_learner(&L->cfg) || L->cfg.mode != FW_MODE_LEARN || L->plan.kind != FW_RUN_TRAINING) {
-    return;
-  }
-  // Every training run's points carry its tag, so that runs can be ranked and fade with age: its
-  // id, or one past the learner's tag when a resumed store is ahead of the ids (fw_pair_run_tag:
-  // tags increase from run to run, so no two runs share one).
-  L->run_tag = fw_pair_run_tag(L->run_id, fw_learner_run_tag(&L->learner));
-  (void)fw_learner_set_run_tag(&L->learner, L->run_tag);
-  if (!pair_run_planned(L, &L->plan)) {
-    return;
-  }
-  L->pair_member = pair_continues(L, &L->plan) ? 1 : 0;
-  L->pair_phase = L->plan.phase;
-  if (L->pair_member == 0) {
-    L->pair_gain = L->cfg.pair_gain_sigma * tasks_rng_normal(&L->explore_rng);
-    L->pair_centring = L->cfg.pair_centring_sigma * tasks_rng_normal(&L->explore_rng);
-    // Drawn only where it is perturbed, so that runs without it keep their noise.
-    L->pair_imitation =
-        L->cfg.pair_imitation_sigma > 0.0 ? L->cfg.pair_imitation_sigma * tasks_rng_normal(&L->explore_rng) : 0.0;
-    L->pair_explore_rng = L->explore_rng;
-  } else {
-    L->explore_rng = L->pair_explore_rng;
-  }
-}
-
-uint32_t fw_pair_run_tag(int32_t run_id, uint32_t current) {
-  if (run_id >= 0 && (uint32_t)run_id > current) {
-    return (uint32_t)run_id;
-  }
-  return current < UINT32_MAX ? current + 1U : current;
-}
-
-int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool examples, int32_t member, bool aborted,
-                           bool goal, int32_t steps, uint32_t tag, double gain, double centring, double imitation,
-                           uint32_t tags[2], double weights[2]) {
-  // Runs of the example policy are imitated whole when the ranking goes into the shift: their +
-  // and - perturbations cancel in the imitation, and the shift was not in their commands.
-  const double imitated = examples && cfg->pair_shift_rate > 0.0 ? 1.0 : 0.0;
-  if (aborted || member == 0) {
-    r->first_pending = !aborted;
-    r->first_goal = goal;
-    r->first_steps = steps;
-    r->first_tag = tag;
-    tags[0] = tag;
-    weights[0] = imitated;
-    return 1;
-  }
-  if (!r->first_pending) {
-    return 0;
-  }
-  r->first_pending = false;
-  tags[0] = r->first_tag;
-  tags[1] = tag;
-  const double d = (double)steps - (double)r->first_steps;  // > 0: the first run was faster
-  if (cfg->pair_shift_rate > 0.0) {
-    weights[0] = imitated;
-    weights[1] = imitated;
-    double u = 0.0;
-    if (r->first_goal && goal) {
-      u = tanh(d / cfg->pair_shift_tau_steps);
-    } else if (r->first_goal != goal) {
-      u = r->first_goal ? 1.0 : -1.0;
-    }
-    const double k = cfg->pair_shift_decay_pairs;
-    fw_pair_shift_t* sh = &r->shift;
-    const double rate = k > 0.0 ? cfg->pair_shift_rate * k / (k + (double)sh->pairs) : cfg->pair_shift_rate;
-    sh->pairs += sh->pairs < UINT32_MAX ? 1U : 0U;
-    const double step_gain = rate * u * gain;
-    const double step_centring = rate * u * centring;
-    const double step_imitation = rate * u * imitation;
-    if (isfinite(step_gain) && isfinite(step_centring) && isfinite(step_imitation)) {  // (a damaged log's record: no step)
-      sh->gain = fmin(FW_PAIR_SHIFT_MAX, fmax(-FW_PAIR_SHIFT_MAX, sh->gain + step_gain));
-      // Among obstacles the bend's coefficient only widens the berth (b >= 0): a negative one
-      // aims inside the cone pair_obstacle_clearance_m keeps, closer than the clearance, where
-      // the model and the emulator part (FW_PAIR_OBSTACLE_CENTRING_MIN, fw/progress.h).
-      const double centring_min = cfg->task == FW_TASK_OBSTACLES ? FW_PAIR_OBSTACLE_CENTRING_MIN : -FW_PAIR_SHIFT_MAX;
-      sh->centring = fmin(FW_PAIR_SHIFT_MAX, fmax(centring_min, sh->centring + step_centring));
-      sh->imitation = fmin(FW_PAIR_IMITATION_MAX, fmax(FW_PAIR_IMITATION_MIN, sh->imitation + step_imitation));
-    }
-    return 2;
-  }
-  weights[0] = r->first_goal ? 2.0 : 0.0;
-  weights[1] = goal ? 2.0 : 0.0;
-  if (r->first_goal && goal) {
-    weights[0] = 2.0 / (1.0 + exp(-d / cfg->pair_tau_steps));
-    weights[1] = 2.0 - weights[0];
-  }
-  return 2;
-}
-
-void fw_pair_basis(fw_task_t task, double obstacle_clearance_m, const double* s, double basis[2]) {
-  if (task == FW_TASK_CORRIDOR) {
-    basis[0] = s[2];
-    basis[1] = s[1] - 0.5;
-    return;
-  }
-  // Obstacles: the goal direction bent around the nearest obstacle (the target the reference law
-  // steers for with the obstacle nearly dead ahead: the goal-side edge of its cone,
-  // tasks_driver_obstacles; without a memory of the side, so a pure function of s that the vet's
-  // model and the mirror image see alike), and the bend alone. The first term is the obstacle
-  // task's target angle, as the corridor's first is its own: a shift along it turns harder toward
-  // the course that keeps the clearance, not toward the obstacle; the second widens (+) or
-  // tightens (-) the berth. (With the goal bearing itself as the first term a harder turn toward
-  // the goal needed a matching wider bend, a ridge beside a cliff that the ranked pairs climbed
-  // slowly: docs/LEARNING.md, "The bent goal direction as the first term".) The bent direction is
-  // the cone's edge, obstacle bearing ± half-cone, within ±π (a visible obstacle lies within
-  // ±π/2, the half-cone at most π/2): no wrap.
-  const double goal_bearing = s[0];
-  const double goal_distance = s[1];
-  const double obstacle_bearing = s[2];
-  const double obstacle_distance = s[3];
-  double bend = 0.0;
-  // No bend without an obstacle near (none visible: its distance is the features' far value) or
-  // with it beyond the goal.
-  if (obstacle_distance < FW_PAIR_OBSTACLE_RANGE_M && obstacle_distance < goal_distance) {
-    const double half_cone = tasks_obstacles_cone_half_angle_rad(obstacle_clearance_m, obstacle_distance);
-    const double rel = features_angle_wrap(goal_bearing - obstacle_bearing);
-    if (fabs(rel) < half_cone && fabs(rel) > 0.0) {
-      // The goal direction passes the obstacle closer than the clearance: the target is the
-      // cone's edge on the goal's side (the goal exactly behind it has no side, as its mirror
-      // image).
-      bend = (rel > 0.0 ? half_cone : -half_cone) - rel;
-    }
-  }
-  basis[0] = goal_bearing + bend;
-  basis[1] = bend;
-}
-
-double fw_pair_shift_at(const fw_pair_shift_t* shift, fw_task_t task, double obstacle_clearance_m, const double* s) {
-  double basis[2];
-  fw_pair_basis(task, obstacle_clearance_m, s, basis);
-  return shift->gain * basis[0] + shift->centring * basis[1];
-}
-
-double fw_pair_policy_action(const fw_pair_shift_t* shift, fw_task_t task, double obstacle_clearance_m, const double* s,
-                             double greedy, bool held) {
-  if (held) {
-    return 0.0;
-  }
-  return (1.0 + shift->imitation) * greedy + fw_pair_shift_at(shift, task, obstacle_clearance_m, s);
-}
-
-// pair_runs: the run under way ended. A perturbed run is not imitated until its pair is ranked:
-// the first run's points weigh 0 at once (so the second run does not imitate it either), and so
-// do the points of a run that was aborted or is left without its pair. After the second run the
-// pair is ranked (fw_pair_ranker_end): by default it proposes a step of the learned policy's shift
-// toward the faster run (taken, cut or refused by the vet between runs, pair_shift_vet:
-// learning.c) and both runs keep weight 0, so the imitation stays the teachers' and the shift
-// alone carries what phase two found (imitating the shifted runs as well would add the shift
-// twice). Phase one's pairs of example runs keep weight 1 by default: their + and - perturbations
-// cancel in the imitation (a run left without its pair, or corrected by the filter, keeps its
-// side's: a small bias, as rare as those runs). A run the safety filter had to correct (pair_vet)
-// counts as one that missed the goal: its perturbation was predicted to reach a wall, and a
-// policy that learns from it would lean on a filter that evaluations and greedy runs do not have.
-// The ranking is O(1) arithmetic; learning.c applies the weights and vets the step between runs,
-// and the shift in force acts from the next run. Every ranked pair passes the vet stage (a step
-// that moves nothing is decided at once, at the cost of one between-run tick).
-static void pair_finish_run(fw_loop_t* L, bool aborted, bool goal, int32_t steps) {
-  if (L->pair_member < 0) {
-    return;
-  }
-  goal = goal && !L->pair_run_vetoed;
-  L->pair_runs_vetoed += L->pair_run_vetoed ? 1 : 0;
-  L->pair_runs_missed += goal ? 0 : 1;
-  const fw_pair_shift_t in_force = L->pair_ranker.shift;
-  L->pair_weigh_n = fw_pair_ranker_end(&L->pair_ranker, &L->cfg, L->plan.phase == 1, L->pair_member, aborted, goal,
-                                       steps, L->run_tag, L->pair_gain, L->pair_centring, L->pair_imitation,
-                                       L->pair_weigh_tag, L->pair_weigh_w);
-  if (L->pair_weigh_n == 2 && L->cfg.pair_shift_vet) {
-    // pair_shift_vet: the step waits for the vet between runs (learning.c), which puts in force
-    // the step, a half, a quarter or an eighth of it, or none; the pair counts at once.
-    // Every term waits; only the pair count moves now.
-    L->shift_proposed = L->pair_ranker.shift;
-    L->pair_ranker.shift = in_force;
-    L->pair_ranker.shift.pairs = L->shift_proposed.pairs;
-    L->shift_vet_pending = true;
-  }
-  L->pair_next_member = aborted || L->pair_member == 1 ? 0 : 1;
-  L->pair_member = -1;
-}
-
-// pair_runs: the perturbation of the run under way at state s (g, c on the task's two terms,
-// fw_pair_basis, m on `own`, the unperturbed policy's own action: the greedy action before the
-// shift, or the example's); + in the pair's first run, - in its second [rad/s].
-static double pair_offset(const fw_loop_t* L, double own) {
-  const double sign = L->pair_member == 0 ? 1.0 : -1.0;
-  double basis[2];
-  fw_pair_basis((fw_task_t)L->cfg.task, L->cfg.pair_obstacle_clearance_m, L->s, basis);
-  return sign * (L->pair_gain * basis[0] + L->pair_centring * basis[1] + L->pair_imitation * own);
-}
-
-// pair_safety: a pair run's command a goes only if the recovery rollout (tasks/recovery.h) keeps
-// pair_safety_margin_m to both walls; otherwise the unperturbed policy's own action (phase two:
-// the learned policy's, when one is known; phase one: the example's), if it does, and else the
-// recovery law's. The first correction vetoes the run (it counts as failed in its pair and its
-// perturbation ends): whatever failed the check, the run needed the filter. Runs before the command is sent: three rollouts at most (30 periods each at the
-// defaults).
-// pair_safety: the recovery rollout from this tick's state keeps the margin after command a.
-static bool pair_passes(const fw_loop_t* L, double a) {
-  return tasks_corridor_recovery_clearance_m(&L->ep.corridor, &L->limits, L->dt_s, &L->ep.corridor_state, L->cmd_v,
-                                             L->cmd_w, a, L->cfg.pair_safety_horizon_s) >= L->cfg.pair_safety_margin_m;
-}
-
-static void pair_vet(fw_loop_t* L, bool own_known, double own_action, int8_t own_source, double* a,
-                     int8_t* source) {
-  if (pair_passes(L, *a)) {
-    return;
-  }
-  L->pair_safety_overrides++;
-  L->pair_run_vetoed = true;
-  if (own_known && pair_passes(L, own_action)) {
-    *a = own_action;
-    *source = own_source;
-    return;
-  }
-  *a = tasks_corridor_recovery_action(&L->ep.corridor, &L->ep.corridor_state);
-  *source = B21R_EXPERIENCE_T_SOURCE_ADVISOR;
-  if (!pair_passes(L, *a)) {
-    L->pair_safety_short++;  // even the recovery law is predicted to come closer than the margin
-  }
-}
-
-// pair_safety: the state at the last decision of a pair run and the command in force before it,
-// for dead reckoning through periods without a new scan (fw_run_pair_hold).
-static void pair_keep_model(fw_loop_t* L) {
-  L->pair_model = L->ep.corridor_state;
-  L->pair_model_v = L->cmd_v;
-  L->pair_model_w = L->cmd_w;
-  L->pair_model_ok = true;
-  L->pair_model_periods = 0;
-}
-
-bool fw_run_pair_hold(fw_loop_t* L, double* v_cmd, double* w_cmd) {
-  // Dead reckoning drifts: beyond the rollout's horizon (features unusable while scans arrive;
-  // a silent laser stops the robot sooner) the command is held as outside pair runs.
-  if (L->pair_member < 0 || !L->cfg.pair_safety || !L->pair_model_ok ||
-      (double)L->pair_model_periods * L->dt_s >= L->cfg.pair_safety_horizon_s) {
-    return false;
-  }
-  features_corridor_t next;
-  if (!tasks_corridor_recovery_predict(&L->ep.corridor, &L->limits, L->dt_s, &L->pair_model, L->pair_model_v,
-                                       L->pair_model_w, L->cmd_v, L->cmd_w, &next)) {
-    return false;
-  }
-  L->pair_model = next;
-  L->pair_model_v = L->cmd_v;
-  L->pair_model_w = L->cmd_w;
-  L->pair_model_periods++;
-  *v_cmd = tasks_corridor_speed_mps(&L->ep.corridor, &next);
-  *w_cmd = tasks_corridor_recovery_action(&L->ep.corridor, &next);
-  // The recovery law drove this period: the action the next transition records is its command
-  // (act() keeps the command sent), so it is recorded, and counted, as the advisor's.
-  L->prev_source = B21R_EXPERIENCE_T_SOURCE_ADVISOR;
-  L->pair_safety_held++;
-  return true;
+  return tasks_episode_training_start(&L->ep, &L->pose_rng);
 }
 
 // The id begin_run gives the next run (B21R_RUN.run_id), as the start-pose request passes it on.
@@ -382,15 +83,7 @@ static void begin_run(fw_loop_t* L) {
   // The driver of this run: the example policy in phase one, the advisor in phase two, or the
   // evaluated reference. Its stream is seeded per run, so a run does not depend on earlier ones.
   uint64_t st = L->driver_seed_base ^ ((uint64_t)(uint32_t)L->run_id * 0x9E3779B97F4A7C15ULL);
-  uint64_t run_seed = tasks_rng_splitmix64(&st);
-  if (pair_run_planned(L, &L->plan) && L->plan.phase == 1) {
-    // A phase-one pair probes the example policy at one gain: its second run repeats the first's.
-    if (pair_continues(L, &L->plan)) {
-      run_seed = L->pair_driver_seed;
-    } else {
-      L->pair_driver_seed = run_seed;
-    }
-  }
+  const uint64_t run_seed = tasks_rng_splitmix64(&st);
   tasks_driver_kind_t kind = TASKS_DRIVER_PROPORTIONAL;
   if (L->cfg.mode == FW_MODE_EVALUATE && L->cfg.evaluate_policy == FW_EVAL_OPTIMAL) {
     kind = TASKS_DRIVER_OPTIMAL;
@@ -419,7 +112,6 @@ static void begin_run(fw_loop_t* L) {
   if (!fw_run_is_corridor(L) && kind == TASKS_DRIVER_PROPORTIONAL) {
     L->driver.law[0] = L->driver.gain;  // the obstacle example policy's law holds its gain
   }
-  pair_begin_run(L);
   L->mode = L->plan.kind == FW_RUN_EVAL ? B21R_STATUS_T_MODE_EVALUATING : B21R_STATUS_T_MODE_RUNNING;
   L->status_now = true;
 }
@@ -478,16 +170,6 @@ static void record_run_end(fw_loop_t* L, int8_t end_reason, int32_t stop_reason,
   for (int i = 0; i < 5; ++i) {
     r->steps_by_source[i] = L->run_steps_by_source[i];
   }
-  r->pair_member = (int8_t)L->pair_member;  // still the run's: pair_finish_run comes after
-  r->pair_vetoed = L->pair_run_vetoed;
-  r->pair_gain = L->pair_member >= 0 ? L->pair_gain : 0.0;
-  r->pair_centring = L->pair_member >= 0 ? L->pair_centring : 0.0;
-  r->pair_imitation = L->pair_member >= 0 ? L->pair_imitation : 0.0;
-  const fw_pair_shift_t* shift = &L->pair_ranker.shift;  // pair_finish_run, which may move it, comes after
-  r->shift_gain = shift->gain;
-  r->shift_centring = shift->centring;
-  r->shift_imitation = shift->imitation;
-  r->shift_pairs = (int32_t)(shift->pairs <= (uint32_t)INT32_MAX ? shift->pairs : (uint32_t)INT32_MAX);
   L->run_end_ready = true;
 }
 
@@ -496,7 +178,6 @@ static void finish_run(fw_loop_t* L, bool reached_goal, int8_t end_reason, int32
   const bool training = L->plan.kind == FW_RUN_TRAINING && L->cfg.mode == FW_MODE_LEARN;
   const int32_t steps = reached_goal ? L->actions_taken : (int32_t)fw_run_step_limit(L);
   record_run_end(L, end_reason, stop_reason, why);
-  pair_finish_run(L, aborted, reached_goal, steps);
   fw_eval_block_t block;
   const bool block_done = fw_schedule_finish_run(&L->sched, steps, reached_goal, aborted, &block);
   if (aborted) {
@@ -673,17 +354,11 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
   // transition into s (learned after the command), so it runs once.
   bool greedy_known = false;
   double greedy_action = 0.0;
-  double greedy_imitated = 0.0;  // HEDGER's greedy action itself, before the shift
   if (learned_policy) {
     double value = 0.0;
-    greedy_known = fw_learner_greedy(&L->learner, L->s, &greedy_imitated, &value);
+    greedy_known = fw_learner_greedy(&L->learner, L->s, &greedy_action, &value);
     if (greedy_known) {
-      // The learned policy: HEDGER's greedy action, weighted by 1 + the imitation's weight, plus
-      // the shift the ranked pairs learned (both 0 until a pair is ranked). The value stays the
-      // greedy action's (the learning target).
-      greedy_action = tasks_clamp_omega(
-          fw_pair_policy_action(&L->pair_ranker.shift, (fw_task_t)L->cfg.task, L->cfg.pair_obstacle_clearance_m, L->s,
-                                greedy_imitated, fw_pass_hold_active(&L->pass_hold)), L->omega_max);
+      greedy_action = tasks_clamp_omega(greedy_action, L->omega_max);
     }
     if (L->pending.active) {
       L->pending.need_greedy = false;
@@ -695,10 +370,6 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
   double a = 0.0;
   double offset = 0.0;
   int8_t source = B21R_EXPERIENCE_T_SOURCE_EXAMPLE;
-  // The unperturbed policy's command, for the safety filter of a pair run (pair_vet).
-  bool own_known = greedy_known;
-  double own_action = greedy_action;
-  int8_t own_source = greedy_known ? B21R_EXPERIENCE_T_SOURCE_GREEDY : B21R_EXPERIENCE_T_SOURCE_EXAMPLE;
   if (!learned_policy) {
     if (fw_run_joystick_drives(L)) {
       a = L->teleop_rot_radps;
@@ -708,24 +379,10 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
       if (!evaluating && L->cfg.example_noise_radps > 0.0 && explore_offset(L, L->cfg.example_noise_radps, &offset)) {
         a += offset;  // phase-one dither: the learner sees actions around the example's
       }
-      own_known = true;  // the example's command: the safety filter's first fallback in a pair run
-      own_action = a;
-      if (!evaluating && L->pair_member >= 0 && !L->pair_run_vetoed) {
-        a = tasks_clamp_omega(a + pair_offset(L, advice), L->omega_max);  // a phase-one pair run
-      }
     }
   } else if (greedy_known) {
     a = greedy_action;
     source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
-    if (!evaluating && L->pair_member >= 0 && !L->pair_run_vetoed && !fw_pass_hold_active(&L->pass_hold)) {
-      // A pair run: the learned policy with the pair's perturbation, within the action bounds.
-      // Once the safety filter has corrected it the run counts as failed: the learned policy
-      // drives the rest of the way, which ends it sooner than the perturbation would. (Held
-      // past an obstacle, both runs of the pair hold course unperturbed; the exploration noise
-      // below still applies, as everywhere in training.)
-      a = tasks_clamp_omega(a + pair_offset(L, greedy_imitated), L->omega_max);
-      source = B21R_EXPERIENCE_T_SOURCE_EXPLORATION;
-    }
     if (!evaluating && explore_offset(L, L->cfg.explore_sigma_radps, &offset)) {
       a += offset;
       source = B21R_EXPERIENCE_T_SOURCE_EXPLORATION;
@@ -736,12 +393,6 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
   } else {
     a = 0.0;  // nothing known: hold course (evaluations measure the learned policy alone)
     source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
-  }
-  // The safety filter is the corridor's: the obstacle task has none (its pairs run in the
-  // emulator only, fw_config_validate_program; the vet of the shift covers its evaluations).
-  if (!evaluating && L->pair_member >= 0 && L->cfg.pair_safety && fw_run_is_corridor(L)) {
-    pair_vet(L, own_known, own_action, own_source, &a, &source);  // every command of a pair run
-    pair_keep_model(L);
   }
   *w_cmd = a;
   *v_cmd = tasks_episode_speed_mps(&L->ep);

@@ -10,17 +10,12 @@
 // The robot is the in-process fake (lockstep); its simulation time is excluded. The store is
 // pre-filled through a checkpoint of synthetic samples spread over the corridor's state space,
 // then the learned policy drives with learning on (phase two), as on the robot.
-// Last, the cost of pair_safety's recovery rollout (tasks/recovery.h; a pair-run tick makes at most
-// three) against the median tick at 20k samples measured above.
-// Arguments: `--set key=value` (repeatable) measures another setting, e.g. a larger hedger_k_max
-// or pair_runs=false (the tick without the pair runs' safety filter, which the default
-// pair_runs = auto runs here: the harness's corridor is the emulator's).
+// Arguments: `--set key=value` (repeatable) measures another setting, e.g. a larger hedger_k_max.
 #define _POSIX_C_SOURCE 200809L
 #include "fw/checkpoint.h"
 #include "loop_harness.h"
 
 #include <hedger/hedger.h>
-#include <tasks/recovery.h>
 
 #include <math.h>
 #include <stdio.h>
@@ -118,7 +113,6 @@ int main(int argc, char** argv) {
   printf("%8s %8s %8s %8s %8s %12s %10s %10s\n", "samples", "p50_us", "p99_us", "max_us", "mean_us", "run_end_max",
          "run_ends", "store_end");
   int status = 0;
-  int64_t p50_at_20k_us = 0;
   for (size_t k = 0; k < sizeof sizes / sizeof sizes[0]; ++k) {
     fw_config_t c = base;
     c.phase_one_runs = 0;
@@ -188,9 +182,6 @@ int main(int argc, char** argv) {
               st.store_fill, run_ends);
       status = 1;
     }
-    if (sizes[k] == 20000) {
-      p50_at_20k_us = t_us[ticks / 2];
-    }
     if (sizes[k] == 20000 && t_us[ticks - 1] >= target_us) {
       fprintf(stderr, "bench: FAIL: the longest tick at 20000 samples took %lld us (target < %lld us)\n",
               (long long)t_us[ticks - 1], (long long)target_us);
@@ -200,31 +191,6 @@ int main(int argc, char** argv) {
     unlink(c.checkpoint_file);
   }
   rmdir(dir);
-  // The rollout over a spread of poses and commands, as the filter meets them.
-  tasks_corridor_spec_t spec;
-  tasks_corridor_spec_default(&spec);
-  tasks_command_limits_t lim;
-  tasks_command_limits_default(&lim);
-  const int calls = 200000;
-  double sink = 0.0;
-  const int64_t r0 = cpu_ns();
-  for (int i = 0; i < calls; ++i) {
-    features_corridor_t f;
-    memset(&f, 0, sizeof f);
-    f.valid = 1;
-    f.end_distance_m = 8.0 - 0.001 * (i % 5000);
-    f.offset_m = 0.1 * (double)(i % 13 - 6);
-    f.heading_rad = 0.15 * (double)(i % 11 - 5);
-    f.lateral_frac = 0.5 - f.offset_m / spec.width_m;
-    f.target_angle_rad = -f.heading_rad - atan2(f.offset_m, spec.lookahead_m);
-    sink += tasks_corridor_recovery_clearance_m(&spec, &lim, spec.dt_s, &f, 0.5, 0.1 * (double)(i % 7 - 3),
-                                                0.25 * (double)(i % 9 - 4), base.pair_safety_horizon_s);
-  }
-  const double rollout_us = (double)(cpu_ns() - r0) / 1000.0 / calls;
-  printf("pair_safety rollout (horizon %.1f s): %.2f us per call, at most 3 per tick = %.1f %% of the median tick at "
-         "20000 samples (%lld us) [checksum %.3f]\n",
-         base.pair_safety_horizon_s, rollout_us, p50_at_20k_us > 0 ? 300.0 * rollout_us / (double)p50_at_20k_us : 0.0,
-         (long long)p50_at_20k_us, sink);
   printf("(one tick = read inputs, features, safety, HEDGER update with the greedy search at s', the\n"
          " action, clamp, command encoding, experience/pose/status into the queue; 10 Hz budget 100000 us)\n");
   return status;

@@ -135,10 +135,8 @@ static long decode_all(const char* path, exp_rec_t* out, long cap) {
   return n;
 }
 
-// The reference: the controller's learning calls on decoded experiences, nothing else. With
-// pair_runs the learner tags each training run's points (fw_pair_run_tag, as the controller and
-// the trainer do); an experience log has no B21R_RUN records, so no run is weighted or ranked.
-static long reference(const hedger_config_t* hc, bool tag_runs, const exp_rec_t* x, long n, uint8_t** saved,
+// The reference: the controller's learning calls on decoded experiences, nothing else.
+static long reference(const hedger_config_t* hc, const exp_rec_t* x, long n, uint8_t** saved,
                       size_t* saved_n, uint64_t* updates) {
   hedger_t* h = NULL;
   if (hedger_create(&h, hc) != HEDGER_OK) {
@@ -154,9 +152,6 @@ static long reference(const hedger_config_t* hc, bool tag_runs, const exp_rec_t*
       in_run = false;
     }
     run = x[i].run_id;
-    if (starts_run && tag_runs && !x[i].evaluating) {
-      (void)hedger_set_run_tag(h, fw_pair_run_tag(x[i].run_id, hedger_run_tag(h)));
-    }
     if (x[i].evaluating) {
       continue;
     }
@@ -214,10 +209,9 @@ static int measure(fw_config_t* c, const char* dir, measured_t* m) {
   }
   uint8_t* ref_state = NULL;
   size_t ref_state_n = 0;
-  const bool tag_runs = fw_config_pair_learner(c);
   for (int r = 0; r < REPEATS; ++r) {
     const times_t t0 = now_times();
-    m->used = reference(&hc, tag_runs, x, m->experiences, r == 0 ? &ref_state : NULL, &ref_state_n, &m->ref_updates);
+    m->used = reference(&hc, x, m->experiences, r == 0 ? &ref_state : NULL, &ref_state_n, &m->ref_updates);
     keep_best(&m->ref, since(t0));
   }
   int rc = 0;
@@ -307,8 +301,8 @@ int main(void) {
     return 1;
   }
   printf("tools.train_bench: offline HEDGER training from an experience log (corridor, the controller's HEDGER\n"
-         "settings, pair learner %s; each setting records its own session; best of %d; the machine may be shared)\n",
-         fw_config_pair_learner(&c) ? "on" : "off", REPEATS);
+         "settings; each setting records its own session; best of %d; the machine may be shared)\n",
+         REPEATS);
   const bool ok_defaults = report("the controller's defaults", &c, &m_defaults, false);
   const bool ok_one_pass = report("one replay pass (hedger_replay_passes = 1)", &one_pass, &m_one_pass, true);
   printf("\n%s\n", ok_defaults && ok_one_pass ? "tools.train_bench: all checks pass" : "tools.train_bench: FAILED");

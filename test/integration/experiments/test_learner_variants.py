@@ -3,9 +3,7 @@
 """experiments.learner_variants: the learner ablation's three learners run end to end on a short
 schedule of its experiment file, and see the same data.
 - `--variant learner=hedger|lwa|tabular` each finish with a complete result that records the learner;
-- phase one is the same for every learner (the learner does not act in phase-one training runs;
-  its 6 runs end before pair_phase_one_from_run, from where phase one's pairs perturb HEDGER's
-  examples and not LWA's or the tabular learner's, which run no pairs),
+- phase one is the same for every learner (the learner does not act in phase-one training runs),
   also across the evaluation blocks inside phase one, whose learner-driven runs differ in length
   and path: each run's sensor noise starts from its run id and the emulator places the robot only
   once the learner is done, so nothing of an evaluation run carries over; equal

@@ -61,11 +61,9 @@ def main():
             return 1
         totals = r["learning"]["totals"]
         src = totals["phase_two_steps_by_source"]
-        # Phase two is the learner's (issue 10: at least 95 % of its steps greedy or exploration):
-        # the example advisor may step in only where no action is known, and the pair runs' safety
-        # filter only where it corrects a command (its recovery law's steps count as advisor; at
-        # most one per command it replaced, in lockstep).
-        own_advisor = src["advisor"] - totals["pair_safety_overrides"]
+        # Phase two is the learner's (at least 95 % of its steps greedy or exploration): the example
+        # advisor may step in only where no action is known.
+        own_advisor = src["advisor"]
         tot = sum(src.values())
         if (src["example"] + src["joystick"] > 0 or src["greedy"] + src["exploration"] < 0.95 * tot
                 or own_advisor > 0.01 * tot):

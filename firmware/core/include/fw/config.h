@@ -43,11 +43,6 @@ extern "C" {
 /// further source is cited as "an earlier setting".
 #define FW_CONFIG_MAX_SOURCES 8U
 
-/// pair_runs on the robot (reposition = operator) needs at least this safety margin [m] and
-/// rollout horizon [s] (the filter's defaults; fw_config_validate_program refuses less).
-#define FW_PAIR_SAFETY_ROBOT_MARGIN_M 0.1
-#define FW_PAIR_SAFETY_ROBOT_HORIZON_S 3.0
-
 /// Learning task (ARCHITECTURE.md, "The experiments of the paper").
 typedef enum fw_task { FW_TASK_CORRIDOR = 0, FW_TASK_OBSTACLES = 1 } fw_task_t;
 /// The task's name as the task key takes it ("corridor", "obstacles"); "unknown" for any other
@@ -95,17 +90,6 @@ typedef enum fw_eval_policy {
   FW_EVAL_OPTIMAL = 2,   ///< the hand-tuned reference controller (the paper's "optimal" line)
   FW_EVAL_HUMAN = 3,     ///< the simulated sloppy human driver (phase_one_driver = human's examples)
 } fw_eval_policy_t;
-
-/// Whether phase two's training runs (and, with pair_phase_one, phase one's example runs from
-/// pair_phase_one_from_run on) come in ranked pairs (config pair_runs; run.c).
-typedef enum fw_pair_runs {
-  FW_PAIR_RUNS_OFF = 0,   ///< "false": every phase-two training run is the learned policy's own
-  FW_PAIR_RUNS_ON = 1,    ///< "true": pairs wherever allowed (fw_config_validate and, for the obstacle task on the robot, fw_config_validate_program refuse the rest)
-  /// "auto": pairs where they were measured to help (in lockstep), both tasks in the emulator
-  /// (learner = hedger, hedger_greedy_method = state_model, reposition = emulator); elsewhere off.
-  /// See fw_config_pair_learner() and fw_config_pair_runs_active().
-  FW_PAIR_RUNS_AUTO = 2,
-} fw_pair_runs_t;
 
 /// Scheduling policy of the process (config rt_scheduler; POSIX sched_setscheduler).
 typedef enum fw_rt_scheduler {
@@ -229,33 +213,6 @@ typedef struct fw_config {
   bool advisor;                    ///< phase two: example policy acts where HEDGER knows nothing
   double example_noise_radps;      ///< phase one, example driver: std-dev of a dither segment's offset
   bool state_rotation;             ///< the state ends with the rotation the base executes [rad/s] (default)
-  /// key pair_runs, fw_pair_runs_t (AUTO = 2: never test it as a bool); read through
-  /// fw_config_pair_learner() and fw_config_pair_runs_active()
-  int32_t pair_runs_mode;
-  double pair_gain_sigma;          ///< pair_runs: std-dev of the perturbation's gain on θ (obstacles: the bent goal direction) [rad/s per rad]
-  double pair_centring_sigma;      ///< pair_runs: std-dev of its term on (lateral fraction − 0.5) [rad/s per corridor width] (obstacles: on the bend [rad/s per rad])
-  double pair_imitation_sigma;     ///< pair_runs: std-dev of its weight on the unperturbed policy's own action [1] (0 = the imitation's weight is not learned)
-  int32_t obstacle_pass_hold_steps;  ///< obstacles: states the learned policy holds course for after a near obstacle slipped out of view (fw_pass_hold_observe); 0 = never
-  double pair_obstacle_clearance_m;  ///< pair_runs, obstacles: the clearance the pair terms bend the goal direction around [m, robot centre to the obstacle's nearest return] (fw_pair_basis)
-  double pair_tau_steps;           ///< pair_runs: scale of the weights' response to the steps' difference
-  double pair_recency_runs;        ///< pair_runs: imitation fades a point stored N runs ago by e^(−N/this)
-  /// pair_runs: each ranked pair moves the learned policy's shift (fw_pair_ranker_t) by this times
-  /// tanh(d / pair_shift_tau_steps) times the pair's perturbation, toward the faster run; 0 = no
-  /// shift (the ranked runs weigh in the imitation instead)
-  double pair_shift_rate;
-  double pair_shift_tau_steps;     ///< pair_runs: steps' difference d at which the shift's step is 0.76 of the rate's
-  /// pair_runs: the rate falls as K / (K + n) after n pairs moved the shift (0 = constant)
-  double pair_shift_decay_pairs;
-  /// pair_runs: phase one's example runs (phase_one_driver = example) come in pairs too, and their
-  /// ranking moves the shift; both runs of a pair are imitated (their perturbations cancel)
-  bool pair_phase_one;
-  int32_t pair_phase_one_from_run; ///< pair_phase_one: phase one's pairs start at this training run (0-based)
-  bool pair_safety;                ///< pair_runs: a kinematic rollout vets each perturbed command
-  double pair_safety_margin_m;     ///< pair_safety: least predicted skirt-to-wall clearance [m]
-  double pair_safety_horizon_s;    ///< pair_safety: rollout length [s]
-  bool pair_shift_vet;             ///< a ranked pair's step of the shift is vetted on the kinematic model (fw/shift_vet.h)
-  int32_t pair_shift_vet_starts;   ///< pair_shift_vet: the last training runs whose first states it drives from
-  int32_t pair_shift_vet_periods_per_tick;  ///< pair_shift_vet: rollout periods per tick between runs
 
   // Output.
   char lcm_url[FW_CONFIG_STR_MAX]; ///< LCM provider URL; "" = LCM's default; "none" = off
@@ -328,25 +285,6 @@ void fw_config_origin(const fw_config_t* cfg, const char* key, char* out, size_t
 /// Writes the documentation of every key (default, allowed values, meaning) to out, in the
 /// config file format, so the output is itself a valid config file.
 void fw_config_print_reference(FILE* out);
-
-/// Whether the learner is configured for ranked pairs under cfg: pair_runs = true, or pair_runs =
-/// auto with learner = hedger and hedger_greedy_method = state_model (either task), wherever it
-/// runs. Then every training run's points carry their run tag (mode = learn, both phases) and the
-/// imitation fades old points (pair_recency_runs; in evaluations too), so a learned state behaves
-/// the same on the emulator and on the robot. Pure, O(1).
-bool fw_config_pair_learner(const fw_config_t* cfg);
-
-/// Whether phase two's training runs come in ranked pairs under cfg (callers also check mode =
-/// learn): fw_config_pair_learner, and pair_runs = true or reposition = emulator. pair_runs =
-/// auto leaves the pairs off on the robot: the pair's second run needs the first one's start pose
-/// again, and the safety filter's margin is measured in the lockstep emulator only (the obstacle
-/// task has no filter: fw_config_validate_program refuses its pairs on the robot). Pure, O(1).
-bool fw_config_pair_runs_active(const fw_config_t* cfg);
-
-/// Whether phase one's example runs come in ranked pairs too (from pair_phase_one_from_run on):
-/// fw_config_pair_runs_active, pair_phase_one and phase_one_driver = example (a person's runs are
-/// never paired). The controller plans its runs by it, b21r-train reads logs by it. Pure, O(1).
-bool fw_config_pair_phase_one_active(const fw_config_t* cfg);
 
 /// Writes the current value of every key to out in the config file format.
 void fw_config_print(const fw_config_t* cfg, FILE* out);

@@ -42,7 +42,6 @@
 #include "fw/checkpoint.h"
 #include "fw/config.h"
 #include "fw/io.h"
-#include "fw/progress.h"
 #include "fw/publisher.h"
 #include "fw/pubq.h"
 #include "fw/safety.h"
@@ -110,24 +109,8 @@ typedef struct fw_loop_stats {
   double mean_example_steps;
   int32_t last_run_steps;
   bool last_run_goal;
-  int64_t learn_ticks;           ///< ticks that did between-run learning work (replay, the shift's vet, checkpoint)
+  int64_t learn_ticks;           ///< ticks that did between-run learning work (replay, checkpoint)
   int64_t checkpoints_submitted; ///< checkpoints handed to the writer (between runs and at shutdown)
-  int32_t pairs_ranked;          ///< pair_runs: pairs ranked (into the shift, or the anchor weights)
-  fw_pair_shift_t shift;         ///< pair_runs: the learned policy's shift (fw_pair_ranker_t)
-  /// greedy searches whose anchor found every neighbour weighted 0 (HEDGER's anchor_unweighted:
-  /// with the shift, a state only phase two's runs reached; there the imitation copies shifted actions)
-  uint64_t anchor_unweighted;
-  /// pair_safety: pair-run commands the filter replaced (the perturbed policy's, or after a
-  /// veto the learned policy's with its exploration noise), by the unperturbed policy's own
-  /// command (phase two: the greedy action; phase one: the example's) or the recovery law
-  int64_t pair_safety_overrides;
-  int32_t pair_runs_vetoed;      ///< pair_safety: pair runs the filter corrected (ranked as failed)
-  int32_t pair_runs_missed;      ///< pair runs ranked as having missed the goal (vetoed included)
-  int64_t pair_safety_short;     ///< of those, where the recovery law too missed the margin
-  int64_t pair_safety_held;      ///< periods without a scan where the dead-reckoned law drove
-  int32_t shift_steps_halved;    ///< pair_shift_vet: pairs whose step of the shift was cut (to a half, a quarter or an eighth)
-  int32_t shift_steps_refused;   ///< and whose step was refused (the shift stayed)
-  int64_t shift_vet_periods;     ///< pair_shift_vet: rollout periods driven between runs (one greedy search each)
   // Deadline accounting (fw/timing.h; real time only, except the compute time).
   int32_t tick_max_ever_us;      ///< longest tick compute time since start [µs]
   int64_t tick_overruns;         ///< ticks that ended after the next scheduled start
@@ -143,100 +126,6 @@ typedef struct fw_loop_stats {
 fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_loop_outputs_t* out, char* err,
                           size_t err_cap);
 
-/// pair_runs: the ranking of pairs as their runs end, kept by the controller (run.c) and by
-/// b21r-train on a log's B21R_RUN records, so that both weigh the same runs alike and reach the
-/// same shift. The shift is part of the learned state: the learned policy is (1 + w) × HEDGER's
-/// greedy action plus a θ + b (lateral fraction − 0.5) in the corridor, a × the goal direction
-/// bent around the nearest obstacle + b × the bend among obstacles (fw_pair_policy_action,
-/// fw_pair_shift_at), w the imitation's weight (moved only where pair_imitation_sigma > 0; one
-/// loaded from a checkpoint applies either way), and
-/// checkpoints keep (a, b, w) and its pair count (fw/progress.h); b21r-train takes them from each
-/// pair record's copy.
-typedef struct fw_pair_ranker {
-  bool first_pending;    ///< a pair's first run ended and the pair is not ranked yet
-  bool first_goal;       ///< that run reached the goal (and was not corrected by the filter)
-  int32_t first_steps;   ///< its steps
-  uint32_t first_tag;    ///< its run tag
-  fw_pair_shift_t shift; ///< the learned policy's shift (fw/progress.h)
-} fw_pair_ranker_t;
-
-/// A pair run ended: examples = the pair drove the example policy (phase one, pair_phase_one),
-/// member 0 or 1 (the run of its pair), aborted (safety stop, shutdown: its pair starts again),
-/// goal = it reached the goal and the safety filter did not correct it, steps, tag, the run's
-/// tag, and (gain, centring, imitation) = the pair's perturbation (g, c, m: the first run drove
-/// with +, the second with −; m weighs the unperturbed policy's own action). Settings from cfg:
-/// pair_shift_rate, pair_shift_tau_steps, pair_tau_steps.
-/// Writes the anchor weights to apply between runs into tags[]/weights[] and returns how many:
-/// - 1 for a first or an aborted run: it weighs 0 (a perturbed run is not imitated unranked);
-///   runs of the examples weigh 1 when pair_shift_rate > 0 (they are imitated whole: their + and
-///   − perturbations cancel in the imitation, and the shift was not in their commands);
-/// - 2 when a second run ranks its pair. With pair_shift_rate > 0 both runs weigh 0 (1 for the
-///   examples) and the pair
-///   moves the shift: (a, b, w) += rate · u · (g, c, m), rate = pair_shift_rate · K / (K + n) after n
-///   pairs (K = pair_shift_decay_pairs; 0: the rate stays), u = tanh(d / pair_shift_tau_steps), d = the
-///   second run's steps minus the first's; u = +1 when only the first reached the goal, −1 when
-///   only the second did, 0 when neither did; a and b are then clamped to ±FW_PAIR_SHIFT_MAX (among
-///   obstacles b to [FW_PAIR_OBSTACLE_CENTRING_MIN, FW_PAIR_SHIFT_MAX]: the bend only widens), w
-///   to [FW_PAIR_IMITATION_MIN, FW_PAIR_IMITATION_MAX] (a non-finite step, from a damaged log
-///   record, is not taken). The step is
-///   a finite-difference estimate of the direction that shortens the runs, from two runs with the
-///   same start and the same exploration noise; the falling rate lets the shift settle where the
-///   pairs' noise alone would keep it wandering. With
-///   pair_shift_rate = 0 the shift stays and the ranking goes into the imitation instead: a run
-///   that missed the goal weighs 0 and one that reached it 2; of two that reached it, the faster
-///   weighs 2 / (1 + e^(−d / pair_tau_steps)) and the slower 2 minus that;
-/// - 0 for a second run whose first run never ended here (a log that lost its record).
-/// O(1).
-int32_t fw_pair_ranker_end(fw_pair_ranker_t* r, const fw_config_t* cfg, bool examples, int32_t member, bool aborted,
-                           bool goal, int32_t steps, uint32_t tag, double gain, double centring, double imitation,
-                           uint32_t tags[2], double weights[2]);
-
-/// The obstacle task's second pair term acts within this distance of the nearest obstacle [m]: a
-/// little beyond the reference law's avoidance range (1.25 m), so a shift can change where the
-/// robot starts to go round; farther off the first term is the goal bearing itself.
-#define FW_PAIR_OBSTACLE_RANGE_M 1.5
-
-/// The two terms of the pairs' perturbation family and of the shift at a learner state s
-/// (fw_pair_ranker_t), per task:
-/// - corridor: basis[0] = target angle s[2] [rad], basis[1] = lateral fraction s[1] − 0.5;
-/// - obstacles: basis[0] = the goal direction bent around the nearest obstacle, goal bearing
-///   s[0] + bend [rad, within ±π], basis[1] = the bend [rad]: where the obstacle (bearing s[2],
-///   distance s[3]) is nearer than FW_PAIR_OBSTACLE_RANGE_M and than the goal (distance s[1]) and
-///   the goal direction lies inside the cone of half-angle asin(obstacle_clearance_m / s[3])
-///   around it (π/2 within the clearance), the angle from the goal direction to the cone's
-///   edge on the goal's side; 0 elsewhere and for a goal exactly behind the obstacle. basis[0] is
-///   then the goal-side edge of the reference law's cone (tasks_driver_obstacles), which the law
-///   itself steers for only with the obstacle nearly dead ahead (off to one side it passes on the
-///   side of least turning): the obstacle task's target angle, as s[2] is the corridor's. A
-///   positive gain on it turns harder toward the course that keeps the clearance; a positive
-///   coefficient on the bend widens the berth, a negative one passes closer. Without a memory of
-///   the side the bend changes sign where the goal direction crosses the obstacle's bearing, and
-///   it drops to 0 at the range's edge (from 0.34 rad at most). (Until checkpoint terms revision
-///   1, fw/progress.h, basis[0] was the goal bearing itself; docs/LEARNING.md.)
-/// obstacle_clearance_m: pair_obstacle_clearance_m [m, from the robot's centre to the obstacle's
-/// nearest return; the corridor ignores it]. (It was fixed at 0.5 m until checkpoints recorded
-/// it, fw/progress.h; the obstacle experiments set 0.4 m, docs/LEARNING.md.) Pure, O(1).
-void fw_pair_basis(fw_task_t task, double obstacle_clearance_m, const double* s, double basis[2]);
-
-/// The learned policy's shift at a learner state s of the task: gain × basis[0] + centring ×
-/// basis[1] (fw_pair_basis) [rad/s], as the controller adds it to the greedy action and the vet's
-/// rollouts do (fw/shift_vet.h). Pure, O(1).
-double fw_pair_shift_at(const fw_pair_shift_t* shift, fw_task_t task, double obstacle_clearance_m, const double* s);
-
-/// The learned policy's action at a learner state s where HEDGER's greedy action is `greedy`:
-/// (1 + imitation) × greedy + fw_pair_shift_at [rad/s], not clamped (callers clamp to the action
-/// bounds), as the controller drives it and the vet's rollouts do; 0 (hold course) where `held`,
-/// the verdict of fw_pass_hold_observe at s. Pure, O(1).
-double fw_pair_policy_action(const fw_pair_shift_t* shift, fw_task_t task, double obstacle_clearance_m, const double* s,
-                             double greedy, bool held);
-
-/// pair_runs: the run tag of a training run with id run_id when the store's current tag is
-/// `current` (run.c; b21r-train uses the same rule): its id while ids run ahead of the tags, else
-/// current + 1 (saturating), so tags always increase from run to run, also where ids start again
-/// below the tags (a controller resumed from a b21r-train checkpoint, a trainer's second pass).
-/// Pure, O(1).
-uint32_t fw_pair_run_tag(int32_t run_id, uint32_t current);
-
 /// The learner's configuration the loop derives from cfg (state dimension, action bounds, input
 /// scales, capacity, ...), for offline tools that build compatible HEDGER states or read
 /// checkpoints (learner = lwa: local_model = HEDGER_LOCAL_LWA; learner = tabular uses no HEDGER,
@@ -251,8 +140,7 @@ void fw_loop_checkpoint_capacity(const fw_loop_t* loop, size_t* meta_bytes, size
 void fw_loop_attach_checkpoints(fw_loop_t* loop, fw_ckpt_writer_t* writer);
 
 /// Loads the checkpoint at cfg->checkpoint_file (if set and present): the learned state and
-/// the schedule's progress. Returns 1 (resumed; err holds a note for the operator, or is empty:
-/// an obstacle shift whose file does not record the hold past the obstacle it was learned with),
+/// the schedule's progress. Returns 1 (resumed; err holds a note for the operator, or is empty),
 /// 0 (nothing to load: fresh start), -1 (corrupt or incompatible: err says what and how to start
 /// fresh; the loop is unchanged).
 int fw_loop_load_checkpoint(fw_loop_t* loop, char* err, size_t err_cap);

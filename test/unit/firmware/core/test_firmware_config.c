@@ -387,144 +387,30 @@ static void test_config_validate_cross_key_rules(void** state) {
   assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
 }
 
-// One key each that takes a configuration outside the pairs: the corridor task, HEDGER and its
-// state-model greedy search are what pair_runs needs.
-static const char* const k_outside_pairs[2][2] = {{"learner", "tabular"}, {"hedger_greedy_method", "per_action"}};
-
-// pair_runs = auto (the default) turns the pairs on only where they were measured to help: both
-// tasks with HEDGER's state-model search in the emulator. Anywhere else it is off, silently: no
-// combination of keys is refused because of it, the robot's gates included. The learner's side
-// of it (run tags, fading) does not depend on where it runs.
-static void test_config_pair_runs_auto_only_in_the_emulator(void** state) {
+// Keys of the removed ranked pairs (and the hold past the obstacle) are refused with why and the
+// fix, in a file and on the command line alike, and change nothing; an unknown key still gets the
+// nearest-key suggestion.
+static void test_config_retired_pair_keys_refused(void** state) {
   (void)state;
   fw_config_t c;
-  char err[FW_CONFIG_ERR_MAX];
   fw_config_defaults(&c);
-  assert_int_equal(c.pair_runs_mode, FW_PAIR_RUNS_AUTO);
-  assert_int_equal(c.reposition, FW_REPOSITION_OPERATOR);
-  assert_false(fw_config_pair_runs_active(&c));  // the robot: no pair runs ...
-  assert_true(fw_config_pair_learner(&c));        // ... but the learner is the emulator's
-  // So no robot gate of the pairs applies, however thin the (unused) filter's settings.
-  assert_int_equal(fw_config_set(&c, "pair_safety", "false", "robot.conf:4", err, sizeof err), 0);
-  assert_int_equal(fw_config_set(&c, "pair_safety_margin_m", "0.05", "robot.conf:5", err, sizeof err), 0);
-  assert_int_equal(fw_config_set(&c, "pair_safety_horizon_s", "1", "robot.conf:6", err, sizeof err), 0);
-  assert_int_equal(fw_config_validate_program(&c, err, sizeof err), 0);
-  assert_int_equal(fw_config_set(&c, "reposition", "emulator", "--set", err, sizeof err), 0);
-  assert_int_equal(fw_config_set(&c, "emulator_control", "/tmp/sim.sock", "--set", err, sizeof err), 0);
-  assert_true(fw_config_pair_runs_active(&c));
-  assert_int_equal(fw_config_validate_program(&c, err, sizeof err), 0);
-  for (int i = 0; i < 2; ++i) {
-    fw_config_t d = c;
-    assert_int_equal(fw_config_set(&d, k_outside_pairs[i][0], k_outside_pairs[i][1], "--set", err, sizeof err), 0);
-    assert_false(fw_config_pair_runs_active(&d));
-    assert_false(fw_config_pair_learner(&d));
-    assert_int_equal(fw_config_validate(&d, err, sizeof err), 0);
-  }
-  // The obstacle task pairs in the emulator too; on the robot auto leaves it off, silently.
-  fw_config_t obstacles = c;
-  assert_int_equal(fw_config_set(&obstacles, "task", "obstacles", "--set", err, sizeof err), 0);
-  assert_true(fw_config_pair_runs_active(&obstacles));
-  assert_int_equal(fw_config_validate_program(&obstacles, err, sizeof err), 0);
-  assert_int_equal(fw_config_set(&obstacles, "reposition", "operator", "--set", err, sizeof err), 0);
-  assert_false(fw_config_pair_runs_active(&obstacles));
-  assert_true(fw_config_pair_learner(&obstacles));
-  assert_int_equal(fw_config_validate_program(&obstacles, err, sizeof err), 0);
-  fw_config_t off = c;
-  assert_int_equal(fw_config_set(&off, "pair_runs", "false", "--set", err, sizeof err), 0);
-  assert_false(fw_config_pair_runs_active(&off));
-  assert_false(fw_config_pair_learner(&off));
-  assert_int_equal(fw_config_set(&off, "pair_runs", "yes", "--set", err, sizeof err), -1);
-  assert_non_null(strstr(err, "pair_runs"));
-  assert_non_null(strstr(err, "auto"));
-}
-
-// pair_runs = true needs HEDGER and the state-model greedy search (the pairs steer that search's
-// policy): each other combination is refused naming pair_runs, where it was set, and the key in
-// the way. The obstacle task pairs only in the emulator: it has no safety filter for the
-// perturbed runs, so on the robot pair_runs = true is refused, naming the task and reposition.
-static void test_config_pair_runs_needs_hedger_state_model(void** state) {
-  (void)state;
-  fw_config_t c;
+  const fw_config_t before = c;
   char err[FW_CONFIG_ERR_MAX];
-  fw_config_defaults(&c);
-  assert_int_equal(fw_config_set(&c, "pair_runs", "true", "robot.conf:3", err, sizeof err), 0);
-  assert_true(fw_config_pair_runs_active(&c));
-  assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
-  fw_config_t obstacles = c;
-  assert_int_equal(fw_config_set(&obstacles, "task", "obstacles", "robot.conf:7", err, sizeof err), 0);
-  assert_int_equal(fw_config_validate(&obstacles, err, sizeof err), 0);
-  assert_int_equal(fw_config_validate_program(&obstacles, err, sizeof err), -1);
-  assert_non_null(strstr(err, "robot.conf:3: pair_runs with task = obstacles (set at robot.conf:7)"));
-  assert_non_null(strstr(err, "reposition = emulator"));
-  assert_non_null(strstr(err, "set pair_runs = auto"));
-  assert_int_equal(fw_config_set(&obstacles, "reposition", "emulator", "--set", err, sizeof err), 0);
-  assert_int_equal(fw_config_set(&obstacles, "emulator_control", "/tmp/sim.sock", "--set", err, sizeof err), 0);
-  assert_int_equal(fw_config_validate_program(&obstacles, err, sizeof err), 0);
-  for (int i = 0; i < 2; ++i) {
-    fw_config_t d = c;
-    assert_int_equal(fw_config_set(&d, k_outside_pairs[i][0], k_outside_pairs[i][1], "robot.conf:9", err, sizeof err),
-                     0);
-    assert_int_equal(fw_config_validate(&d, err, sizeof err), -1);
-    assert_non_null(strstr(err, "robot.conf:3: pair_runs needs"));
-    assert_non_null(strstr(err, "set at robot.conf:9"));
-    assert_non_null(strstr(err, "set pair_runs = auto"));
+  const char* const retired[] = {"pair_runs", "pair_shift_rate", "pair_safety", "pair_shift_vet",
+                                 "obstacle_pass_hold_steps", "pair_phase_one_from_run"};
+  for (size_t i = 0; i < sizeof retired / sizeof retired[0]; ++i) {
+    assert_int_equal(fw_config_set(&c, retired[i], "true", "robot.conf:3", err, sizeof err), -1);
+    assert_non_null(strstr(err, "robot.conf:3: key '"));
+    assert_non_null(strstr(err, retired[i]));
+    assert_non_null(strstr(err, "no longer exists"));
+    assert_non_null(strstr(err, "delete the line"));
+    assert_false(fw_config_has_key(retired[i]));
   }
-  // Out-of-range settings are refused by the key's own range.
-  assert_int_equal(fw_config_set(&c, "pair_tau_steps", "0", "--set", err, sizeof err), -1);
-  assert_non_null(strstr(err, "pair_tau_steps"));
-  assert_int_equal(fw_config_set(&c, "pair_recency_runs", "-1", "--set", err, sizeof err), -1);
-  assert_int_equal(fw_config_set(&c, "pair_shift_rate", "-0.5", "--set", err, sizeof err), -1);
-  assert_non_null(strstr(err, "pair_shift_rate"));
-  assert_int_equal(fw_config_set(&c, "pair_shift_rate", "4.5", "--set", err, sizeof err), -1);
-  assert_int_equal(fw_config_set(&c, "pair_shift_tau_steps", "0", "--set", err, sizeof err), -1);
-  assert_non_null(strstr(err, "pair_shift_tau_steps"));
-  assert_int_equal(fw_config_set(&c, "pair_shift_rate", "0", "--set", err, sizeof err), 0);  // the imitation weights
-  assert_true(c.pair_shift_rate == 0.0);
-  assert_int_equal(fw_config_set(&c, "pair_gain_sigma", "0.1", "--set", err, sizeof err), 0);
-  assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
-  // Phase one's pairs: on by default from the 11th example run, with the vet of the shift's steps
-  // (20 starts, 16 periods per tick); a negative first run and a ring beyond its capacity are
-  // refused.
-  assert_true(c.pair_phase_one && c.pair_phase_one_from_run == 10);
-  assert_true(c.pair_shift_vet && c.pair_shift_vet_starts == 20 && c.pair_shift_vet_periods_per_tick == 16);
-  assert_int_equal(fw_config_set(&c, "pair_phase_one_from_run", "-1", "--set", err, sizeof err), -1);
-  assert_non_null(strstr(err, "pair_phase_one_from_run"));
-  assert_int_equal(fw_config_set(&c, "pair_phase_one_from_run", "0", "--set", err, sizeof err), 0);
-  assert_int_equal(fw_config_set(&c, "pair_phase_one", "false", "--set", err, sizeof err), 0);
-  assert_true(!c.pair_phase_one && c.pair_phase_one_from_run == 0);
-  assert_int_equal(fw_config_set(&c, "pair_shift_vet_starts", "33", "--set", err, sizeof err), -1);
-  assert_non_null(strstr(err, "pair_shift_vet_starts"));
-  assert_int_equal(fw_config_set(&c, "pair_shift_vet_periods_per_tick", "0", "--set", err, sizeof err), -1);
-  assert_int_equal(fw_config_set(&c, "pair_shift_vet", "false", "--set", err, sizeof err), 0);
-  assert_false(c.pair_shift_vet);
-  assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
-  assert_int_equal(fw_config_set(&c, "pair_safety_margin_m", "-0.1", "--set", err, sizeof err), -1);
-  assert_non_null(strstr(err, "pair_safety_margin_m"));
-  assert_int_equal(fw_config_set(&c, "pair_safety_horizon_s", "0", "--set", err, sizeof err), -1);
-  assert_non_null(strstr(err, "pair_safety_horizon_s"));
-  // With its safety filter (the default) the program runs it on the robot (reposition = operator);
-  // without, against the emulator only: unvetted perturbed runs hit walls.
-  assert_true(c.pair_safety);
-  assert_int_equal(fw_config_validate_program(&c, err, sizeof err), 0);
-  // ... but not with a thinner margin or a shorter rollout than the measured defaults.
-  fw_config_t thin = c;
-  assert_int_equal(fw_config_set(&thin, "pair_safety_margin_m", "0.05", "robot.conf:5", err, sizeof err), 0);
-  assert_int_equal(fw_config_validate(&thin, err, sizeof err), 0);
-  assert_int_equal(fw_config_validate_program(&thin, err, sizeof err), -1);
-  assert_non_null(strstr(err, "robot.conf:3: pair_runs on the robot"));
-  assert_non_null(strstr(err, "pair_safety_margin_m >= 0.10 (set at robot.conf:5)"));
-  fw_config_t short_horizon = c;
-  assert_int_equal(fw_config_set(&short_horizon, "pair_safety_horizon_s", "2", "robot.conf:6", err, sizeof err), 0);
-  assert_int_equal(fw_config_validate_program(&short_horizon, err, sizeof err), -1);
-  assert_non_null(strstr(err, "pair_safety_horizon_s >= 3.0 (set at robot.conf:6)"));
-  assert_int_equal(fw_config_set(&c, "pair_safety", "false", "robot.conf:4", err, sizeof err), 0);
-  assert_int_equal(fw_config_validate_program(&c, err, sizeof err), -1);
-  assert_non_null(strstr(err, "robot.conf:3: pair_runs without its safety filter is for the emulator only"));
-  assert_non_null(strstr(err, "pair_safety = false set at robot.conf:4"));
-  assert_non_null(strstr(err, "set pair_safety = true on the robot"));
-  assert_int_equal(fw_config_set(&c, "reposition", "emulator", "--set", err, sizeof err), 0);
-  assert_int_equal(fw_config_set(&c, "emulator_control", "/tmp/sim.sock", "--set", err, sizeof err), 0);
-  assert_int_equal(fw_config_validate_program(&c, err, sizeof err), 0);
+  assert_int_equal(fw_config_set_arg(&c, "pair_runs=false", err, sizeof err), -1);
+  assert_non_null(strstr(err, "--set: key 'pair_runs' no longer exists"));
+  assert_memory_equal(&c, &before, offsetof(fw_config_t, origins));
+  assert_int_equal(fw_config_set(&c, "pair_rnus", "true", "--set", err, sizeof err), -1);
+  assert_non_null(strstr(err, "unknown key 'pair_rnus'"));
 }
 
 // The program refuses joystick driving where no operator can drive: in lockstep, and with LCM
@@ -791,8 +677,7 @@ int main(int argc, char** argv) {
       cmocka_unit_test(test_config_reference_file_matches_defaults),
       cmocka_unit_test(test_config_extra_keys_go_to_the_handler),
       cmocka_unit_test(test_config_set_allocates_nothing),
-      cmocka_unit_test(test_config_pair_runs_auto_only_in_the_emulator),
-      cmocka_unit_test(test_config_pair_runs_needs_hedger_state_model),
+      cmocka_unit_test(test_config_retired_pair_keys_refused),
       cmocka_unit_test(test_config_program_refuses_joystick_without_operator),
       cmocka_unit_test(test_config_learner_key),
       cmocka_unit_test(test_config_task_name),
