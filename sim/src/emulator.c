@@ -7,7 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <tasks/rng.h>
+#include <rng/rng.h>
 
 struct sim_emu {
   sim_emu_config_t cfg;
@@ -23,7 +23,7 @@ struct sim_emu {
   double corrupt_fraction;
   double latency_s;
   int forced_panel;  // -1 = none
-  tasks_rng_t corrupt_rng;
+  rng_t corrupt_rng;
   // Trace.
   sim_trace_point_t* trace;
   size_t trace_len;
@@ -75,9 +75,9 @@ sim_emu_t* sim_emu_create(const sim_world_t* world, const sim_emu_config_t* cfg)
   uint64_t sm = cfg->seed;
   const bool paced = cfg->mode == SIM_MODE_REALTIME;
   e->cfg.laser.paced = paced;
-  e->cfg.laser.seed = tasks_rng_splitmix64(&sm);
+  e->cfg.laser.seed = rng_splitmix64(&sm);
   e->cfg.rflex.paced = paced;
-  tasks_rng_seed(&e->corrupt_rng, tasks_rng_splitmix64(&sm));
+  rng_seed(&e->corrupt_rng, rng_splitmix64(&sm));
   e->plant = sim_plant_create(world, &e->cfg.plant);
   e->laser = sim_lms_create(&e->cfg.laser, &laser_scan, e);
   if (cfg->base == SIM_BASE_RFLEX) {
@@ -343,8 +343,8 @@ static void corrupt(sim_emu_t* e, uint8_t* bytes, size_t n) {
     return;
   }
   for (size_t i = 0; i < n; ++i) {
-    if (tasks_rng_uniform(&e->corrupt_rng) < e->corrupt_fraction) {
-      bytes[i] ^= (uint8_t)(1U + tasks_rng_below(&e->corrupt_rng, 255U));
+    if (rng_uniform(&e->corrupt_rng) < e->corrupt_fraction) {
+      bytes[i] ^= (uint8_t)(1U + rng_below(&e->corrupt_rng, 255U));
     }
   }
 }
@@ -422,7 +422,7 @@ void sim_emu_reset(sim_emu_t* e, double x_m, double y_m, double theta_rad) {
 
 void sim_emu_reset_run(sim_emu_t* e, double x_m, double y_m, double theta_rad, uint64_t run_stream) {
   uint64_t st = e->cfg.laser.seed ^ (run_stream * 0x9E3779B97F4A7C15ULL + 0xD1B54A32D192ED03ULL);
-  sim_lms_reseed(e->laser, tasks_rng_splitmix64(&st));
+  sim_lms_reseed(e->laser, rng_splitmix64(&st));
   sim_emu_reset(e, x_m, y_m, theta_rad);
 }
 

@@ -10,7 +10,7 @@
 
 #include <proto/lms200.h>
 #include <proto/rflex.h>
-#include <tasks/rng.h>
+#include <rng/rng.h>
 
 #include "sim/emulator.h"
 #include "sim/kinematic.h"
@@ -27,7 +27,7 @@ struct sim_env {
   sim_env_config_t cfg;
   sim_world_t world;
   tasks_episode_t ep;
-  tasks_rng_t start_rng;
+  rng_t start_rng;
   uint64_t seed;
   double dt_s;                 // control period
   // Episode.
@@ -262,7 +262,7 @@ sim_env_status_t sim_env_seed(sim_env_t* env, uint64_t seed) {
   }
   env->seed = seed;
   uint64_t st = seed;
-  tasks_rng_seed(&env->start_rng, tasks_rng_splitmix64(&st));
+  rng_seed(&env->start_rng, rng_splitmix64(&st));
   memset(&env->ep.start_cycle, 0, sizeof env->ep.start_cycle);  // training starts: a new cycle
   env->fresh = true;
   env->episodes = 0;

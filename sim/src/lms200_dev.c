@@ -6,7 +6,7 @@
 #include <proto/lms200.h>
 #include <stdlib.h>
 #include <string.h>
-#include <tasks/rng.h>
+#include <rng/rng.h>
 
 #include "byteq.h"
 
@@ -20,7 +20,7 @@ struct sim_lms {
   void* user;
   lms_decoder_t dec;
   sim_byteq_t out;
-  tasks_rng_t rng;
+  rng_t rng;
   uint32_t baud;
   uint16_t width_deg;
   uint16_t res_cdeg;
@@ -75,14 +75,14 @@ sim_lms_t* sim_lms_create(const sim_lms_config_t* cfg, sim_lms_scan_fn scan_fn, 
   d->user = user;
   (void)lms_decoder_init(&d->dec, LMS_ROLE_DEVICE, 0);
   sim_byteq_init(&d->out);
-  tasks_rng_seed(&d->rng, cfg->seed);
+  rng_seed(&d->rng, cfg->seed);
   power_up(d);
   return d;
 }
 
 void sim_lms_destroy(sim_lms_t* d) { free(d); }
 
-void sim_lms_reseed(sim_lms_t* d, uint64_t seed) { tasks_rng_seed(&d->rng, seed); }
+void sim_lms_reseed(sim_lms_t* d, uint64_t seed) { rng_seed(&d->rng, seed); }
 
 static void queue(sim_lms_t* d, const uint8_t* bytes, size_t n, double t_s) {
   if (n == 0) {
@@ -118,8 +118,8 @@ size_t sim_lms_beams(const sim_lms_t* d, double* angle_min_rad, double* incremen
 
 static uint16_t range_to_raw(sim_lms_t* d, double range_m) {
   const unsigned bits = 13;
-  if (d->cfg.error_code_prob > 0.0 && tasks_rng_uniform(&d->rng) < d->cfg.error_code_prob) {
-    return lms_beam_status_raw(tasks_rng_uniform(&d->rng) < 0.5 ? LMS_BEAM_DAZZLED
+  if (d->cfg.error_code_prob > 0.0 && rng_uniform(&d->rng) < d->cfg.error_code_prob) {
+    return lms_beam_status_raw(rng_uniform(&d->rng) < 0.5 ? LMS_BEAM_DAZZLED
                                                                 : LMS_BEAM_SNR_LOW,
                                bits);
   }
@@ -128,7 +128,7 @@ static uint16_t range_to_raw(sim_lms_t* d, double range_m) {
   }
   double r = range_m;
   if (d->cfg.noise_sigma_m > 0.0) {
-    r += d->cfg.noise_sigma_m * tasks_rng_normal(&d->rng);
+    r += d->cfg.noise_sigma_m * rng_normal(&d->rng);
   }
   if (r < 0.0) {
     r = 0.0;

@@ -18,7 +18,7 @@
 #include "inproc_sim.h"
 
 #include <hedger/hedger.h>
-#include <tasks/rng.h>
+#include <rng/rng.h>
 
 #include <math.h>
 #include <stdio.h>
@@ -62,7 +62,7 @@ static double clamp1(double x) { return x < -1.0 ? -1.0 : (x > 1.0 ? 1.0 : x); }
 
 // The next joystick command from the newest state: a proportional law plus noise, with bursts of
 // large random commands (they exercise the controller's acceleration clamp).
-static double policy(int task, const double* s, tasks_rng_t* rng) {
+static double policy(int task, const double* s, rng_t* rng) {
   double a;
   if (task == 0) {
     a = 1.2 * s[2];  // target angle
@@ -72,10 +72,10 @@ static double policy(int task, const double* s, tasks_rng_t* rng) {
       a = s[2] > 0.0 ? -1.0 : 1.0;
     }
   }
-  if (tasks_rng_uniform(rng) < 0.1) {
-    return clamp1(tasks_rng_uniform_range(rng, -1.0, 1.0));
+  if (rng_uniform(rng) < 0.1) {
+    return clamp1(rng_uniform_range(rng, -1.0, 1.0));
   }
-  return clamp1(a + 0.3 * tasks_rng_normal(rng));
+  return clamp1(a + 0.3 * rng_normal(rng));
 }
 
 static void print_vec(FILE* f, const double* v, int n) {
@@ -147,8 +147,8 @@ int main(int argc, char** argv) {
   }
   fw_loop_attach_checkpoints(loop, ckpt);
 
-  tasks_rng_t rng;
-  tasks_rng_seed(&rng, seed ^ 0x5DEECE66DULL);
+  rng_t rng;
+  rng_seed(&rng, seed ^ 0x5DEECE66DULL);
   double next = 0.0;
   int64_t tick = 0;
   int finished = 0;

@@ -26,7 +26,7 @@ typedef struct explore_run {
 
 static uint64_t run_seed(uint64_t seed, int32_t run) {
   uint64_t st = seed ^ ((uint64_t)(uint32_t)run * 0x9E3779B97F4A7C15ULL);
-  return tasks_rng_splitmix64(&st);
+  return rng_splitmix64(&st);
 }
 
 // Fig. 6: from the centre line at start_x, heading uniform in the half-circle towards the goal,
@@ -51,21 +51,21 @@ static explore_run_t corridor_run(const exp_settings_t* s, const fw_config_t* cf
     lim.accel_rot_radps2 = 0.0;
   }
   const double half = 0.5 * spec.width_m - spec.robot_radius_m;
-  tasks_rng_t rng;
-  tasks_rng_seed(&rng, seed);
+  rng_t rng;
+  rng_seed(&rng, seed);
   explore_run_t r = {false, 0.0, 0};
   const int64_t max_steps = (int64_t)ceil(s->explore_time_limit_s / dt);
   int64_t t = 0;
   while (t < max_steps) {
     r.episodes++;
     sim_kin_state_t k;
-    sim_kin_reset(&k, s->explore_start_x_m, 0.0, tasks_rng_uniform_range(&rng, -0.5 * k_pi, 0.5 * k_pi));
+    sim_kin_reset(&k, s->explore_start_x_m, 0.0, rng_uniform_range(&rng, -0.5 * k_pi, 0.5 * k_pi));
     features_corridor_t f;
     features_pose_t pose = {k.x_m, k.y_m, k.theta_rad};
     (void)features_corridor_from_pose(&fc, pose, &f);
     for (uint32_t steps = 1; t < max_steps; ++steps) {
       const double v = tasks_corridor_speed_mps(&spec, &f);
-      const double w = tasks_rng_uniform_range(&rng, -spec.omega_max_radps, spec.omega_max_radps);
+      const double w = rng_uniform_range(&rng, -spec.omega_max_radps, spec.omega_max_radps);
       sim_kin_step(&k, &lim, v, w, dt);
       ++t;
       pose = (features_pose_t){k.x_m, k.y_m, k.theta_rad};
@@ -101,8 +101,8 @@ static explore_run_t goal_run(const exp_settings_t* s, double dt, uint64_t seed)
     lim.accel_rot_radps2 = 0.0;
   }
   const double sd = sqrt(s->explore_omega_variance);
-  tasks_rng_t rng;
-  tasks_rng_seed(&rng, seed);
+  rng_t rng;
+  rng_seed(&rng, seed);
   sim_kin_state_t k;
   sim_kin_reset(&k, spec.goal_x_m - s->explore_start_distance_m, spec.goal_y_m, 0.0);
   features_obstacles_t f;
@@ -111,7 +111,7 @@ static explore_run_t goal_run(const exp_settings_t* s, double dt, uint64_t seed)
   const int64_t max_steps = (int64_t)ceil(s->explore_time_limit_s / dt);
   explore_run_t r = {false, 0.0, 1};
   for (int64_t t = 1; t <= max_steps; ++t) {
-    sim_kin_step(&k, &lim, spec.v_mps, sd * tasks_rng_normal(&rng), dt);
+    sim_kin_step(&k, &lim, spec.v_mps, sd * rng_normal(&rng), dt);
     f.goal_distance_m = hypot(k.x_m - spec.goal_x_m, k.y_m - spec.goal_y_m);
     if (tasks_obstacles_outcome(&spec, &f, 0, 0).reason == TASKS_END_GOAL) {
       r.success = true;

@@ -72,10 +72,10 @@ typedef struct seeds {
 static seeds_t derive_seeds(uint64_t root) {
   seeds_t s;
   uint64_t st = root;
-  s.pose = tasks_rng_splitmix64(&st);
-  s.explore = tasks_rng_splitmix64(&st);
-  s.hedger = tasks_rng_splitmix64(&st);
-  s.driver = tasks_rng_splitmix64(&st);
+  s.pose = rng_splitmix64(&st);
+  s.explore = rng_splitmix64(&st);
+  s.hedger = rng_splitmix64(&st);
+  s.driver = rng_splitmix64(&st);
   return s;
 }
 
@@ -114,8 +114,8 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
   }
   setup_task(L);
   const seeds_t seeds = derive_seeds(cfg->seed);
-  tasks_rng_seed(&L->pose_rng, seeds.pose);
-  tasks_rng_seed(&L->explore_rng, seeds.explore);
+  rng_seed(&L->pose_rng, seeds.pose);
+  rng_seed(&L->explore_rng, seeds.explore);
   L->driver_seed_base = seeds.driver;
 
   if (fw_learner_init(L, seeds.hedger, err, err_cap) != 0) {

@@ -221,8 +221,8 @@ struct fw_loop {
   fw_schedule_t sched;
 
   // Random streams.
-  tasks_rng_t pose_rng;
-  tasks_rng_t explore_rng;
+  rng_t pose_rng;
+  rng_t explore_rng;
   uint64_t driver_seed_base;
   tasks_driver_t driver;
   tasks_start_cycle_t start_cycle;

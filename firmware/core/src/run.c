@@ -83,7 +83,7 @@ static void begin_run(fw_loop_t* L) {
   // The driver of this run: the example policy in phase one, the advisor in phase two, or the
   // evaluated reference. Its stream is seeded per run, so a run does not depend on earlier ones.
   uint64_t st = L->driver_seed_base ^ ((uint64_t)(uint32_t)L->run_id * 0x9E3779B97F4A7C15ULL);
-  const uint64_t run_seed = tasks_rng_splitmix64(&st);
+  const uint64_t run_seed = rng_splitmix64(&st);
   tasks_driver_kind_t kind = TASKS_DRIVER_PROPORTIONAL;
   if (L->cfg.mode == FW_MODE_EVALUATE && L->cfg.evaluate_policy == FW_EVAL_OPTIMAL) {
     kind = TASKS_DRIVER_OPTIMAL;
@@ -295,12 +295,12 @@ void fw_run_request_pose_while_stopped(fw_loop_t* L) {
 // (with the offset) while a segment is running.
 static bool explore_offset(fw_loop_t* L, double sigma, double* offset) {
   if (L->explore_steps_left == 0) {
-    if (sigma <= 0.0 || !(tasks_rng_uniform(&L->explore_rng) < L->cfg.explore_probability)) {
+    if (sigma <= 0.0 || !(rng_uniform(&L->explore_rng) < L->cfg.explore_probability)) {
       return false;
     }
     const int64_t hold = (int64_t)floor(L->cfg.explore_hold_s / L->dt_s + 0.5);
     L->explore_steps_left = hold > 1 ? (int32_t)hold : 1;
-    L->explore_offset = sigma * tasks_rng_normal(&L->explore_rng);
+    L->explore_offset = sigma * rng_normal(&L->explore_rng);
   }
   L->explore_steps_left--;
   *offset = L->explore_offset;

@@ -31,12 +31,12 @@ void tasks_driver_begin_run(tasks_driver_t* d, tasks_driver_kind_t kind, tasks_t
   d->task = (uint8_t)(task == TASKS_TASK_OBSTACLES ? task : TASKS_TASK_CORRIDOR);
   d->omega_max_radps =
       (isfinite(omega_max_radps) && omega_max_radps > 0.0) ? omega_max_radps : 1.0;
-  tasks_rng_seed(&d->rng, run_seed);
+  rng_seed(&d->rng, run_seed);
   const int corridor = d->task == (uint8_t)TASKS_TASK_CORRIDOR;
   // The gain is drawn first for every kind, so that the streams of the kinds stay comparable.
-  d->gain = corridor ? tasks_rng_uniform_range(&d->rng, TASKS_PROPORTIONAL_CORRIDOR_GAIN_MIN,
+  d->gain = corridor ? rng_uniform_range(&d->rng, TASKS_PROPORTIONAL_CORRIDOR_GAIN_MIN,
                                                TASKS_PROPORTIONAL_CORRIDOR_GAIN_MAX)
-                     : tasks_rng_uniform_range(&d->rng, TASKS_PROPORTIONAL_OBSTACLES_GAIN_MIN,
+                     : rng_uniform_range(&d->rng, TASKS_PROPORTIONAL_OBSTACLES_GAIN_MIN,
                                                TASKS_PROPORTIONAL_OBSTACLES_GAIN_MAX);
   if (corridor) {
     d->law[0] = OPTIMAL_CORRIDOR_GAIN;
@@ -54,20 +54,20 @@ void tasks_driver_begin_run(tasks_driver_t* d, tasks_driver_kind_t kind, tasks_t
     // A person's temperament for this run: a heavy hand (gain well above what is needed), a
     // reaction delay of 0.3..0.8 s, a dead band before anything is done, a noisy hand and slow
     // drift, and now and then a lapse of attention.
-    d->gain = tasks_rng_uniform_range(&d->rng, 1.5, 3.5);
-    d->delay_steps = 3U + tasks_rng_below(&d->rng, 6U);
-    d->deadband_rad = tasks_rng_uniform_range(&d->rng, 0.15, 0.4);
-    d->release_rad = tasks_rng_uniform_range(&d->rng, 0.02, 0.08);
-    d->noise_radps = tasks_rng_uniform_range(&d->rng, 0.05, 0.2);
-    d->drift_radps = tasks_rng_uniform_range(&d->rng, 0.1, 0.35);
-    d->lapse_prob = tasks_rng_uniform_range(&d->rng, 0.01, 0.05);
-    d->pref_offset_m = tasks_rng_uniform_range(&d->rng, -0.35, 0.35);
-    d->pref_lookahead_m = tasks_rng_uniform_range(&d->rng, 1.0, 3.0);
-    d->side_pref = (int8_t)(tasks_rng_uniform(&d->rng) < 0.3 ? -1 : 1);
+    d->gain = rng_uniform_range(&d->rng, 1.5, 3.5);
+    d->delay_steps = 3U + rng_below(&d->rng, 6U);
+    d->deadband_rad = rng_uniform_range(&d->rng, 0.15, 0.4);
+    d->release_rad = rng_uniform_range(&d->rng, 0.02, 0.08);
+    d->noise_radps = rng_uniform_range(&d->rng, 0.05, 0.2);
+    d->drift_radps = rng_uniform_range(&d->rng, 0.1, 0.35);
+    d->lapse_prob = rng_uniform_range(&d->rng, 0.01, 0.05);
+    d->pref_offset_m = rng_uniform_range(&d->rng, -0.35, 0.35);
+    d->pref_lookahead_m = rng_uniform_range(&d->rng, 1.0, 3.0);
+    d->side_pref = (int8_t)(rng_uniform(&d->rng) < 0.3 ? -1 : 1);
     if (!corridor) {
       // People give obstacles a wide berth and start early.
-      d->law[1] = tasks_rng_uniform_range(&d->rng, 0.6, 1.0);
-      d->law[2] = tasks_rng_uniform_range(&d->rng, 1.5, 2.5);
+      d->law[1] = rng_uniform_range(&d->rng, 0.6, 1.0);
+      d->law[2] = rng_uniform_range(&d->rng, 1.5, 2.5);
     }
   }
 }
@@ -75,7 +75,7 @@ void tasks_driver_begin_run(tasks_driver_t* d, tasks_driver_kind_t kind, tasks_t
 // The human model. `error` is what the person is trying to null (an angle, +: turn left);
 // `danger` says a collision looks imminent, which cuts a lapse short and forces a correction.
 static double human_step(tasks_driver_t* d, double error, int danger) {
-  const double perceived = error + 0.03 * tasks_rng_normal(&d->rng);
+  const double perceived = error + 0.03 * rng_normal(&d->rng);
   d->delay_line[d->head] = perceived;
   d->head = (d->head + 1U) % TASKS_HUMAN_MAX_DELAY;
   ++d->steps;
@@ -85,10 +85,10 @@ static double human_step(tasks_driver_t* d, double error, int danger) {
   const uint32_t lag = d->steps <= delay ? d->steps - 1U : delay;
   const double e = d->delay_line[(d->head + TASKS_HUMAN_MAX_DELAY - 1U - lag) % TASKS_HUMAN_MAX_DELAY];
 
-  d->drift_state = 0.95 * d->drift_state + 0.3 * d->drift_radps * tasks_rng_normal(&d->rng);
+  d->drift_state = 0.95 * d->drift_state + 0.3 * d->drift_radps * rng_normal(&d->rng);
   d->drift_state = fmax(-d->drift_radps, fmin(d->drift_radps, d->drift_state));
-  const double u_lapse = tasks_rng_uniform(&d->rng);
-  const double hand = d->noise_radps * tasks_rng_normal(&d->rng);
+  const double u_lapse = rng_uniform(&d->rng);
+  const double hand = d->noise_radps * rng_normal(&d->rng);
   if (danger) {
     d->lapse_steps = 0U;
     d->hold_steps = 0U;
@@ -108,10 +108,10 @@ static double human_step(tasks_driver_t* d, double error, int danger) {
     // Joystick positions are coarse: a tenth of the range per notch.
     const double want = d->correcting ? k * e : 0.0;
     d->stick_radps = 0.1 * d->omega_max_radps * floor(want / (0.1 * d->omega_max_radps) + 0.5);
-    d->hold_steps = 1U + tasks_rng_below(&d->rng, 4U);
+    d->hold_steps = 1U + rng_below(&d->rng, 4U);
     // Attention wanders when things look calm, not in the middle of a hard turn.
     if (u_lapse < d->lapse_prob && !danger && fabs(d->stick_radps) < 0.5 * d->omega_max_radps) {
-      d->lapse_steps = 5U + tasks_rng_below(&d->rng, 21U);
+      d->lapse_steps = 5U + rng_below(&d->rng, 21U);
     }
   }
   // In a reflex the hand is firm: no drift.

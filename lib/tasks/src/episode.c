@@ -159,7 +159,7 @@ features_pose_t tasks_episode_eval_start(const tasks_episode_t* ep, uint32_t ind
                          : tasks_obstacles_eval_start(&ep->obstacles, index);
 }
 
-features_pose_t tasks_episode_training_start(tasks_episode_t* ep, tasks_rng_t* rng) {
+features_pose_t tasks_episode_training_start(tasks_episode_t* ep, rng_t* rng) {
   const uint32_t k = tasks_start_cycle_next(&ep->start_cycle, rng);
   return is_corridor(ep) ? tasks_corridor_training_start_near(&ep->corridor, k, rng)
                          : tasks_obstacles_training_start_near(&ep->obstacles, k, rng);

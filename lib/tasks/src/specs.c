@@ -87,15 +87,15 @@ static double jitter_norm(double dx, double dy, double dth, double jx, double jy
 // start, so the caller can apply its task's fallback. O(TASKS_START_ATTEMPTS).
 static int jittered_start(const features_pose_t eval_starts[TASKS_N_EVAL_STARTS], uint32_t index, double jx,
                           double jy, double jth, int (*is_clear)(const void* spec, features_pose_t),
-                          const void* spec, tasks_rng_t* rng, features_pose_t* out,
+                          const void* spec, rng_t* rng, features_pose_t* out,
                           features_pose_t* base_out) {
   const features_pose_t base = eval_starts[index % TASKS_N_EVAL_STARTS];
   *base_out = base;
   *out = base;
   for (int attempt = 0; attempt < TASKS_START_ATTEMPTS; ++attempt) {
-    const double dx = tasks_rng_uniform_range(rng, -jx, jx);
-    const double dy = tasks_rng_uniform_range(rng, -jy, jy);
-    const double dth = tasks_rng_uniform_range(rng, -jth, jth);
+    const double dx = rng_uniform_range(rng, -jx, jx);
+    const double dy = rng_uniform_range(rng, -jy, jy);
+    const double dth = rng_uniform_range(rng, -jth, jth);
     features_pose_t p = base;
     p.x_m = base.x_m + dx;
     p.y_m = base.y_m + dy;
@@ -117,12 +117,12 @@ static int corridor_pose_clear(const void* spec_v, features_pose_t p) {
          p.x_m <= spec->length_m - spec->goal_distance_m - 0.5;
 }
 
-features_pose_t tasks_corridor_training_start(const tasks_corridor_spec_t* spec, tasks_rng_t* rng) {
-  return tasks_corridor_training_start_near(spec, tasks_rng_below(rng, TASKS_N_EVAL_STARTS), rng);
+features_pose_t tasks_corridor_training_start(const tasks_corridor_spec_t* spec, rng_t* rng) {
+  return tasks_corridor_training_start_near(spec, rng_below(rng, TASKS_N_EVAL_STARTS), rng);
 }
 
 features_pose_t tasks_corridor_training_start_near(const tasks_corridor_spec_t* spec, uint32_t index,
-                                                   tasks_rng_t* rng) {
+                                                   rng_t* rng) {
   features_pose_t p;
   features_pose_t base;
   if (jittered_start(spec->eval_starts, index, spec->train_jitter_x_m, spec->train_jitter_y_m,
@@ -256,12 +256,12 @@ static int obstacles_pose_clear(const void* spec_v, features_pose_t p) {
 }
 
 features_pose_t tasks_obstacles_training_start(const tasks_obstacles_spec_t* spec,
-                                               tasks_rng_t* rng) {
-  return tasks_obstacles_training_start_near(spec, tasks_rng_below(rng, TASKS_N_EVAL_STARTS), rng);
+                                               rng_t* rng) {
+  return tasks_obstacles_training_start_near(spec, rng_below(rng, TASKS_N_EVAL_STARTS), rng);
 }
 
 features_pose_t tasks_obstacles_training_start_near(const tasks_obstacles_spec_t* spec, uint32_t index,
-                                                    tasks_rng_t* rng) {
+                                                    rng_t* rng) {
   features_pose_t p;
   features_pose_t base;
   if (jittered_start(spec->eval_starts, index, spec->train_jitter_x_m, spec->train_jitter_y_m,
@@ -304,14 +304,14 @@ double tasks_clamp_omega(double omega_radps, double omega_max_radps) {
   return clampd(omega_radps, -omega_max_radps, omega_max_radps);
 }
 
-uint32_t tasks_start_cycle_next(tasks_start_cycle_t* cycle, tasks_rng_t* rng) {
+uint32_t tasks_start_cycle_next(tasks_start_cycle_t* cycle, rng_t* rng) {
   if (!cycle->started || cycle->next >= TASKS_N_EVAL_STARTS) {
     // Fisher-Yates shuffle of 0..9.
     for (uint32_t i = 0U; i < TASKS_N_EVAL_STARTS; ++i) {
       cycle->order[i] = (uint8_t)i;
     }
     for (uint32_t i = TASKS_N_EVAL_STARTS - 1U; i > 0U; --i) {
-      const uint32_t j = tasks_rng_below(rng, i + 1U);
+      const uint32_t j = rng_below(rng, i + 1U);
       const uint8_t t = cycle->order[i];
       cycle->order[i] = cycle->order[j];
       cycle->order[j] = t;

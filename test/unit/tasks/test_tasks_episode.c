@@ -148,9 +148,9 @@ static void test_episode_obstacles_pose_starts_drivers(void** state) {
   assert_true(s[0] == f.goal_bearing_rad && s[1] == f.goal_distance_m && s[2] == f.obstacle[0].bearing_rad &&
               s[3] == f.obstacle[0].distance_m);
   assert_true(tasks_episode_speed_mps(&ep) == spec.v_mps);
-  tasks_rng_t a, b;
-  tasks_rng_seed(&a, 9);
-  tasks_rng_seed(&b, 9);
+  rng_t a, b;
+  rng_seed(&a, 9);
+  rng_seed(&b, 9);
   // The episode's training starts go round the evaluation poses in shuffled cycles.
   tasks_start_cycle_t cycle;
   memset(&cycle, 0, sizeof cycle);

@@ -114,9 +114,9 @@ static void test_specs_training_starts_similar_not_same(void** state) {
   tasks_corridor_spec_default(&c);
   tasks_obstacles_spec_t o;
   tasks_obstacles_spec_default(&o);
-  tasks_rng_t r1, r2;
-  tasks_rng_seed(&r1, 99U);
-  tasks_rng_seed(&r2, 99U);
+  rng_t r1, r2;
+  rng_seed(&r1, 99U);
+  rng_seed(&r2, 99U);
   for (int k = 0; k < 500; ++k) {
     const features_pose_t p = tasks_corridor_training_start(&c, &r1);
     const features_pose_t q = tasks_corridor_training_start(&c, &r2);
@@ -288,11 +288,11 @@ static void test_specs_no_allocation(void** state) {
   (void)state;
   tasks_corridor_spec_t c;
   tasks_obstacles_spec_t o;
-  tasks_rng_t r;
+  rng_t r;
   alloc_counter_begin();
   tasks_corridor_spec_default(&c);
   tasks_obstacles_spec_default(&o);
-  tasks_rng_seed(&r, 1U);
+  rng_seed(&r, 1U);
   for (int i = 0; i < 1000; ++i) {
     (void)tasks_corridor_training_start(&c, &r);
     (void)tasks_obstacles_training_start(&o, &r);

@@ -113,7 +113,7 @@ features_pose_t tasks_episode_eval_start(const tasks_episode_t* ep, uint32_t ind
 /// The next training start pose: jittered around the evaluation pose the episode's start cycle
 /// names (tasks_start_cycle_next: every pose once per ten runs, shuffled), drawn from rng
 /// (tasks_*_training_start_near). Advances the cycle. Bounded draws.
-features_pose_t tasks_episode_training_start(tasks_episode_t* ep, tasks_rng_t* rng);
+features_pose_t tasks_episode_training_start(tasks_episode_t* ep, rng_t* rng);
 
 /// The run's step limit (the spec's; 0 = none). O(1).
 uint32_t tasks_episode_step_limit(const tasks_episode_t* ep);

@@ -11,14 +11,14 @@
 ///   obstacles are vertical cylinders, the arena is bounded by four walls.
 ///
 /// Everything here is pure or works on caller-owned state; no allocation, no I/O, O(1) per call
-/// unless stated. Randomness comes only from tasks_rng_t instances seeded by the caller.
+/// unless stated. Randomness comes only from rng_t instances seeded by the caller.
 #ifndef B21R_TASKS_TASKS_H
 #define B21R_TASKS_TASKS_H
 
 #include <stdint.h>
 
 #include "features/features.h"
-#include "tasks/rng.h"
+#include "rng/rng.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -121,12 +121,12 @@ uint32_t tasks_corridor_steps_lower_bound(const tasks_corridor_spec_t* spec, fea
 /// evaluation pose itself) and the robot stays at least robot_radius + 0.1 m from the walls.
 /// Consumes a bounded number of draws (at most 64 attempts; then the last attempt is clamped
 /// into the corridor). Deterministic given the rng state.
-features_pose_t tasks_corridor_training_start(const tasks_corridor_spec_t* spec, tasks_rng_t* rng);
+features_pose_t tasks_corridor_training_start(const tasks_corridor_spec_t* spec, rng_t* rng);
 
 /// As tasks_corridor_training_start, around the given evaluation pose (index modulo
 /// TASKS_N_EVAL_STARTS) instead of a uniformly drawn one (see tasks_start_cycle_next).
 features_pose_t tasks_corridor_training_start_near(const tasks_corridor_spec_t* spec, uint32_t index,
-                                                   tasks_rng_t* rng);
+                                                   rng_t* rng);
 
 /// Reward and termination of the corridor task for the transition into state f_next:
 /// - contact (bumper / emulator contact) -> reward 0, terminal (COLLISION): the paper's corridor
@@ -191,12 +191,12 @@ features_pose_t tasks_obstacles_eval_start(const tasks_obstacles_spec_t* spec, u
 /// A training start pose near a uniformly chosen evaluation pose (same rule as the corridor:
 /// jittered, never identical, at least robot_radius + 0.1 m clear of obstacles and walls).
 features_pose_t tasks_obstacles_training_start(const tasks_obstacles_spec_t* spec,
-                                               tasks_rng_t* rng);
+                                               rng_t* rng);
 
 /// As tasks_obstacles_training_start, around the given evaluation pose (index modulo
 /// TASKS_N_EVAL_STARTS).
 features_pose_t tasks_obstacles_training_start_near(const tasks_obstacles_spec_t* spec, uint32_t index,
-                                                    tasks_rng_t* rng);
+                                                    rng_t* rng);
 
 /// Stratified choice of the evaluation pose a training start is jittered around: each cycle of
 /// TASKS_N_EVAL_STARTS training runs visits every pose once, in an order shuffled per cycle, so
@@ -211,7 +211,7 @@ typedef struct tasks_start_cycle {
 
 /// The evaluation-pose index of the next training start (see tasks_start_cycle_t); consumes
 /// TASKS_N_EVAL_STARTS - 1 draws of rng at the start of each cycle, none otherwise.
-uint32_t tasks_start_cycle_next(tasks_start_cycle_t* cycle, tasks_rng_t* rng);
+uint32_t tasks_start_cycle_next(tasks_start_cycle_t* cycle, rng_t* rng);
 
 /// Reward and termination of the obstacle task for the transition into state f_next:
 /// contact -> collision_reward (-1), terminal (takes precedence); f_next->valid and
@@ -272,7 +272,7 @@ typedef struct tasks_driver {
   double law[TASKS_DRIVER_LAW_PARAMS];
   int8_t avoid_side;        ///< side chosen to pass the obstacle: +1 left, -1 right, 0 none
   uint32_t pass_steps;      ///< steps left to hold course after the obstacle left the view
-  tasks_rng_t rng;          ///< the driver's private stream (human noise)
+  rng_t rng;          ///< the driver's private stream (human noise)
   // Human temperament of this run (drawn in begin_run).
   uint32_t delay_steps;     ///< reaction delay [steps], < TASKS_HUMAN_MAX_DELAY
   double deadband_rad;      ///< errors below this are ignored while not correcting [rad]

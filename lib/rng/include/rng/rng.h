@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: MIT
-/// tasks/rng.h — Small seeded pseudo-random generator (xoshiro256**, seeded by splitmix64).
+/// rng/rng.h — Small seeded pseudo-random generator (xoshiro256**, seeded by splitmix64).
 ///
 /// Every random choice of the product (example-policy gains, the simulated human driver,
 /// training start poses, exploration noise, emulator noise) draws from an explicit instance of
@@ -8,8 +8,8 @@
 ///
 /// Memory: 40 bytes, caller-owned, no allocation. Not thread-safe per instance; use one instance
 /// per thread or stream. All functions O(1).
-#ifndef B21R_TASKS_RNG_H
-#define B21R_TASKS_RNG_H
+#ifndef B21R_RNG_H
+#define B21R_RNG_H
 
 #include <stdint.h>
 
@@ -18,38 +18,38 @@ extern "C" {
 #endif
 
 /// Generator state. Treat as opaque; copy it to fork a stream.
-typedef struct tasks_rng {
-  uint64_t s[4];          ///< xoshiro256** state, never all zero after tasks_rng_seed
+typedef struct rng {
+  uint64_t s[4];          ///< xoshiro256** state, never all zero after rng_seed
   double spare_normal;    ///< second value of the last Box-Muller pair
   uint8_t has_spare;      ///< 1 if spare_normal holds an unused value
-} tasks_rng_t;
+} rng_t;
 
 /// Seeds the generator: the four state words are the first four outputs of splitmix64(seed).
 /// Every seed (including 0) is valid and gives an independent-looking stream.
-void tasks_rng_seed(tasks_rng_t* rng, uint64_t seed);
+void rng_seed(rng_t* rng, uint64_t seed);
 
 /// Next 64 random bits.
-uint64_t tasks_rng_next_u64(tasks_rng_t* rng);
+uint64_t rng_next_u64(rng_t* rng);
 
 /// Uniform double in [0, 1) with 53 random bits.
-double tasks_rng_uniform(tasks_rng_t* rng);
+double rng_uniform(rng_t* rng);
 
 /// Uniform double in [lo, hi) (returns lo if hi <= lo).
-double tasks_rng_uniform_range(tasks_rng_t* rng, double lo, double hi);
+double rng_uniform_range(rng_t* rng, double lo, double hi);
 
 /// Uniform integer in [0, n) without modulo bias; returns 0 for n == 0.
-uint32_t tasks_rng_below(tasks_rng_t* rng, uint32_t n);
+uint32_t rng_below(rng_t* rng, uint32_t n);
 
 /// Standard normal variate N(0, 1) (Box-Muller; the second value of each pair is kept in the
 /// state and returned by the next call). Always finite.
-double tasks_rng_normal(tasks_rng_t* rng);
+double rng_normal(rng_t* rng);
 
 /// splitmix64 step: advances *state and returns a well-mixed 64-bit value. Used to derive
 /// independent seeds (per run, per stream) from one master seed.
-uint64_t tasks_rng_splitmix64(uint64_t* state);
+uint64_t rng_splitmix64(uint64_t* state);
 
 #ifdef __cplusplus
 }
 #endif
 
-#endif  // B21R_TASKS_RNG_H
+#endif  // B21R_RNG_H

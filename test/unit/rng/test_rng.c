@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: MIT
 // The seeded generator: pinned sequence, ranges, moments, independence of seeds.
 #include <b21r_test/alloc_counter.h>
-#include <tasks/rng.h>
+#include <rng/rng.h>
 
 #include <math.h>
 #include <setjmp.h>
@@ -15,16 +15,16 @@
 // The sequence for a seed never changes: logs and experiments are replayed from seeds.
 static void test_rng_seed_fixed_sequence_pinned(void** state) {
   (void)state;
-  tasks_rng_t r;
-  tasks_rng_seed(&r, 0U);
+  rng_t r;
+  rng_seed(&r, 0U);
   // splitmix64(0) first output is the published test value 0xE220A8397B1DCDAF.
   uint64_t sm = 0U;
-  assert_true(tasks_rng_splitmix64(&sm) == 0xE220A8397B1DCDAFULL);
+  assert_true(rng_splitmix64(&sm) == 0xE220A8397B1DCDAFULL);
   uint64_t first[3];
-  for (int i = 0; i < 3; ++i) first[i] = tasks_rng_next_u64(&r);
-  tasks_rng_t again;
-  tasks_rng_seed(&again, 0U);
-  for (int i = 0; i < 3; ++i) assert_true(tasks_rng_next_u64(&again) == first[i]);
+  for (int i = 0; i < 3; ++i) first[i] = rng_next_u64(&r);
+  rng_t again;
+  rng_seed(&again, 0U);
+  for (int i = 0; i < 3; ++i) assert_true(rng_next_u64(&again) == first[i]);
   // Pinned values (xoshiro256** seeded by splitmix64(0)).
   printf("[ rng ] seed 0: %016llx %016llx %016llx\n", (unsigned long long)first[0],
          (unsigned long long)first[1], (unsigned long long)first[2]);
@@ -36,53 +36,53 @@ static void test_rng_seed_fixed_sequence_pinned(void** state) {
 // Different seeds give different streams; the same seed the same stream.
 static void test_rng_seeds_independent(void** state) {
   (void)state;
-  tasks_rng_t a, b;
-  tasks_rng_seed(&a, 1U);
-  tasks_rng_seed(&b, 2U);
+  rng_t a, b;
+  rng_seed(&a, 1U);
+  rng_seed(&b, 2U);
   int same = 0;
-  for (int i = 0; i < 1000; ++i) same += tasks_rng_next_u64(&a) == tasks_rng_next_u64(&b);
+  for (int i = 0; i < 1000; ++i) same += rng_next_u64(&a) == rng_next_u64(&b);
   assert_int_equal(same, 0);
 }
 
 // Uniforms stay in range with the right mean; below(n) is in range and roughly flat.
 static void test_rng_uniform_and_below_in_range(void** state) {
   (void)state;
-  tasks_rng_t r;
-  tasks_rng_seed(&r, 42U);
+  rng_t r;
+  rng_seed(&r, 42U);
   double sum = 0.0;
   const int n = 100000;
   for (int i = 0; i < n; ++i) {
-    const double u = tasks_rng_uniform(&r);
+    const double u = rng_uniform(&r);
     assert_true(u >= 0.0 && u < 1.0);
     sum += u;
   }
   assert_true(fabs(sum / n - 0.5) < 0.01);
   for (int i = 0; i < 1000; ++i) {
-    const double v = tasks_rng_uniform_range(&r, -2.0, 3.0);
+    const double v = rng_uniform_range(&r, -2.0, 3.0);
     assert_true(v >= -2.0 && v < 3.0);
   }
-  assert_true(tasks_rng_uniform_range(&r, 1.0, 1.0) == 1.0);
+  assert_true(rng_uniform_range(&r, 1.0, 1.0) == 1.0);
   uint32_t counts[7] = {0};
   for (int i = 0; i < 70000; ++i) {
-    const uint32_t k = tasks_rng_below(&r, 7U);
+    const uint32_t k = rng_below(&r, 7U);
     assert_true(k < 7U);
     ++counts[k];
   }
   for (int k = 0; k < 7; ++k) assert_true(counts[k] > 9500U && counts[k] < 10500U);
-  assert_int_equal(tasks_rng_below(&r, 0U), 0U);
-  assert_int_equal(tasks_rng_below(&r, 1U), 0U);
+  assert_int_equal(rng_below(&r, 0U), 0U);
+  assert_int_equal(rng_below(&r, 1U), 0U);
 }
 
 // Normals have mean 0 and variance 1 and are always finite; no allocation.
 static void test_rng_normal_moments(void** state) {
   (void)state;
-  tasks_rng_t r;
-  tasks_rng_seed(&r, 7U);
+  rng_t r;
+  rng_seed(&r, 7U);
   double s1 = 0.0, s2 = 0.0;
   const int n = 200000;
   alloc_counter_begin();
   for (int i = 0; i < n; ++i) {
-    const double x = tasks_rng_normal(&r);
+    const double x = rng_normal(&r);
     assert_true(isfinite(x));
     s1 += x;
     s2 += x * x;
@@ -102,5 +102,5 @@ int main(void) {
       cmocka_unit_test(test_rng_uniform_and_below_in_range),
       cmocka_unit_test(test_rng_normal_moments),
   };
-  return cmocka_run_group_tests_name("tasks.rng", tests, NULL, NULL);
+  return cmocka_run_group_tests_name("rng.rng", tests, NULL, NULL);
 }
