@@ -24,7 +24,7 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     FUZZ_CHECK(memchr(why, '\0', sizeof why) != NULL);
     return 0;
   }
-  const fw_schedule_progress_t* g = &p.schedule;
+  const learn_schedule_progress_t* g = &p.schedule;
   const bool rev1 = size != FW_PROGRESS_BYTES;
   FUZZ_CHECK(size == FW_PROGRESS_BYTES || size == 96U || size == 104U);
   FUZZ_CHECK(p.task == FW_TASK_CORRIDOR || p.task == FW_TASK_OBSTACLES);

@@ -39,7 +39,7 @@ typedef struct run_rec {
 } run_rec_t;
 
 typedef struct block_rec {
-  fw_eval_block_t b;
+  learn_eval_block_t b;
   uint32_t store_fill;
   int64_t training_steps;  // training steps driven before the block
 } block_rec_t;
@@ -255,7 +255,7 @@ static int run_session(const fw_config_t* cfg, const session_io_t* sio, session_
           b->b.training_runs = e->training_runs;
           b->b.phase = e->phase;
           b->b.n_starts = e->n_starts;
-          for (int32_t i = 0; i < e->n_starts && i < FW_SCHEDULE_MAX_STARTS; ++i) {
+          for (int32_t i = 0; i < e->n_starts && i < LEARN_SCHEDULE_MAX_STARTS; ++i) {
             b->b.steps[i] = e->steps[i];
             b->b.success[i] = e->success[i] != 0;
           }
@@ -317,7 +317,7 @@ static void write_int_array(json_writer_t* w, const char* key, const int32_t* v,
   json_end_array(w);
 }
 
-static void write_block(json_writer_t* w, const fw_eval_block_t* b) {
+static void write_block(json_writer_t* w, const learn_eval_block_t* b) {
   write_int_array(w, "steps", b->steps, b->n_starts);
   json_array(w, "success");
   for (int32_t i = 0; i < b->n_starts; ++i) {

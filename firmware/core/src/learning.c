@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
-// The learner inside the loop: HEDGER's configuration, the update of each step (after the
-// tick's command went out), the between-run work (backward replay, checkpoint) in bounded slices,
-// and the checkpoint's controller section.
+// The learning framework (lib/learn) inside the loop: its set-up from the configuration and the
+// task, the update of each step (after the tick's command went out), the between-run work (the
+// framework's backward replay, then the checkpoint) in bounded slices, and the checkpoint's
+// controller section.
 //
 // Why slices: the replay of a finished run costs replay_passes × run length updates, and the
 // serialisation of a full store O(n); done at once they take tens of milliseconds at 20k points
@@ -19,6 +20,64 @@
 #include <stdlib.h>
 #include <string.h>
 
+#define PI 3.14159265358979323846
+
+_Static_assert((int)FW_SWITCH_RUNS == (int)LEARN_SWITCH_RUNS && (int)FW_SWITCH_OPERATOR == (int)LEARN_SWITCH_OPERATOR &&
+                   (int)FW_SWITCH_AUTO == (int)LEARN_SWITCH_AUTO,
+               "the phase_switch key's values are the framework's");
+_Static_assert((int)FW_LEARNER_HEDGER == (int)LEARN_LEARNER_HEDGER && (int)FW_LEARNER_LWA == (int)LEARN_LEARNER_LWA &&
+                   (int)FW_LEARNER_TABULAR == (int)LEARN_LEARNER_TABULAR,
+               "the learner key's values are the framework's");
+_Static_assert((int)LEARN_SOURCE_EXAMPLE == (int)B21R_EXPERIENCE_T_SOURCE_EXAMPLE &&
+                   (int)LEARN_SOURCE_JOYSTICK == (int)B21R_EXPERIENCE_T_SOURCE_JOYSTICK &&
+                   (int)LEARN_SOURCE_GREEDY == (int)B21R_EXPERIENCE_T_SOURCE_GREEDY &&
+                   (int)LEARN_SOURCE_EXPLORATION == (int)B21R_EXPERIENCE_T_SOURCE_EXPLORATION &&
+                   (int)LEARN_SOURCE_ADVISOR == (int)B21R_EXPERIENCE_T_SOURCE_ADVISOR,
+               "the framework's sources are the experience message's");
+
+void fw_learning_task(const fw_config_t* cfg, const tasks_episode_t* ep, learn_task_t* t) {
+  memset(t, 0, sizeof *t);
+  t->state_dim = ep->state_dim;
+  t->action_min = -cfg->max_rotation_radps;
+  t->action_max = cfg->max_rotation_radps;
+  t->gamma = tasks_episode_gamma(ep);
+  t->step_limit = tasks_episode_step_limit(ep);
+  if (cfg->task == FW_TASK_CORRIDOR) {
+    // One scaled unit is about the distance over which the value of an action changes
+    // markedly. Along the corridor the value falls by 1 % per 6 cm of progress: a 1 m scale
+    // keeps a neighbourhood within a few tenths of a metre, where the value is nearly linear in
+    // the distance; the lateral position at half its useful range; the action's scale sets how
+    // far apart two actions must be to count as different. The target angle is finer (0.125
+    // rad, about a tenth of its range): a run that starts heading far off the axis is then
+    // judged by runs that started at a similar heading, not by the on-axis majority (hedger.h,
+    // "Greedy method"; the measurements: docs/LEARNING.md, "A finer target-angle scale, and
+    // k_max 64").
+    const double scale[3] = {1.0, 0.5, 0.125};                   // end distance [m], lateral fraction, target angle [rad]
+    const double lo[3] = {0.0, 0.0, -0.5 * PI};                  // beyond +-90 deg the robot faces a wall
+    const double hi[3] = {cfg->corridor_length_m, 1.0, 0.5 * PI};
+    for (int i = 0; i < 3; ++i) {
+      t->state_scale[i] = scale[i];
+      t->state_min[i] = lo[i];
+      t->state_max[i] = hi[i];
+    }
+    t->action_scale = 0.25;  // rotation [rad/s]
+    // The fine target-angle scale leaves a state's neighbourhood empty while phase one has covered
+    // few headings; a wide second attempt answers there from runs at other headings instead of
+    // holding course (docs/LEARNING.md, "greedy_reach 8 for the corridor, 3 for the obstacles").
+    t->greedy_reach = 8.0;
+  } else {
+    const double lo[4] = {-PI, 0.0, -PI, 0.0};  // goal bearing, distance; obstacle bearing, distance (8 m: sensing)
+    const double hi[4] = {PI, 8.0, PI, 8.0};
+    for (int i = 0; i < 4; ++i) {
+      t->state_scale[i] = 1.0;
+      t->state_min[i] = lo[i];
+      t->state_max[i] = hi[i];
+    }
+    t->action_scale = 0.5;  // rotation [rad/s]
+    t->greedy_reach = 3.0;
+  }
+}
+
 // state_rotation: the executed rotation's scale [rad/s per scaled unit]. Wide (the whole range
 // is about two units): it must tell a robot still ramping up its turn from one turning steadily,
 // and must not split the few samples near a start pose into separate neighbourhoods. Chosen on
@@ -27,76 +86,105 @@
 // cost 9, within the seeds' spread (on seeds 1-10 1.0 gained 15).
 static const double kExecutedRotationScale = 1.0;
 
-void fw_learning_config(const fw_loop_t* L, hedger_config_t* hc) {
-  *hc = hedger_config_default();
-  hc->state_dim = L->state_dim;
-  hc->action_min = -L->omega_max;
-  hc->action_max = L->omega_max;
-  hc->capacity = (uint32_t)L->cfg.hedger_capacity;
-  hc->k_min = (uint32_t)L->cfg.hedger_k_min;
-  hc->k_max = (uint32_t)L->cfg.hedger_k_max;
-  hc->bandwidth = L->cfg.hedger_bandwidth;
-  hc->alpha = L->cfg.alpha;
-  hc->gamma = L->gamma;
-  if (L->cfg.hedger_input_scale_n > 0) {
-    for (int32_t i = 0; i < L->cfg.hedger_input_scale_n; ++i) {
-      hc->input_scale[i] = L->cfg.hedger_input_scale[i];
-    }
+void fw_learning_settings(const fw_config_t* cfg, double dt_s, learn_config_t* c) {
+  *c = learn_config_default();
+  if (cfg->mode == FW_MODE_EVALUATE) {
+    c->mode = cfg->evaluate_policy == FW_EVAL_LEARNED ? LEARN_MODE_EVALUATE : LEARN_MODE_EVALUATE_ADVICE;
   } else {
-    // The inputs are the task's features, then (state_rotation) the executed rotation, then the
-    // action: the feature scales per task, the other two by position.
-    const uint32_t features = L->ep.state_dim;
-    double action_scale;
-    if (fw_run_is_corridor(L)) {
-      // One scaled unit is about the distance over which the value of an action changes
-      // markedly. Along the corridor the value falls by 1 % per 6 cm of progress: a 1 m scale
-      // keeps a neighbourhood within a few tenths of a metre, where the value is nearly linear in
-      // the distance; the lateral position at half its useful range; the action's scale sets how
-      // far apart two actions must be to count as different. The target angle is finer (0.125
-      // rad, about a tenth of its range): a run that starts heading far off the axis is then
-      // judged by runs that started at a similar heading, not by the on-axis majority (hedger.h,
-      // "Greedy method"; the measurements: docs/LEARNING.md, "A finer target-angle scale, and
-      // k_max 64").
-      hc->input_scale[0] = 1.0;    // end distance [m]
-      hc->input_scale[1] = 0.5;    // lateral fraction of the width
-      hc->input_scale[2] = 0.125;  // target angle [rad]
-      action_scale = 0.25;         // rotation [rad/s]
-    } else {
-      hc->input_scale[0] = 1.0;  // goal bearing [rad]
-      hc->input_scale[1] = 1.0;  // goal distance [m]
-      hc->input_scale[2] = 1.0;  // obstacle bearing [rad]
-      hc->input_scale[3] = 1.0;  // obstacle distance [m]
-      action_scale = 0.5;        // rotation [rad/s]
-    }
-    if (L->cfg.state_rotation) {
-      hc->input_scale[features] = kExecutedRotationScale;  // executed rotation [rad/s]
-    }
-    hc->input_scale[L->state_dim] = action_scale;
+    c->mode = LEARN_MODE_LEARN;
   }
-  hc->merge_radius = L->cfg.hedger_merge_radius;
-  hc->greedy_coarse_actions = (uint32_t)L->cfg.hedger_greedy_actions;
-  const uint32_t run_cap = fw_run_step_limit(L) + 8U;
-  hc->run_capacity = run_cap > HEDGER_MAX_RUN ? HEDGER_MAX_RUN : run_cap;
-  hc->replay = L->cfg.hedger_replay ? 1U : 0U;
-  hc->replay_passes = (uint32_t)L->cfg.hedger_replay_passes;
-  hc->replay_lambda = L->cfg.hedger_replay_lambda;
-  hc->greedy_method = (uint32_t)L->cfg.hedger_greedy_method;
-  hc->greedy_pessimism = L->cfg.hedger_greedy_pessimism;
-  // The corridor's fine target-angle scale leaves a state's neighbourhood empty while phase one
-  // has covered few headings; a wide second attempt answers there from runs at other headings
-  // instead of holding course (Fig. 4, seeds 11-20: 227 steps after 5 runs against 512 at 3, the
-  // same final block; hedger.h, "Greedy method"; docs/LEARNING.md, "greedy_reach 8 for the
-  // corridor, 3 for the obstacles"). The obstacle task did not gain from it.
-  const double task_reach = fw_run_is_corridor(L) ? 8.0 : 3.0;
-  hc->greedy_reach = L->cfg.hedger_greedy_reach > 0.0 ? L->cfg.hedger_greedy_reach : task_reach;
-  hc->local_model = L->cfg.learner == FW_LEARNER_LWA ? HEDGER_LOCAL_LWA : HEDGER_LOCAL_LWR;
+  c->phase_one_driver = cfg->phase_driver == FW_DRIVER_JOYSTICK ? LEARN_DRIVER_JOYSTICK : LEARN_DRIVER_EXAMPLE;
+  c->schedule = (learn_schedule_config_t){.eval_every = cfg->eval_every_runs,
+                                          .eval_starts = cfg->eval_starts,
+                                          .eval_at_start = cfg->eval_at_start,
+                                          .phase_one_runs = cfg->phase_one_runs,
+                                          .phase_two_runs = cfg->phase_two_runs,
+                                          .switch_mode = cfg->phase_switch,
+                                          .auto_min_runs = cfg->auto_switch_min_runs,
+                                          .auto_ratio = cfg->auto_switch_ratio,
+                                          .evaluate_only = cfg->mode == FW_MODE_EVALUATE};
+  c->learner = cfg->learner;
+  c->alpha = cfg->alpha;
+  c->gamma = cfg->gamma;
+  c->state_last_action = cfg->state_rotation;
+  c->last_action_scale = kExecutedRotationScale;
+  c->capacity = (uint32_t)cfg->hedger_capacity;
+  c->k_min = (uint32_t)cfg->hedger_k_min;
+  c->k_max = (uint32_t)cfg->hedger_k_max;
+  c->bandwidth = cfg->hedger_bandwidth;
+  c->merge_radius = cfg->hedger_merge_radius;
+  c->greedy_actions = (uint32_t)cfg->hedger_greedy_actions;
+  c->greedy_method = cfg->hedger_greedy_method;
+  c->greedy_pessimism = cfg->hedger_greedy_pessimism;
+  c->greedy_reach = cfg->hedger_greedy_reach;
+  c->replay = cfg->hedger_replay;
+  c->replay_passes = (uint32_t)cfg->hedger_replay_passes;
+  c->replay_lambda = cfg->hedger_replay_lambda;
+  c->input_scale_n = (uint32_t)cfg->hedger_input_scale_n;
+  for (int32_t i = 0; i < cfg->hedger_input_scale_n && i <= (int32_t)LEARN_MAX_STATE; ++i) {
+    c->input_scale[i] = cfg->hedger_input_scale[i];
+  }
+  c->tabular_bins = (uint32_t)cfg->tabular_bins;
+  c->tabular_actions = (uint32_t)cfg->tabular_actions;
+  c->explore_sigma = cfg->explore_sigma_radps;
+  c->explore_probability = cfg->explore_probability;
+  const int64_t hold = (int64_t)floor(cfg->explore_hold_s / dt_s + 0.5);
+  c->explore_hold_steps = hold > 1 ? (uint32_t)hold : 1U;
+  c->example_dither_sigma = cfg->example_noise_radps;
+  c->advisor = cfg->advisor;
+  c->replay_updates_per_slice = (uint32_t)cfg->learn_updates_per_tick;
+}
+
+int fw_learning_init(fw_loop_t* L, uint64_t explore_seed, uint64_t learner_seed, char* err, size_t err_cap) {
+  learn_task_t task;
+  fw_learning_task(&L->cfg, &L->ep, &task);
+  learn_config_t lc;
+  fw_learning_settings(&L->cfg, L->dt_s, &lc);
+  lc.explore_seed = explore_seed;
+  lc.learner_seed = learner_seed;
+  const size_t bytes = learn_storage_size(&task, &lc);
+  if (bytes == 0) {
+    char why[LEARN_ERR_MAX];
+    (void)learn_init(NULL, 0, &task, &lc, why, sizeof why);
+    snprintf(err, err_cap, "loop: %s", why);
+    return -1;
+  }
+  L->agent_storage = aligned_alloc(LEARN_STORAGE_ALIGN, bytes);
+  if (L->agent_storage == NULL) {
+    snprintf(err, err_cap, "loop: cannot allocate %zu bytes for the learner (%d samples)", bytes,
+             (int)L->cfg.hedger_capacity);
+    return -1;
+  }
+  L->agent_bytes = bytes;
+  char why[LEARN_ERR_MAX];
+  L->agent = learn_init(L->agent_storage, bytes, &task, &lc, why, sizeof why);
+  if (L->agent == NULL) {
+    snprintf(err, err_cap, "loop: %s", why);
+    fw_learning_free(L);
+    return -1;
+  }
+  const hedger_t* h = learn_get_learner(L->agent)->hedger;
+  L->save_max = h != NULL ? hedger_serialized_max_size(hedger_get_config(h)) : 0U;
+  return 0;
+}
+
+void fw_learning_free(fw_loop_t* L) {
+  free(L->agent_storage);
+  L->agent_storage = NULL;
+  L->agent = NULL;
+  L->agent_bytes = 0;
 }
 
 // ---- checkpoints --------------------------------------------------------------------------
 
+// HEDGER's instance (NULL for the tabular learner, which keeps no checkpoints).
+static hedger_t* hedger_of(const fw_loop_t* L) { return learn_get_learner(L->agent)->hedger; }
+
 static size_t encode_meta(const fw_loop_t* L, uint8_t* p) {
-  const fw_progress_t g = {
-      .task = L->cfg.task, .state_dim = L->state_dim, .schedule = L->sched.p, .run_id = L->run_id};
+  const fw_progress_t g = {.task = L->cfg.task,
+                           .state_dim = learn_agent_state_dim(L->agent),
+                           .schedule = learn_schedule(L->agent)->p,
+                           .run_id = learn_run_id(L->agent)};
   return fw_progress_encode(&g, p);
 }
 
@@ -126,7 +214,7 @@ static void checkpoint_submit(fw_loop_t* L, size_t payload_size) {
 }
 
 void fw_learning_checkpoint_now(fw_loop_t* L) {
-  if (L->out.checkpoints == NULL || L->learner.hedger == NULL) {
+  if (L->out.checkpoints == NULL || hedger_of(L) == NULL) {
     return;
   }
   void* payload = NULL;
@@ -135,7 +223,7 @@ void fw_learning_checkpoint_now(fw_loop_t* L) {
     return;
   }
   size_t written = 0;
-  if (hedger_save(L->learner.hedger, payload, payload_cap, &written) != HEDGER_OK) {
+  if (hedger_save(hedger_of(L), payload, payload_cap, &written) != HEDGER_OK) {
     written = 0;  // never happens: the buffer is sized by hedger_serialized_max_size
   }
   checkpoint_submit(L, written);
@@ -143,7 +231,7 @@ void fw_learning_checkpoint_now(fw_loop_t* L) {
 
 void fw_loop_checkpoint_capacity(const fw_loop_t* L, size_t* meta_bytes, size_t* payload_bytes) {
   *meta_bytes = FW_PROGRESS_BYTES;
-  *payload_bytes = L->learner.save_max;
+  *payload_bytes = L->save_max;
 }
 
 void fw_loop_attach_checkpoints(fw_loop_t* L, fw_ckpt_writer_t* writer) { L->out.checkpoints = writer; }
@@ -153,7 +241,7 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
   if (path[0] == '\0') {
     return 0;
   }
-  if (L->learner.hedger == NULL) {
+  if (hedger_of(L) == NULL) {
     snprintf(err, err_cap, "checkpoint %s: learner = tabular keeps no checkpoints; set checkpoint_file = \"\"", path);
     return -1;
   }
@@ -166,7 +254,7 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
   uint8_t meta[FW_PROGRESS_READ_MAX];
   // At most the largest learned state this configuration can hold, whatever the header claims:
   // fw_checkpoint_read refuses a larger (or corrupt) size with a message instead.
-  const size_t payload_cap = payload_size < L->learner.save_max ? payload_size : L->learner.save_max;
+  const size_t payload_cap = payload_size < L->save_max ? payload_size : L->save_max;
   void* payload = malloc(payload_cap + 1U);
   if (payload == NULL) {
     snprintf(err, err_cap, "checkpoint %s: cannot allocate %zu bytes", path, payload_cap);
@@ -195,7 +283,7 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
              path, L->cfg.state_rotation ? "without" : "with", L->cfg.state_rotation ? "false" : "true", path, path);
     return -1;
   }
-  if (g.task != L->cfg.task || g.state_dim != L->state_dim) {
+  if (g.task != L->cfg.task || g.state_dim != learn_agent_state_dim(L->agent)) {
     free(payload);
     snprintf(err, err_cap,
              "checkpoint %s was learned for another task (%s); to start fresh, move the file away (e.g. mv '%s' "
@@ -203,7 +291,7 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
              path, fw_task_name(g.task), path, path);
     return -1;
   }
-  const hedger_status_t hs = hedger_load(L->learner.hedger, payload, payload_size);
+  const hedger_status_t hs = hedger_load(hedger_of(L), payload, payload_size);
   free(payload);
   if (hs != HEDGER_OK) {
     snprintf(err, err_cap,
@@ -212,9 +300,7 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
              path, hedger_status_str(hs), path, path);
     return -1;
   }
-  const fw_schedule_config_t sc = L->sched.cfg;  // a copy: init clears the schedule first
-  fw_schedule_init(&L->sched, &sc, &g.schedule);
-  L->run_id = g.run_id;
+  learn_resume(L->agent, &g.schedule, g.run_id);
   err[0] = '\0';
   if (g.legacy_shift) {
     snprintf(err, err_cap,
@@ -229,60 +315,41 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
 // ---- the step's update and the between-run work -------------------------------------------
 
 void fw_learning_run_ended(fw_loop_t* L) {
-  L->end_run_pending = true;
   if (L->out.checkpoints != NULL && L->cfg.progress) {
     L->lines_holding = true;  // the run's line waits for its checkpoint
   }
 }
 
-bool fw_learning_idle(const fw_loop_t* L) {
-  return !L->pending.active && !L->end_run_pending && L->learn_stage == FW_LEARN_IDLE;
-}
+bool fw_learning_idle(const fw_loop_t* L) { return learn_idle(L->agent) && L->learn_stage == FW_LEARN_IDLE; }
 
-// The pending transition: its update (training) or the prediction of its Q (for the message),
-// then the experience message. Bounded: at most one greedy search and one update.
-static void learn_pending(fw_loop_t* L) {
-  fw_pending_step_t* p = &L->pending;
-  double q = 0.0;
-  hedger_kind_t kind = HEDGER_KIND_UNKNOWN;
-  if (p->learning) {
-    double q_next = 0.0;
-    if (!p->terminal) {
-      if (p->need_greedy) {
-        (void)fw_learner_greedy(&L->learner, p->s_next, NULL, &q_next);
-      } else {
-        q_next = p->q_next;
-      }
-    }
-    if (!fw_learner_learn(&L->learner, p->s, p->a, p->reward, p->s_next, p->terminal, q_next, &q, &kind)) {
-      q = 0.0;
-      kind = HEDGER_KIND_UNKNOWN;
-    }
-  } else if (!fw_learner_predict(&L->learner, p->s, p->a, &q, &kind)) {
-    q = 0.0;
-    kind = HEDGER_KIND_UNKNOWN;
+// The queued transition's update (training) or the prediction of its Q (for the message), then
+// the experience message. Bounded: at most one greedy search and one update.
+static bool learn_pending(fw_loop_t* L) {
+  learn_experience_t e;
+  if (!learn_update(L->agent, &e)) {
+    return false;
   }
-  fw_out_experience(L, p, q, kind);
-  p->active = false;
+  fw_out_experience(L, &e);
+  return true;
 }
 
 // The save of a checkpoint in slices. Without a writer (or with both of its buffers busy) the
 // same slices pass without writing, so that a lockstep run spends the same ticks between runs
 // with and without checkpoints (its experience stream does not depend on them).
 static void save_slice(fw_loop_t* L) {
-  const uint32_t fill = fw_learner_stats(&L->learner).fill;
+  const uint32_t fill = learn_learner_stats(learn_get_learner(L->agent)).fill;
   const uint32_t per_tick = (uint32_t)L->cfg.checkpoint_points_per_tick;
-  if (L->save_handle < 0 && L->save_points_done == 0 && L->out.checkpoints != NULL && L->learner.hedger != NULL) {
+  if (L->save_handle < 0 && L->save_points_done == 0 && L->out.checkpoints != NULL && hedger_of(L) != NULL) {
     if (checkpoint_acquire(L, &L->save_payload, &L->save_payload_cap) &&
-        hedger_save_begin(L->learner.hedger, L->save_payload, L->save_payload_cap, &L->save_cursor) != HEDGER_OK) {
+        hedger_save_begin(hedger_of(L), L->save_payload, L->save_payload_cap, &L->save_cursor) != HEDGER_OK) {
       L->save_handle = -1;  // never happens: the buffer is sized by hedger_serialized_max_size
     }
   }
   if (L->save_handle >= 0) {
     size_t written = 0;
-    if (hedger_save_step(L->learner.hedger, &L->save_cursor, per_tick, &written) != HEDGER_OK) {
+    if (hedger_save_step(hedger_of(L), &L->save_cursor, per_tick, &written) != HEDGER_OK) {
       // Nothing changes the learner between runs; should it happen, the save starts over.
-      (void)hedger_save_begin(L->learner.hedger, L->save_payload, L->save_payload_cap, &L->save_cursor);
+      (void)hedger_save_begin(hedger_of(L), L->save_payload, L->save_payload_cap, &L->save_cursor);
       L->save_points_done = 0;
       return;
     }
@@ -297,12 +364,10 @@ static void save_slice(fw_loop_t* L) {
   }
 }
 
-// One slice of the between-run work: at most learn_updates_per_tick replay updates, then at most
-// checkpoint_points_per_tick points of the save.
+// One slice of the between-run work: at most learn_updates_per_tick replay updates (the
+// framework's), then at most checkpoint_points_per_tick points of the save.
 static void between_runs_slice(fw_loop_t* L) {
-  if (L->end_run_pending) {
-    L->end_run_pending = false;
-    fw_learner_end_run_begin(&L->learner);
+  if (learn_replay_due(L->agent)) {
     L->learn_stage = FW_LEARN_REPLAY;
     L->save_points_done = 0;
     L->save_handle = -1;
@@ -312,7 +377,7 @@ static void between_runs_slice(fw_loop_t* L) {
   }
   L->learn_ticks++;
   if (L->learn_stage == FW_LEARN_REPLAY) {
-    if (fw_learner_end_run_step(&L->learner, (uint32_t)L->cfg.learn_updates_per_tick) > 0) {
+    if (learn_replay_slice(L->agent, (uint32_t)L->cfg.learn_updates_per_tick) > 0) {
       return;
     }
     L->learn_stage = FW_LEARN_SAVE;
@@ -321,28 +386,21 @@ static void between_runs_slice(fw_loop_t* L) {
 }
 
 void fw_learning_after_command(fw_loop_t* L) {
-  if (L->pending.active) {
-    learn_pending(L);
-    if (!L->end_run_pending) {
-      return;
-    }
+  if (learn_pending(L) && !learn_replay_due(L->agent)) {
+    return;
   }
   between_runs_slice(L);
 }
 
 void fw_learning_finish_now(fw_loop_t* L) {
-  if (L->pending.active) {
-    learn_pending(L);
+  learn_experience_t e;
+  if (learn_finish_now(L->agent, &e)) {
+    fw_out_experience(L, &e);
   }
-  if (L->end_run_pending) {
-    L->end_run_pending = false;
-    fw_learner_end_run_begin(&L->learner);
-  }
-  (void)fw_learner_end_run_step(&L->learner, UINT32_MAX);
   if (L->learn_stage == FW_LEARN_SAVE && L->save_handle >= 0) {
     // A slice-wise save was under way: finish it at once.
     size_t written = 0;
-    if (hedger_save_step(L->learner.hedger, &L->save_cursor, UINT32_MAX, &written) == HEDGER_OK && L->save_cursor.done) {
+    if (hedger_save_step(hedger_of(L), &L->save_cursor, UINT32_MAX, &written) == HEDGER_OK && L->save_cursor.done) {
       checkpoint_submit(L, written);
     }
   }

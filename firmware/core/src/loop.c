@@ -60,8 +60,6 @@ static void setup_task(fw_loop_t* L) {
   fw_loop_task_specs(cfg, &corridor, &obstacles, &L->limits);
   tasks_episode_init(&L->ep, cfg->task == FW_TASK_CORRIDOR ? TASKS_TASK_CORRIDOR : TASKS_TASK_OBSTACLES, &corridor,
                      &obstacles);
-  L->state_dim = L->ep.state_dim + (cfg->state_rotation ? 1U : 0U);
-  L->gamma = cfg->gamma > 0.0 ? cfg->gamma : tasks_episode_gamma(&L->ep);
 }
 
 // Every random stream derives from the one root seed, in this order.
@@ -88,8 +86,14 @@ void fw_loop_learner_config(const fw_config_t* cfg, hedger_config_t* out) {
   }
   L->cfg = *cfg;
   setup_task(L);
-  fw_learning_config(L, out);
-  out->seed = derive_seeds(cfg->seed).hedger;
+  learn_task_t task;
+  fw_learning_task(cfg, &L->ep, &task);
+  learn_config_t lc;
+  fw_learning_settings(cfg, L->dt_s, &lc);
+  lc.learner_seed = derive_seeds(cfg->seed).hedger;
+  learn_learner_config_t llc;
+  learn_learner_config(&task, &lc, &llc);
+  *out = llc.hedger;
   free(L);
 }
 
@@ -115,10 +119,9 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
   setup_task(L);
   const seeds_t seeds = derive_seeds(cfg->seed);
   rng_seed(&L->pose_rng, seeds.pose);
-  rng_seed(&L->explore_rng, seeds.explore);
   L->driver_seed_base = seeds.driver;
 
-  if (fw_learner_init(L, seeds.hedger, err, err_cap) != 0) {
+  if (fw_learning_init(L, seeds.explore, seeds.hedger, err, err_cap) != 0) {
     free(L);
     return NULL;
   }
@@ -132,7 +135,7 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
   }
   if (L->config_text == NULL) {
     snprintf(err, err_cap, "loop: out of memory");
-    fw_learner_free(&L->learner);
+    fw_learning_free(L);
     free(L);
     return NULL;
   }
@@ -164,18 +167,7 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
                                  .auto_resume = cfg->safety_auto_resume};
   fw_safety_init(&L->safety, &sc);
   fw_timing_init(&L->timing, L->period_us, (int64_t)llround(cfg->late_start_threshold_s * 1e6));
-  const fw_schedule_config_t schc = {.eval_every = cfg->eval_every_runs,
-                                     .eval_starts = cfg->eval_starts,
-                                     .eval_at_start = cfg->eval_at_start,
-                                     .phase_one_runs = cfg->phase_one_runs,
-                                     .phase_two_runs = cfg->phase_two_runs,
-                                     .switch_mode = cfg->phase_switch,
-                                     .auto_min_runs = cfg->auto_switch_min_runs,
-                                     .auto_ratio = cfg->auto_switch_ratio,
-                                     .evaluate_only = cfg->mode == FW_MODE_EVALUATE};
-  fw_schedule_init(&L->sched, &schc, NULL);
   L->mode = B21R_STATUS_T_MODE_STARTING;
-  L->run_id = -1;
   L->last_block.block = -1;
   L->status_countdown = 0;
   return L;
@@ -194,7 +186,7 @@ static __attribute__((noinline)) void prefault_stack(void) {
 
 void fw_loop_prefault(fw_loop_t* L) {
   fw_prefault(L, sizeof *L);
-  fw_prefault(L->learner.storage, L->learner.storage_bytes);
+  fw_prefault(L->agent_storage, L->agent_bytes);
   if (L->out.queue != NULL) {
     fw_pubq_prefault(L->out.queue);
   }
@@ -210,7 +202,7 @@ void fw_loop_destroy(fw_loop_t* L) {
   }
   pthread_mutex_destroy(&L->mbox_mu);
   free(L->config_text);
-  fw_learner_free(&L->learner);
+  fw_learning_free(L);
   free(L);
 }
 
@@ -255,6 +247,7 @@ typedef struct sensed {
   bool running;       ///< a run is under way
   bool run_starting;  ///< repositioned, the start pose stands: a run may start on this scan
   bool state_ok;      ///< a new scan gave a usable state (running or starting)
+  bool state_finite;  ///< every value of the learner's state is finite (when state_ok is computed)
   bool odo_finite;
 } sensed_t;
 
@@ -294,7 +287,7 @@ static void check_devices(fw_loop_t* L, int64_t now_us) {
 }
 
 static sensed_t sense(fw_loop_t* L, int64_t now_us) {
-  sensed_t in = {false, false, false, true};
+  sensed_t in = {false, false, false, true, true};
   check_devices(L, now_us);
   poll_inputs(L, now_us);
   fw_laser_stats_t ls = {0, 0, 0};
@@ -326,7 +319,8 @@ static sensed_t sense(fw_loop_t* L, int64_t now_us) {
     tasks_episode_begin(&L->ep, L->start_pose, fw_run_odom_pose(L));  // the run's frame
   }
   if (L->scan_new && (in.running || in.run_starting)) {
-    in.state_ok = fw_run_observe(L) && all_finite(L->s, L->state_dim);
+    const bool usable = fw_run_observe(L, &in.state_finite);
+    in.state_ok = usable && in.state_finite;
   }
   const double odo[3] = {L->base.odometry.x_m, L->base.odometry.y_m, L->base.odometry.theta_rad};
   in.odo_finite = all_finite(odo, 3);
@@ -351,12 +345,12 @@ static fw_safety_event_t supervise(fw_loop_t* L, const sensed_t* in, int64_t now
   si.base_fault_detail = L->base_fault_detail;
   si.bumper_mask = L->bumper_mask;
   si.non_finite = !in->odo_finite ||
-                  (L->scan_new && (in->running || in->run_starting) && !all_finite(L->s, L->state_dim));
+                  (L->scan_new && (in->running || in->run_starting) && !in->state_finite);
   si.non_finite_where = !in->odo_finite ? "odometry" : "task state";
   // The joystick must hold the deadman while it drives, and already in the tick its run starts.
   si.deadman_required = fw_run_joystick_drives(L) ||
                         (in->run_starting && L->cfg.mode == FW_MODE_LEARN && L->cfg.phase_driver == FW_DRIVER_JOYSTICK &&
-                         L->plan.kind == FW_RUN_TRAINING && L->plan.phase == 1);
+                         learn_plan(L->agent).kind == LEARN_RUN_TRAINING && learn_plan(L->agent).phase == 1);
   si.deadman_fresh = L->teleop_deadman && now_us - L->teleop_last_us <= (int64_t)(L->cfg.teleop_timeout_s * 1e6);
   si.teleop_out_of_range = L->teleop_range_newest;
   si.teleop_range_detail = L->teleop_range_detail;
@@ -369,7 +363,7 @@ static fw_safety_event_t supervise(fw_loop_t* L, const sensed_t* in, int64_t now
   if (ev == FW_SAFETY_STOP_BEGAN) {
     fw_loop_log(L, 2, "b21r-controller: SAFETY STOP (%s): %s", fw_stop_reason_name(L->safety.reason), L->safety.detail);
     if (in->running) {
-      if (L->safety.reason == FW_STOP_BUMPER && L->scan_new && in->state_ok && L->have_prev) {
+      if (L->safety.reason == FW_STOP_BUMPER && L->scan_new && in->state_ok && learn_has_transition(L->agent)) {
         // A bump ends the run as a collision: its last transition is learned, then the stop.
         fw_run_step(L, 1, &cmd->v_mps, &cmd->w_radps);
       } else {
@@ -443,14 +437,7 @@ static void act(fw_loop_t* L, command_t* cmd) {
     (void)tasks_command_clamp(&L->limits, L->dt_s, L->cmd_v, L->cmd_w, &cmd->v_mps, &cmd->w_radps);
     if (fw_run_running(L)) {
       // The learner records what was executed: the clamped action.
-      memcpy(L->prev_s, L->s, sizeof L->prev_s);
-      L->prev_a = cmd->w_radps;
-      L->prev_v = cmd->v_mps;
-      L->have_prev = true;
-      L->actions_taken++;
-      if (L->prev_source >= 0 && L->prev_source < 5) {
-        L->run_steps_by_source[L->prev_source]++;
-      }
+      learn_executed(L->agent, cmd->w_radps, cmd->v_mps);
     }
   }
   fw_base_command(L, cmd->v_mps, cmd->w_radps, cmd->stopping);
@@ -668,14 +655,15 @@ int fw_loop_shutdown(fw_loop_t* L) {
 void fw_loop_get_stats(const fw_loop_t* L, fw_loop_stats_t* out) {
   memset(out, 0, sizeof *out);
   out->ticks = L->tick_count;
-  out->steps = L->steps;
+  out->steps = learn_steps(L->agent);
   out->experiences_dropped = L->exp_dropped;
-  out->run_id = L->run_id;
+  out->run_id = learn_run_id(L->agent);
   out->runs_finished = L->runs_finished;
   out->runs_aborted = L->runs_aborted;
-  out->training_runs = L->sched.p.training_runs;
-  out->eval_blocks = L->sched.p.eval_blocks;
-  out->phase = L->sched.p.phase;
+  const learn_schedule_progress_t* sp = &learn_schedule(L->agent)->p;
+  out->training_runs = sp->training_runs;
+  out->eval_blocks = sp->eval_blocks;
+  out->phase = sp->phase;
   out->mode = fw_out_status_mode(L);
   out->stop_reason = L->safety.reason;
   out->safety_stops = L->safety.stops;
@@ -687,12 +675,11 @@ void fw_loop_get_stats(const fw_loop_t* L, fw_loop_stats_t* out) {
   out->teleop_rejected = L->teleop_rejected;
   out->commands_accepted = L->commands_accepted;
   out->commands_rejected = L->commands_rejected;
-  out->store_fill = fw_learner_stats(&L->learner).fill;
+  out->store_fill = learn_learner_stats(learn_get_learner(L->agent)).fill;
   out->done = L->done;
   out->last_block = L->last_block;
-  out->best_example_steps = L->sched.p.best_example_steps;
-  out->mean_example_steps =
-      L->sched.p.example_runs > 0 ? L->sched.p.example_steps_sum / (double)L->sched.p.example_runs : 0.0;
+  out->best_example_steps = sp->best_example_steps;
+  out->mean_example_steps = sp->example_runs > 0 ? sp->example_steps_sum / (double)sp->example_runs : 0.0;
   out->last_run_steps = L->last_run_steps;
   out->last_run_goal = L->last_run_goal;
   out->learn_ticks = L->learn_ticks;

@@ -2,10 +2,11 @@
 // Private state of the loop core and the functions its files share:
 //   loop.c      the tick (sense → safety → decide → act → learn → publish), pacing, start-up,
 //               shutdown;
-//   run.c       the run lifecycle (repositioning, runs, the schedule) and the action of a step;
-//   learner.c   the value-function learner behind one interface (HEDGER, LWA only, tabular);
-//   learning.c  the learner's use: its configuration, the per-step update after the command, the
-//               between-run work (backward replay, checkpoint) in bounded slices, checkpoints;
+//   run.c       the run lifecycle (repositioning, start poses, the task's driver, run ends) around
+//               the learning framework (lib/learn), which decides who acts and learns;
+//   learning.c  the framework's set-up from the configuration and the task, the step's update
+//               after the command, the between-run work (the framework's replay, then the
+//               checkpoint) in bounded slices, checkpoints;
 //   outputs.c   the messages (experience, pose, scan, eval, status, text lines);
 //   operator.c  B21R_TELEOP / B21R_COMMAND mailboxes and their validation;
 //   base.c      the base adapters (rFLEX bytes, CANopen frames).
@@ -18,17 +19,16 @@
 
 #include <features/features.h>
 #include <hedger/hedger.h>
+#include <learn/learn.h>
 #include <proto/canopen.h>
 #include <proto/lms200.h>
 #include <proto/rflex.h>
-#include <tabq/tabq.h>
 #include <tasks/episode.h>
 #include <tasks/tasks.h>
 
 #include <pthread.h>
 #include <stdatomic.h>
 
-#define FW_MAX_STATE (TASKS_MAX_STATE_DIM + 1)
 #define FW_MAILBOX 8
 
 typedef struct fw_drive {
@@ -62,53 +62,12 @@ typedef struct fw_bump_node {
   uint64_t frames;      // every frame from its id (tells a mute node from a PDO-less one)
 } fw_bump_node_t;
 
-/// The value-function learner (learner.c): exactly one of hedger (learner hedger, lwa) and tabq.
-typedef struct fw_learner {
-  int32_t kind;         ///< fw_learner_kind_t
-  void* storage;        ///< the learner's one block (owned)
-  size_t storage_bytes; ///< its allocated size (pre-faulted with rt_prefault)
-  hedger_t* hedger;
-  tabq_t* tabq;
-  size_t save_max;      ///< HEDGER: largest checkpoint payload; 0 for the tabular learner
-} fw_learner_t;
-
-/// Gauges and counters of the learner for the status message and the progress lines.
-typedef struct fw_learner_stats {
-  uint32_t fill;                 ///< HEDGER: stored points; tabular: visited cells
-  uint32_t capacity;             ///< HEDGER: store capacity; tabular: cells
-  uint64_t predictions_lwr;
-  uint64_t predictions_lwa;      ///< tabular: predictions of a visited cell
-  uint64_t predictions_unknown;
-  uint64_t evictions;
-  uint64_t rebuilds;
-} fw_learner_stats_t;
-
 /// The learner's work after a step or between runs (learning.c).
 typedef enum fw_learn_stage {
   FW_LEARN_IDLE = 0,     ///< nothing to do between runs
-  FW_LEARN_REPLAY = 1,   ///< backward replay of the finished training run, in slices
+  FW_LEARN_REPLAY = 1,   ///< the framework's backward replay of the finished training run, in slices
   FW_LEARN_SAVE = 2,     ///< serialising the learned state into the checkpoint writer, in slices
 } fw_learn_stage_t;
-
-/// A transition waiting to be learned (and published) after this tick's command was sent.
-typedef struct fw_pending_step {
-  bool active;
-  bool learning;        ///< update HEDGER (training) or only predict Q for the message (evaluation)
-  bool need_greedy;     ///< q' not known yet (the greedy at s was not needed for the action)
-  bool terminal;
-  bool evaluating;
-  int8_t source;        ///< who chose a (B21R_EXPERIENCE_T_SOURCE_*)
-  int8_t end_reason;    ///< tasks_end_reason_t of the transition
-  int32_t run_id;
-  int32_t step_id;
-  int32_t phase;
-  double q_next;        ///< greedy value at s_next (when !need_greedy)
-  double reward;
-  double a;             ///< rotation executed [rad/s]
-  double v;             ///< translation executed [m/s]
-  double s[FW_MAX_STATE];
-  double s_next[FW_MAX_STATE];
-} fw_pending_step_t;
 
 /// Progress lines waiting for the checkpoint of the run they report (outputs.c).
 #define FW_HELD_LINES 8
@@ -123,13 +82,14 @@ struct fw_loop {
   // Task: specs, feature extractors, the current run's frame and newest features.
   tasks_episode_t ep;
   tasks_command_limits_t limits;
-  uint32_t state_dim;
   double omega_max;
-  double gamma;
+  double features[LEARN_MAX_TASK_STATE];  // the task's state of the newest usable scan
 
-  // Learner.
-  fw_learner_t learner;
-  fw_pending_step_t pending;
+  // The learning framework (lib/learn) in its own block, and the between-run work around it.
+  learn_t* agent;
+  void* agent_storage;         // owned; agent_bytes long (pre-faulted with rt_prefault)
+  size_t agent_bytes;
+  size_t save_max;             // the learner's largest checkpoint payload (0: no checkpoints)
   fw_learn_stage_t learn_stage;
   hedger_save_cursor_t save_cursor;
   int save_handle;             // checkpoint writer buffer being filled (-1: none)
@@ -218,19 +178,14 @@ struct fw_loop {
   // Supervisors.
   fw_safety_t safety;
   fw_timing_t timing;
-  fw_schedule_t sched;
 
   // Random streams.
   rng_t pose_rng;
-  rng_t explore_rng;
   uint64_t driver_seed_base;
   tasks_driver_t driver;
   tasks_start_cycle_t start_cycle;
-  int32_t explore_steps_left;  // of the exploration segment under way
-  double explore_offset;       // its action offset [rad/s]
   // Run state.
   int32_t mode;                // b21r_status_t MODE_*
-  fw_run_plan_t plan;
   bool pose_requested;
   bool awaiting_confirm;
   int32_t settle_ticks;
@@ -240,17 +195,7 @@ struct fw_loop {
   bool start_pose_chosen;      // start_pose is the next run's (drawn once per run: the pose sequence
                                // of a seed does not depend on stops between runs)
   features_pose_t start_pose;
-  int32_t run_id;
-  int32_t actions_taken;       // actions executed in the current run
-  bool have_prev;
-  double prev_s[FW_MAX_STATE];
-  double prev_a;
-  double prev_v;
-  int8_t prev_source;
-  double s[FW_MAX_STATE];
-  double run_return;
   int64_t run_first_seq;       // exp_seq when the run began
-  int32_t run_steps_by_source[5]; // actions of the run by B21R_EXPERIENCE_T_SOURCE_*
   b21r_run_t run_end;          // the end record of the run that ended, published after its last experience
   bool run_end_ready;
 
@@ -263,7 +208,6 @@ struct fw_loop {
   int64_t utime;               // of the current tick
   int64_t exp_seq;
   int64_t exp_dropped;
-  int64_t steps;
   int64_t held_ticks;
   int64_t next_deadline_us;
   int64_t tick_deadline_us;
@@ -276,7 +220,7 @@ struct fw_loop {
   int32_t runs_aborted;
   int32_t last_run_steps;
   bool last_run_goal;
-  fw_eval_block_t last_block;
+  learn_eval_block_t last_block;
   int64_t checkpoints_submitted;
   int64_t checkpoints_skipped;
   // A finished training run's progress line (and the lines after it) wait until its checkpoint
@@ -285,7 +229,6 @@ struct fw_loop {
   uint32_t n_held_lines;
   bool lines_holding;
   uint64_t lines_release_at;   // writer's written + failed + superseded that releases them (0: not yet known)
-  bool end_run_pending;        // a training run ended: its replay starts after the pending step
   char* config_text;           // the effective configuration (fw_config_print), for B21R_CONFIG
   int64_t pace_origin_us;      // lockstep_realtime_factor: monotonic time of pacing tick 0
   int64_t pace_ticks;
@@ -309,10 +252,10 @@ uint64_t fw_base_checksum_errors(const fw_loop_t* L);
 
 // ---- outputs.c ----
 void fw_loop_log(fw_loop_t* L, int stream, const char* format, ...) __attribute__((format(printf, 3, 4)));
-void fw_out_experience(fw_loop_t* L, const fw_pending_step_t* step, double q, hedger_kind_t kind);
+void fw_out_experience(fw_loop_t* L, const learn_experience_t* e);
 void fw_out_pose(fw_loop_t* L);
 void fw_out_scan(fw_loop_t* L);
-void fw_out_eval(fw_loop_t* L, const fw_eval_block_t* block);
+void fw_out_eval(fw_loop_t* L, const learn_eval_block_t* block);
 void fw_out_status(fw_loop_t* L);
 /// B21R_CONFIG (once, at start-up).
 void fw_out_config(fw_loop_t* L);
@@ -334,8 +277,9 @@ features_pose_t fw_run_odom_pose(const fw_loop_t* L);
 /// Once per tick after base.odometry's update: run_starting restarts run_odometry at the
 /// current counts; otherwise it integrates the same counts as base.odometry. O(1).
 void fw_run_odometry_update(fw_loop_t* L, bool run_starting);
-/// The state of the newest scan (features at the odometry pose); false when unusable.
-bool fw_run_observe(fw_loop_t* L);
+/// The state of the newest scan (features at the odometry pose, and the learner's state from
+/// them); false when unusable. *finite: every value of the learner's state is finite.
+bool fw_run_observe(fw_loop_t* L, bool* finite);
 void fw_run_begin_repositioning(fw_loop_t* L);
 /// Repositioning: requests the start pose, and starts the run once it stands (and the learner is
 /// idle). Sets *v/*w and returns true when the run's first command was decided.
@@ -348,32 +292,25 @@ void fw_run_abort(fw_loop_t* L, int8_t end_reason, int32_t stop_reason, const ch
 /// While stopped for a bump in the emulator: asks for the next start pose once.
 void fw_run_request_pose_while_stopped(fw_loop_t* L);
 
-// ---- learner.c ----
-/// Sets up the configured learner (cfg.learner) in memory allocated once; -1 with a message.
-int fw_learner_init(fw_loop_t* L, uint64_t seed, char* err, size_t err_cap);
-void fw_learner_free(fw_learner_t* lr);
-/// Greedy action and its value at s; false when no action is known there (value = 0, the default).
-bool fw_learner_greedy(fw_learner_t* lr, const double* s, double* action, double* value);
-/// One update of (s, a, r, s', terminal) with q' given; *q_old / *kind: Q(s, a) before it.
-bool fw_learner_learn(fw_learner_t* lr, const double* s, double a, double r, const double* s_next, bool terminal,
-                      double q_next, double* q_old, hedger_kind_t* kind);
-/// Q(s, a) and how it was obtained (tabular: LWA = a visited cell).
-bool fw_learner_predict(fw_learner_t* lr, const double* s, double a, double* q, hedger_kind_t* kind);
-/// The finished run's backward replay: begin, then steps of at most max_updates (returns those left).
-void fw_learner_end_run_begin(fw_learner_t* lr);
-uint32_t fw_learner_end_run_step(fw_learner_t* lr, uint32_t max_updates);
-fw_learner_stats_t fw_learner_stats(const fw_learner_t* lr);
-
 // ---- loop.c ----
 /// The task's specs and command limits as cfg configures them (the loop's set-up). O(1).
 void fw_loop_task_specs(const fw_config_t* cfg, tasks_corridor_spec_t* corridor, tasks_obstacles_spec_t* obstacles,
                         tasks_command_limits_t* limits);
 
 // ---- learning.c ----
-void fw_learning_config(const fw_loop_t* L, hedger_config_t* out);
-/// After the command: the pending step's update (or prediction), and a slice of between-run work.
+/// The task as the learning framework sees it (learn_task_t): the state's dimension, declared
+/// scales and ranges, action bounds, discount and step limit of the configured task. O(1).
+void fw_learning_task(const fw_config_t* cfg, const tasks_episode_t* ep, learn_task_t* out);
+/// The framework's settings from the configuration (dt_s: the control period [s]). O(1).
+void fw_learning_settings(const fw_config_t* cfg, double dt_s, learn_config_t* out);
+/// Sets up the framework for the configured task in one block allocated here (the only
+/// allocation); -1 with a message.
+int fw_learning_init(fw_loop_t* L, uint64_t explore_seed, uint64_t learner_seed, char* err, size_t err_cap);
+void fw_learning_free(fw_loop_t* L);
+/// After the command: the queued step's update (or prediction) and its experience message, and a
+/// slice of between-run work (the framework's replay, then the checkpoint).
 void fw_learning_after_command(fw_loop_t* L);
-/// A training run ended (its last transition is pending): replay and checkpoint follow.
+/// A training run ended (its last transition is queued): replay and checkpoint follow.
 void fw_learning_run_ended(fw_loop_t* L);
 /// True when no between-run work is left (a run may start).
 bool fw_learning_idle(const fw_loop_t* L);

@@ -62,7 +62,7 @@ static void take_command(fw_loop_t* L, const b21r_command_t* m) {
   L->cmd_last_seq = m->seq;
   switch (m->command) {
     case B21R_COMMAND_T_START_PHASE_TWO:
-      fw_schedule_request_phase_two(&L->sched);
+      learn_request_phase_two(L->agent);
       fw_loop_log(L, 2, "b21r-controller: operator: phase two starts when the current training run ends");
       break;
     case B21R_COMMAND_T_CONFIRM_START_POSE:

@@ -69,7 +69,7 @@ void fw_out_release_lines(fw_loop_t* L, bool force) {
   L->n_held_lines = 0;
 }
 
-void fw_out_experience(fw_loop_t* L, const fw_pending_step_t* step, double q, hedger_kind_t kind) {
+void fw_out_experience(fw_loop_t* L, const learn_experience_t* step) {
   const int64_t seq = L->exp_seq++;  // a dropped experience leaves a gap in seq: detectable
   if (L->out.queue == NULL) {
     return;
@@ -89,8 +89,8 @@ void fw_out_experience(fw_loop_t* L, const fw_pending_step_t* step, double q, he
   e->phase = (int8_t)step->phase;
   e->source = step->source;
   e->evaluating = step->evaluating ? 1 : 0;
-  e->state_dim = (int8_t)L->state_dim;
-  for (uint32_t i = 0; i < L->state_dim; ++i) {
+  e->state_dim = (int8_t)step->state_dim;
+  for (uint32_t i = 0; i < step->state_dim; ++i) {
     e->s[i] = step->s[i];
     e->s_next[i] = step->s_next[i];
   }
@@ -98,8 +98,8 @@ void fw_out_experience(fw_loop_t* L, const fw_pending_step_t* step, double q, he
   e->translation_mps = step->v;
   e->reward = step->reward;
   e->terminal = step->terminal ? 1 : 0;
-  e->q_value = isfinite(q) ? q : 0.0;
-  e->q_kind = (int8_t)(kind == HEDGER_KIND_LWR ? 0 : (kind == HEDGER_KIND_LWA ? 1 : 2));
+  e->q_value = isfinite(step->q) ? step->q : 0.0;
+  e->q_kind = (int8_t)(step->q_kind == HEDGER_KIND_LWR ? 0 : (step->q_kind == HEDGER_KIND_LWA ? 1 : 2));
   fw_pubq_commit(L->out.queue);
 }
 
@@ -113,8 +113,8 @@ void fw_out_pose(fw_loop_t* L) {
   }
   b21r_pose_t* p = &m->u.pose;
   p->utime = L->utime;
-  p->run_id = L->run_id;
-  p->step_id = L->actions_taken;
+  p->run_id = learn_run_id(L->agent);
+  p->step_id = learn_run_actions(L->agent);
   p->x_m = L->base.odometry.x_m;
   p->y_m = L->base.odometry.y_m;
   p->theta_rad = L->base.odometry.theta_rad;
@@ -133,8 +133,8 @@ void fw_out_scan(fw_loop_t* L) {
   }
   b21r_scan_t* s = &m->u.scan;
   s->utime = L->utime;
-  s->run_id = L->run_id;
-  s->step_id = L->actions_taken;
+  s->run_id = learn_run_id(L->agent);
+  s->step_id = learn_run_actions(L->agent);
   s->angle_min_rad = (float)L->scan.angle_min_rad;
   s->angle_increment_rad = (float)L->scan.angle_increment_rad;
   s->n_beams = (int16_t)L->scan.n_beams;
@@ -145,7 +145,7 @@ void fw_out_scan(fw_loop_t* L) {
   fw_pubq_commit(L->out.queue);
 }
 
-void fw_out_eval(fw_loop_t* L, const fw_eval_block_t* b) {
+void fw_out_eval(fw_loop_t* L, const learn_eval_block_t* b) {
   if (L->out.queue == NULL) {
     return;
   }
@@ -189,21 +189,21 @@ void fw_out_status(fw_loop_t* L) {
   b21r_status_t* s = &m->u.status.msg;
   memset(s, 0, sizeof *s);
   s->utime = L->utime;
-  s->phase = (int8_t)L->sched.p.phase;
+  s->phase = (int8_t)learn_schedule(L->agent)->p.phase;
   s->mode = fw_out_status_mode(L);
   s->stop_reason = (int8_t)L->safety.reason;
   memcpy(m->u.status.detail, L->safety.detail, sizeof m->u.status.detail);
-  s->run_id = L->run_id;
-  s->step_id = L->actions_taken;
-  s->training_runs = L->sched.p.training_runs;
-  s->eval_blocks = L->sched.p.eval_blocks;
+  s->run_id = learn_run_id(L->agent);
+  s->step_id = learn_run_actions(L->agent);
+  s->training_runs = learn_schedule(L->agent)->p.training_runs;
+  s->eval_blocks = learn_schedule(L->agent)->p.eval_blocks;
   const fw_timing_summary_t t = fw_timing_summary(&L->timing);
   s->tick_p50_us = t.p50_us;
   s->tick_p99_us = t.p99_us;
   s->tick_max_us = t.max_us;
   s->tick_overruns = t.overruns;
   s->ticks = t.ticks;
-  const fw_learner_stats_t learner = fw_learner_stats(&L->learner);
+  const learn_learner_stats_t learner = learn_learner_stats(learn_get_learner(L->agent));
   s->store_fill = (int32_t)learner.fill;
   s->store_capacity = (int32_t)learner.capacity;
   s->hedger_lwr = (int64_t)learner.predictions_lwr;

@@ -23,7 +23,7 @@ _Static_assert(FW_PROGRESS_BYTES == 56U, "fw_progress_encode fills bytes 0-55");
 _Static_assert(FW_PROGRESS_READ_MAX >= BYTES_1_HOLD, "the largest section read fits the buffer");
 
 size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]) {
-  const fw_schedule_progress_t* g = &p->schedule;
+  const learn_schedule_progress_t* g = &p->schedule;
   memset(out, 0, FW_PROGRESS_BYTES);
   memcpy(out, MAGIC, 8);
   fw_put_u32(out + 8, (uint32_t)p->task);
@@ -63,7 +63,7 @@ int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why
   }
   fw_progress_t p;
   memset(&p, 0, sizeof p);
-  fw_schedule_progress_t* g = &p.schedule;
+  learn_schedule_progress_t* g = &p.schedule;
   const uint32_t task = fw_get_u32(b + 8);
   if (task != (uint32_t)FW_TASK_CORRIDOR && task != (uint32_t)FW_TASK_OBSTACLES) {
     fw_errfmt(why, cap, "task %u, expected %d (corridor) or %d (obstacles)", (unsigned)task, FW_TASK_CORRIDOR,

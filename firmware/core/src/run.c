@@ -1,5 +1,8 @@
 // SPDX-License-Identifier: MIT
-// The run lifecycle (repositioning, runs, the schedule) and the action of each step.
+// The run lifecycle around the learning framework: repositioning and start poses, the task's
+// driver of each run (the example policy, a simulated person, the evaluated reference), the
+// observation of each step, and the run's end record. Who acts and what is learned is the
+// framework's (lib/learn).
 #include "loop_internal.h"
 
 #include <math.h>
@@ -13,10 +16,7 @@ bool fw_run_running(const fw_loop_t* L) {
   return L->mode == B21R_STATUS_T_MODE_RUNNING || L->mode == B21R_STATUS_T_MODE_EVALUATING;
 }
 
-bool fw_run_joystick_drives(const fw_loop_t* L) {
-  return L->cfg.mode == FW_MODE_LEARN && L->cfg.phase_driver == FW_DRIVER_JOYSTICK &&
-         L->plan.kind == FW_RUN_TRAINING && L->plan.phase == 1 && fw_run_running(L);
-}
+bool fw_run_joystick_drives(const fw_loop_t* L) { return fw_run_running(L) && learn_joystick_drives(L->agent); }
 
 features_pose_t fw_run_odom_pose(const fw_loop_t* L) {
   const features_pose_t p = {L->run_odometry.x_m, L->run_odometry.y_m, L->run_odometry.theta_rad};
@@ -32,18 +32,17 @@ void fw_run_odometry_update(fw_loop_t* L, bool run_starting) {
   (void)rflex_odom_follow(&L->run_odometry, &L->base.odometry);
 }
 
-bool fw_run_observe(fw_loop_t* L) {
-  if (L->cfg.state_rotation) {
-    // The command of the previous tick after the limits: the rotation the base executes now, and
-    // the one the acceleration limit measures this tick's change against. Known exactly, unlike
-    // the odometry's noisy rate, so a lockstep run stays a function of its inputs.
-    L->s[L->ep.state_dim] = L->cmd_w;
-  }
-  return tasks_episode_observe(&L->ep, &L->scan, fw_run_odom_pose(L), L->s) == 1;
+bool fw_run_observe(fw_loop_t* L, bool* finite) {
+  // The task's features (kept as they were when the scan is unusable), and the learner's state
+  // from them and the command of the previous tick after the limits (the rotation the base
+  // executes now).
+  const bool usable = tasks_episode_observe(&L->ep, &L->scan, fw_run_odom_pose(L), L->features) == 1;
+  *finite = learn_observe(L->agent, L->features, L->cmd_w);
+  return usable;
 }
 
-static const char* run_kind_name(const fw_loop_t* L) {
-  if (L->plan.kind == FW_RUN_EVAL) {
+static const char* run_kind_name(const fw_loop_t* L, const learn_plan_t* plan) {
+  if (plan->kind == LEARN_RUN_EVAL) {
     if (L->cfg.mode == FW_MODE_EVALUATE) {
       switch (L->cfg.evaluate_policy) {
         case FW_EVAL_OPTIMAL:
@@ -61,35 +60,32 @@ static const char* run_kind_name(const fw_loop_t* L) {
   return "train";
 }
 
-static features_pose_t next_start_pose(fw_loop_t* L, const fw_run_plan_t* plan) {
-  if (plan->kind == FW_RUN_EVAL) {
+static features_pose_t next_start_pose(fw_loop_t* L, const learn_plan_t* plan) {
+  if (plan->kind == LEARN_RUN_EVAL) {
     return tasks_episode_eval_start(&L->ep, (uint32_t)plan->eval_index);
   }
   return tasks_episode_training_start(&L->ep, &L->pose_rng);
 }
 
-// The id begin_run gives the next run (B21R_RUN.run_id), as the start-pose request passes it on.
-static uint64_t next_run_id(const fw_loop_t* L) { return (uint64_t)(L->run_id + 1); }
+// The id the next run gets (B21R_RUN.run_id), as the start-pose request passes it on.
+static uint64_t next_run_id(const fw_loop_t* L) { return (uint64_t)(learn_run_id(L->agent) + 1); }
 
 static void begin_run(fw_loop_t* L) {
-  L->run_id++;
+  learn_begin_run(L->agent);
+  const learn_plan_t plan = learn_plan(L->agent);
+  const int32_t run_id = learn_run_id(L->agent);
   L->start_pose_chosen = false;
-  L->explore_steps_left = 0;
-  L->actions_taken = 0;
-  L->have_prev = false;
-  L->run_return = 0.0;
   L->run_first_seq = L->exp_seq;
-  memset(L->run_steps_by_source, 0, sizeof L->run_steps_by_source);
   // The driver of this run: the example policy in phase one, the advisor in phase two, or the
   // evaluated reference. Its stream is seeded per run, so a run does not depend on earlier ones.
-  uint64_t st = L->driver_seed_base ^ ((uint64_t)(uint32_t)L->run_id * 0x9E3779B97F4A7C15ULL);
+  uint64_t st = L->driver_seed_base ^ ((uint64_t)(uint32_t)run_id * 0x9E3779B97F4A7C15ULL);
   const uint64_t run_seed = rng_splitmix64(&st);
   tasks_driver_kind_t kind = TASKS_DRIVER_PROPORTIONAL;
   if (L->cfg.mode == FW_MODE_EVALUATE && L->cfg.evaluate_policy == FW_EVAL_OPTIMAL) {
     kind = TASKS_DRIVER_OPTIMAL;
   } else if (L->cfg.mode == FW_MODE_EVALUATE && L->cfg.evaluate_policy == FW_EVAL_HUMAN) {
     kind = TASKS_DRIVER_HUMAN;
-  } else if (L->cfg.phase_driver == FW_DRIVER_HUMAN && L->plan.kind == FW_RUN_TRAINING && L->plan.phase == 1) {
+  } else if (L->cfg.phase_driver == FW_DRIVER_HUMAN && plan.kind == LEARN_RUN_TRAINING && plan.phase == 1) {
     kind = TASKS_DRIVER_HUMAN;
   }
   tasks_driver_begin_run(&L->driver, kind, fw_run_is_corridor(L) ? TASKS_TASK_CORRIDOR : TASKS_TASK_OBSTACLES,
@@ -112,7 +108,7 @@ static void begin_run(fw_loop_t* L) {
   if (!fw_run_is_corridor(L) && kind == TASKS_DRIVER_PROPORTIONAL) {
     L->driver.law[0] = L->driver.gain;  // the obstacle example policy's law holds its gain
   }
-  L->mode = L->plan.kind == FW_RUN_EVAL ? B21R_STATUS_T_MODE_EVALUATING : B21R_STATUS_T_MODE_RUNNING;
+  L->mode = plan.kind == LEARN_RUN_EVAL ? B21R_STATUS_T_MODE_EVALUATING : B21R_STATUS_T_MODE_RUNNING;
   L->status_now = true;
 }
 
@@ -128,83 +124,82 @@ void fw_run_begin_repositioning(fw_loop_t* L) {
   L->confirm_pending = false;
   L->settle_ticks = L->pose_requested ? (L->cfg.lockstep ? 0 : 3) : 0;
   L->retry_countdown = 0;
-  L->plan = fw_schedule_next(&L->sched);
+  const learn_plan_t plan = learn_plan(L->agent);
   L->status_now = true;
-  if (L->plan.kind == FW_RUN_NONE) {
+  if (plan.kind == LEARN_RUN_NONE) {
     L->mode = B21R_STATUS_T_MODE_DONE;
     L->done = true;
     L->exit_status = 0;
-    fw_loop_log(L, 1, "schedule complete: %d training runs, %d evaluation blocks", L->sched.p.training_runs,
-                L->sched.p.eval_blocks);
+    const learn_schedule_progress_t* p = &learn_schedule(L->agent)->p;
+    fw_loop_log(L, 1, "schedule complete: %d training runs, %d evaluation blocks", p->training_runs, p->eval_blocks);
     return;
   }
   if (!L->start_pose_chosen) {
-    L->start_pose = next_start_pose(L, &L->plan);
+    L->start_pose = next_start_pose(L, &plan);
     L->start_pose_chosen = true;
   }
 }
 
 // The run's end record; published by fw_out_run_end once the run's last experience is out.
-static void record_run_end(fw_loop_t* L, int8_t end_reason, int32_t stop_reason, const char* why) {
+static void record_run_end(fw_loop_t* L, const learn_run_end_t* e, int8_t end_reason, int32_t stop_reason,
+                           const char* why) {
   fw_out_run_end(L);  // one still waiting (never expected: at most one run ends per tick)
   b21r_run_t* r = &L->run_end;
   memset(r, 0, sizeof *r);
-  const bool eval = L->plan.kind == FW_RUN_EVAL;
+  const bool eval = e->plan.kind == LEARN_RUN_EVAL;
   r->utime = L->utime;
-  r->run_id = L->run_id;
+  r->run_id = e->run_id;
   r->kind = eval ? B21R_RUN_T_KIND_EVALUATION : B21R_RUN_T_KIND_TRAINING;
-  r->phase = (int8_t)L->plan.phase;
+  r->phase = (int8_t)e->plan.phase;
   r->task = (int8_t)L->cfg.task;
-  r->training_index = eval ? -1 : L->plan.training_index;
-  r->eval_block = eval ? L->sched.p.eval_blocks : -1;  // blocks finished so far = this block's number
-  r->eval_index = eval ? L->plan.eval_index : -1;
+  r->training_index = eval ? -1 : e->plan.training_index;
+  r->eval_block = e->eval_block;
+  r->eval_index = eval ? e->plan.eval_index : -1;
   r->start_x_m = L->start_pose.x_m;
   r->start_y_m = L->start_pose.y_m;
   r->start_theta_rad = L->start_pose.theta_rad;
   r->end_reason = end_reason;
   r->stop_reason = (int8_t)stop_reason;
   r->detail = (char*)(uintptr_t)why;
-  r->steps = L->actions_taken;
-  r->total_reward = L->run_return;
+  r->steps = e->steps;
+  r->total_reward = e->total_reward;
   r->first_seq = L->run_first_seq;
   for (int i = 0; i < 5; ++i) {
-    r->steps_by_source[i] = L->run_steps_by_source[i];
+    r->steps_by_source[i] = e->steps_by_source[i];
   }
   L->run_end_ready = true;
 }
 
-static void finish_run(fw_loop_t* L, bool reached_goal, int8_t end_reason, int32_t stop_reason, const char* why) {
-  const bool aborted = end_reason == B21R_RUN_T_END_SAFETY_STOP || end_reason == B21R_RUN_T_END_SHUTDOWN;
-  const bool training = L->plan.kind == FW_RUN_TRAINING && L->cfg.mode == FW_MODE_LEARN;
-  const int32_t steps = reached_goal ? L->actions_taken : (int32_t)fw_run_step_limit(L);
-  record_run_end(L, end_reason, stop_reason, why);
-  fw_eval_block_t block;
-  const bool block_done = fw_schedule_finish_run(&L->sched, steps, reached_goal, aborted, &block);
-  if (aborted) {
+// The framework has ended the run (e): its record, counts, progress lines and evaluation block.
+static void finish_run(fw_loop_t* L, const learn_run_end_t* e, int8_t end_reason, int32_t stop_reason,
+                       const char* why) {
+  record_run_end(L, e, end_reason, stop_reason, why);
+  if (e->aborted) {
     L->runs_aborted++;
   } else {
     L->runs_finished++;
-    L->last_run_steps = L->actions_taken;
-    L->last_run_goal = reached_goal;
+    L->last_run_steps = e->steps;
+    L->last_run_goal = e->goal;
   }
-  if (training) {
+  if (e->learning) {
     // The replay of the run and the checkpoint run after this tick's command, in slices; the
     // run's progress line waits until its checkpoint is written (see learning.c).
     fw_learning_run_ended(L);
   }
   if (L->cfg.progress) {
-    fw_loop_log(L, 1, "run %4d  phase %d  %-13s %-9s %4d steps  (%s)  store %u/%u", L->run_id, L->plan.phase,
-                run_kind_name(L), aborted ? "ABORTED" : (reached_goal ? "goal" : "no goal"), L->actions_taken, why,
-                fw_learner_stats(&L->learner).fill, fw_learner_stats(&L->learner).capacity);
+    const learn_learner_stats_t ls = learn_learner_stats(learn_get_learner(L->agent));
+    fw_loop_log(L, 1, "run %4d  phase %d  %-13s %-9s %4d steps  (%s)  store %u/%u", e->run_id, e->plan.phase,
+                run_kind_name(L, &e->plan), e->aborted ? "ABORTED" : (e->goal ? "goal" : "no goal"), e->steps, why,
+                ls.fill, ls.capacity);
   }
-  if (block_done) {
-    L->last_block = block;
-    fw_out_eval(L, &block);
+  if (e->block_done) {
+    L->last_block = e->block;
+    fw_out_eval(L, &e->block);
     if (L->cfg.progress) {
       fw_loop_log(L, 1, "EVAL block %2d after %3d training runs (phase %d): %2d/%d reached the goal, mean %.1f +- %.1f steps",
-                  block.block, block.training_runs, block.phase, block.successes, block.n_starts, block.mean_steps,
-                  block.ci95_halfwidth);
-      if (L->sched.p.phase == 2 && block.phase == 1) {
+                  e->block.block, e->block.training_runs, e->block.phase, e->block.successes, e->block.n_starts,
+                  e->block.mean_steps, e->block.ci95_halfwidth);
+      if (learn_schedule(L->agent)->p.phase == 2 && e->block.phase == 1) {
         fw_loop_log(L, 1, "PHASE TWO: the learned policy drives from now on");
       }
     }
@@ -213,8 +208,9 @@ static void finish_run(fw_loop_t* L, bool reached_goal, int8_t end_reason, int32
 }
 
 void fw_run_abort(fw_loop_t* L, int8_t end_reason, int32_t stop_reason, const char* why) {
-  if (fw_run_running(L)) {
-    finish_run(L, false, end_reason, stop_reason, why);
+  learn_run_end_t e;
+  if (fw_run_running(L) && learn_abort_run(L->agent, &e)) {
+    finish_run(L, &e, end_reason, stop_reason, why);
   }
 }
 
@@ -277,8 +273,8 @@ void fw_run_request_pose_while_stopped(fw_loop_t* L) {
     return;
   }
   if (!L->start_pose_chosen) {
-    const fw_run_plan_t plan = fw_schedule_next(&L->sched);
-    if (plan.kind == FW_RUN_NONE) {
+    const learn_plan_t plan = learn_plan(L->agent);
+    if (plan.kind == LEARN_RUN_NONE) {
       return;
     }
     L->start_pose = next_start_pose(L, &plan);
@@ -290,111 +286,33 @@ void fw_run_request_pose_while_stopped(fw_loop_t* L) {
   L->stopped_pose_requested = r == 1;
 }
 
-// Exploration of a training step: with explore_probability per step a segment starts that adds
-// one offset ~ N(0, sigma) to the actions for explore_hold_s (at least one step). Returns true
-// (with the offset) while a segment is running.
-static bool explore_offset(fw_loop_t* L, double sigma, double* offset) {
-  if (L->explore_steps_left == 0) {
-    if (sigma <= 0.0 || !(rng_uniform(&L->explore_rng) < L->cfg.explore_probability)) {
-      return false;
-    }
-    const int64_t hold = (int64_t)floor(L->cfg.explore_hold_s / L->dt_s + 0.5);
-    L->explore_steps_left = hold > 1 ? (int32_t)hold : 1;
-    L->explore_offset = sigma * rng_normal(&L->explore_rng);
-  }
-  L->explore_steps_left--;
-  *offset = L->explore_offset;
-  return true;
-}
-
-// The transition (prev_s, prev_a) -> s with its reward waits for learning.c, after the command.
-static void queue_transition(fw_loop_t* L, const tasks_outcome_t* o, bool learning) {
-  fw_pending_step_t* p = &L->pending;
-  p->active = true;
-  p->learning = learning;
-  p->need_greedy = true;
-  p->q_next = 0.0;
-  p->reward = o->reward;
-  p->terminal = o->terminal != 0;
-  p->end_reason = (int8_t)o->reason;
-  memcpy(p->s, L->prev_s, sizeof p->s);
-  memcpy(p->s_next, L->s, sizeof p->s_next);
-  p->a = L->prev_a;
-  p->v = L->prev_v;
-  p->source = L->prev_source;
-  p->run_id = L->run_id;
-  p->step_id = L->actions_taken - 1;
-  p->phase = L->plan.phase;
-  p->evaluating = L->plan.kind == FW_RUN_EVAL;
-}
-
 void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
-  const bool evaluating = L->plan.kind == FW_RUN_EVAL;
-  const bool learning = !evaluating && L->cfg.mode == FW_MODE_LEARN;
-  const bool learned_policy =
-      (evaluating && !(L->cfg.mode == FW_MODE_EVALUATE && L->cfg.evaluate_policy != FW_EVAL_LEARNED)) ||
-      (!evaluating && L->plan.phase == 2);
-  if (L->have_prev) {
-    const tasks_outcome_t o = tasks_episode_outcome(&L->ep, contact, (uint32_t)L->actions_taken);
-    queue_transition(L, &o, learning);
-    L->steps++;
-    L->run_return += o.reward;
-    if (o.end_run) {
+  if (learn_has_transition(L->agent)) {
+    // The outcome of the last executed action, as the task computes it.
+    const tasks_outcome_t o =
+        tasks_episode_outcome(&L->ep, contact, (uint32_t)learn_run_actions(L->agent));
+    const learn_outcome_t lo = {.reward = o.reward,
+                                .terminal = o.terminal != 0,
+                                .end_run = o.end_run != 0,
+                                .goal = o.reason == TASKS_END_GOAL,
+                                .reason = (int8_t)o.reason};
+    learn_run_end_t e;
+    if (learn_transition(L->agent, &lo, &e)) {
       *v_cmd = 0.0;
       *w_cmd = 0.0;
       const bool goal = o.reason == TASKS_END_GOAL;
       const bool collision = o.reason == TASKS_END_COLLISION;
-      finish_run(L, goal,
+      finish_run(L, &e,
                  goal ? B21R_RUN_T_END_GOAL : (collision ? B21R_RUN_T_END_COLLISION : B21R_RUN_T_END_STEP_LIMIT), 0,
                  goal ? "goal" : (collision ? "collision" : "step limit"));
       return;
     }
   }
-  // The greedy search at s chooses the learned policy's action; its value is also the q' of the
-  // transition into s (learned after the command), so it runs once.
-  bool greedy_known = false;
-  double greedy_action = 0.0;
-  if (learned_policy) {
-    double value = 0.0;
-    greedy_known = fw_learner_greedy(&L->learner, L->s, &greedy_action, &value);
-    if (greedy_known) {
-      greedy_action = tasks_clamp_omega(greedy_action, L->omega_max);
-    }
-    if (L->pending.active) {
-      L->pending.need_greedy = false;
-      L->pending.q_next = value;  // the default value (0) when no action is known
-    }
-  }
   // The driver runs every step (even when it only advises) so its state follows the run.
   const double advice = tasks_episode_driver_action(&L->ep, &L->driver);
   double a = 0.0;
-  double offset = 0.0;
-  int8_t source = B21R_EXPERIENCE_T_SOURCE_EXAMPLE;
-  if (!learned_policy) {
-    if (fw_run_joystick_drives(L)) {
-      a = L->teleop_rot_radps;
-      source = B21R_EXPERIENCE_T_SOURCE_JOYSTICK;
-    } else {
-      a = advice;
-      if (!evaluating && L->cfg.example_noise_radps > 0.0 && explore_offset(L, L->cfg.example_noise_radps, &offset)) {
-        a += offset;  // phase-one dither: the learner sees actions around the example's
-      }
-    }
-  } else if (greedy_known) {
-    a = greedy_action;
-    source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
-    if (!evaluating && explore_offset(L, L->cfg.explore_sigma_radps, &offset)) {
-      a += offset;
-      source = B21R_EXPERIENCE_T_SOURCE_EXPLORATION;
-    }
-  } else if (!evaluating && L->cfg.advisor) {
-    a = advice;  // the learner knows no action here: the example policy advises
-    source = B21R_EXPERIENCE_T_SOURCE_ADVISOR;
-  } else {
-    a = 0.0;  // nothing known: hold course (evaluations measure the learned policy alone)
-    source = B21R_EXPERIENCE_T_SOURCE_GREEDY;
-  }
+  int8_t source = LEARN_SOURCE_EXAMPLE;
+  learn_act(L->agent, advice, L->teleop_rot_radps, &a, &source);
   *w_cmd = a;
   *v_cmd = tasks_episode_speed_mps(&L->ep);
-  L->prev_source = source;
 }

@@ -27,7 +27,7 @@
 #include <fw/checkpoint.h>
 #include <fw/config.h>
 #include <fw/loop.h>
-#include <fw/schedule.h>
+#include <learn/schedule.h>
 #include <hedger/hedger.h>
 #include <sim/env.h>
 #include <tasks/episode.h>
@@ -673,7 +673,7 @@ std::vector<uint32_t> corridor_steps_lower_bound(double length_m) {
 
 nb::tuple mean_ci95(const std::vector<double>& values) {
   double mean = 0.0, half = 0.0;
-  fw_mean_ci95(values.data(), static_cast<int32_t>(values.size()), &mean, &half);
+  learn_mean_ci95(values.data(), static_cast<int32_t>(values.size()), &mean, &half);
   return nb::make_tuple(mean, half);
 }
 

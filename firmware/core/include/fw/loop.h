@@ -45,7 +45,7 @@
 #include "fw/publisher.h"
 #include "fw/pubq.h"
 #include "fw/safety.h"
-#include "fw/schedule.h"
+#include "learn/schedule.h"
 
 #include <hedger/hedger.h>
 
@@ -104,7 +104,7 @@ typedef struct fw_loop_stats {
   int64_t commands_rejected;
   uint32_t store_fill;
   bool done;                     ///< the schedule has ended (or SHUTDOWN/signal)
-  fw_eval_block_t last_block;    ///< newest finished evaluation block (block < 0: none yet)
+  learn_eval_block_t last_block;    ///< newest finished evaluation block (block < 0: none yet)
   int32_t best_example_steps;
   double mean_example_steps;
   int32_t last_run_steps;

@@ -34,7 +34,7 @@
 #ifndef FW_PROGRESS_H
 #define FW_PROGRESS_H
 
-#include "fw/schedule.h"
+#include "learn/schedule.h"
 
 #include <stdbool.h>
 #include <stddef.h>
@@ -56,7 +56,7 @@ extern "C" {
 typedef struct fw_progress {
   int32_t task;                     ///< fw_task_t the learned state belongs to
   uint32_t state_dim;               ///< its state dimension
-  fw_schedule_progress_t schedule;  ///< schedule progress (fw/schedule.h)
+  learn_schedule_progress_t schedule;  ///< schedule progress (fw/schedule.h)
   int32_t run_id;                   ///< last run started, -1 = none
   /// decoded only: a revision-1 file whose policy shift had moved (not used by this controller)
   bool legacy_shift;

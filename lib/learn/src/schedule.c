@@ -1,13 +1,12 @@
 // SPDX-License-Identifier: MIT
 // Run schedule: training runs, evaluation blocks, phase switch.
-#include "fw/schedule.h"
-
-#include "fw/config.h"
+#include "learn/schedule.h"
 
 #include <math.h>
+#include <stdbool.h>
 #include <string.h>
 
-double fw_student_t975(int32_t df) {
+double learn_student_t975(int32_t df) {
   static const double t[31] = {0.0,    12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228,
                                2.201,  2.179,  2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080,
                                2.074,  2.069,  2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042};
@@ -20,7 +19,7 @@ double fw_student_t975(int32_t df) {
   return 1.96 + 2.4 / (double)df;
 }
 
-void fw_mean_ci95(const double* values, int32_t n, double* mean, double* half_width) {
+void learn_mean_ci95(const double* values, int32_t n, double* mean, double* half_width) {
   *mean = 0.0;
   *half_width = 0.0;
   if (n <= 0) {
@@ -40,10 +39,10 @@ void fw_mean_ci95(const double* values, int32_t n, double* mean, double* half_wi
     ss += (values[i] - m) * (values[i] - m);
   }
   const double sd = sqrt(ss / (double)(n - 1));
-  *half_width = fw_student_t975(n - 1) * sd / sqrt((double)n);
+  *half_width = learn_student_t975(n - 1) * sd / sqrt((double)n);
 }
 
-static void begin_block(fw_schedule_t* s) {
+static void begin_block(learn_schedule_t* s) {
   s->in_eval = true;
   s->eval_index = 0;
   memset(&s->current, 0, sizeof s->current);
@@ -53,9 +52,9 @@ static void begin_block(fw_schedule_t* s) {
   s->current.n_starts = s->cfg.eval_starts;
 }
 
-void fw_schedule_init(fw_schedule_t* s, const fw_schedule_config_t* cfg, const fw_schedule_progress_t* resume) {
-  const fw_schedule_config_t c = *cfg;  // cfg may point into *s
-  const fw_schedule_progress_t r = resume != NULL ? *resume : (fw_schedule_progress_t){0};
+void learn_schedule_init(learn_schedule_t* s, const learn_schedule_config_t* cfg, const learn_schedule_progress_t* resume) {
+  const learn_schedule_config_t c = *cfg;  // cfg may point into *s
+  const learn_schedule_progress_t r = resume != NULL ? *resume : (learn_schedule_progress_t){0};
   memset(s, 0, sizeof *s);
   s->cfg = c;
   if (s->cfg.eval_every < 1) {
@@ -64,8 +63,8 @@ void fw_schedule_init(fw_schedule_t* s, const fw_schedule_config_t* cfg, const f
   if (s->cfg.eval_starts < 1) {
     s->cfg.eval_starts = 1;
   }
-  if (s->cfg.eval_starts > FW_SCHEDULE_MAX_STARTS) {
-    s->cfg.eval_starts = FW_SCHEDULE_MAX_STARTS;
+  if (s->cfg.eval_starts > LEARN_SCHEDULE_MAX_STARTS) {
+    s->cfg.eval_starts = LEARN_SCHEDULE_MAX_STARTS;
   }
   if (resume != NULL) {
     s->p = r;
@@ -85,7 +84,7 @@ void fw_schedule_init(fw_schedule_t* s, const fw_schedule_config_t* cfg, const f
     return;
   }
   // A phase-one schedule that has used up its runs switches on resume (RUNS mode).
-  if (s->p.phase == 1 && s->cfg.switch_mode != FW_SWITCH_OPERATOR && s->p.phase_one_runs >= s->cfg.phase_one_runs) {
+  if (s->p.phase == 1 && s->cfg.switch_mode != LEARN_SWITCH_OPERATOR && s->p.phase_one_runs >= s->cfg.phase_one_runs) {
     s->p.phase = 2;
   }
   if (s->cfg.eval_at_start && s->p.training_runs == 0) {
@@ -93,25 +92,25 @@ void fw_schedule_init(fw_schedule_t* s, const fw_schedule_config_t* cfg, const f
   }
 }
 
-fw_run_plan_t fw_schedule_next(const fw_schedule_t* s) {
-  fw_run_plan_t plan;
+learn_plan_t learn_schedule_next(const learn_schedule_t* s) {
+  learn_plan_t plan;
   memset(&plan, 0, sizeof plan);
   plan.phase = s->p.phase;
   if (s->done) {
-    plan.kind = FW_RUN_NONE;
+    plan.kind = LEARN_RUN_NONE;
   } else if (s->in_eval) {
-    plan.kind = FW_RUN_EVAL;
+    plan.kind = LEARN_RUN_EVAL;
     plan.eval_index = s->eval_index;
   } else {
-    plan.kind = FW_RUN_TRAINING;
+    plan.kind = LEARN_RUN_TRAINING;
     plan.training_index = s->p.training_runs;
   }
   return plan;
 }
 
-bool fw_schedule_done(const fw_schedule_t* s) { return s->done; }
+bool learn_schedule_done(const learn_schedule_t* s) { return s->done; }
 
-void fw_schedule_request_phase_two(fw_schedule_t* s) {
+void learn_schedule_request_phase_two(learn_schedule_t* s) {
   if (s->p.phase == 1) {
     s->operator_request = true;
     if (s->in_eval) {
@@ -120,13 +119,13 @@ void fw_schedule_request_phase_two(fw_schedule_t* s) {
   }
 }
 
-static void switch_to_phase_two(fw_schedule_t* s) {
+static void switch_to_phase_two(learn_schedule_t* s) {
   s->p.phase = 2;
   s->switch_pending = false;
   s->operator_request = false;
 }
 
-static bool ready_for_phase_two(const fw_schedule_t* s, const fw_eval_block_t* b) {
+static bool ready_for_phase_two(const learn_schedule_t* s, const learn_eval_block_t* b) {
   if (s->p.phase_one_runs < s->cfg.auto_min_runs || b->successes < b->n_starts || s->p.example_runs == 0) {
     return false;
   }
@@ -134,9 +133,9 @@ static bool ready_for_phase_two(const fw_schedule_t* s, const fw_eval_block_t* b
   return b->mean_steps <= s->cfg.auto_ratio * example_mean;
 }
 
-static void finish_block(fw_schedule_t* s, fw_eval_block_t* out) {
-  fw_eval_block_t* b = &s->current;
-  double values[FW_SCHEDULE_MAX_STARTS];
+static void finish_block(learn_schedule_t* s, learn_eval_block_t* out) {
+  learn_eval_block_t* b = &s->current;
+  double values[LEARN_SCHEDULE_MAX_STARTS];
   int32_t n = 0;
   for (int32_t i = 0; i < b->n_starts; ++i) {
     if (b->success[i]) {
@@ -144,7 +143,7 @@ static void finish_block(fw_schedule_t* s, fw_eval_block_t* out) {
     }
   }
   b->successes = n;
-  fw_mean_ci95(values, n, &b->mean_steps, &b->ci95_halfwidth);
+  learn_mean_ci95(values, n, &b->mean_steps, &b->ci95_halfwidth);
   if (out != NULL) {
     *out = *b;
   }
@@ -155,7 +154,7 @@ static void finish_block(fw_schedule_t* s, fw_eval_block_t* out) {
     return;
   }
   if (s->p.phase == 1) {
-    const bool auto_ready = s->cfg.switch_mode == FW_SWITCH_AUTO && ready_for_phase_two(s, b);
+    const bool auto_ready = s->cfg.switch_mode == LEARN_SWITCH_AUTO && ready_for_phase_two(s, b);
     if (s->switch_pending || s->operator_request || auto_ready) {
       switch_to_phase_two(s);
       // No phase-two runs configured: the block just finished is the last word.
@@ -164,7 +163,7 @@ static void finish_block(fw_schedule_t* s, fw_eval_block_t* out) {
   }
 }
 
-bool fw_schedule_finish_run(fw_schedule_t* s, int32_t steps, bool reached_goal, bool aborted, fw_eval_block_t* block) {
+bool learn_schedule_finish_run(learn_schedule_t* s, int32_t steps, bool reached_goal, bool aborted, learn_eval_block_t* block) {
   if (s->done) {
     return false;
   }
@@ -199,7 +198,7 @@ bool fw_schedule_finish_run(fw_schedule_t* s, int32_t steps, bool reached_goal, 
   }
   bool switch_now = false;
   if (s->p.phase == 1) {
-    const bool by_runs = s->cfg.switch_mode != FW_SWITCH_OPERATOR && s->p.phase_one_runs >= s->cfg.phase_one_runs;
+    const bool by_runs = s->cfg.switch_mode != LEARN_SWITCH_OPERATOR && s->p.phase_one_runs >= s->cfg.phase_one_runs;
     switch_now = by_runs || s->operator_request;
   }
   const bool last = s->p.phase == 2 && s->p.phase_two_runs >= s->cfg.phase_two_runs;

@@ -1,0 +1,551 @@
+// SPDX-License-Identifier: MIT
+// The two-phase learning framework (learn/learn.h): who acts, the step's update after the
+// command, and the between-run replay in slices.
+//
+// Why the update waits for the command: the tick that sees a new state must send its command
+// first (a stop must never wait for learning); the transition into that state is queued and
+// learned after the command went out. Its q' is the greedy value at the new state, which the
+// learned policy's action choice computes anyway: the search runs once.
+//
+// Why slices between runs: the replay of a finished run costs replay_passes × its length updates,
+// tens of milliseconds at 20k points on a PC and seconds on a small onboard computer. The caller
+// does one slice per control period while the robot stands, and the next run starts when the
+// work is done. The work is counted in updates, never in time, so a lockstep run stays a function
+// of its inputs however loaded the machine is.
+#include "learn/learn.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+// The transition into the newest state, learned after the command (learn_update).
+typedef struct pending {
+  bool active;
+  bool learning;      // update the learner (training) or only predict Q for the record (evaluation)
+  bool need_greedy;   // q' not known yet (no greedy search at s_next was needed for the action)
+  double q_next;      // greedy value at s_next (when !need_greedy)
+  learn_experience_t e;
+} pending_t;
+
+struct learn {
+  learn_task_t task;
+  learn_config_t cfg;
+  uint32_t state_dim;  // the learner's
+  learn_learner_t learner;
+  learn_schedule_t sched;
+  learn_plan_t plan;
+  rng_t explore_rng;
+  int32_t explore_steps_left;  // of the exploration (or dither) segment under way
+  double explore_offset;       // its offset [action units]
+  // The run.
+  bool running;
+  int32_t run_id;
+  int32_t actions_taken;
+  bool have_prev;
+  double s[LEARN_MAX_STATE];
+  double prev_s[LEARN_MAX_STATE];
+  double prev_a;
+  double prev_v;
+  int8_t source;               // who chose the action of this step (learn_act)
+  int8_t prev_source;          // ... of the executed one
+  double run_return;
+  int32_t steps_by_source[LEARN_N_SOURCES];
+  // Learning.
+  pending_t pending;
+  bool replay_pending;         // a training run ended: its replay begins with the next slice
+  bool replaying;
+  int64_t steps;
+};
+
+_Static_assert(LEARN_SOURCE_ADVISOR + 1 == LEARN_N_SOURCES, "the sources are counted in steps_by_source");
+_Static_assert(LEARN_MAX_STATE <= HEDGER_MAX_STATE_DIM, "the learner's state fits HEDGER's");
+
+learn_config_t learn_config_default(void) {
+  learn_config_t c;
+  memset(&c, 0, sizeof c);
+  c.mode = LEARN_MODE_LEARN;
+  c.phase_one_driver = LEARN_DRIVER_EXAMPLE;
+  c.schedule.eval_every = 5;
+  c.schedule.eval_starts = 10;
+  c.schedule.eval_at_start = false;
+  c.schedule.phase_one_runs = 30;
+  c.schedule.phase_two_runs = 35;
+  c.schedule.switch_mode = LEARN_SWITCH_RUNS;
+  c.schedule.auto_min_runs = 10;
+  c.schedule.auto_ratio = 1.0;
+  c.learner = LEARN_LEARNER_HEDGER;
+  c.alpha = 0.2;
+  c.gamma = 0.0;
+  c.state_last_action = true;
+  c.last_action_scale = 1.0;
+  c.capacity = 20000U;
+  c.k_min = 8U;
+  c.k_max = 64U;
+  c.bandwidth = 0.2;
+  c.merge_radius = 0.02;
+  c.greedy_actions = 9U;
+  c.greedy_method = HEDGER_GREEDY_STATE_MODEL;
+  c.greedy_pessimism = 4.0;
+  c.greedy_reach = 0.0;
+  c.replay = true;
+  c.replay_passes = 20U;
+  c.replay_lambda = 0.9;
+  c.tabular_bins = 10U;
+  c.tabular_actions = 9U;
+  c.explore_sigma = 0.3;
+  c.explore_probability = 0.1;
+  c.explore_hold_steps = 1U;
+  c.example_dither_sigma = 0.3;
+  c.advisor = true;
+  c.replay_updates_per_slice = 200U;
+  c.explore_seed = 1U;
+  c.learner_seed = 2U;
+  return c;
+}
+
+uint32_t learn_state_dim(const learn_task_t* task, const learn_config_t* cfg) {
+  return task->state_dim + (cfg->state_last_action ? 1U : 0U);
+}
+
+static double discount(const learn_task_t* task, const learn_config_t* cfg) {
+  return cfg->gamma > 0.0 ? cfg->gamma : task->gamma;
+}
+
+void learn_learner_config(const learn_task_t* task, const learn_config_t* cfg, learn_learner_config_t* out) {
+  memset(out, 0, sizeof *out);
+  out->kind = cfg->learner;
+  const uint32_t dim = learn_state_dim(task, cfg);
+  hedger_config_t* hc = &out->hedger;
+  *hc = hedger_config_default();
+  hc->state_dim = dim;
+  hc->action_min = task->action_min;
+  hc->action_max = task->action_max;
+  hc->capacity = cfg->capacity;
+  hc->k_min = cfg->k_min;
+  hc->k_max = cfg->k_max;
+  hc->bandwidth = cfg->bandwidth;
+  hc->alpha = cfg->alpha;
+  hc->gamma = discount(task, cfg);
+  if (cfg->input_scale_n > 0U) {
+    for (uint32_t i = 0; i < cfg->input_scale_n && i <= LEARN_MAX_STATE; ++i) {
+      hc->input_scale[i] = cfg->input_scale[i];
+    }
+  } else {
+    // The task's declared scales, then (state_last_action) the last action's, then the action's.
+    for (uint32_t i = 0; i < task->state_dim; ++i) {
+      hc->input_scale[i] = task->state_scale[i];
+    }
+    if (cfg->state_last_action) {
+      hc->input_scale[task->state_dim] = cfg->last_action_scale;
+    }
+    hc->input_scale[dim] = task->action_scale;
+  }
+  hc->merge_radius = cfg->merge_radius;
+  hc->greedy_coarse_actions = cfg->greedy_actions;
+  const uint32_t run_cap = task->step_limit + 8U;
+  hc->run_capacity = run_cap > HEDGER_MAX_RUN ? HEDGER_MAX_RUN : run_cap;
+  hc->replay = cfg->replay ? 1U : 0U;
+  hc->replay_passes = cfg->replay_passes;
+  hc->replay_lambda = cfg->replay_lambda;
+  hc->greedy_method = (uint32_t)cfg->greedy_method;
+  hc->greedy_pessimism = cfg->greedy_pessimism;
+  hc->greedy_reach = cfg->greedy_reach > 0.0 ? cfg->greedy_reach : task->greedy_reach;
+  hc->local_model = cfg->learner == LEARN_LEARNER_LWA ? HEDGER_LOCAL_LWA : HEDGER_LOCAL_LWR;
+  hc->seed = cfg->learner_seed;
+
+  tabq_config_t* tc = &out->tabular;
+  *tc = tabq_config_default();
+  tc->state_dim = dim;
+  for (uint32_t i = 0; i < dim && i < TABQ_MAX_STATE_DIM; ++i) {
+    tc->bins[i] = cfg->tabular_bins;
+  }
+  // The task's declared ranges (values outside fall into the edge bins), then the last action's.
+  for (uint32_t i = 0; i < task->state_dim && i < TABQ_MAX_STATE_DIM; ++i) {
+    tc->state_min[i] = task->state_min[i];
+    tc->state_max[i] = task->state_max[i];
+  }
+  if (cfg->state_last_action && task->state_dim < TABQ_MAX_STATE_DIM) {
+    tc->state_min[task->state_dim] = task->action_min;
+    tc->state_max[task->state_dim] = task->action_max;
+  }
+  tc->action_min = task->action_min;
+  tc->action_max = task->action_max;
+  tc->n_actions = cfg->tabular_actions;
+  tc->alpha = hc->alpha;
+  tc->gamma = hc->gamma;
+  tc->run_capacity = hc->run_capacity;
+  tc->replay = hc->replay;
+  tc->replay_passes = hc->replay_passes;
+  tc->replay_lambda = hc->replay_lambda;
+}
+
+static size_t agent_bytes(void) {
+  return (sizeof(learn_t) + LEARN_STORAGE_ALIGN - 1U) & ~(size_t)(LEARN_STORAGE_ALIGN - 1U);
+}
+
+static bool task_valid(const learn_task_t* t) {
+  if (t->state_dim < 1U || t->state_dim > LEARN_MAX_TASK_STATE || !isfinite(t->action_min) ||
+      !isfinite(t->action_max) || !(t->action_min < t->action_max) || !(t->action_scale > 0.0) ||
+      !(t->gamma >= 0.0 && t->gamma < 1.0) || !(t->greedy_reach >= 1.0)) {
+    return false;
+  }
+  for (uint32_t i = 0; i < t->state_dim; ++i) {
+    if (!(t->state_scale[i] > 0.0) || !isfinite(t->state_scale[i]) || !(t->state_min[i] <= t->state_max[i])) {
+      return false;
+    }
+  }
+  return true;
+}
+
+size_t learn_storage_size(const learn_task_t* task, const learn_config_t* cfg) {
+  if (!task_valid(task)) {
+    return 0;
+  }
+  learn_learner_config_t lc;
+  learn_learner_config(task, cfg, &lc);
+  const size_t learner = learn_learner_storage_size(&lc);
+  return learner == 0 ? 0 : agent_bytes() + learner;
+}
+
+learn_t* learn_init(void* storage, size_t storage_size, const learn_task_t* task, const learn_config_t* cfg,
+                    char* err, size_t err_cap) {
+  if (!task_valid(task)) {
+    snprintf(err, err_cap, "the task's declaration is invalid (state dimension 1..%u, finite ordered action bounds, "
+             "positive scales, discount in [0, 1), greedy reach >= 1)", LEARN_MAX_TASK_STATE);
+    return NULL;
+  }
+  if (storage == NULL || ((uintptr_t)storage % LEARN_STORAGE_ALIGN) != 0U) {
+    snprintf(err, err_cap, "the learner's storage is missing or not aligned to %u bytes", LEARN_STORAGE_ALIGN);
+    return NULL;
+  }
+  const size_t need = learn_storage_size(task, cfg);
+  if (need == 0 || storage_size < need) {
+    learn_learner_config_t lc;
+    learn_learner_config(task, cfg, &lc);
+    if (learn_learner_storage_size(&lc) == 0) {
+      // The learner's own message names the setting.
+      learn_learner_t probe;
+      (void)learn_learner_init(&probe, NULL, 0, &lc, err, err_cap);
+    } else {
+      snprintf(err, err_cap, "the learner needs %zu bytes of storage, %zu given", need, storage_size);
+    }
+    return NULL;
+  }
+  learn_t* a = (learn_t*)storage;
+  memset(a, 0, sizeof *a);
+  a->task = *task;
+  a->cfg = *cfg;
+  if (a->cfg.explore_hold_steps < 1U) {
+    a->cfg.explore_hold_steps = 1U;
+  }
+  a->state_dim = learn_state_dim(task, cfg);
+  learn_learner_config_t lc;
+  learn_learner_config(task, cfg, &lc);
+  if (learn_learner_init(&a->learner, (uint8_t*)storage + agent_bytes(), storage_size - agent_bytes(), &lc, err,
+                         err_cap) != 0) {
+    return NULL;
+  }
+  learn_schedule_config_t sc = cfg->schedule;
+  sc.evaluate_only = cfg->mode != LEARN_MODE_LEARN;
+  learn_schedule_init(&a->sched, &sc, NULL);
+  a->plan = learn_schedule_next(&a->sched);
+  rng_seed(&a->explore_rng, cfg->explore_seed);
+  a->run_id = -1;
+  return a;
+}
+
+learn_plan_t learn_plan(const learn_t* a) { return learn_schedule_next(&a->sched); }
+
+void learn_begin_run(learn_t* a) {
+  a->plan = learn_schedule_next(&a->sched);
+  a->run_id++;
+  a->running = true;
+  a->explore_steps_left = 0;
+  a->actions_taken = 0;
+  a->have_prev = false;
+  a->run_return = 0.0;
+  memset(a->steps_by_source, 0, sizeof a->steps_by_source);
+}
+
+bool learn_running(const learn_t* a) { return a->running; }
+
+bool learn_observe(learn_t* a, const double* features, double last_command) {
+  for (uint32_t i = 0; i < a->task.state_dim; ++i) {
+    a->s[i] = features[i];
+  }
+  if (a->cfg.state_last_action) {
+    // The command in force (after the caller's limits): the action the base executes now, and the
+    // one an acceleration limit measures the next change against. Known exactly, unlike a measured
+    // rate, so a lockstep run stays a function of its inputs.
+    a->s[a->task.state_dim] = last_command;
+  }
+  for (uint32_t i = 0; i < a->state_dim; ++i) {
+    if (!isfinite(a->s[i])) {
+      return false;
+    }
+  }
+  return true;
+}
+
+const double* learn_state(const learn_t* a) { return a->s; }
+
+uint32_t learn_agent_state_dim(const learn_t* a) { return a->state_dim; }
+
+bool learn_has_transition(const learn_t* a) { return a->running && a->have_prev; }
+
+int32_t learn_run_actions(const learn_t* a) { return a->actions_taken; }
+
+static bool evaluating(const learn_t* a) { return a->plan.kind == LEARN_RUN_EVAL; }
+
+static bool learning(const learn_t* a) { return !evaluating(a) && a->cfg.mode == LEARN_MODE_LEARN; }
+
+bool learn_policy_acts(const learn_t* a) {
+  return (evaluating(a) && a->cfg.mode != LEARN_MODE_EVALUATE_ADVICE) || (!evaluating(a) && a->plan.phase == 2);
+}
+
+bool learn_joystick_drives(const learn_t* a) {
+  return a->running && a->cfg.mode == LEARN_MODE_LEARN && a->cfg.phase_one_driver == LEARN_DRIVER_JOYSTICK &&
+         a->plan.kind == LEARN_RUN_TRAINING && a->plan.phase == 1;
+}
+
+// The run under way ends: the schedule counts it (an aborted one is repeated); a training run of
+// the learn mode has its replay between runs (also when aborted: its transitions were learned).
+static void end_run(learn_t* a, bool goal, bool aborted, learn_run_end_t* end) {
+  memset(end, 0, sizeof *end);
+  end->run_id = a->run_id;
+  end->plan = a->plan;
+  end->goal = goal;
+  end->aborted = aborted;
+  end->steps = a->actions_taken;
+  end->total_reward = a->run_return;
+  memcpy(end->steps_by_source, a->steps_by_source, sizeof end->steps_by_source);
+  end->eval_block = evaluating(a) ? a->sched.p.eval_blocks : -1;  // blocks finished so far = this block's number
+  end->learning = a->plan.kind == LEARN_RUN_TRAINING && a->cfg.mode == LEARN_MODE_LEARN;
+  // A run that missed the goal counts at the step limit.
+  const int32_t steps = goal ? a->actions_taken : (int32_t)a->task.step_limit;
+  end->block_done = learn_schedule_finish_run(&a->sched, steps, goal, aborted, &end->block);
+  if (end->learning) {
+    a->replay_pending = true;
+  }
+  a->running = false;
+  a->plan = learn_schedule_next(&a->sched);
+}
+
+bool learn_transition(learn_t* a, const learn_outcome_t* o, learn_run_end_t* end) {
+  pending_t* p = &a->pending;
+  p->active = true;
+  p->learning = learning(a);
+  p->need_greedy = true;
+  p->q_next = 0.0;
+  learn_experience_t* e = &p->e;
+  e->run_id = a->run_id;
+  e->step_id = a->actions_taken - 1;
+  e->phase = a->plan.phase;
+  e->evaluating = evaluating(a);
+  e->source = a->prev_source;
+  e->reason = o->reason;
+  e->state_dim = a->state_dim;
+  memcpy(e->s, a->prev_s, sizeof e->s);
+  memcpy(e->s_next, a->s, sizeof e->s_next);
+  e->a = a->prev_a;
+  e->v = a->prev_v;
+  e->reward = o->reward;
+  e->terminal = o->terminal;
+  a->steps++;
+  a->run_return += o->reward;
+  if (!o->end_run) {
+    return false;
+  }
+  end_run(a, o->goal, false, end);
+  return true;
+}
+
+bool learn_abort_run(learn_t* a, learn_run_end_t* end) {
+  if (!a->running) {
+    return false;
+  }
+  end_run(a, false, true, end);
+  return true;
+}
+
+static double clamp_action(const learn_t* a, double x) {
+  if (!isfinite(x)) {
+    return 0.0;
+  }
+  return x < a->task.action_min ? a->task.action_min : (x > a->task.action_max ? a->task.action_max : x);
+}
+
+// Exploration (or phase one's dither) of a training step: with explore_probability per step a
+// segment starts that adds one offset ~ N(0, sigma) to the actions for explore_hold_steps steps.
+// Returns true (with the offset) while a segment is running.
+static bool explore_offset(learn_t* a, double sigma, double* offset) {
+  if (a->explore_steps_left == 0) {
+    if (sigma <= 0.0 || !(rng_uniform(&a->explore_rng) < a->cfg.explore_probability)) {
+      return false;
+    }
+    a->explore_steps_left = (int32_t)a->cfg.explore_hold_steps;
+    a->explore_offset = sigma * rng_normal(&a->explore_rng);
+  }
+  a->explore_steps_left--;
+  *offset = a->explore_offset;
+  return true;
+}
+
+void learn_act(learn_t* a, double advice, double joystick, double* action, int8_t* source) {
+  const bool eval = evaluating(a);
+  const bool policy = learn_policy_acts(a);
+  // The greedy search at s chooses the learned policy's action; its value is also the q' of the
+  // transition into s (learned after the command), so it runs once.
+  bool greedy_known = false;
+  double greedy_action = 0.0;
+  if (policy) {
+    double value = 0.0;
+    greedy_known = learn_learner_greedy(&a->learner, a->s, &greedy_action, &value);
+    if (greedy_known) {
+      greedy_action = clamp_action(a, greedy_action);
+    }
+    if (a->pending.active) {
+      a->pending.need_greedy = false;
+      a->pending.q_next = value;  // the default value when no action is known
+    }
+  }
+  double act = 0.0;
+  double offset = 0.0;
+  int8_t src = LEARN_SOURCE_EXAMPLE;
+  if (!policy) {
+    if (learn_joystick_drives(a)) {
+      act = joystick;
+      src = LEARN_SOURCE_JOYSTICK;
+    } else {
+      act = advice;
+      if (!eval && a->cfg.example_dither_sigma > 0.0 && explore_offset(a, a->cfg.example_dither_sigma, &offset)) {
+        act += offset;  // phase-one dither: the learner sees actions around the example's
+      }
+    }
+  } else if (greedy_known) {
+    act = greedy_action;
+    src = LEARN_SOURCE_GREEDY;
+    if (!eval && explore_offset(a, a->cfg.explore_sigma, &offset)) {
+      act += offset;
+      src = LEARN_SOURCE_EXPLORATION;
+    }
+  } else if (!eval && a->cfg.advisor) {
+    act = advice;  // the learner knows no action here: the example policy advises
+    src = LEARN_SOURCE_ADVISOR;
+  } else {
+    act = 0.0;  // nothing known: hold course (evaluations measure the learned policy alone)
+    src = LEARN_SOURCE_GREEDY;
+  }
+  a->source = src;
+  *action = act;
+  *source = src;
+}
+
+void learn_executed(learn_t* a, double action, double translation) {
+  if (!a->running) {
+    return;
+  }
+  memcpy(a->prev_s, a->s, sizeof a->prev_s);
+  a->prev_a = action;
+  a->prev_v = translation;
+  a->prev_source = a->source;
+  a->have_prev = true;
+  a->actions_taken++;
+  if (a->prev_source >= 0 && a->prev_source < LEARN_N_SOURCES) {
+    a->steps_by_source[a->prev_source]++;
+  }
+}
+
+// The queued transition: its update (training) or the prediction of its Q (evaluation).
+// Bounded: at most one greedy search and one update.
+static bool update_pending(learn_t* a, learn_experience_t* exp) {
+  pending_t* p = &a->pending;
+  if (!p->active) {
+    return false;
+  }
+  double q = 0.0;
+  hedger_kind_t kind = HEDGER_KIND_UNKNOWN;
+  learn_experience_t* e = &p->e;
+  if (p->learning) {
+    double q_next = 0.0;
+    if (!e->terminal) {
+      if (p->need_greedy) {
+        (void)learn_learner_greedy(&a->learner, e->s_next, NULL, &q_next);
+      } else {
+        q_next = p->q_next;
+      }
+    }
+    if (!learn_learner_learn(&a->learner, e->s, e->a, e->reward, e->s_next, e->terminal, q_next, &q, &kind)) {
+      q = 0.0;
+      kind = HEDGER_KIND_UNKNOWN;
+    }
+  } else if (!learn_learner_predict(&a->learner, e->s, e->a, &q, &kind)) {
+    q = 0.0;
+    kind = HEDGER_KIND_UNKNOWN;
+  }
+  e->q = isfinite(q) ? q : 0.0;
+  e->q_kind = kind;
+  *exp = *e;
+  p->active = false;
+  return true;
+}
+
+bool learn_update(learn_t* a, learn_experience_t* exp) { return update_pending(a, exp); }
+
+uint32_t learn_replay_slice(learn_t* a, uint32_t max_updates) {
+  if (a->replay_pending) {
+    a->replay_pending = false;
+    learn_learner_end_run_begin(&a->learner);
+    a->replaying = true;
+  }
+  if (!a->replaying) {
+    return 0;
+  }
+  const uint32_t left = learn_learner_end_run_step(&a->learner, max_updates);
+  a->replaying = left > 0;
+  return left;
+}
+
+bool learn_after_command(learn_t* a, learn_experience_t* exp) {
+  const bool had = update_pending(a, exp);
+  if (!had || a->replay_pending || a->replaying) {
+    (void)learn_replay_slice(a, a->cfg.replay_updates_per_slice);
+  }
+  return had;
+}
+
+bool learn_idle(const learn_t* a) { return !a->pending.active && !a->replay_pending && !a->replaying; }
+
+bool learn_replay_due(const learn_t* a) { return a->replay_pending; }
+
+bool learn_replaying(const learn_t* a) { return a->replay_pending || a->replaying; }
+
+bool learn_finish_now(learn_t* a, learn_experience_t* exp) {
+  const bool had = update_pending(a, exp);
+  if (a->replay_pending) {
+    a->replay_pending = false;
+    learn_learner_end_run_begin(&a->learner);
+  }
+  (void)learn_learner_end_run_step(&a->learner, UINT32_MAX);
+  a->replaying = false;
+  return had;
+}
+
+void learn_request_phase_two(learn_t* a) { learn_schedule_request_phase_two(&a->sched); }
+
+const learn_schedule_t* learn_schedule(const learn_t* a) { return &a->sched; }
+
+int32_t learn_run_id(const learn_t* a) { return a->run_id; }
+
+void learn_resume(learn_t* a, const learn_schedule_progress_t* progress, int32_t run_id) {
+  const learn_schedule_config_t sc = a->sched.cfg;  // a copy: init clears the schedule first
+  learn_schedule_init(&a->sched, &sc, progress);
+  a->run_id = run_id;
+  a->plan = learn_schedule_next(&a->sched);
+}
+
+learn_learner_t* learn_get_learner(learn_t* a) { return &a->learner; }
+
+const learn_learner_t* learn_get_learner_const(const learn_t* a) { return &a->learner; }
+
+int64_t learn_steps(const learn_t* a) { return a->steps; }
