@@ -13,8 +13,13 @@ protocol; what the controller sees) or ``backend="kinematic"`` (the idealised mo
 fast). See :class:`b21r_learn.envs.B21rEnv`.
 
 HEDGER: :class:`Hedger` (settings as keyword arguments, defaults from the C API), the example
-drivers :class:`Driver`, and the controller's files: :func:`read_checkpoint`,
+drivers :class:`Driver` (``Driver("proportional", "corridor", gain=1.5)``), and the controller's
+files: :func:`read_checkpoint`, :func:`read_checkpoint_progress` (the learned policy's shift and
+the schedule's progress), :func:`learned_policy_action` (the action the controller drives),
 :func:`controller_learner_config`.
+
+Rendering (``render_mode="rgb_array"``) needs Pillow, a dependency of the package
+(tools/python/pyproject.toml; the project's venv has it).
 """
 from pkgutil import extend_path
 
@@ -31,8 +36,10 @@ from ._core import (  # noqa: E402  (after the package path is complete)
     Prediction,
     controller_learner_config,
     corridor_steps_lower_bound,
+    learned_policy_action,
     mean_ci95,
     read_checkpoint,
+    read_checkpoint_progress,
 )
 from .envs import B21rEnv, register_envs  # noqa: E402
 
@@ -48,8 +55,10 @@ __all__ = [
     "Prediction",
     "controller_learner_config",
     "corridor_steps_lower_bound",
+    "learned_policy_action",
     "mean_ci95",
     "read_checkpoint",
+    "read_checkpoint_progress",
     "register_envs",
 ]
 

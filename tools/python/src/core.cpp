@@ -27,6 +27,7 @@
 #include <fw/checkpoint.h>
 #include <fw/config.h>
 #include <fw/loop.h>
+#include <fw/progress.h>
 #include <fw/schedule.h>
 #include <hedger/hedger.h>
 #include <sim/env.h>
@@ -389,8 +390,10 @@ class Env {
 
 class Driver {
  public:
-  Driver(const std::string& kind, const std::string& task, double omega_max_radps)
-      : task_(parse_task(task)), omega_max_(omega_max_radps) {
+  // gain: a fixed proportional gain [1/s] for every run (None: drawn per run from the task's
+  // range, as the controller's phase one draws it; the human driver's is its temperament).
+  Driver(const std::string& kind, const std::string& task, double omega_max_radps, std::optional<double> gain)
+      : task_(parse_task(task)), omega_max_(omega_max_radps), fixed_gain_(gain) {
     if (kind == "proportional") {
       kind_ = TASKS_DRIVER_PROPORTIONAL;
     } else if (kind == "human") {
@@ -400,21 +403,44 @@ class Driver {
     } else {
       throw nb::value_error(("unknown driver '" + kind + "' (proportional, human, optimal)").c_str());
     }
+    if (gain.has_value()) check_gain(*gain);
     begin_run(0);
   }
-  void begin_run(uint64_t seed) { tasks_driver_begin_run(&d_, kind_, task_, omega_max_, seed); }
+  void begin_run(uint64_t seed) {
+    tasks_driver_begin_run(&d_, kind_, task_, omega_max_, seed);
+    if (fixed_gain_.has_value()) apply_gain(*fixed_gain_);
+  }
   double act(const Env& env) {
     if (sim_env_episode(env.raw())->task != task_) throw nb::value_error("the driver is for another task");
     return sim_env_driver_action(env.raw(), &d_);
   }
   double gain() const { return d_.gain; }
-  void set_gain(double g) { d_.gain = g; }
+  // Setting the gain fixes it for this and every later run.
+  void set_gain(double g) {
+    check_gain(g);
+    fixed_gain_ = g;
+    apply_gain(g);
+  }
 
  private:
+  void check_gain(double g) const {
+    if (kind_ == TASKS_DRIVER_OPTIMAL) {
+      throw nb::value_error("the optimal driver has no gain to set: its law's constants are searched "
+                            "(gain= applies to 'proportional' and 'human')");
+    }
+    if (!std::isfinite(g) || g <= 0.0) throw nb::value_error("gain must be a positive number [1/s]");
+  }
+  void apply_gain(double g) {
+    d_.gain = g;
+    // The obstacle example policy's law holds its gain (as the controller's evaluate_example_gain).
+    if (d_.task == TASKS_TASK_OBSTACLES && kind_ == TASKS_DRIVER_PROPORTIONAL) d_.law[0] = g;
+  }
+
   tasks_driver_t d_{};
   tasks_driver_kind_t kind_ = TASKS_DRIVER_PROPORTIONAL;
   tasks_task_t task_;
   double omega_max_;
+  std::optional<double> fixed_gain_;
 };
 
 // ---- HEDGER -------------------------------------------------------------------------------
@@ -671,6 +697,49 @@ std::vector<uint32_t> corridor_steps_lower_bound(double length_m) {
   return out;
 }
 
+// The controller's section of a checkpoint (read_checkpoint's meta), decoded and validated by the
+// controller's own decoder (fw/progress.h): what was learned besides HEDGER's store.
+nb::dict read_checkpoint_progress(const nb::bytes& meta) {
+  fw_progress_t p;
+  char why[FW_PROGRESS_WHY_MAX] = "";
+  if (fw_progress_decode(reinterpret_cast<const uint8_t*>(meta.c_str()), meta.size(), &p, why, sizeof why) != 0)
+    throw nb::value_error((std::string("checkpoint progress section: ") + why).c_str());
+  nb::dict d;
+  d["task"] = fw_task_name(p.task);
+  d["state_dim"] = p.state_dim;
+  d["phase"] = p.schedule.phase;
+  d["training_runs"] = p.schedule.training_runs;
+  d["phase_one_runs"] = p.schedule.phase_one_runs;
+  d["phase_two_runs"] = p.schedule.phase_two_runs;
+  d["eval_blocks"] = p.schedule.eval_blocks;
+  d["run_id"] = p.run_id;
+  nb::dict shift;
+  shift["gain"] = p.shift.gain;
+  shift["centring"] = p.shift.centring;
+  shift["imitation"] = p.shift.imitation;
+  shift["pairs"] = p.shift.pairs;
+  d["shift"] = shift;
+  d["obstacle_clearance_m"] = p.obstacle_clearance_m > 0.0 ? p.obstacle_clearance_m
+                                                           : FW_PROGRESS_CLEARANCE_UNRECORDED_M;
+  d["obstacle_pass_hold_steps"] = p.pass_hold_recorded ? p.obstacle_pass_hold_steps : -1;
+  return d;
+}
+
+// The learned policy's action at learner state s where HEDGER's greedy action is `greedy`, with
+// the shift a checkpoint holds ({gain, centring, imitation}: read_checkpoint_progress), as the
+// controller drives it (fw_pair_policy_action), clamped to +-omega_max.
+double learned_policy_action(const nb::dict& shift, const std::string& task, double obstacle_clearance_m,
+                             const InVec& s, double greedy, double omega_max_radps, bool held) {
+  fw_pair_shift_t sh{};
+  sh.gain = nb::cast<double>(shift["gain"]);
+  sh.centring = nb::cast<double>(shift["centring"]);
+  sh.imitation = nb::cast<double>(shift["imitation"]);
+  const fw_task_t t = parse_task(task) == TASKS_TASK_OBSTACLES ? FW_TASK_OBSTACLES : FW_TASK_CORRIDOR;
+  const size_t need = t == FW_TASK_OBSTACLES ? 4 : 3;
+  if (s.shape(0) < need) throw nb::value_error("learned_policy_action: the state is shorter than the task's features");
+  return tasks_clamp_omega(fw_pair_policy_action(&sh, t, obstacle_clearance_m, s.data(), greedy, held), omega_max_radps);
+}
+
 nb::tuple mean_ci95(const std::vector<double>& values) {
   double mean = 0.0, half = 0.0;
   fw_mean_ci95(values.data(), static_cast<int32_t>(values.size()), &mean, &half);
@@ -704,7 +773,11 @@ NB_MODULE(_core, m) {
   m.attr("N_EVAL_STARTS") = TASKS_N_EVAL_STARTS;
 
   nb::class_<Driver>(m, "Driver", "An example driver of lib/tasks (phase one's teacher).")
-      .def(nb::init<const std::string&, const std::string&, double>(), "kind"_a, "task"_a, "omega_max_radps"_a = 1.0)
+      .def(nb::init<const std::string&, const std::string&, double, std::optional<double>>(), "kind"_a, "task"_a,
+           "omega_max_radps"_a = 1.0, "gain"_a = nb::none(),
+           "kind: 'proportional' (the example policy), 'human' (the simulated joystick driver) or 'optimal' (the "
+           "hand-tuned reference); task: 'corridor' or 'obstacles'; gain: a fixed gain [1/s] for every run "
+           "(default: drawn per run, as the controller's phase one does)")
       .def("begin_run", &Driver::begin_run, "seed"_a)
       .def("act", &Driver::act, "env"_a)
       .def_prop_rw("gain", &Driver::gain, &Driver::set_gain);
@@ -743,6 +816,14 @@ NB_MODULE(_core, m) {
   m.attr("POINT_PROTECTED") = HEDGER_POINT_PROTECTED;
 
   m.def("read_checkpoint", &read_checkpoint, "path"_a);
+  m.def("read_checkpoint_progress", &read_checkpoint_progress, "meta"_a,
+        "The controller's section of a checkpoint (the meta bytes of read_checkpoint) as a dict: task, "
+        "phase, run counts, the learned policy's shift {gain, centring, imitation, pairs}, the obstacle "
+        "clearance and hold it was learned with.");
+  m.def("learned_policy_action", &learned_policy_action, "shift"_a, "task"_a, "obstacle_clearance_m"_a, "state"_a,
+        "greedy"_a, "omega_max_radps"_a = 1.0, "held"_a = false,
+        "The learned policy's action [rad/s] at a learner state, as the controller drives it: (1 + imitation) x "
+        "HEDGER's greedy action plus the shift's terms, clamped (fw_pair_policy_action).");
   m.def("mean_ci95", &mean_ci95, "values"_a,
         "(mean, 95 % half-width) with Student's t, as the controller's evaluation blocks report them.");
   m.def("corridor_steps_lower_bound", &corridor_steps_lower_bound, "length_m"_a = 10.0,
