@@ -1,21 +1,23 @@
 #!/usr/bin/env python3
 # SPDX-License-Identifier: MIT
 """b21r_session: one command for an emulated session, like a launch file: the emulator
-(b21r-sim), the controller (b21r-controller), lcm-logger and, when a display is present, lcm-spy
-with the project's types (b21r-lcm-spy). Ctrl-C (or SIGTERM) stops them in order: the controller
-first (it stops the base, sets the brake and saves the learned state), then the recorder, the
-viewer and the emulator, each waited for; when a required program ends by itself (the schedule
+(b21r-sim), the controller (b21r-controller), lcm-logger, when a display is present, lcm-spy
+with the project's types (b21r-lcm-spy), and with --foxglove the live view for Foxglove
+(tools/b21r_foxglove_bridge.py: connect Foxglove to ws://127.0.0.1:8765). Ctrl-C (or SIGTERM)
+stops them in order: the controller first (it stops the base, sets the brake and saves the
+learned state), then the recorder, the viewers and the emulator, each waited for; when a required program ends by itself (the schedule
 is done, a crash) the others are stopped the same way.
 
     b21r_session.py [--out DIR] [--world FILE] [--base rflex|canopen] [--lockstep [--pace X]]
-                    [--lcm-url URL] [--spy | --no-spy] [--config FILE] [--set KEY=VALUE]...
+                    [--lcm-url URL] [--spy | --no-spy] [--foxglove [--foxglove-port N]
+                    [--foxglove-host ADDR]] [--config FILE] [--set KEY=VALUE]...
                     [-- CONTROLLER_ARGS...]
 
 Everything goes into DIR (default build/sessions/<time>): session.lcmlog (lcm-logger),
 controller.lcmlog (the controller's own --log, which loses nothing), hedger.ckpt (the learned
 state; a second session with the same --out resumes from it), the programs' output (sim.log,
-controller.log, progress.txt, logger.log, spy.log) and, with --base canopen, the CAN trace
-bus.log (candump -L). The controller's progress lines are shown as they come.
+controller.log, progress.txt, logger.log, spy.log, foxglove.log) and, with --base canopen, the CAN
+trace bus.log (candump -L). The controller's progress lines are shown as they come.
 LCM: a host-local URL (udpm with ttl=0: nothing leaves this machine) unless --lcm-url is given;
 B21R_TELEOP and B21R_COMMAND from tools/b21r_teleop.py with the same --lcm-url reach the controller.
 --lockstep runs emulator and controller in lockstep, paced at --pace times real time (default 20:
@@ -170,6 +172,11 @@ def main():
     spy = ap.add_mutually_exclusive_group()
     spy.add_argument("--spy", dest="spy", action="store_true", default=None, help="start b21r-lcm-spy")
     spy.add_argument("--no-spy", dest="spy", action="store_false", help="do not start b21r-lcm-spy")
+    ap.add_argument("--foxglove", action="store_true",
+                    help="start the Foxglove bridge (tools/b21r_foxglove_bridge.py): the session live in Foxglove")
+    ap.add_argument("--foxglove-port", type=int, default=8765, metavar="N", help="its WebSocket port (default %(default)s)")
+    ap.add_argument("--foxglove-host", default="127.0.0.1", metavar="ADDR",
+                    help="its address (default %(default)s: this machine only)")
     ap.add_argument("--config", action="append", default=[], help="controller config file (repeatable)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="controller setting (repeatable)")
     ap.add_argument("controller_args", nargs="*", help="more b21r-controller arguments (after --)")
@@ -216,6 +223,13 @@ def main():
         if spy_exe is not None:
             children.append(Child("lcm-spy", [str(spy_exe), "--lcm-url=" + args.lcm_url], os.path.join(out, "spy.log"),
                                   required=False, stop_signal=signal.SIGTERM))
+        if args.foxglove:
+            children.append(Child("foxglove", [sys.executable, str(repo / "tools" / "b21r_foxglove_bridge.py"),
+                                               "--lcm-url", args.lcm_url, "--port", str(args.foxglove_port),
+                                               "--host", args.foxglove_host], os.path.join(out, "foxglove.log"),
+                                  required=False, stop_signal=signal.SIGTERM))
+            say("Foxglove: open a connection to ws://%s:%d (layout: tools/foxglove/b21r-layout.json)" %
+                (args.foxglove_host, args.foxglove_port))
         time.sleep(0.3)  # the recorder subscribes before the first message
         ccmd = [controller_exe]
         for c in args.config:

@@ -11,7 +11,9 @@
 #    the ODE emulator in lockstep over pseudo-terminals, printing progress as it goes;
 # 4. writes the learning curve (PNG), a summary (text and JSON: each of the paper's claims with
 #    yes/no and its numbers, paired over the poses, and who drove every run), the LCM logs, the
-#    checkpoint and an overhead picture of every run into the output folder it names at the end.
+#    checkpoint and an overhead picture of every run into the output folder it names at the end;
+# 5. draws what was learned (policy_map_corridor.png: value and policy over a slice of the state
+#    space beside the teacher and the optimal controller).
 # The controllers publish on LCM on this host only (udpm with ttl=0), so the run can be watched
 # with lcm-spy (tools/b21r-lcm-spy) or recorded with lcm-logger while it learns; without a
 # multicast route the job says so and runs with LCM off.
@@ -139,6 +141,13 @@ say "writing the learning curve and the summary"
   --optimal "$out/optimal.lcmlog" --example "$out/example.lcmlog" "${gain_args[@]}" --out "$out" \
   --title "Corridor following, emulated B21r ($base base, seed $seed)" >/dev/null
 cat "$out/summary.txt"
+
+# Pictures of what was learned (a step of its own): the learned value and policy over a slice of
+# the state space beside the teacher's and the optimal controller's commands, HEDGER's unknown
+# region hatched (tools/b21r_policy_map.py; docs/tools.md).
+say "drawing what was learned (policy_map_corridor.png)"
+"$python" "$repo/tools/b21r_policy_map.py" --checkpoint "$out/hedger.ckpt" --out "$out" \
+  --title "What was learned: corridor, emulated B21r ($base base, seed $seed)" | sed "s/^/main-job:   /"
 say "finished in $(( $(date +%s) - start )) s"
 say "output folder: $out"
-say "  learning_curve.png  summary.txt  summary.json  trajectories.svg  learning.lcmlog  hedger.ckpt"
+say "  learning_curve.png  summary.txt  summary.json  trajectories.svg  policy_map_corridor.png  learning.lcmlog  hedger.ckpt"

@@ -166,6 +166,45 @@ class Environments(unittest.TestCase):
         plain.reset(seed=0)
         self.assertIsNone(plain.render())  # no render_mode: nothing drawn
 
+    def test_driver_takes_a_gain(self):
+        # Driver(kind, task, gain=...) fixes the gain for every run (the obstacle law's too), and
+        # the action follows it: the proportional corridor policy is gain x target angle.
+        for task in ("corridor", "obstacles"):
+            env = make(task, "kinematic")
+            obs, _ = env.reset(seed=3, options={"start": "eval", "eval_index": 3})
+            actions = []
+            for gain in (0.5, 1.0):
+                d = b21r_learn.Driver("proportional", task, gain=gain)
+                d.begin_run(7)  # a new run keeps the fixed gain
+                self.assertEqual(d.gain, gain)
+                actions.append(env.unwrapped.driver_action(d))
+            if task == "corridor":
+                self.assertAlmostEqual(actions[0], 0.5 * obs[2], places=12)
+                self.assertAlmostEqual(actions[1], 1.0 * obs[2], places=12)
+            self.assertNotEqual(actions[0], actions[1])
+        with self.assertRaises(ValueError):
+            b21r_learn.Driver("optimal", "corridor", gain=1.0)
+        with self.assertRaises(ValueError):
+            b21r_learn.Driver("proportional", "corridor", gain=-1.0)
+
+    def test_render_without_pillow_names_the_fix(self):
+        # A plain venv without Pillow: rendering fails at construction with the fix in the message.
+        import builtins
+        real_import = builtins.__import__
+
+        def no_pil(name, *args, **kwargs):
+            if name == "PIL" or name.startswith("PIL."):
+                raise ImportError("No module named 'PIL'")
+            return real_import(name, *args, **kwargs)
+
+        builtins.__import__ = no_pil
+        try:
+            with self.assertRaises(ImportError) as cm:
+                make("corridor", "kinematic", render_mode="rgb_array")
+        finally:
+            builtins.__import__ = real_import
+        self.assertIn("pip install pillow", str(cm.exception))
+
     def test_backends_agree_on_the_motion(self):
         # The kinematic model steps like the plant; the ODE back-end's commands are quantised to
         # rFLEX counts and its state comes from noisy scans. Same start, same actions: the true

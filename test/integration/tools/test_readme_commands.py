@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 # SPDX-License-Identifier: MIT
-"""tools.readme_commands: every tool command the READMEs show runs as written from a plain
-environment (PATH of the system only: no venv, no PYTHONPATH, no B21R_* variables), from the
+"""tools.readme_commands: every tool command the READMEs and docs/*.md show runs as written from a
+plain environment (PATH of the system only: no venv, no PYTHONPATH, no B21R_* variables), from the
 repository's top folder, as an operator would type it after tools/setup.sh and a build.
 - Every tools/*.py the READMEs name is run directly (its shebang, the system's python3) with
   --help: it must re-execute itself in the project's venv, find the generated types and print
@@ -12,18 +12,23 @@ repository's top folder, as an operator would type it after tools/setup.sh and a
   the main job).
 - A few commands are run for real, exactly as the README writes them (checked verbatim), with
   files made here in place of the README's placeholders: sending an operator command, reading
-  a log, drawing its trajectories, offline training from it.
+  a log, drawing its trajectories, offline training from it, converting it to MCAP, drawing
+  what the trained checkpoint learned.
+- The lcm-spy command is started for real under Xvfb (with PROBE_JAR, the accessibility probe
+  of the lcm-spy tests): it must open its window and show a B21R_STATUS message sent to the URL
+  the command names, decoded.
 Run inside netns-run: the commands that publish on LCM's default URL stay in this namespace.
-usage: test_readme_commands.py REPO BUILD_DIR"""
+usage: test_readme_commands.py REPO BUILD_DIR [PROBE_JAR]"""
 import os
 import re
 import shutil
 import subprocess
 import sys
 import tempfile
+import time
 
 import lcm
-from b21r import experience_t, pose_t
+from b21r import experience_t, pose_t, status_t
 
 import fwtest
 
@@ -37,15 +42,60 @@ REAL = [
     ("build/host-release/bin/b21r-train --config robot.conf --out trained.ckpt run1.lcmlog run2.lcmlog",
      {"build/host-release": "{build}", "robot.conf": "{tmp}/robot.conf", "trained.ckpt": "{tmp}/trained.ckpt",
       "run1.lcmlog": "{log}", "run2.lcmlog": "{log}"}),
+    # docs/tools.md (after b21r-train: its checkpoint is drawn)
+    ("tools/b21r_mcap.py build/sessions/NAME/controller.lcmlog", {"build/sessions/NAME": "{tmp}"}),
+    ("tools/b21r_policy_map.py --checkpoint build/sessions/NAME/hedger.ckpt",
+     {"build/sessions/NAME/hedger.ckpt": "{tmp}/trained.ckpt"}),
 ]
+SPY_COMMAND = "LCM_DEFAULT_URL='udpm://239.255.76.67:7667?ttl=0' build/host-release/bin/b21r-lcm-spy"
 
 
 def readme_text(repo):
     parts = []
-    for path in ("README.md", "sim/README.md"):
+    docs = sorted(os.path.join("docs", n) for n in os.listdir(os.path.join(repo, "docs")) if n.endswith(".md"))
+    for path in ["README.md", "sim/README.md"] + docs:
         with open(os.path.join(repo, path)) as f:
             parts.append(f.read())
     return "\n".join(parts)
+
+
+def run_spy(repo, build, probe_jar, tmp, text):
+    """The README's lcm-spy command for real, on a virtual display: its window shows B21R_STATUS decoded."""
+    import xdisplay
+    if SPY_COMMAND not in text:
+        fwtest.fail("the README no longer shows `%s`: update this test with it" % SPY_COMMAND)
+    exe = os.path.join(repo, "build", "host-release", "bin", "b21r-lcm-spy")
+    if not os.path.exists(exe):
+        exe = os.path.join(build, "bin", "b21r-lcm-spy")
+    x = xdisplay.Xvfb(tmp)
+    spy = None
+    try:
+        probe = os.path.join(tmp, "probe.txt")
+        env = dict(PLAIN_ENV, DISPLAY=x.display, LCM_DEFAULT_URL="udpm://239.255.76.67:7667?ttl=0",
+                   JDK_JAVA_OPTIONS="-javaagent:%s=%s" % (probe_jar, probe))
+        with open(os.path.join(tmp, "spy.log"), "w") as log:
+            spy = subprocess.Popen([exe], cwd=repo, env=env, stdout=log, stderr=subprocess.STDOUT)
+        lc = lcm.LCM("udpm://239.255.76.67:7667?ttl=0")
+        deadline = time.time() + 90
+        while time.time() < deadline:
+            s = status_t()
+            s.stop_detail = ""
+            lc.publish("B21R_STATUS", s.encode())
+            got = xdisplay.channel_table(probe)
+            if got is not None and got[0].get("B21R_STATUS", {}).get("Type") == "status_t":
+                fwtest.note("%-34s ran under Xvfb: B21R_STATUS decoded as status_t" % SPY_COMMAND.split()[-1])
+                return
+            if spy.poll() is not None:
+                break
+            time.sleep(0.3)
+        with open(os.path.join(tmp, "spy.log")) as f:
+            fwtest.fail("`%s` under Xvfb (exit %s) did not show B21R_STATUS decoded:\n%s" %
+                        (SPY_COMMAND, spy.poll(), f.read()[-3000:]))
+    finally:
+        if spy is not None and spy.poll() is None:
+            spy.terminate()
+            spy.wait(10)
+        x.close()
 
 
 def run(cmd, repo, timeout=120):
@@ -78,6 +128,7 @@ def write_session_log(path):
 
 def main():
     repo, build = sys.argv[1:3]
+    probe_jar = sys.argv[3] if len(sys.argv) > 3 else ""
     text = readme_text(repo)
     tools = sorted(set(re.findall(r"\btools/[A-Za-z0-9_.-]+\.(?:py|sh)\b", text)))
     programs = sorted(set(p for p in re.findall(r"\bbuild/(<preset>|[A-Za-z0-9_-]+)/bin/([A-Za-z0-9_.-]+)", text)
@@ -114,6 +165,7 @@ def main():
     try:
         log = os.path.join(tmp, "session.lcmlog")
         write_session_log(log)
+        shutil.copy(log, os.path.join(tmp, "controller.lcmlog"))  # docs/tools.md's session folder
         with open(os.path.join(tmp, "robot.conf"), "w") as f:
             f.write("# the controller's settings\ntask = corridor\n")
         release = os.path.join(repo, "build", "host-release")
@@ -127,6 +179,10 @@ def main():
             if rc != 0:
                 fwtest.fail("`%s` (as `%s`): exit %d\n%s" % (shown, cmd, rc, out))
             fwtest.note("%-34s ran: %s" % (shown.split()[0], out.strip().splitlines()[-1] if out.strip() else "ok"))
+        if probe_jar:
+            run_spy(repo, build, probe_jar, tmp, text)
+        else:
+            fwtest.note("no lcm-spy probe (no JDK in this build): lcm-spy checked with --help only")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     print("PASS")

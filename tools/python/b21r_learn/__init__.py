@@ -13,8 +13,12 @@ protocol; what the controller sees) or ``backend="kinematic"`` (the idealised mo
 fast). See :class:`b21r_learn.envs.B21rEnv`.
 
 HEDGER: :class:`Hedger` (settings as keyword arguments, defaults from the C API), the example
-drivers :class:`Driver`, and the controller's files: :func:`read_checkpoint`,
+drivers :class:`Driver` (``Driver("proportional", "corridor", gain=1.5)``), and the controller's
+files: :func:`read_checkpoint`, :func:`read_checkpoint_progress` (the schedule's progress),
 :func:`controller_learner_config`.
+
+Rendering (``render_mode="rgb_array"``) needs Pillow, a dependency of the package
+(tools/python/pyproject.toml; the project's venv has it).
 """
 from pkgutil import extend_path
 
@@ -33,6 +37,7 @@ from ._core import (  # noqa: E402  (after the package path is complete)
     corridor_steps_lower_bound,
     mean_ci95,
     read_checkpoint,
+    read_checkpoint_progress,
 )
 from .envs import B21rEnv, register_envs  # noqa: E402
 
@@ -50,6 +55,7 @@ __all__ = [
     "corridor_steps_lower_bound",
     "mean_ci95",
     "read_checkpoint",
+    "read_checkpoint_progress",
     "register_envs",
 ]
 

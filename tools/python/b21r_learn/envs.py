@@ -25,9 +25,21 @@ class B21rEnv(gymnasium.Env):
       (default 1 rad/s). The translation speed comes from the task's speed policy. Both are
       clamped like the controller's commands (velocity, then acceleration limits); the command
       actually sent is ``info["action"]`` / ``info["translation_mps"]``.
-    - Reward and termination from lib/tasks: corridor +10 at the end (goal), 0 otherwise;
-      obstacles +1 at the goal, -1 on a collision. A collision ends the episode (terminated);
-      the paper's step limit (corridor 1000, obstacles 500) truncates it.
+    - Reward and termination from lib/tasks (the paper's, section V):
+
+      ========= ============== ================ ===================================
+      task      goal reached   collision        otherwise
+      ========= ============== ================ ===================================
+      corridor  +10, ends      0, ends          0 (step limit 1000: truncated)
+      obstacles +1, ends       -1, ends         0 (step limit 500: truncated)
+      ========= ============== ================ ===================================
+
+      The corridor's 0 at a wall is the paper's task ("10 for reaching the end of the corridor,
+      and zero in all other situations"), not an omission: every value there is >= 0 and a
+      collision is absorbing, so a wall's value 0 is already the least any state can have (the
+      goal is worth 10 * gamma^steps > 0), and the learner avoids walls without a penalty. The
+      obstacle task's -1 is also the paper's; there it matters, because an obstacle can be
+      passed close by and the goal then still reached.
     - ``reset(seed=s)`` seeds everything (the ODE back-end's emulator gets ``s`` itself).
       ``options``: ``{"start": "training"}`` (default: the training distribution),
       ``{"start": "eval", "eval_index": i}`` (one of the 10 evaluation poses; without an index
@@ -47,6 +59,8 @@ class B21rEnv(gymnasium.Env):
                  limits=None, laser_noise_sigma_m=None, laser_error_code_prob=None):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError("render_mode must be None or 'rgb_array', not %r" % (render_mode,))
+        if render_mode == "rgb_array":
+            _require_pillow()
         if start not in ("training", "eval"):
             raise ValueError("start must be 'training' or 'eval', not %r" % (start,))
         self.task = task
@@ -122,6 +136,7 @@ class B21rEnv(gymnasium.Env):
 
     def _draw(self, width_px=800, max_height_px=600, margin_m=0.3):
         # Pillow is imported here so that environments without rendering never need it.
+        _require_pillow()
         from PIL import Image, ImageDraw
 
         if self._world is None:
@@ -168,6 +183,15 @@ class B21rEnv(gymnasium.Env):
         draw.ellipse([px(rx - rr, ry + rr), px(rx + rr, ry - rr)], outline=colour, width=2)
         draw.line([px(rx, ry), px(rx + rr * math.cos(rth), ry + rr * math.sin(rth))], fill=colour, width=2)
         return np.asarray(img, dtype=np.uint8)
+
+
+def _require_pillow():
+    try:
+        import PIL  # noqa: F401
+    except ImportError as exc:
+        raise ImportError("render_mode='rgb_array' draws with Pillow, a dependency of b21r_learn "
+                          "(tools/python/pyproject.toml) that this environment lacks: "
+                          "pip install pillow (or use the project's venv, build/venv)") from exc
 
 
 def register_envs():

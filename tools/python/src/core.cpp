@@ -27,6 +27,7 @@
 #include <fw/checkpoint.h>
 #include <fw/config.h>
 #include <fw/loop.h>
+#include <fw/progress.h>
 #include <learn/schedule.h>
 #include <hedger/hedger.h>
 #include <sim/env.h>
@@ -389,8 +390,10 @@ class Env {
 
 class Driver {
  public:
-  Driver(const std::string& kind, const std::string& task, double omega_max_radps)
-      : task_(parse_task(task)), omega_max_(omega_max_radps) {
+  // gain: a fixed proportional gain [1/s] for every run (None: drawn per run from the task's
+  // range, as the controller's phase one draws it; the human driver's is its temperament).
+  Driver(const std::string& kind, const std::string& task, double omega_max_radps, std::optional<double> gain)
+      : task_(parse_task(task)), omega_max_(omega_max_radps), fixed_gain_(gain) {
     if (kind == "proportional") {
       kind_ = TASKS_DRIVER_PROPORTIONAL;
     } else if (kind == "human") {
@@ -400,21 +403,44 @@ class Driver {
     } else {
       throw nb::value_error(("unknown driver '" + kind + "' (proportional, human, optimal)").c_str());
     }
+    if (gain.has_value()) check_gain(*gain);
     begin_run(0);
   }
-  void begin_run(uint64_t seed) { tasks_driver_begin_run(&d_, kind_, task_, omega_max_, seed); }
+  void begin_run(uint64_t seed) {
+    tasks_driver_begin_run(&d_, kind_, task_, omega_max_, seed);
+    if (fixed_gain_.has_value()) apply_gain(*fixed_gain_);
+  }
   double act(const Env& env) {
     if (sim_env_episode(env.raw())->task != task_) throw nb::value_error("the driver is for another task");
     return sim_env_driver_action(env.raw(), &d_);
   }
   double gain() const { return d_.gain; }
-  void set_gain(double g) { d_.gain = g; }
+  // Setting the gain fixes it for this and every later run.
+  void set_gain(double g) {
+    check_gain(g);
+    fixed_gain_ = g;
+    apply_gain(g);
+  }
 
  private:
+  void check_gain(double g) const {
+    if (kind_ == TASKS_DRIVER_OPTIMAL) {
+      throw nb::value_error("the optimal driver has no gain to set: its law's constants are searched "
+                            "(gain= applies to 'proportional' and 'human')");
+    }
+    if (!std::isfinite(g) || g <= 0.0) throw nb::value_error("gain must be a positive number [1/s]");
+  }
+  void apply_gain(double g) {
+    d_.gain = g;
+    // The obstacle example policy's law holds its gain (as the controller's evaluate_example_gain).
+    if (d_.task == TASKS_TASK_OBSTACLES && kind_ == TASKS_DRIVER_PROPORTIONAL) d_.law[0] = g;
+  }
+
   tasks_driver_t d_{};
   tasks_driver_kind_t kind_ = TASKS_DRIVER_PROPORTIONAL;
   tasks_task_t task_;
   double omega_max_;
+  std::optional<double> fixed_gain_;
 };
 
 // ---- HEDGER -------------------------------------------------------------------------------
@@ -671,6 +697,26 @@ std::vector<uint32_t> corridor_steps_lower_bound(double length_m) {
   return out;
 }
 
+// The controller's section of a checkpoint (read_checkpoint's meta), decoded and validated by the
+// controller's own decoder (fw/progress.h): what was learned besides HEDGER's store.
+nb::dict read_checkpoint_progress(const nb::bytes& meta) {
+  fw_progress_t p;
+  char why[FW_PROGRESS_WHY_MAX] = "";
+  if (fw_progress_decode(reinterpret_cast<const uint8_t*>(meta.c_str()), meta.size(), &p, why, sizeof why) != 0)
+    throw nb::value_error((std::string("checkpoint progress section: ") + why).c_str());
+  nb::dict d;
+  d["task"] = fw_task_name(p.task);
+  d["state_dim"] = p.state_dim;
+  d["phase"] = p.schedule.phase;
+  d["training_runs"] = p.schedule.training_runs;
+  d["phase_one_runs"] = p.schedule.phase_one_runs;
+  d["phase_two_runs"] = p.schedule.phase_two_runs;
+  d["eval_blocks"] = p.schedule.eval_blocks;
+  d["run_id"] = p.run_id;
+  d["legacy_shift"] = p.legacy_shift;
+  return d;
+}
+
 nb::tuple mean_ci95(const std::vector<double>& values) {
   double mean = 0.0, half = 0.0;
   learn_mean_ci95(values.data(), static_cast<int32_t>(values.size()), &mean, &half);
@@ -704,7 +750,11 @@ NB_MODULE(_core, m) {
   m.attr("N_EVAL_STARTS") = TASKS_N_EVAL_STARTS;
 
   nb::class_<Driver>(m, "Driver", "An example driver of lib/tasks (phase one's teacher).")
-      .def(nb::init<const std::string&, const std::string&, double>(), "kind"_a, "task"_a, "omega_max_radps"_a = 1.0)
+      .def(nb::init<const std::string&, const std::string&, double, std::optional<double>>(), "kind"_a, "task"_a,
+           "omega_max_radps"_a = 1.0, "gain"_a = nb::none(),
+           "kind: 'proportional' (the example policy), 'human' (the simulated joystick driver) or 'optimal' (the "
+           "hand-tuned reference); task: 'corridor' or 'obstacles'; gain: a fixed gain [1/s] for every run "
+           "(default: drawn per run, as the controller's phase one does)")
       .def("begin_run", &Driver::begin_run, "seed"_a)
       .def("act", &Driver::act, "env"_a)
       .def_prop_rw("gain", &Driver::gain, &Driver::set_gain);
@@ -743,6 +793,10 @@ NB_MODULE(_core, m) {
   m.attr("POINT_PROTECTED") = HEDGER_POINT_PROTECTED;
 
   m.def("read_checkpoint", &read_checkpoint, "path"_a);
+  m.def("read_checkpoint_progress", &read_checkpoint_progress, "meta"_a,
+        "The controller's section of a checkpoint (the meta bytes of read_checkpoint) as a dict: task, "
+        "state dimension, phase, run counts, run id, and legacy_shift (an older controller's file whose "
+        "policy shift had moved; not used).");
   m.def("mean_ci95", &mean_ci95, "values"_a,
         "(mean, 95 % half-width) with Student's t, as the controller's evaluation blocks report them.");
   m.def("corridor_steps_lower_bound", &corridor_steps_lower_bound, "length_m"_a = 10.0,
