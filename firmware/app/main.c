@@ -3,6 +3,7 @@
 #define _GNU_SOURCE 1
 #include "fw/checkpoint.h"
 #include "fw/config.h"
+#include "fw/config_task.h"
 #include "fw/endpoints.h"
 #include "fw/loop.h"
 #include "fw/publisher.h"
@@ -54,6 +55,8 @@ static void usage(FILE* f) {
           "  --experience-log FILE   same as --set experience_log_file=FILE\n"
           "  --print-config          print the effective settings and exit\n"
           "  --print-reference-config  print every key, its allowed values and its default\n"
+          "  --print-task-params     print every declared task, its state and its parameters\n"
+          "                          (task_params = \"name=value,...\") with ranges and defaults\n"
           "  --help                  this text\n"
           "\n"
           "LCM channels: publishes B21R_CONFIG (once), B21R_EXPERIENCE, B21R_RUN (one per run end),\n"
@@ -133,6 +136,10 @@ int main(int argc, char** argv) {
     }
     if (strcmp(argv[i], "--print-reference-config") == 0) {
       fw_config_print_reference(stdout);
+      return 0;
+    }
+    if (strcmp(argv[i], "--print-task-params") == 0) {
+      fw_config_print_task_params(stdout);
       return 0;
     }
     if (strcmp(argv[i], "--config") == 0) {

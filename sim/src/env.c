@@ -61,12 +61,13 @@ static void fmt_err(char* err, size_t cap, const char* msg) {
   }
 }
 
-void sim_env_config_default(sim_env_config_t* cfg, tasks_task_t task, sim_env_backend_t backend) {
+void sim_env_config_default(sim_env_config_t* cfg, const tasks_decl_t* task, sim_env_backend_t backend) {
   memset(cfg, 0, sizeof *cfg);
   cfg->task = task;
   cfg->backend = backend;
-  tasks_corridor_spec_default(&cfg->corridor);
-  tasks_obstacles_spec_default(&cfg->obstacles);
+  if (task != NULL) {
+    task->spec_default(cfg->spec);
+  }
   tasks_command_limits_default(&cfg->limits);
   sim_lms_config_t lms;
   sim_lms_config_default(&lms);
@@ -194,7 +195,7 @@ static sim_env_status_t ode_power_up(sim_env_t* env) {
 // ---- create / seed ------------------------------------------------------------------------
 
 sim_env_t* sim_env_create(const sim_env_config_t* cfg, char* err, size_t err_cap) {
-  if (cfg == NULL || (cfg->task != TASKS_TASK_CORRIDOR && cfg->task != TASKS_TASK_OBSTACLES) ||
+  if (cfg == NULL || cfg->task == NULL ||
       (cfg->backend != SIM_ENV_ODE && cfg->backend != SIM_ENV_KINEMATIC)) {
     fmt_err(err, err_cap, "sim_env: unknown task or back-end");
     return NULL;
@@ -212,13 +213,10 @@ sim_env_t* sim_env_create(const sim_env_config_t* cfg, char* err, size_t err_cap
   }
   env->cfg = *cfg;
   // One rotation limit, as in the controller: the clamp's is also the task's action bound.
-  env->cfg.corridor.omega_max_radps = cfg->limits.max_rotation_radps;
-  env->cfg.obstacles.omega_max_radps = cfg->limits.max_rotation_radps;
-  tasks_episode_init(&env->ep, cfg->task, &env->cfg.corridor, &env->cfg.obstacles);
-  const sim_world_status_t ws = cfg->task == TASKS_TASK_CORRIDOR
-                                    ? sim_world_from_corridor_spec(&cfg->corridor, &env->world)
-                                    : sim_world_from_obstacles_spec(&cfg->obstacles, &env->world);
-  env->dt_s = cfg->task == TASKS_TASK_CORRIDOR ? cfg->corridor.dt_s : cfg->obstacles.dt_s;
+  tasks_spec_set_omega_max(cfg->task, env->cfg.spec, cfg->limits.max_rotation_radps);
+  tasks_episode_init(&env->ep, cfg->task, env->cfg.spec);
+  const sim_world_status_t ws = sim_world_from_task(cfg->task, env->cfg.spec, &env->world);
+  env->dt_s = tasks_spec_dt_s(cfg->task, env->cfg.spec);
   if (ws != SIM_WORLD_OK || !(env->dt_s > 0.0) || !isfinite(env->dt_s)) {
     fmt_err(err, err_cap, "sim_env: the task spec is invalid (geometry or dt_s)");
     free(env);
@@ -429,8 +427,7 @@ size_t sim_env_laser_view(sim_env_t* env, double* angle_min_rad, double* increme
   }
   // Kinematic: an ideal scan (no noise, every beam to the first solid) from the true pose.
   const tasks_episode_t* ep = &env->ep;
-  const features_laser_mount_t* m =
-      ep->task == TASKS_TASK_CORRIDOR ? &ep->corridor_features.scan.mount : &ep->obstacles_features.scan.mount;
+  const features_laser_mount_t* m = tasks_episode_laser_mount(ep);
   const double c = cos(env->kin.theta_rad), s = sin(env->kin.theta_rad);
   const double lx = env->kin.x_m + c * m->x_m - s * m->y_m;
   const double ly = env->kin.y_m + s * m->x_m + c * m->y_m;
@@ -453,31 +450,7 @@ const tasks_episode_t* sim_env_episode(const sim_env_t* env) { return &env->ep; 
 const sim_env_config_t* sim_env_get_config(const sim_env_t* env) { return &env->cfg; }
 
 void sim_env_state_bounds(const sim_env_t* env, double* low, double* high) {
-  const tasks_episode_t* ep = &env->ep;
-  if (ep->task == TASKS_TASK_CORRIDOR) {
-    // The end distance comes from odometry (at most the length) or from the laser, which the
-    // features accept only within end_gate_m of odometry.
-    low[0] = 0.0;
-    high[0] = ep->corridor.length_m + ep->corridor_features.end_gate_m;
-    low[1] = 0.0;
-    high[1] = 1.0;
-    low[2] = -ENV_PI;
-    high[2] = ENV_PI;
-    return;
-  }
-  const tasks_obstacles_spec_t* o = &ep->obstacles;
-  const double gx = fmax(fabs(o->arena_min_x_m - o->goal_x_m), fabs(o->arena_max_x_m - o->goal_x_m));
-  const double gy = fmax(fabs(o->arena_min_y_m - o->goal_y_m), fabs(o->arena_max_y_m - o->goal_y_m));
-  const features_scan_config_t* sc = &ep->obstacles_features.scan;
-  low[0] = -ENV_PI;
-  high[0] = ENV_PI;
-  // Inside the arena; odometry may drift a little beyond it.
-  low[1] = 0.0;
-  high[1] = hypot(gx, gy) + 1.0;
-  low[2] = -ENV_PI;
-  high[2] = ENV_PI;
-  low[3] = 0.0;
-  high[3] = fmax(ep->obstacles_features.no_obstacle_distance_m, sc->max_range_m + hypot(sc->mount.x_m, sc->mount.y_m));
+  tasks_episode_state_bounds(&env->ep, low, high);
 }
 
 const char* sim_env_status_str(sim_env_status_t status) {

@@ -1,57 +1,60 @@
 // SPDX-License-Identifier: MIT
-// Emulator worlds built from lib/tasks' task specifications.
+// Emulator worlds built from the declared tasks' specifications (sim/task_worlds.h): the
+// declaration writes its world through a sink whose calls are the world file's directives.
 #include "sim/task_worlds.h"
 
 #include <stdio.h>
 
-sim_world_status_t sim_world_from_corridor_spec(const tasks_corridor_spec_t* spec, sim_world_t* out) {
-  if (out == NULL) {
-    return SIM_WORLD_ERR_INVALID_ARG;
-  }
-  sim_world_clear(out);
-  if (spec == NULL) {
-    return SIM_WORLD_ERR_INVALID_ARG;
-  }
-  sim_world_status_t st = sim_world_add_corridor(out, spec->length_m, spec->width_m, 1);
-  for (size_t i = 0; st == SIM_WORLD_OK && i < TASKS_N_EVAL_STARTS; ++i) {
-    const features_pose_t* p = &spec->eval_starts[i];
-    st = sim_world_add_start(out, p->x_m, p->y_m, p->theta_rad);
-  }
-  if (st != SIM_WORLD_OK) {
-    sim_world_clear(out);
-    return st;
-  }
-  (void)snprintf(out->name, sizeof(out->name), "corridor%g", spec->length_m);
-  sim_world_compute_bounds(out);
-  return SIM_WORLD_OK;
+static int sink_corridor(void* user, double length_m, double width_m, int end) {
+  return sim_world_add_corridor((sim_world_t*)user, length_m, width_m, end) != SIM_WORLD_OK;
 }
 
-sim_world_status_t sim_world_from_obstacles_spec(const tasks_obstacles_spec_t* spec,
-                                                 sim_world_t* out) {
+static int sink_arena(void* user, double min_x, double min_y, double max_x, double max_y) {
+  return sim_world_add_arena((sim_world_t*)user, min_x, min_y, max_x, max_y) != SIM_WORLD_OK;
+}
+
+static int sink_wall(void* user, double x0, double y0, double x1, double y1, double thickness_m) {
+  return sim_world_add_wall((sim_world_t*)user, x0, y0, x1, y1, thickness_m) != SIM_WORLD_OK;
+}
+
+static int sink_cylinder(void* user, double x, double y, double radius_m) {
+  return sim_world_add_cylinder((sim_world_t*)user, x, y, radius_m) != SIM_WORLD_OK;
+}
+
+static int sink_goal(void* user, double x, double y, double radius_m) {
+  sim_world_t* w = (sim_world_t*)user;
+  if (!(radius_m > 0.0)) {
+    return 1;
+  }
+  w->has_goal = 1;
+  w->goal = (sim_cylinder_t){x, y, radius_m};
+  return 0;
+}
+
+static int sink_start(void* user, features_pose_t p) {
+  return sim_world_add_start((sim_world_t*)user, p.x_m, p.y_m, p.theta_rad) != SIM_WORLD_OK;
+}
+
+static int sink_name(void* user, const char* name) {
+  sim_world_t* w = (sim_world_t*)user;
+  (void)snprintf(w->name, sizeof(w->name), "%s", name);
+  return 0;
+}
+
+sim_world_status_t sim_world_from_task(const tasks_decl_t* decl, const void* spec, sim_world_t* out) {
   if (out == NULL) {
     return SIM_WORLD_ERR_INVALID_ARG;
   }
   sim_world_clear(out);
-  if (spec == NULL || spec->n_obstacles > TASKS_MAX_OBSTACLES || !(spec->goal_radius_m > 0.0)) {
+  if (decl == NULL || spec == NULL) {
     return SIM_WORLD_ERR_INVALID_ARG;
   }
-  sim_world_status_t st = sim_world_add_arena(out, spec->arena_min_x_m, spec->arena_min_y_m,
-                                              spec->arena_max_x_m, spec->arena_max_y_m);
-  for (uint32_t k = 0; st == SIM_WORLD_OK && k < spec->n_obstacles; ++k) {
-    const tasks_circle_t* c = &spec->obstacles[k];
-    st = sim_world_add_cylinder(out, c->x_m, c->y_m, c->radius_m);
-  }
-  for (size_t i = 0; st == SIM_WORLD_OK && i < TASKS_N_EVAL_STARTS; ++i) {
-    const features_pose_t* p = &spec->eval_starts[i];
-    st = sim_world_add_start(out, p->x_m, p->y_m, p->theta_rad);
-  }
-  if (st != SIM_WORLD_OK) {
+  const tasks_world_sink_t sink = {out,          sink_corridor, sink_arena, sink_wall,
+                                   sink_cylinder, sink_goal,     sink_start, sink_name};
+  if (decl->world(spec, &sink) != 0) {
     sim_world_clear(out);
-    return st;
+    return SIM_WORLD_ERR_INVALID_ARG;
   }
-  out->has_goal = 1;
-  out->goal = (sim_cylinder_t){spec->goal_x_m, spec->goal_y_m, spec->goal_radius_m};
-  (void)snprintf(out->name, sizeof(out->name), "obstacles%u", (unsigned)spec->n_obstacles);
   sim_world_compute_bounds(out);
   return SIM_WORLD_OK;
 }

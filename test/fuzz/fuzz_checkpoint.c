@@ -9,6 +9,7 @@
 //
 // Seeds: B21R_FUZZ_SEEDS_OUT=<dir> fuzz_checkpoint writes valid checkpoints for this target's
 // configuration into <dir> and exits (test/fuzz/corpus/checkpoint was made that way).
+#include <tasks/decl.h>
 #include "fw/checkpoint.h"
 #include "fw/config.h"
 #include "fw/loop.h"
@@ -126,7 +127,7 @@ static void write_seeds(const char* dir) {
     FUZZ_CHECK(hedger_save(h, payload, sizeof payload, &n) == HEDGER_OK);
     fw_progress_t g;
     memset(&g, 0, sizeof g);
-    g.task = FW_TASK_CORRIDOR;
+    g.task = (int32_t)tasks_corridor_decl.id;
     g.state_dim = hc.state_dim;
     g.schedule.phase = k == 2 ? 2 : 1;
     g.schedule.phase_one_runs = k == 0 ? 0 : 12;

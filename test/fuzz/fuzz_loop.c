@@ -4,6 +4,8 @@
 
 #include "fuzz_util.h"
 
+#include <tasks/decl.h>
+
 #include <math.h>
 
 static fuzz_loop_t* self(void* user) { return (fuzz_loop_t*)user; }
@@ -52,7 +54,7 @@ void fuzz_loop_config(fw_config_t* cfg, bool canopen) {
   strcpy(cfg->emulator_control, "fake");
   strcpy(cfg->lcm_url, "none");
   cfg->base_protocol = canopen ? FW_BASE_CANOPEN : FW_BASE_RFLEX;
-  cfg->task = FW_TASK_OBSTACLES;
+  cfg->task = (int32_t)tasks_obstacles_decl.id;
   cfg->laser_fov_deg = 100;
   cfg->queue_capacity = 16;
   cfg->status_period_ticks = 5;

@@ -5,6 +5,7 @@
 // whether its shift's doubles (56, 64, 80) were not all zero; every refusal has a reason.
 #include "fw/config.h"
 #include "fw/progress.h"
+#include <tasks/decl.h>
 #include "fuzz_util.h"
 
 #include <math.h>
@@ -27,7 +28,7 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const learn_schedule_progress_t* g = &p.schedule;
   const bool rev1 = size != FW_PROGRESS_BYTES;
   FUZZ_CHECK(size == FW_PROGRESS_BYTES || size == 96U || size == 104U);
-  FUZZ_CHECK(p.task == FW_TASK_CORRIDOR || p.task == FW_TASK_OBSTACLES);
+  FUZZ_CHECK(tasks_by_id(p.task) != NULL);
   FUZZ_CHECK(p.state_dim >= 1U && p.state_dim <= 8U);
   FUZZ_CHECK(g->phase == 1 || g->phase == 2);
   FUZZ_CHECK(g->phase_one_runs >= 0 && g->phase_two_runs >= 0 && g->eval_blocks >= 0);

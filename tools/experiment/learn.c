@@ -4,6 +4,8 @@
 // what the loop publishes (experiences, evaluation blocks) and its counters between ticks.
 #define _POSIX_C_SOURCE 200809L
 #include "experiment.h"
+
+#include <fw/config_task.h>
 #include "fw/errfmt.h"
 #include "fw/loop.h"
 #include "fw/publisher.h"
@@ -163,17 +165,9 @@ static double now_s(void) {
 }
 
 static uint32_t step_limit_of(const fw_config_t* cfg) {
-  if (cfg->max_steps_per_run > 0) {
-    return (uint32_t)cfg->max_steps_per_run;
-  }
-  if (cfg->task == FW_TASK_CORRIDOR) {
-    tasks_corridor_spec_t c;
-    tasks_corridor_spec_default(&c);
-    return c.step_limit;
-  }
-  tasks_obstacles_spec_t o;
-  tasks_obstacles_spec_default(&o);
-  return o.step_limit;
+  static tasks_episode_t ep;
+  char err[FW_CONFIG_ERR_MAX];
+  return fw_config_task(cfg, &ep, NULL, err, sizeof err) == 0 ? tasks_episode_step_limit(&ep) : 1000U;
 }
 
 // Upper bound on the ticks of a schedule (every run at its step limit, generous repositioning):
@@ -428,19 +422,14 @@ int exp_run_learn(const exp_settings_t* s, const fw_config_t* cfg_in, const exp_
         sim_world_load(path, &world, err, err_cap) != SIM_WORLD_OK) {
       return -1;
     }
-  } else if (cfg.task == FW_TASK_CORRIDOR) {
-    tasks_corridor_spec_t spec;
-    tasks_corridor_spec_default(&spec);
-    spec.length_m = cfg.corridor_length_m;
-    if (sim_world_from_corridor_spec(&spec, &world) != SIM_WORLD_OK) {
-      fw_errfmt(err, err_cap, "cannot build the corridor world (length %g m)", cfg.corridor_length_m);
+  } else {
+    // The configured task's own world (its declaration, with its parameters).
+    static tasks_episode_t ep;
+    if (fw_config_task(&cfg, &ep, NULL, err, err_cap) != 0) {
       return -1;
     }
-  } else {
-    tasks_obstacles_spec_t spec;
-    tasks_obstacles_spec_default(&spec);
-    if (sim_world_from_obstacles_spec(&spec, &world) != SIM_WORLD_OK) {
-      fw_errfmt(err, err_cap, "cannot build the obstacle world");
+    if (sim_world_from_task(ep.decl, tasks_episode_spec(&ep), &world) != SIM_WORLD_OK) {
+      fw_errfmt(err, err_cap, "cannot build the %s task's world (check task_params)", ep.decl->name);
       return -1;
     }
   }

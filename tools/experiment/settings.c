@@ -429,11 +429,11 @@ int exp_validate(const exp_settings_t* s, const fw_config_t* cfg, char* err, siz
         "phase_one_driver = joystick needs a person; experiments use example or human (the simulated driver)");
     return -1;
   }
-  if (s->kind == EXP_EXPLORE_CORRIDOR && cfg->task != FW_TASK_CORRIDOR) {
+  if (s->kind == EXP_EXPLORE_CORRIDOR && strcmp(fw_task_name(cfg->task), "corridor") != 0) {
     fw_errfmt(err, err_cap, "experiment.kind = explore_corridor needs task = corridor");
     return -1;
   }
-  if (s->kind == EXP_EXPLORE_GOAL && cfg->task != FW_TASK_OBSTACLES) {
+  if (s->kind == EXP_EXPLORE_GOAL && strcmp(fw_task_name(cfg->task), "obstacles") != 0) {
     fw_errfmt(err, err_cap, "experiment.kind = explore_goal needs task = obstacles (the goal task, without obstacles)");
     return -1;
   }

@@ -6,6 +6,7 @@
 #include "fw/progress.h"
 
 #include <hedger/hedger.h>
+#include <tasks/decl.h>
 
 #include <errno.h>
 #include <math.h>
@@ -21,6 +22,8 @@ typedef enum key_kind {
   KIND_ENUM,
   KIND_DLIST,
   KIND_CPUS,  // CPU list "0,2-3" stored as a uint64_t mask
+  KIND_TASK,  // a declared task's name (tasks/decl.h), stored as its id (int32_t)
+  KIND_POSES, // "x,y,theta; x,y,theta; ...", stored as doubles followed by the pose count (int32_t)
 } key_kind_t;
 
 typedef struct choice {
@@ -47,11 +50,12 @@ typedef struct key_desc {
 _Static_assert(offsetof(fw_config_t, hedger_input_scale_n) ==
                    offsetof(fw_config_t, hedger_input_scale) + FW_CONFIG_MAX_SCALES * sizeof(double),
                "list count must follow the list");
+_Static_assert(offsetof(fw_config_t, eval_poses_n) == offsetof(fw_config_t, eval_poses) + 3 * FW_CONFIG_MAX_POSES * sizeof(double),
+               "the pose count must follow the poses");
 _Static_assert(offsetof(fw_config_t, example_gain_range_n) ==
                    offsetof(fw_config_t, example_gain_range) + FW_CONFIG_MAX_SCALES * sizeof(double),
                "list count must follow the list");
 
-static const choice_t k_task[] = {{"corridor", FW_TASK_CORRIDOR}, {"obstacles", FW_TASK_OBSTACLES}, {NULL, 0}};
 static const choice_t k_mode[] = {{"learn", FW_MODE_LEARN}, {"evaluate", FW_MODE_EVALUATE}, {NULL, 0}};
 static const choice_t k_eval_policy[] = {
     {"learned", FW_EVAL_LEARNED}, {"example", FW_EVAL_EXAMPLE}, {"optimal", FW_EVAL_OPTIMAL},
@@ -80,8 +84,12 @@ static const choice_t k_switch[] = {
 
 // clang-format off
 static const key_desc_t k_keys[] = {
-  {"What to do", "task", KIND_ENUM, OFF(task), 0, 0, false, false, k_task, "corridor",
-   "learning task: corridor following or obstacle avoidance (the paper's two tasks)"},
+  {"What to do", "task", KIND_TASK, OFF(task), 0, 0, false, false, NULL, "corridor",
+   "learning task: one of the declared tasks (lib/tasks; b21r-controller --print-task-params lists "
+   "them)"},
+  {NULL, "task_params", KIND_STRING, OFF(task_params), 0, 0, false, false, NULL, "",
+   "the task's parameters as name=value,name=value (each task declares its own, with its range: "
+   "b21r-controller --print-task-params; \"\" = the task's defaults)"},
   {NULL, "mode", KIND_ENUM, OFF(mode), 0, 0, false, false, k_mode, "learn",
    "learn: the two-phase schedule; evaluate: one evaluation block of evaluate_policy, then exit"},
   {NULL, "evaluate_policy", KIND_ENUM, OFF(evaluate_policy), 0, 0, false, false, k_eval_policy, "learned",
@@ -268,6 +276,10 @@ static const key_desc_t k_keys[] = {
    "an evaluation block (learning off) after every N training runs (the paper: 5)"},
   {NULL, "eval_starts", KIND_INT, OFF(eval_starts), 1, 16, false, false, NULL, "10",
    "fixed start poses per evaluation block (the paper: 10)"},
+  {NULL, "eval_poses", KIND_POSES, OFF(eval_poses), 0, 0, false, false, NULL, "",
+   "the evaluation blocks' start poses as \"x,y,theta; x,y,theta; ...\" [m, m, rad; the task frame], at least "
+   "eval_starts of them (\"\" = the task's own poses); training starts stay around the task's poses, so the "
+   "learned policy can be evaluated from poses it never started near"},
   {NULL, "eval_at_start", KIND_BOOL, OFF(eval_at_start), 0, 0, false, false, NULL, "false",
    "also run an evaluation block before the first training run"},
   {NULL, "max_steps_per_run", KIND_INT, OFF(max_steps_per_run), 0, 1000000, false, false, NULL, "0",
@@ -522,6 +534,60 @@ static void describe_allowed(const key_desc_t* k, char* out, size_t cap) {
       }
       break;
     }
+    case KIND_TASK: {
+      size_t used = (size_t)snprintf(out, cap, "one of the declared tasks:");
+      for (uint32_t t = 0; t < tasks_count() && used < cap; ++t) {
+        used += (size_t)snprintf(out + used, cap - used, "%s %s", t == 0 ? "" : ",", tasks_decl_at(t)->name);
+      }
+      break;
+    }
+    case KIND_POSES:
+      snprintf(out, cap, "empty, or 1 to %d poses \"x,y,theta\" separated by ';' (finite numbers)", FW_CONFIG_MAX_POSES);
+      break;
+  }
+}
+
+// "x,y,theta; x,y,theta; ..." into out (3 doubles per pose); the pose count, or -1 when malformed.
+static int parse_poses(const char* v, double* out) {
+  int n = 0;
+  const char* p = v;
+  while (*p == ' ') {
+    ++p;
+  }
+  if (*p == '\0') {
+    return 0;
+  }
+  for (;;) {
+    if (n >= FW_CONFIG_MAX_POSES) {
+      return -1;
+    }
+    for (int c = 0; c < 3; ++c) {
+      char* end = NULL;
+      errno = 0;
+      const double x = strtod(p, &end);
+      if (end == p || errno != 0 || !isfinite(x)) {
+        return -1;
+      }
+      out[3 * n + c] = x;
+      p = end;
+      while (*p == ' ') {
+        ++p;
+      }
+      if (c < 2) {
+        if (*p != ',') {
+          return -1;
+        }
+        ++p;
+      }
+    }
+    ++n;
+    if (*p == '\0') {
+      return n;
+    }
+    if (*p != ';') {
+      return -1;
+    }
+    ++p;
   }
 }
 
@@ -768,6 +834,28 @@ static int set_value(fw_config_t* cfg, const key_desc_t* k, const char* value) {
         }
       }
       break;
+    case KIND_TASK: {
+      const tasks_decl_t* d = tasks_find(value);
+      if (d == NULL) {
+        break;
+      }
+      const int32_t id = (int32_t)d->id;
+      memcpy(field, &id, sizeof id);
+      return 0;
+    }
+    case KIND_POSES: {
+      double poses[3 * FW_CONFIG_MAX_POSES];
+      const int n = parse_poses(value, poses);
+      if (n < 0) {
+        break;
+      }
+      double* dst = (double*)(void*)field;
+      memset(dst, 0, sizeof poses);
+      memcpy(dst, poses, (size_t)n * 3U * sizeof(double));
+      const int32_t count = n;
+      memcpy(field + sizeof poses, &count, sizeof count);
+      return 0;
+    }
   }
   return -1;
 }
@@ -1004,12 +1092,8 @@ static origin_buf_t origin_of(const fw_config_t* cfg, const char* key) {
 }
 
 const char* fw_task_name(int32_t task) {
-  for (const choice_t* c = k_task; c->name != NULL; ++c) {
-    if (c->value == task) {
-      return c->name;
-    }
-  }
-  return "unknown";
+  const tasks_decl_t* d = tasks_by_id(task);
+  return d != NULL ? d->name : "unknown";
 }
 
 int fw_config_validate_program(const fw_config_t* cfg, char* err, size_t err_cap) {
@@ -1038,7 +1122,80 @@ int fw_config_validate_program(const fw_config_t* cfg, char* err, size_t err_cap
   return 0;
 }
 
+int fw_config_each_task_param(const fw_config_t* cfg, fw_config_task_param_fn fn, void* user, char* err,
+                              size_t err_cap) {
+  const tasks_decl_t* decl = tasks_by_id(cfg->task);
+  char buf[FW_CONFIG_STR_MAX];
+  snprintf(buf, sizeof buf, "%s", cfg->task_params);
+  char* next = buf;
+  while (next != NULL) {
+    char* item = next;
+    char* comma = strchr(item, ',');
+    next = comma != NULL ? comma + 1 : NULL;
+    if (comma != NULL) {
+      *comma = '\0';
+    }
+    if (item[strspn(item, " ")] == '\0' && next == NULL && item == buf) {
+      break;  // "": the task's defaults
+    }
+    char* eq = strchr(item, '=');
+    char* name = item;
+    while (*name == ' ') {
+      ++name;
+    }
+    if (eq == NULL || eq == name) {
+      fw_errfmt(err, err_cap, "%s: task_params item '%s': expected name=value", origin_of(cfg, "task_params").text, item);
+      return -1;
+    }
+    *eq = '\0';
+    for (char* e = eq - 1; e > name && *e == ' '; --e) {
+      *e = '\0';
+    }
+    char* value = eq + 1;
+    while (*value == ' ') {
+      ++value;
+    }
+    for (size_t n = strlen(value); n > 0 && value[n - 1] == ' '; --n) {
+      value[n - 1] = '\0';
+    }
+    const tasks_param_t* p = decl != NULL ? tasks_param_find(decl, name) : NULL;
+    double v = 0.0;
+    if (p == NULL) {
+      char names[FW_CONFIG_STR_MAX] = "";
+      size_t used = 0;
+      for (uint32_t i = 0; decl != NULL && i < decl->n_params && used < sizeof names; ++i) {
+        used += (size_t)snprintf(names + used, sizeof names - used, "%s%s", i == 0 ? "" : ", ", decl->params[i].name);
+      }
+      fw_errfmt(err, err_cap, "%s: task_params: task %s (set at %s) has no parameter '%s'; its parameters: %s",
+          origin_of(cfg, "task_params").text, fw_task_name(cfg->task), origin_of(cfg, "task").text, name, names);
+      return -1;
+    }
+    if (!parse_double(value, &v) || !(v >= p->min && v <= p->max)) {
+      fw_errfmt(err, err_cap, "%s: task_params: %s = '%s', expected a number in [%g, %g] (%s)",
+          origin_of(cfg, "task_params").text, name, value, p->min, p->max, p->help);
+      return -1;
+    }
+    if (fn != NULL) {
+      fn(user, p->name, v);
+    }
+  }
+  return 0;
+}
+
 int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
+  if (tasks_by_id(cfg->task) == NULL) {
+    fw_errfmt(err, err_cap, "%s: task id %d is not a declared task", origin_of(cfg, "task").text, (int)cfg->task);
+    return -1;
+  }
+  if (fw_config_each_task_param(cfg, NULL, NULL, err, err_cap) != 0) {
+    return -1;
+  }
+  if (cfg->eval_poses_n > 0 && cfg->eval_poses_n < cfg->eval_starts) {
+    fw_errfmt(err, err_cap, "%s: eval_poses gives %d poses, but eval_starts (set at %s) asks for %d; give more poses or "
+        "lower eval_starts", origin_of(cfg, "eval_poses").text, (int)cfg->eval_poses_n, origin_of(cfg, "eval_starts").text,
+        (int)cfg->eval_starts);
+    return -1;
+  }
   if (cfg->laser_resolution_cdeg == 25 && cfg->laser_fov_deg != 100) {
     fw_errfmt(err, err_cap,
         "%s: laser_resolution_deg = 0.25 needs laser_fov_deg = 100 (set at %s; the LMS200 has no 180/0.25 variant)",
@@ -1070,7 +1227,8 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
         origin_of(cfg, "example_gain_range").text, given);
     return -1;
   }
-  const int32_t dims = (cfg->task == FW_TASK_CORRIDOR ? 3 : 4) + (cfg->state_rotation ? 1 : 0) + 1;
+  const tasks_decl_t* decl = tasks_by_id(cfg->task);
+  const int32_t dims = (decl != NULL ? (int32_t)decl->state_dim : 0) + (cfg->state_rotation ? 1 : 0) + 1;
   if (cfg->hedger_input_scale_n != 0 && cfg->hedger_input_scale_n != dims) {
     fw_errfmt(err, err_cap,
         "%s: hedger_input_scale has %d values; task %s (set at %s) needs %d (state dimensions%s, then the action)",
@@ -1136,6 +1294,18 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
   return 0;
 }
 
+// The shortest of %.15g and %.17g that reads back as the same double: a file written by
+// --print-config says 0.1, not 0.10000000000000001, and still round-trips exactly.
+static void print_double(FILE* out, double d) {
+  char buf[32];
+  snprintf(buf, sizeof buf, "%.15g", d);
+  const double back = strtod(buf, NULL);
+  if (memcmp(&back, &d, sizeof d) != 0) {
+    snprintf(buf, sizeof buf, "%.17g", d);
+  }
+  fputs(buf, out);
+}
+
 static void print_value(const key_desc_t* k, const fw_config_t* cfg, FILE* out) {
   const char* field = (const char*)cfg + k->offset;
   switch (k->kind) {
@@ -1160,7 +1330,7 @@ static void print_value(const key_desc_t* k, const fw_config_t* cfg, FILE* out) 
     case KIND_DOUBLE: {
       double d = 0.0;
       memcpy(&d, field, sizeof d);
-      fprintf(out, "%.17g", d);
+      print_double(out, d);
       break;
     }
     case KIND_STRING:
@@ -1173,7 +1343,8 @@ static void print_value(const key_desc_t* k, const fw_config_t* cfg, FILE* out) 
       for (int32_t i = 0; i < n; ++i) {
         double d = 0.0;
         memcpy(&d, field + (size_t)i * sizeof(double), sizeof d);
-        fprintf(out, "%s%.17g", i == 0 ? "" : ",", d);
+        fputs(i == 0 ? "" : ",", out);
+        print_double(out, d);
       }
       fputc('"', out);
       break;
@@ -1197,6 +1368,29 @@ static void print_value(const key_desc_t* k, const fw_config_t* cfg, FILE* out) 
       }
       break;
     }
+    case KIND_TASK: {
+      int32_t v = 0;
+      memcpy(&v, field, sizeof v);
+      fprintf(out, "%s", fw_task_name(v));
+      break;
+    }
+    case KIND_POSES: {
+      int32_t n = 0;
+      memcpy(&n, field + 3U * FW_CONFIG_MAX_POSES * sizeof(double), sizeof n);
+      fputc('"', out);
+      for (int32_t i = 0; i < n; ++i) {
+        double p[3];
+        memcpy(p, field + (size_t)i * 3U * sizeof(double), sizeof p);
+        fputs(i == 0 ? "" : "; ", out);
+        print_double(out, p[0]);
+        fputc(',', out);
+        print_double(out, p[1]);
+        fputc(',', out);
+        print_double(out, p[2]);
+      }
+      fputc('"', out);
+      break;
+    }
   }
 }
 
@@ -1209,7 +1403,7 @@ void fw_config_print_reference(FILE* out) {
     char allowed[256];
     describe_allowed(k, allowed, sizeof allowed);
     fprintf(out, "# %s\n#   allowed: %s\n", k->doc, allowed);
-    if (k->kind == KIND_STRING || k->kind == KIND_DLIST || k->kind == KIND_CPUS) {
+    if (k->kind == KIND_STRING || k->kind == KIND_DLIST || k->kind == KIND_CPUS || k->kind == KIND_POSES) {
       fprintf(out, "%s = \"%s\"\n", k->name, k->def);
     } else {
       fprintf(out, "%s = %s\n", k->name, k->def);

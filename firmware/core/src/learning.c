@@ -13,6 +13,7 @@
 // when the work is done. The work is counted in updates and points, never in time, so a lockstep
 // run stays a function of its inputs however loaded the machine is.
 #include "loop_internal.h"
+#include "fw/config_task.h"
 #include "fw/progress.h"
 
 #include <math.h>
@@ -20,128 +21,11 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define PI 3.14159265358979323846
-
-_Static_assert((int)FW_SWITCH_RUNS == (int)LEARN_SWITCH_RUNS && (int)FW_SWITCH_OPERATOR == (int)LEARN_SWITCH_OPERATOR &&
-                   (int)FW_SWITCH_AUTO == (int)LEARN_SWITCH_AUTO,
-               "the phase_switch key's values are the framework's");
-_Static_assert((int)FW_LEARNER_HEDGER == (int)LEARN_LEARNER_HEDGER && (int)FW_LEARNER_LWA == (int)LEARN_LEARNER_LWA &&
-                   (int)FW_LEARNER_TABULAR == (int)LEARN_LEARNER_TABULAR,
-               "the learner key's values are the framework's");
-_Static_assert((int)LEARN_SOURCE_EXAMPLE == (int)B21R_EXPERIENCE_T_SOURCE_EXAMPLE &&
-                   (int)LEARN_SOURCE_JOYSTICK == (int)B21R_EXPERIENCE_T_SOURCE_JOYSTICK &&
-                   (int)LEARN_SOURCE_GREEDY == (int)B21R_EXPERIENCE_T_SOURCE_GREEDY &&
-                   (int)LEARN_SOURCE_EXPLORATION == (int)B21R_EXPERIENCE_T_SOURCE_EXPLORATION &&
-                   (int)LEARN_SOURCE_ADVISOR == (int)B21R_EXPERIENCE_T_SOURCE_ADVISOR,
-               "the framework's sources are the experience message's");
-
-void fw_learning_task(const fw_config_t* cfg, const tasks_episode_t* ep, learn_task_t* t) {
-  memset(t, 0, sizeof *t);
-  t->state_dim = ep->state_dim;
-  t->action_min = -cfg->max_rotation_radps;
-  t->action_max = cfg->max_rotation_radps;
-  t->gamma = tasks_episode_gamma(ep);
-  t->step_limit = tasks_episode_step_limit(ep);
-  if (cfg->task == FW_TASK_CORRIDOR) {
-    // One scaled unit is about the distance over which the value of an action changes
-    // markedly. Along the corridor the value falls by 1 % per 6 cm of progress: a 1 m scale
-    // keeps a neighbourhood within a few tenths of a metre, where the value is nearly linear in
-    // the distance; the lateral position at half its useful range; the action's scale sets how
-    // far apart two actions must be to count as different. The target angle is finer (0.125
-    // rad, about a tenth of its range): a run that starts heading far off the axis is then
-    // judged by runs that started at a similar heading, not by the on-axis majority (hedger.h,
-    // "Greedy method"; the measurements: docs/LEARNING.md, "A finer target-angle scale, and
-    // k_max 64").
-    const double scale[3] = {1.0, 0.5, 0.125};                   // end distance [m], lateral fraction, target angle [rad]
-    const double lo[3] = {0.0, 0.0, -0.5 * PI};                  // beyond +-90 deg the robot faces a wall
-    const double hi[3] = {cfg->corridor_length_m, 1.0, 0.5 * PI};
-    for (int i = 0; i < 3; ++i) {
-      t->state_scale[i] = scale[i];
-      t->state_min[i] = lo[i];
-      t->state_max[i] = hi[i];
-    }
-    t->action_scale = 0.25;  // rotation [rad/s]
-    // The fine target-angle scale leaves a state's neighbourhood empty while phase one has covered
-    // few headings; a wide second attempt answers there from runs at other headings instead of
-    // holding course (docs/LEARNING.md, "greedy_reach 8 for the corridor, 3 for the obstacles").
-    t->greedy_reach = 8.0;
-  } else {
-    const double lo[4] = {-PI, 0.0, -PI, 0.0};  // goal bearing, distance; obstacle bearing, distance (8 m: sensing)
-    const double hi[4] = {PI, 8.0, PI, 8.0};
-    for (int i = 0; i < 4; ++i) {
-      t->state_scale[i] = 1.0;
-      t->state_min[i] = lo[i];
-      t->state_max[i] = hi[i];
-    }
-    t->action_scale = 0.5;  // rotation [rad/s]
-    t->greedy_reach = 3.0;
-  }
-}
-
-// state_rotation: the executed rotation's scale [rad/s per scaled unit]. Wide (the whole range
-// is about two units): it must tell a robot still ramping up its turn from one turning steadily,
-// and must not split the few samples near a start pose into separate neighbourhoods. Chosen on
-// seeds 11-20 (docs/LEARNING.md, "The executed rotation in the state"): against the state without
-// it, 0.25 (the action's scale) cost the human-driven corridor 31 steps in the final block, 1.0
-// cost 9, within the seeds' spread (on seeds 1-10 1.0 gained 15).
-static const double kExecutedRotationScale = 1.0;
-
-void fw_learning_settings(const fw_config_t* cfg, double dt_s, learn_config_t* c) {
-  *c = learn_config_default();
-  if (cfg->mode == FW_MODE_EVALUATE) {
-    c->mode = cfg->evaluate_policy == FW_EVAL_LEARNED ? LEARN_MODE_EVALUATE : LEARN_MODE_EVALUATE_ADVICE;
-  } else {
-    c->mode = LEARN_MODE_LEARN;
-  }
-  c->phase_one_driver = cfg->phase_driver == FW_DRIVER_JOYSTICK ? LEARN_DRIVER_JOYSTICK : LEARN_DRIVER_EXAMPLE;
-  c->schedule = (learn_schedule_config_t){.eval_every = cfg->eval_every_runs,
-                                          .eval_starts = cfg->eval_starts,
-                                          .eval_at_start = cfg->eval_at_start,
-                                          .phase_one_runs = cfg->phase_one_runs,
-                                          .phase_two_runs = cfg->phase_two_runs,
-                                          .switch_mode = cfg->phase_switch,
-                                          .auto_min_runs = cfg->auto_switch_min_runs,
-                                          .auto_ratio = cfg->auto_switch_ratio,
-                                          .evaluate_only = cfg->mode == FW_MODE_EVALUATE};
-  c->learner = cfg->learner;
-  c->alpha = cfg->alpha;
-  c->gamma = cfg->gamma;
-  c->state_last_action = cfg->state_rotation;
-  c->last_action_scale = kExecutedRotationScale;
-  c->capacity = (uint32_t)cfg->hedger_capacity;
-  c->k_min = (uint32_t)cfg->hedger_k_min;
-  c->k_max = (uint32_t)cfg->hedger_k_max;
-  c->bandwidth = cfg->hedger_bandwidth;
-  c->merge_radius = cfg->hedger_merge_radius;
-  c->greedy_actions = (uint32_t)cfg->hedger_greedy_actions;
-  c->greedy_method = cfg->hedger_greedy_method;
-  c->greedy_pessimism = cfg->hedger_greedy_pessimism;
-  c->greedy_reach = cfg->hedger_greedy_reach;
-  c->replay = cfg->hedger_replay;
-  c->replay_passes = (uint32_t)cfg->hedger_replay_passes;
-  c->replay_lambda = cfg->hedger_replay_lambda;
-  c->input_scale_n = (uint32_t)cfg->hedger_input_scale_n;
-  for (int32_t i = 0; i < cfg->hedger_input_scale_n && i <= (int32_t)LEARN_MAX_STATE; ++i) {
-    c->input_scale[i] = cfg->hedger_input_scale[i];
-  }
-  c->tabular_bins = (uint32_t)cfg->tabular_bins;
-  c->tabular_actions = (uint32_t)cfg->tabular_actions;
-  c->explore_sigma = cfg->explore_sigma_radps;
-  c->explore_probability = cfg->explore_probability;
-  const int64_t hold = (int64_t)floor(cfg->explore_hold_s / dt_s + 0.5);
-  c->explore_hold_steps = hold > 1 ? (uint32_t)hold : 1U;
-  c->example_dither_sigma = cfg->example_noise_radps;
-  c->advisor = cfg->advisor;
-  c->replay_updates_per_slice = (uint32_t)cfg->learn_updates_per_tick;
-}
-
-int fw_learning_init(fw_loop_t* L, uint64_t explore_seed, uint64_t learner_seed, char* err, size_t err_cap) {
+int fw_learning_init(fw_loop_t* L, char* err, size_t err_cap) {
   learn_task_t task;
-  fw_learning_task(&L->cfg, &L->ep, &task);
+  fw_config_learn_task(&L->cfg, &L->ep, &task);
   learn_config_t lc;
-  fw_learning_settings(&L->cfg, L->dt_s, &lc);
-  lc.explore_seed = explore_seed;
-  lc.learner_seed = learner_seed;
+  fw_config_learn_settings(&L->cfg, &lc);
   const size_t bytes = learn_storage_size(&task, &lc);
   if (bytes == 0) {
     char why[LEARN_ERR_MAX];

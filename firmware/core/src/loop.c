@@ -7,6 +7,7 @@
 // only after the command went out) → publish (pose, scan, status).
 #define _POSIX_C_SOURCE 200809L
 #include "loop_internal.h"
+#include "fw/config_task.h"
 
 #include "fw/prefault.h"
 
@@ -28,53 +29,15 @@ static bool all_finite(const double* v, uint32_t n) {
 
 // ---- set-up ---------------------------------------------------------------------------------
 
-void fw_loop_task_specs(const fw_config_t* cfg, tasks_corridor_spec_t* corridor, tasks_obstacles_spec_t* obstacles,
-                        tasks_command_limits_t* limits) {
-  const double dt_s = (double)fw_config_period_us(cfg) * 1e-6;
-  tasks_corridor_spec_default(corridor);
-  corridor->length_m = cfg->corridor_length_m;
-  corridor->omega_max_radps = cfg->max_rotation_radps;
-  corridor->dt_s = dt_s;
-  tasks_obstacles_spec_default(obstacles);
-  obstacles->omega_max_radps = cfg->max_rotation_radps;
-  obstacles->dt_s = dt_s;
-  if (cfg->max_steps_per_run > 0) {
-    corridor->step_limit = (uint32_t)cfg->max_steps_per_run;
-    obstacles->step_limit = (uint32_t)cfg->max_steps_per_run;
-  }
-  limits->max_translation_mps = cfg->max_translation_mps;
-  limits->max_rotation_radps = cfg->max_rotation_radps;
-  limits->max_translation_accel_mps2 = cfg->max_translation_accel_mps2;
-  limits->max_rotation_accel_radps2 = cfg->max_rotation_accel_radps2;
-}
-
-// The task as configured: specs (corridor length, action bound, period, step limit), the
-// command limits, the learner's state dimension and discount.
+// The task as configured (fw/config_task.h): its declaration, specification, evaluation poses and
+// the command limits. The configuration was validated: the task and its parameters exist.
 static void setup_task(fw_loop_t* L) {
   const fw_config_t* cfg = &L->cfg;
   L->period_us = fw_config_period_us(cfg);
   L->dt_s = (double)L->period_us * 1e-6;
   L->omega_max = cfg->max_rotation_radps;
-  tasks_corridor_spec_t corridor;
-  tasks_obstacles_spec_t obstacles;
-  fw_loop_task_specs(cfg, &corridor, &obstacles, &L->limits);
-  tasks_episode_init(&L->ep, cfg->task == FW_TASK_CORRIDOR ? TASKS_TASK_CORRIDOR : TASKS_TASK_OBSTACLES, &corridor,
-                     &obstacles);
-}
-
-// Every random stream derives from the one root seed, in this order.
-typedef struct seeds {
-  uint64_t pose, explore, hedger, driver;
-} seeds_t;
-
-static seeds_t derive_seeds(uint64_t root) {
-  seeds_t s;
-  uint64_t st = root;
-  s.pose = rng_splitmix64(&st);
-  s.explore = rng_splitmix64(&st);
-  s.hedger = rng_splitmix64(&st);
-  s.driver = rng_splitmix64(&st);
-  return s;
+  char err[FW_CONFIG_ERR_MAX];
+  (void)fw_config_task(cfg, &L->ep, &L->limits, err, sizeof err);
 }
 
 void fw_loop_learner_config(const fw_config_t* cfg, hedger_config_t* out) {
@@ -87,10 +50,9 @@ void fw_loop_learner_config(const fw_config_t* cfg, hedger_config_t* out) {
   L->cfg = *cfg;
   setup_task(L);
   learn_task_t task;
-  fw_learning_task(cfg, &L->ep, &task);
+  fw_config_learn_task(cfg, &L->ep, &task);
   learn_config_t lc;
-  fw_learning_settings(cfg, L->dt_s, &lc);
-  lc.learner_seed = derive_seeds(cfg->seed).hedger;
+  fw_config_learn_settings(cfg, &lc);
   learn_learner_config_t llc;
   learn_learner_config(&task, &lc, &llc);
   *out = llc.hedger;
@@ -117,11 +79,11 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
     L->out = *out;
   }
   setup_task(L);
-  const seeds_t seeds = derive_seeds(cfg->seed);
+  const fw_config_seeds_t seeds = fw_config_derive_seeds(cfg->seed);
   rng_seed(&L->pose_rng, seeds.pose);
   L->driver_seed_base = seeds.driver;
 
-  if (fw_learning_init(L, seeds.explore, seeds.hedger, err, err_cap) != 0) {
+  if (fw_learning_init(L, err, err_cap) != 0) {
     free(L);
     return NULL;
   }

@@ -268,7 +268,6 @@ int8_t fw_out_status_mode(const fw_loop_t* L);
 void fw_operator_drain(fw_loop_t* L, int64_t now_us);
 
 // ---- run.c ----
-bool fw_run_is_corridor(const fw_loop_t* L);
 uint32_t fw_run_step_limit(const fw_loop_t* L);
 bool fw_run_joystick_drives(const fw_loop_t* L);
 bool fw_run_running(const fw_loop_t* L);
@@ -292,20 +291,10 @@ void fw_run_abort(fw_loop_t* L, int8_t end_reason, int32_t stop_reason, const ch
 /// While stopped for a bump in the emulator: asks for the next start pose once.
 void fw_run_request_pose_while_stopped(fw_loop_t* L);
 
-// ---- loop.c ----
-/// The task's specs and command limits as cfg configures them (the loop's set-up). O(1).
-void fw_loop_task_specs(const fw_config_t* cfg, tasks_corridor_spec_t* corridor, tasks_obstacles_spec_t* obstacles,
-                        tasks_command_limits_t* limits);
-
 // ---- learning.c ----
-/// The task as the learning framework sees it (learn_task_t): the state's dimension, declared
-/// scales and ranges, action bounds, discount and step limit of the configured task. O(1).
-void fw_learning_task(const fw_config_t* cfg, const tasks_episode_t* ep, learn_task_t* out);
-/// The framework's settings from the configuration (dt_s: the control period [s]). O(1).
-void fw_learning_settings(const fw_config_t* cfg, double dt_s, learn_config_t* out);
 /// Sets up the framework for the configured task in one block allocated here (the only
 /// allocation); -1 with a message.
-int fw_learning_init(fw_loop_t* L, uint64_t explore_seed, uint64_t learner_seed, char* err, size_t err_cap);
+int fw_learning_init(fw_loop_t* L, char* err, size_t err_cap);
 void fw_learning_free(fw_loop_t* L);
 /// After the command: the queued step's update (or prediction) and its experience message, and a
 /// slice of between-run work (the framework's replay, then the checkpoint).

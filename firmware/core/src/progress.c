@@ -7,6 +7,7 @@
 #include "fw/errfmt.h"
 
 #include <hedger/hedger.h>
+#include <tasks/decl.h>
 
 #include <math.h>
 #include <stdbool.h>
@@ -65,9 +66,8 @@ int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why
   memset(&p, 0, sizeof p);
   learn_schedule_progress_t* g = &p.schedule;
   const uint32_t task = fw_get_u32(b + 8);
-  if (task != (uint32_t)FW_TASK_CORRIDOR && task != (uint32_t)FW_TASK_OBSTACLES) {
-    fw_errfmt(why, cap, "task %u, expected %d (corridor) or %d (obstacles)", (unsigned)task, FW_TASK_CORRIDOR,
-        FW_TASK_OBSTACLES);
+  if (task > (uint32_t)INT32_MAX || tasks_by_id((int32_t)task) == NULL) {
+    fw_errfmt(why, cap, "task %u, expected the id of a declared task", (unsigned)task);
     return -1;
   }
   p.task = (int32_t)task;

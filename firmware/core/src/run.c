@@ -8,8 +8,6 @@
 #include <math.h>
 #include <string.h>
 
-bool fw_run_is_corridor(const fw_loop_t* L) { return L->cfg.task == FW_TASK_CORRIDOR; }
-
 uint32_t fw_run_step_limit(const fw_loop_t* L) { return tasks_episode_step_limit(&L->ep); }
 
 bool fw_run_running(const fw_loop_t* L) {
@@ -88,25 +86,22 @@ static void begin_run(fw_loop_t* L) {
   } else if (L->cfg.phase_driver == FW_DRIVER_HUMAN && plan.kind == LEARN_RUN_TRAINING && plan.phase == 1) {
     kind = TASKS_DRIVER_HUMAN;
   }
-  tasks_driver_begin_run(&L->driver, kind, fw_run_is_corridor(L) ? TASKS_TASK_CORRIDOR : TASKS_TASK_OBSTACLES,
-                         L->omega_max, run_seed);
-  const double task_lo = fw_run_is_corridor(L) ? TASKS_PROPORTIONAL_CORRIDOR_GAIN_MIN : TASKS_PROPORTIONAL_OBSTACLES_GAIN_MIN;
-  const double task_hi = fw_run_is_corridor(L) ? TASKS_PROPORTIONAL_CORRIDOR_GAIN_MAX : TASKS_PROPORTIONAL_OBSTACLES_GAIN_MAX;
+  tasks_episode_driver_begin(&L->ep, &L->driver, kind, L->omega_max, run_seed);
+  const double task_lo = L->ep.decl->gain_min;
+  const double task_hi = L->ep.decl->gain_max;
   const bool ranged = L->cfg.example_gain_range_n == 2;
   const double lo = ranged ? L->cfg.example_gain_range[0] : task_lo;
   const double hi = ranged ? L->cfg.example_gain_range[1] : task_hi;
   if (ranged && kind == TASKS_DRIVER_PROPORTIONAL) {
     // The configured range takes the place of the task's: the run's draw is rescaled, not drawn
     // again, so every other stream (start poses, noise) stays the same as with the task's range.
-    L->driver.gain = lo + (L->driver.gain - task_lo) * ((hi - lo) / (task_hi - task_lo));
+    tasks_driver_set_gain(&L->driver, L->ep.decl, lo + (L->driver.gain - task_lo) * ((hi - lo) / (task_hi - task_lo)));
   }
   if (L->cfg.mode == FW_MODE_EVALUATE && L->cfg.evaluate_policy == FW_EVAL_EXAMPLE) {
     // The example policy at a fixed gain: the configured one, or the middle of the range the
     // training runs draw from.
-    L->driver.gain = L->cfg.evaluate_example_gain > 0.0 ? L->cfg.evaluate_example_gain : 0.5 * (lo + hi);
-  }
-  if (!fw_run_is_corridor(L) && kind == TASKS_DRIVER_PROPORTIONAL) {
-    L->driver.law[0] = L->driver.gain;  // the obstacle example policy's law holds its gain
+    tasks_driver_set_gain(&L->driver, L->ep.decl,
+                          L->cfg.evaluate_example_gain > 0.0 ? L->cfg.evaluate_example_gain : 0.5 * (lo + hi));
   }
   L->mode = plan.kind == LEARN_RUN_EVAL ? B21R_STATUS_T_MODE_EVALUATING : B21R_STATUS_T_MODE_RUNNING;
   L->status_now = true;

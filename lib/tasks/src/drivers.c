@@ -23,25 +23,43 @@
 #define EXAMPLE_OBSTACLES_CLEARANCE_M 0.55
 #define EXAMPLE_OBSTACLES_RANGE_M 1.5
 
-void tasks_driver_begin_run(tasks_driver_t* d, tasks_driver_kind_t kind, tasks_task_t task,
-                            double omega_max_radps, uint64_t run_seed) {
+void tasks_driver_begin_common(tasks_driver_t* d, tasks_driver_kind_t kind, uint8_t task_id, double omega_max_radps,
+                               uint64_t run_seed, double gain_min, double gain_max) {
   memset(d, 0, sizeof(*d));
   d->kind = (uint8_t)((kind == TASKS_DRIVER_HUMAN || kind == TASKS_DRIVER_OPTIMAL)
                           ? kind : TASKS_DRIVER_PROPORTIONAL);
-  d->task = (uint8_t)(task == TASKS_TASK_OBSTACLES ? task : TASKS_TASK_CORRIDOR);
+  d->task = task_id;
   d->omega_max_radps =
       (isfinite(omega_max_radps) && omega_max_radps > 0.0) ? omega_max_radps : 1.0;
   rng_seed(&d->rng, run_seed);
-  const int corridor = d->task == (uint8_t)TASKS_TASK_CORRIDOR;
   // The gain is drawn first for every kind, so that the streams of the kinds stay comparable.
-  d->gain = corridor ? rng_uniform_range(&d->rng, TASKS_PROPORTIONAL_CORRIDOR_GAIN_MIN,
-                                               TASKS_PROPORTIONAL_CORRIDOR_GAIN_MAX)
-                     : rng_uniform_range(&d->rng, TASKS_PROPORTIONAL_OBSTACLES_GAIN_MIN,
-                                               TASKS_PROPORTIONAL_OBSTACLES_GAIN_MAX);
-  if (corridor) {
-    d->law[0] = OPTIMAL_CORRIDOR_GAIN;
-    d->law[1] = OPTIMAL_CORRIDOR_LOOKAHEAD_M;
-  } else if (d->kind == (uint8_t)TASKS_DRIVER_OPTIMAL) {
+  d->gain = rng_uniform_range(&d->rng, gain_min, gain_max);
+}
+
+void tasks_driver_begin_human(tasks_driver_t* d) {
+  // A person's temperament for this run: a heavy hand (gain well above what is needed), a
+  // reaction delay of 0.3..0.8 s, a dead band before anything is done, a noisy hand and slow
+  // drift, and now and then a lapse of attention; and their preferences (an offset and an aim
+  // distance where a task has a line to follow, a side where it has something to pass).
+  d->gain = rng_uniform_range(&d->rng, 1.5, 3.5);
+  d->delay_steps = 3U + rng_below(&d->rng, 6U);
+  d->deadband_rad = rng_uniform_range(&d->rng, 0.15, 0.4);
+  d->release_rad = rng_uniform_range(&d->rng, 0.02, 0.08);
+  d->noise_radps = rng_uniform_range(&d->rng, 0.05, 0.2);
+  d->drift_radps = rng_uniform_range(&d->rng, 0.1, 0.35);
+  d->lapse_prob = rng_uniform_range(&d->rng, 0.01, 0.05);
+  d->pref_offset_m = rng_uniform_range(&d->rng, -0.35, 0.35);
+  d->pref_lookahead_m = rng_uniform_range(&d->rng, 1.0, 3.0);
+  d->side_pref = (int8_t)(rng_uniform(&d->rng) < 0.3 ? -1 : 1);
+}
+
+void tasks_driver_law_corridor(tasks_driver_t* d) {
+  d->law[0] = OPTIMAL_CORRIDOR_GAIN;
+  d->law[1] = OPTIMAL_CORRIDOR_LOOKAHEAD_M;
+}
+
+void tasks_driver_law_obstacles(tasks_driver_t* d) {
+  if (d->kind == (uint8_t)TASKS_DRIVER_OPTIMAL) {
     d->law[0] = OPTIMAL_OBSTACLES_GAIN;
     d->law[1] = OPTIMAL_OBSTACLES_CLEARANCE_M;
     d->law[2] = OPTIMAL_OBSTACLES_RANGE_M;
@@ -50,31 +68,17 @@ void tasks_driver_begin_run(tasks_driver_t* d, tasks_driver_kind_t kind, tasks_t
     d->law[1] = EXAMPLE_OBSTACLES_CLEARANCE_M;
     d->law[2] = EXAMPLE_OBSTACLES_RANGE_M;
   }
-  if (d->kind == (uint8_t)TASKS_DRIVER_HUMAN) {
-    // A person's temperament for this run: a heavy hand (gain well above what is needed), a
-    // reaction delay of 0.3..0.8 s, a dead band before anything is done, a noisy hand and slow
-    // drift, and now and then a lapse of attention.
-    d->gain = rng_uniform_range(&d->rng, 1.5, 3.5);
-    d->delay_steps = 3U + rng_below(&d->rng, 6U);
-    d->deadband_rad = rng_uniform_range(&d->rng, 0.15, 0.4);
-    d->release_rad = rng_uniform_range(&d->rng, 0.02, 0.08);
-    d->noise_radps = rng_uniform_range(&d->rng, 0.05, 0.2);
-    d->drift_radps = rng_uniform_range(&d->rng, 0.1, 0.35);
-    d->lapse_prob = rng_uniform_range(&d->rng, 0.01, 0.05);
-    d->pref_offset_m = rng_uniform_range(&d->rng, -0.35, 0.35);
-    d->pref_lookahead_m = rng_uniform_range(&d->rng, 1.0, 3.0);
-    d->side_pref = (int8_t)(rng_uniform(&d->rng) < 0.3 ? -1 : 1);
-    if (!corridor) {
-      // People give obstacles a wide berth and start early.
-      d->law[1] = rng_uniform_range(&d->rng, 0.6, 1.0);
-      d->law[2] = rng_uniform_range(&d->rng, 1.5, 2.5);
-    }
-  }
+}
+
+void tasks_driver_human_obstacles(tasks_driver_t* d) {
+  // People give obstacles a wide berth and start early.
+  d->law[1] = rng_uniform_range(&d->rng, 0.6, 1.0);
+  d->law[2] = rng_uniform_range(&d->rng, 1.5, 2.5);
 }
 
 // The human model. `error` is what the person is trying to null (an angle, +: turn left);
 // `danger` says a collision looks imminent, which cuts a lapse short and forces a correction.
-static double human_step(tasks_driver_t* d, double error, int danger) {
+double tasks_driver_human_step(tasks_driver_t* d, double error, int danger) {
   const double perceived = error + 0.03 * rng_normal(&d->rng);
   d->delay_line[d->head] = perceived;
   d->head = (d->head + 1U) % TASKS_HUMAN_MAX_DELAY;
@@ -140,7 +144,7 @@ double tasks_driver_corridor(tasks_driver_t* d, const features_corridor_t* f) {
                          fabs(f->heading_rad) > 1.1;
       // The person aims at their favourite line, at their own distance ahead.
       const double aim = -f->heading_rad - atan2(f->offset_m - d->pref_offset_m, d->pref_lookahead_m);
-      return human_step(d, features_angle_wrap(aim), danger);
+      return tasks_driver_human_step(d, features_angle_wrap(aim), danger);
     }
     default:
       return tasks_clamp_omega(d->gain * f->target_angle_rad, d->omega_max_radps);
@@ -206,7 +210,7 @@ double tasks_driver_obstacles(tasks_driver_t* d, const features_obstacles_t* f) 
   if (d->kind == (uint8_t)TASKS_DRIVER_HUMAN) {
     const features_obstacle_t* o = &f->obstacle[0];
     const int danger = o->visible != 0U && o->distance_m < 0.8 && fabs(o->bearing_rad) < 1.0;
-    return human_step(d, theta, danger);
+    return tasks_driver_human_step(d, theta, danger);
   }
   return tasks_clamp_omega(d->law[0] * theta, d->omega_max_radps);
 }

@@ -35,33 +35,40 @@ int tasks_command_clamp(const tasks_command_limits_t* lim, double dt_s, double p
   return 1;
 }
 
-static int is_corridor(const tasks_episode_t* ep) { return ep->task != TASKS_TASK_OBSTACLES; }
-
-void tasks_episode_init(tasks_episode_t* ep, tasks_task_t task, const tasks_corridor_spec_t* corridor,
-                        const tasks_obstacles_spec_t* obstacles) {
+void tasks_episode_init(tasks_episode_t* ep, const tasks_decl_t* decl, const void* spec) {
   memset(ep, 0, sizeof *ep);
-  ep->task = task == TASKS_TASK_OBSTACLES ? TASKS_TASK_OBSTACLES : TASKS_TASK_CORRIDOR;
-  if (corridor != NULL) {
-    ep->corridor = *corridor;
+  ep->decl = decl != NULL ? decl : &tasks_corridor_decl;
+  ep->state_dim = ep->decl->state_dim;
+  if (spec != NULL) {
+    memcpy(ep->spec, spec, ep->decl->spec_size);
   } else {
-    tasks_corridor_spec_default(&ep->corridor);
+    ep->decl->spec_default(ep->spec);
   }
-  if (obstacles != NULL) {
-    ep->obstacles = *obstacles;
-  } else {
-    tasks_obstacles_spec_default(&ep->obstacles);
+  ep->decl->run_init(ep);
+}
+
+void* tasks_episode_spec(tasks_episode_t* ep) { return ep->spec; }
+const void* tasks_episode_spec_const(const tasks_episode_t* ep) { return ep->spec; }
+void* tasks_episode_run(tasks_episode_t* ep) { return ep->run; }
+const void* tasks_episode_run_const(const tasks_episode_t* ep) { return ep->run; }
+
+int tasks_episode_set_param(tasks_episode_t* ep, const char* name, double value) {
+  const int r = tasks_spec_set_param(ep->decl, ep->spec, name, value);
+  if (r == 0) {
+    ep->decl->run_init(ep);
   }
-  tasks_corridor_features_config(&ep->corridor, &ep->corridor_features);
-  tasks_obstacles_features_config(&ep->obstacles, &ep->obstacles_features);
-  ep->state_dim = is_corridor(ep) ? FEATURES_CORRIDOR_STATE_DIM : FEATURES_OBSTACLES_STATE_DIM;
-  // Neutral features until the first observation: the empty inputs give the documented
-  // "invalid" states of the feature functions.
-  const features_pose_t origin = {0.0, 0.0, 0.0};
-  (void)features_corridor_from_pose(&ep->corridor_features, origin, &ep->corridor_state);
-  ep->corridor_state.valid = 0U;
-  (void)features_obstacles_from_pose(&ep->obstacles_features, origin, ep->obstacles.goal_x_m,
-                                     ep->obstacles.goal_y_m, NULL, 0U, TASKS_PI, &ep->obstacles_state);
-  ep->obstacles_state.valid = 0U;
+  return r;
+}
+
+void tasks_episode_set_eval_starts(tasks_episode_t* ep, const features_pose_t* poses, uint32_t n) {
+  ep->n_eval_starts = n < TASKS_MAX_EVAL_STARTS ? n : TASKS_MAX_EVAL_STARTS;
+  for (uint32_t i = 0U; i < ep->n_eval_starts; ++i) {
+    ep->eval_starts[i] = poses[i];
+  }
+}
+
+uint32_t tasks_episode_n_eval_starts(const tasks_episode_t* ep) {
+  return ep->n_eval_starts > 0U ? ep->n_eval_starts : TASKS_N_EVAL_STARTS;
 }
 
 void tasks_episode_begin(tasks_episode_t* ep, features_pose_t start_in_task, features_pose_t odom_at_start) {
@@ -73,46 +80,9 @@ features_pose_t tasks_episode_pose_in_task(const tasks_episode_t* ep, features_p
   return features_odom_to_task(ep->start_in_task, ep->odom_at_start, odom_now);
 }
 
-static int all_finite(const double* v, uint32_t n) {
-  for (uint32_t i = 0U; i < n; ++i) {
-    if (!isfinite(v[i])) {
-      return 0;
-    }
-  }
-  return 1;
-}
-
-// Writes the state vector of the newest features when they are valid (as the controller does:
-// an invalid state leaves the previous vector in place); 1 when it is also finite.
-static int write_state(const tasks_episode_t* ep, features_status_t status, double* state) {
-  if (status != FEATURES_OK) {
-    return 0;
-  }
-  if (is_corridor(ep)) {
-    if (ep->corridor_state.valid == 0U) {
-      return 0;
-    }
-    features_corridor_state(&ep->corridor_state, state);
-  } else {
-    if (ep->obstacles_state.valid == 0U) {
-      return 0;
-    }
-    (void)features_obstacles_state(&ep->obstacles_state, 1U, state, TASKS_MAX_STATE_DIM);
-  }
-  return all_finite(state, ep->state_dim);
-}
-
 int tasks_episode_observe(tasks_episode_t* ep, const features_scan_t* scan, features_pose_t odom_now,
                           double* state) {
-  const features_pose_t pose = tasks_episode_pose_in_task(ep, odom_now);
-  features_status_t st;
-  if (is_corridor(ep)) {
-    st = features_corridor_compute(&ep->corridor_features, scan, &pose, &ep->corridor_state);
-  } else {
-    st = features_obstacles_compute(&ep->obstacles_features, scan, &pose, ep->obstacles.goal_x_m,
-                                    ep->obstacles.goal_y_m, &ep->obstacles_state);
-  }
-  return write_state(ep, st, state);
+  return ep->decl->observe(ep, scan, tasks_episode_pose_in_task(ep, odom_now), state);
 }
 
 features_status_t tasks_obstacles_features_at_pose(const tasks_obstacles_spec_t* spec,
@@ -129,54 +99,72 @@ features_status_t tasks_obstacles_features_at_pose(const tasks_obstacles_spec_t*
 }
 
 int tasks_episode_observe_pose(tasks_episode_t* ep, features_pose_t pose_in_task, double* state) {
-  features_status_t st;
-  if (is_corridor(ep)) {
-    st = features_corridor_from_pose(&ep->corridor_features, pose_in_task, &ep->corridor_state);
-  } else {
-    st = tasks_obstacles_features_at_pose(&ep->obstacles, &ep->obstacles_features, pose_in_task,
-                                          &ep->obstacles_state);
-  }
-  return write_state(ep, st, state);
+  return ep->decl->observe_pose(ep, pose_in_task, state);
 }
 
 tasks_outcome_t tasks_episode_outcome(const tasks_episode_t* ep, uint8_t contact, uint32_t steps_taken) {
-  return is_corridor(ep) ? tasks_corridor_outcome(&ep->corridor, &ep->corridor_state, contact, steps_taken)
-                         : tasks_obstacles_outcome(&ep->obstacles, &ep->obstacles_state, contact, steps_taken);
+  return ep->decl->outcome(ep, contact, steps_taken);
 }
 
-double tasks_episode_speed_mps(const tasks_episode_t* ep) {
-  return is_corridor(ep) ? tasks_corridor_speed_mps(&ep->corridor, &ep->corridor_state)
-                         : tasks_obstacles_speed_mps(&ep->obstacles);
-}
+double tasks_episode_speed_mps(const tasks_episode_t* ep) { return ep->decl->speed_mps(ep); }
 
 double tasks_episode_driver_action(const tasks_episode_t* ep, tasks_driver_t* driver) {
-  return is_corridor(ep) ? tasks_driver_corridor(driver, &ep->corridor_state)
-                         : tasks_driver_obstacles(driver, &ep->obstacles_state);
+  return ep->decl->driver_action(ep, driver);
 }
 
 features_pose_t tasks_episode_eval_start(const tasks_episode_t* ep, uint32_t index) {
-  return is_corridor(ep) ? tasks_corridor_eval_start(&ep->corridor, index)
-                         : tasks_obstacles_eval_start(&ep->obstacles, index);
+  if (ep->n_eval_starts > 0U) {
+    return ep->eval_starts[index % ep->n_eval_starts];
+  }
+  return tasks_spec_eval_start(ep->decl, ep->spec, index);
 }
 
 features_pose_t tasks_episode_training_start(tasks_episode_t* ep, rng_t* rng) {
   const uint32_t k = tasks_start_cycle_next(&ep->start_cycle, rng);
-  return is_corridor(ep) ? tasks_corridor_training_start_near(&ep->corridor, k, rng)
-                         : tasks_obstacles_training_start_near(&ep->obstacles, k, rng);
+  return ep->decl->training_start_near(ep->spec, k, rng);
 }
 
-uint32_t tasks_episode_step_limit(const tasks_episode_t* ep) {
-  return is_corridor(ep) ? ep->corridor.step_limit : ep->obstacles.step_limit;
+uint32_t tasks_episode_step_limit(const tasks_episode_t* ep) { return tasks_spec_step_limit(ep->decl, ep->spec); }
+
+double tasks_episode_omega_max(const tasks_episode_t* ep) { return tasks_spec_omega_max(ep->decl, ep->spec); }
+
+double tasks_episode_gamma(const tasks_episode_t* ep) { return tasks_spec_gamma(ep->decl, ep->spec); }
+
+double tasks_episode_robot_radius(const tasks_episode_t* ep) { return tasks_spec_robot_radius(ep->decl, ep->spec); }
+
+double tasks_episode_dt_s(const tasks_episode_t* ep) { return tasks_spec_dt_s(ep->decl, ep->spec); }
+
+const features_laser_mount_t* tasks_episode_laser_mount(const tasks_episode_t* ep) { return ep->decl->laser_mount(ep); }
+
+void tasks_episode_state_bounds(const tasks_episode_t* ep, double* lo, double* hi) {
+  ep->decl->state_bounds(ep, lo, hi);
 }
 
-double tasks_episode_omega_max(const tasks_episode_t* ep) {
-  return is_corridor(ep) ? ep->corridor.omega_max_radps : ep->obstacles.omega_max_radps;
+void tasks_episode_state_range(const tasks_episode_t* ep, double* lo, double* hi) {
+  ep->decl->state_range(ep->spec, lo, hi);
 }
 
-double tasks_episode_gamma(const tasks_episode_t* ep) {
-  return is_corridor(ep) ? ep->corridor.gamma : ep->obstacles.gamma;
+void tasks_driver_begin_run(tasks_driver_t* d, tasks_driver_kind_t kind, const tasks_decl_t* decl,
+                            double omega_max_radps, uint64_t run_seed) {
+  const tasks_decl_t* t = decl != NULL ? decl : &tasks_corridor_decl;
+  tasks_driver_begin_common(d, kind, t->id, omega_max_radps, run_seed, t->gain_min, t->gain_max);
+  t->driver_law(d);
+  if (d->kind == (uint8_t)TASKS_DRIVER_HUMAN) {
+    tasks_driver_begin_human(d);
+    if (t->driver_human != NULL) {
+      t->driver_human(d);
+    }
+  }
 }
 
-double tasks_episode_robot_radius(const tasks_episode_t* ep) {
-  return is_corridor(ep) ? ep->corridor.robot_radius_m : ep->obstacles.robot_radius_m;
+void tasks_driver_set_gain(tasks_driver_t* d, const tasks_decl_t* decl, double gain) {
+  d->gain = gain;
+  if (d->kind == (uint8_t)TASKS_DRIVER_PROPORTIONAL) {
+    (decl != NULL ? decl : &tasks_corridor_decl)->driver_law(d);
+  }
+}
+
+void tasks_episode_driver_begin(const tasks_episode_t* ep, tasks_driver_t* d, tasks_driver_kind_t kind,
+                                double omega_max_radps, uint64_t run_seed) {
+  tasks_driver_begin_run(d, kind, ep->decl, omega_max_radps, run_seed);
 }

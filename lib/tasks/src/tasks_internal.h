@@ -14,6 +14,19 @@
 #include "features/features.h"
 #include "tasks/tasks.h"
 
+#include <math.h>
+#include <stdint.h>
+
+/// 1 when the n values are all finite.
+static inline int tasks_all_finite(const double* v, uint32_t n) {
+  for (uint32_t i = 0U; i < n; ++i) {
+    if (!isfinite(v[i])) {
+      return 0;
+    }
+  }
+  return 1;
+}
+
 /// The obstacle features an ideal laser gives at a pose in the arena: features_obstacles_from_pose
 /// with spec's discs (the first TASKS_MAX_OBSTACLES) and the LMS200's 180° field of view. Shared
 /// by tasks_episode_observe_pose and the obstacle rollouts (recovery.c). O(obstacles), pure.

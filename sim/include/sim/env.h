@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
-/// sim/env.h — The paper's tasks as step-by-step environments (reset / step), the C core of the
-/// Python environments B21rCorridor-v0 and B21rObstacles-v0 (tools/python/b21r_learn).
+/// sim/env.h — Any declared task (tasks/decl.h) as a step-by-step environment (reset / step),
+/// the C core of the Python environments (B21rCorridor-v0, B21rObstacles-v0, ... one per
+/// declaration: tools/python/b21r_learn).
 ///
 /// One step = one control period (the task's dt_s, 0.1 s): the action (rotation velocity
 /// [rad/s]) and the task's translation speed are clamped exactly as the controller clamps its
@@ -12,8 +13,8 @@
 ///   protocols: the rFLEX command pair (velocities quantised to counts, rflex_make_velocity),
 ///   the ODE plant with contacts, the ray-cast LMS200 with its range noise and millimetre
 ///   telegrams, rFLEX odometry reports integrated by rflex_odom_update, bump panels over DIO.
-///   The state is features_corridor_compute / features_obstacles_compute of the decoded scan at
-///   the odometry pose: what the controller sees. A reset reproduces the controller's own
+///   The state is the task's features of the decoded scan at the odometry pose: what the
+///   controller sees. A reset reproduces the controller's own
 ///   sequence between runs (a zero-command period ending the previous run, the robot placed at
 ///   the start pose, a zero-command period, then the first state), so that, with the emulator
 ///   seeded alike, an episode is step for step the controller's run from the same start pose
@@ -77,13 +78,14 @@ typedef enum sim_env_start {
 
 /// Configuration. Defaults (sim_env_config_default) in brackets.
 typedef struct sim_env_config {
-  tasks_task_t task;                  ///< [as given]
+  const tasks_decl_t* task;           ///< the declared task [as given]
   sim_env_backend_t backend;          ///< [as given]
-  tasks_corridor_spec_t corridor;     ///< the corridor task [tasks_corridor_spec_default]
-  tasks_obstacles_spec_t obstacles;   ///< the obstacle task [tasks_obstacles_spec_default]
+  /// the task's specification, task->spec_size bytes [task->spec_default]; set its parameters
+  /// with tasks_spec_set_param
+  double spec[TASKS_SPEC_BYTES / sizeof(double)];
   tasks_command_limits_t limits;      ///< command clamp [tasks_command_limits_default]; its
                                       ///< max_rotation_radps is also the action range (written
-                                      ///< into the specs' omega_max_radps, as the controller does)
+                                      ///< into the spec's omega_max_radps, as the controller does)
   double laser_noise_sigma_m;         ///< ODE: LMS200 range noise, standard deviation [0.005]
   double laser_error_code_prob;       ///< ODE: per-beam probability of a dazzle/SNR code [0]
 } sim_env_config_t;
@@ -116,7 +118,7 @@ typedef struct sim_env_truth {
 typedef struct sim_env sim_env_t;
 
 /// Fills cfg with the defaults documented above for task and backend. O(1).
-void sim_env_config_default(sim_env_config_t* cfg, tasks_task_t task, sim_env_backend_t backend);
+void sim_env_config_default(sim_env_config_t* cfg, const tasks_decl_t* task, sim_env_backend_t backend);
 
 /// Creates an environment, seeded with 0 (sim_env_seed). Returns NULL on an invalid
 /// configuration or out of memory, with a message in err (if err_cap > 0).

@@ -15,7 +15,7 @@
 
 #include <cmocka.h>
 
-static sim_env_t* make(tasks_task_t task, sim_env_backend_t backend) {
+static sim_env_t* make(const tasks_decl_t* task, sim_env_backend_t backend) {
   sim_env_config_t cfg;
   sim_env_config_default(&cfg, task, backend);
   char err[256];
@@ -52,8 +52,8 @@ static void test_env_deterministic_per_seed(void** state) {
   static double a[4000], b[4000];
   for (int task = 0; task < 2; ++task) {
     for (int be = 0; be < 2; ++be) {
-      sim_env_t* e1 = make((tasks_task_t)task, (sim_env_backend_t)be);
-      sim_env_t* e2 = make((tasks_task_t)task, (sim_env_backend_t)be);
+      sim_env_t* e1 = make(task == 0 ? &tasks_corridor_decl : &tasks_obstacles_decl, (sim_env_backend_t)be);
+      sim_env_t* e2 = make(task == 0 ? &tasks_corridor_decl : &tasks_obstacles_decl, (sim_env_backend_t)be);
       const int na = run(e1, 42, 600, a, 4000);
       const int nb = run(e2, 42, 600, b, 4000);
       assert_int_equal(na, nb);
@@ -71,7 +71,7 @@ static void test_env_clamp_and_bounds(void** state) {
   (void)state;
   for (int task = 0; task < 2; ++task) {
     for (int be = 0; be < 2; ++be) {
-      sim_env_t* env = make((tasks_task_t)task, (sim_env_backend_t)be);
+      sim_env_t* env = make(task == 0 ? &tasks_corridor_decl : &tasks_obstacles_decl, (sim_env_backend_t)be);
       double s[TASKS_MAX_STATE_DIM], lo[TASKS_MAX_STATE_DIM], hi[TASKS_MAX_STATE_DIM];
       sim_env_state_bounds(env, lo, hi);
       assert_int_equal(sim_env_reset(env, SIM_ENV_START_EVAL, 0, k_no_pose, s), SIM_ENV_OK);
@@ -95,7 +95,7 @@ static void test_env_clamp_and_bounds(void** state) {
 // Errors: step before a reset and after the end, bad actions and poses; nothing changes.
 static void test_env_errors(void** state) {
   (void)state;
-  sim_env_t* env = make(TASKS_TASK_CORRIDOR, SIM_ENV_KINEMATIC);
+  sim_env_t* env = make(&tasks_corridor_decl, SIM_ENV_KINEMATIC);
   sim_env_transition_t t;
   double s[TASKS_MAX_STATE_DIM];
   assert_int_equal(sim_env_step(env, 0.0, &t), SIM_ENV_ERR_STATE);
@@ -113,13 +113,13 @@ static void test_env_errors(void** state) {
   assert_non_null(strstr(sim_env_status_str(SIM_ENV_ERR_STATE), "reset"));
   sim_env_destroy(env);
   sim_env_config_t bad;
-  sim_env_config_default(&bad, TASKS_TASK_CORRIDOR, SIM_ENV_ODE);
+  sim_env_config_default(&bad, &tasks_corridor_decl, SIM_ENV_ODE);
   bad.limits.max_rotation_radps = 0.0;
   char err[128] = "";
   assert_null(sim_env_create(&bad, err, sizeof err));
   assert_true(strlen(err) > 0);
-  sim_env_config_default(&bad, TASKS_TASK_CORRIDOR, SIM_ENV_ODE);
-  bad.corridor.dt_s = 0.105;  // not a whole number of 0.01 s substeps
+  sim_env_config_default(&bad, &tasks_corridor_decl, SIM_ENV_ODE);
+  tasks_spec_set_dt_s(&tasks_corridor_decl, bad.spec, 0.105);  // not a whole number of 0.01 s substeps
   assert_null(sim_env_create(&bad, err, sizeof err));
 }
 
@@ -128,7 +128,7 @@ static void test_env_errors(void** state) {
 static void test_env_collision_terminates(void** state) {
   (void)state;
   for (int be = 0; be < 2; ++be) {
-    sim_env_t* env = make(TASKS_TASK_OBSTACLES, (sim_env_backend_t)be);
+    sim_env_t* env = make(&tasks_obstacles_decl, (sim_env_backend_t)be);
     const features_pose_t facing = {-2.5, 0.0, 0.0};  // obstacle at (-1.5, 0), radius 0.25
     double s[TASKS_MAX_STATE_DIM];
     assert_int_equal(sim_env_reset(env, SIM_ENV_START_POSE, 0, facing, s), SIM_ENV_OK);
@@ -149,7 +149,7 @@ static void test_env_collision_terminates(void** state) {
 static void test_env_step_allocation_free(void** state) {
   (void)state;
   for (int be = 0; be < 2; ++be) {
-    sim_env_t* env = make(TASKS_TASK_CORRIDOR, (sim_env_backend_t)be);
+    sim_env_t* env = make(&tasks_corridor_decl, (sim_env_backend_t)be);
     double s[TASKS_MAX_STATE_DIM];
     sim_env_transition_t t;
     assert_int_equal(sim_env_reset(env, SIM_ENV_START_EVAL, 0, k_no_pose, s), SIM_ENV_OK);

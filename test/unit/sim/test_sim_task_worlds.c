@@ -48,7 +48,7 @@ static void test_task_worlds_corridor_file_matches_spec(void** state) {
   (void)state;
   tasks_corridor_spec_t spec;
   tasks_corridor_spec_default(&spec);
-  assert_int_equal(sim_world_from_corridor_spec(&spec, &g_spec), SIM_WORLD_OK);
+  assert_int_equal(sim_world_from_task(&tasks_corridor_decl, &spec, &g_spec), SIM_WORLD_OK);
   load("corridor10.world");
   assert_same_geometry(0.0);
   assert_true(g_file.corridor_length_m == spec.length_m && g_file.corridor_width_m == spec.width_m);
@@ -60,7 +60,7 @@ static void test_task_worlds_obstacle_file_matches_spec(void** state) {
   (void)state;
   tasks_obstacles_spec_t spec;
   tasks_obstacles_spec_default(&spec);
-  assert_int_equal(sim_world_from_obstacles_spec(&spec, &g_spec), SIM_WORLD_OK);
+  assert_int_equal(sim_world_from_task(&tasks_obstacles_decl, &spec, &g_spec), SIM_WORLD_OK);
   load("obstacle1.world");
   assert_same_geometry(1e-11);
   assert_true(g_file.goal.radius_m == spec.goal_radius_m);
@@ -71,19 +71,19 @@ static void test_task_worlds_starts_clear_and_bad_specs_fail(void** state) {
   (void)state;
   tasks_obstacles_spec_t spec;
   tasks_obstacles_spec_default(&spec);
-  assert_int_equal(sim_world_from_obstacles_spec(&spec, &g_spec), SIM_WORLD_OK);
+  assert_int_equal(sim_world_from_task(&tasks_obstacles_decl, &spec, &g_spec), SIM_WORLD_OK);
   for (size_t i = 0; i < g_spec.n_starts; ++i) {
     assert_false(sim_world_disc_collides(&g_spec, g_spec.starts[i].x_m, g_spec.starts[i].y_m,
                                          TASKS_B21R_RADIUS_M + 0.1));
   }
   spec.arena_max_x_m = spec.arena_min_x_m;
-  assert_int_equal(sim_world_from_obstacles_spec(&spec, &g_spec), SIM_WORLD_ERR_INVALID_ARG);
+  assert_int_equal(sim_world_from_task(&tasks_obstacles_decl, &spec, &g_spec), SIM_WORLD_ERR_INVALID_ARG);
   assert_int_equal(g_spec.n_walls, 0);
   tasks_corridor_spec_t cs;
   tasks_corridor_spec_default(&cs);
   cs.width_m = -1.0;
-  assert_int_equal(sim_world_from_corridor_spec(&cs, &g_spec), SIM_WORLD_ERR_INVALID_ARG);
-  assert_int_equal(sim_world_from_corridor_spec(NULL, &g_spec), SIM_WORLD_ERR_INVALID_ARG);
+  assert_int_equal(sim_world_from_task(&tasks_corridor_decl, &cs, &g_spec), SIM_WORLD_ERR_INVALID_ARG);
+  assert_int_equal(sim_world_from_task(&tasks_corridor_decl, NULL, &g_spec), SIM_WORLD_ERR_INVALID_ARG);
 }
 
 int main(void) {

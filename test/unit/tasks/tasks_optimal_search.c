@@ -11,10 +11,12 @@
 
 #include "task_sim.h"
 
+#include <tasks/decl.h>
+
 #define MIN_CLEARANCE_M 0.10
 
 // Mean steps over the evaluation starts and sensor seeds; +inf if any run fails.
-static double score(tasks_task_t task, const double law[TASKS_DRIVER_LAW_PARAMS]) {
+static double score(const tasks_decl_t* task, const double law[TASKS_DRIVER_LAW_PARAMS]) {
   tasks_corridor_spec_t cs;
   tasks_corridor_spec_default(&cs);
   tasks_obstacles_spec_t os;
@@ -30,7 +32,7 @@ static double score(tasks_task_t task, const double law[TASKS_DRIVER_LAW_PARAMS]
       tasks_driver_begin_run(&d, TASKS_DRIVER_OPTIMAL, task, 1.0, seed);
       memcpy(d.law, law, sizeof d.law);
       const task_sim_result_t r =
-          task == TASKS_TASK_CORRIDOR
+          task == &tasks_corridor_decl
               ? task_sim_corridor(&cs, tasks_corridor_eval_start(&cs, i), &d, &o)
               : task_sim_obstacles(&os, tasks_obstacles_eval_start(&os, i), &d, &o);
       if (r.reason != TASKS_END_GOAL || r.min_clearance_m < MIN_CLEARANCE_M) {
@@ -48,7 +50,7 @@ static void search_corridor(void) {
   for (double g = 0.5; g <= 4.01; g += 0.25) {
     for (double l = 0.25; l <= 3.01; l += 0.25) {
       const double law[TASKS_DRIVER_LAW_PARAMS] = {g, l, 0.0};
-      const double s = score(TASKS_TASK_CORRIDOR, law);
+      const double s = score(&tasks_corridor_decl, law);
       if (s < best) {
         best = s;
         bg = g;
@@ -65,7 +67,7 @@ static void search_obstacles(void) {
     for (double c = 0.30; c <= 0.751; c += 0.05) {
       for (double r = 1.0; r <= 2.51; r += 0.25) {
         const double law[TASKS_DRIVER_LAW_PARAMS] = {g, c, r};
-        const double s = score(TASKS_TASK_OBSTACLES, law);
+        const double s = score(&tasks_obstacles_decl, law);
         if (s < best) {
           best = s;
           bg = g;

@@ -4,6 +4,7 @@
 // start reaches the goal within the step limit; the simulated human is far more varied than the
 // proportional controller; runs are a function of their seeds; no allocation.
 #include <b21r_test/alloc_counter.h>
+#include <tasks/decl.h>
 #include <tasks/tasks.h>
 
 #include <math.h>
@@ -54,7 +55,7 @@ static double maximum(const double* v, int n) {
 
 // Runs `seeds` runs from each evaluation start (run seed = 1000 * s + start) and checks that each
 // reaches the goal within the step limit.
-static void run_batch(tasks_task_t task, tasks_driver_kind_t kind, int seeds,
+static void run_batch(const tasks_decl_t* task, tasks_driver_kind_t kind, int seeds,
                       const task_sim_opts_t* opts, batch_t* b) {
   memset(b, 0, sizeof *b);
   tasks_corridor_spec_t cs;
@@ -66,7 +67,7 @@ static void run_batch(tasks_task_t task, tasks_driver_kind_t kind, int seeds,
       tasks_driver_t d;
       tasks_driver_begin_run(&d, kind, task, 1.0, 1000U * (uint64_t)s + i);
       const task_sim_result_t r =
-          task == TASKS_TASK_CORRIDOR
+          task == &tasks_corridor_decl
               ? task_sim_corridor(&cs, tasks_corridor_eval_start(&cs, i), &d, opts)
               : task_sim_obstacles(&os, tasks_obstacles_eval_start(&os, i), &d, opts);
       if (r.reason != TASKS_END_GOAL) {
@@ -74,12 +75,12 @@ static void run_batch(tasks_task_t task, tasks_driver_kind_t kind, int seeds,
                r.reason, r.steps, r.final_x_m, r.final_y_m);
       }
       assert_int_equal(r.reason, TASKS_END_GOAL);
-      if (task == TASKS_TASK_CORRIDOR) {
+      if (task == &tasks_corridor_decl) {
         // No driver beats the kinematic bound from its pose (tasks_corridor_steps_lower_bound).
         assert_true(r.steps >= tasks_corridor_steps_lower_bound(&cs, tasks_corridor_eval_start(&cs, i)));
       }
-      assert_true(r.steps <= (task == TASKS_TASK_CORRIDOR ? cs.step_limit : os.step_limit));
-      assert_true(r.return_sum == (task == TASKS_TASK_CORRIDOR ? cs.goal_reward : os.goal_reward));
+      assert_true(r.steps <= (task == &tasks_corridor_decl ? cs.step_limit : os.step_limit));
+      assert_true(r.return_sum == (task == &tasks_corridor_decl ? cs.goal_reward : os.goal_reward));
       assert_true(b->n < MAX_RUNS);
       b->steps[b->n] = (double)r.steps;
       b->path[b->n] = r.path_m;
@@ -99,7 +100,7 @@ static void print_batch(const char* task, const char* who, const batch_t* b) {
 // The three drivers on one task: all reach the goal from every evaluation start; the human's
 // runs spread far more than the proportional controller's; the optimal reference is at least
 // as good on average as the example policy.
-static void drivers_on_task(tasks_task_t task, const char* name) {
+static void drivers_on_task(const tasks_decl_t* task, const char* name) {
   task_sim_opts_t opts;
   task_sim_opts_default(&opts);
   batch_t p, h, o;
@@ -118,13 +119,13 @@ static void drivers_on_task(tasks_task_t task, const char* name) {
 // Corridor: proportional (gain varied per run), human and optimal drivers.
 static void test_drivers_corridor_all_reach_goal(void** state) {
   (void)state;
-  drivers_on_task(TASKS_TASK_CORRIDOR, "corridor");
+  drivers_on_task(&tasks_corridor_decl, "corridor");
 }
 
 // Obstacles: proportional with avoidance bend, human and optimal drivers.
 static void test_drivers_obstacles_all_reach_goal(void** state) {
   (void)state;
-  drivers_on_task(TASKS_TASK_OBSTACLES, "obstacles");
+  drivers_on_task(&tasks_obstacles_decl, "obstacles");
 }
 
 // The corridor drivers also cope with 0.5° scans, dropouts, a person by the wall and odometry
@@ -142,8 +143,8 @@ static void test_drivers_corridor_robust_to_clutter_and_drift(void** state) {
   opts.limits.acc_mps2 = 0.7;    // B21r accelerations (protocols.md C)
   opts.limits.acc_radps2 = 2.86;
   batch_t p, o;
-  run_batch(TASKS_TASK_CORRIDOR, TASKS_DRIVER_PROPORTIONAL, 1, &opts, &p);
-  run_batch(TASKS_TASK_CORRIDOR, TASKS_DRIVER_OPTIMAL, 1, &opts, &o);
+  run_batch(&tasks_corridor_decl, TASKS_DRIVER_PROPORTIONAL, 1, &opts, &p);
+  run_batch(&tasks_corridor_decl, TASKS_DRIVER_OPTIMAL, 1, &opts, &o);
   print_batch("corridor*", "proportional", &p);
   print_batch("corridor*", "optimal", &o);
 }
@@ -161,8 +162,8 @@ static void test_drivers_obstacles_robust_to_dropouts_and_drift(void** state) {
   opts.limits.acc_mps2 = 0.7;
   opts.limits.acc_radps2 = 2.86;
   batch_t p, o;
-  run_batch(TASKS_TASK_OBSTACLES, TASKS_DRIVER_PROPORTIONAL, 1, &opts, &p);
-  run_batch(TASKS_TASK_OBSTACLES, TASKS_DRIVER_OPTIMAL, 1, &opts, &o);
+  run_batch(&tasks_obstacles_decl, TASKS_DRIVER_PROPORTIONAL, 1, &opts, &p);
+  run_batch(&tasks_obstacles_decl, TASKS_DRIVER_OPTIMAL, 1, &opts, &o);
   print_batch("obstacles*", "proportional", &p);
   print_batch("obstacles*", "optimal", &o);
 }
@@ -177,8 +178,8 @@ static void test_drivers_runs_deterministic_per_seed(void** state) {
   task_sim_opts_default(&opts);
   for (int kind = 0; kind < 3; ++kind) {
     tasks_driver_t a, b;
-    tasks_driver_begin_run(&a, (tasks_driver_kind_t)kind, TASKS_TASK_CORRIDOR, 1.0, 77U);
-    tasks_driver_begin_run(&b, (tasks_driver_kind_t)kind, TASKS_TASK_CORRIDOR, 1.0, 77U);
+    tasks_driver_begin_run(&a, (tasks_driver_kind_t)kind, &tasks_corridor_decl, 1.0, 77U);
+    tasks_driver_begin_run(&b, (tasks_driver_kind_t)kind, &tasks_corridor_decl, 1.0, 77U);
     const task_sim_result_t ra = task_sim_corridor(&cs, tasks_corridor_eval_start(&cs, 4U), &a, &opts);
     const task_sim_result_t rb = task_sim_corridor(&cs, tasks_corridor_eval_start(&cs, 4U), &b, &opts);
     assert_int_equal(ra.steps, rb.steps);
@@ -189,7 +190,7 @@ static void test_drivers_runs_deterministic_per_seed(void** state) {
   double lo = INFINITY, hi = -INFINITY;
   for (uint64_t seed = 0U; seed < 200U; ++seed) {
     tasks_driver_t d;
-    tasks_driver_begin_run(&d, TASKS_DRIVER_PROPORTIONAL, TASKS_TASK_CORRIDOR, 1.0, seed);
+    tasks_driver_begin_run(&d, TASKS_DRIVER_PROPORTIONAL, &tasks_corridor_decl, 1.0, seed);
     lo = fmin(lo, d.gain);
     hi = fmax(hi, d.gain);
     assert_true(d.gain >= TASKS_PROPORTIONAL_CORRIDOR_GAIN_MIN &&
@@ -209,7 +210,7 @@ static void test_drivers_outputs_bounded_and_safe(void** state) {
   for (int kind = 0; kind < 3; ++kind) {
     for (int task = 0; task < 2; ++task) {
       tasks_driver_t d;
-      tasks_driver_begin_run(&d, (tasks_driver_kind_t)kind, (tasks_task_t)task, 0.5, 3U);
+      tasks_driver_begin_run(&d, (tasks_driver_kind_t)kind, task == 0 ? &tasks_corridor_decl : &tasks_obstacles_decl, 0.5, 3U);
       for (int i = 0; i < 200; ++i) {
         fc.valid = (uint8_t)(i % 3 != 0);
         fc.target_angle_rad = 3.0 * sin(0.37 * i);
@@ -229,7 +230,7 @@ static void test_drivers_outputs_bounded_and_safe(void** state) {
     }
   }
   tasks_driver_t d;
-  tasks_driver_begin_run(&d, TASKS_DRIVER_PROPORTIONAL, TASKS_TASK_CORRIDOR, 1.0, 5U);
+  tasks_driver_begin_run(&d, TASKS_DRIVER_PROPORTIONAL, &tasks_corridor_decl, 1.0, 5U);
   fc.valid = 1U;
   fc.target_angle_rad = 0.1;
   assert_true(fabs(tasks_driver_corridor(&d, &fc) - d.gain * 0.1) < 1e-15);
@@ -238,9 +239,9 @@ static void test_drivers_outputs_bounded_and_safe(void** state) {
   assert_true(tasks_driver_corridor(&d, NULL) == 0.0);
   assert_true(tasks_driver_obstacles(NULL, &fo) == 0.0);
   // Out-of-range kind, task and bound fall back to the documented defaults.
-  tasks_driver_begin_run(&d, (tasks_driver_kind_t)9, (tasks_task_t)7, NAN, 5U);
+  tasks_driver_begin_run(&d, (tasks_driver_kind_t)9, NULL, NAN, 5U);
   assert_int_equal(d.kind, TASKS_DRIVER_PROPORTIONAL);
-  assert_int_equal(d.task, TASKS_TASK_CORRIDOR);
+  assert_int_equal(d.task, tasks_corridor_decl.id);
   assert_true(d.omega_max_radps == 1.0);
 }
 
@@ -254,10 +255,10 @@ static void test_drivers_episode_allocation_free(void** state) {
   task_sim_opts_t opts;
   task_sim_opts_default(&opts);
   tasks_driver_t d;
-  tasks_driver_begin_run(&d, TASKS_DRIVER_HUMAN, TASKS_TASK_CORRIDOR, 1.0, 1U);
+  tasks_driver_begin_run(&d, TASKS_DRIVER_HUMAN, &tasks_corridor_decl, 1.0, 1U);
   alloc_counter_begin();
   const task_sim_result_t rc = task_sim_corridor(&cs, tasks_corridor_eval_start(&cs, 0U), &d, &opts);
-  tasks_driver_begin_run(&d, TASKS_DRIVER_HUMAN, TASKS_TASK_OBSTACLES, 1.0, 1U);
+  tasks_driver_begin_run(&d, TASKS_DRIVER_HUMAN, &tasks_obstacles_decl, 1.0, 1U);
   const task_sim_result_t ro = task_sim_obstacles(&os, tasks_obstacles_eval_start(&os, 0U), &d, &opts);
   assert_int_equal(alloc_counter_end(), 0);
   assert_int_equal(rc.reason, TASKS_END_GOAL);

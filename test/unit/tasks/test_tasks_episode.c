@@ -65,7 +65,7 @@ static void test_episode_command_clamp_limits_and_non_finite(void** state) {
 static void test_episode_corridor_observe_outcome_speed(void** state) {
   (void)state;
   tasks_episode_t ep;
-  tasks_episode_init(&ep, TASKS_TASK_CORRIDOR, NULL, NULL);
+  tasks_episode_init(&ep, &tasks_corridor_decl, NULL);
   assert_int_equal(ep.state_dim, 3);
   assert_true(tasks_episode_step_limit(&ep) == 1000U && tasks_episode_gamma(&ep) == 0.99);
   assert_true(tasks_episode_robot_radius(&ep) == TASKS_B21R_RADIUS_M);
@@ -93,16 +93,17 @@ static void test_episode_corridor_observe_outcome_speed(void** state) {
   double s[TASKS_MAX_STATE_DIM];
   assert_int_equal(tasks_episode_observe(&ep, &scan, odom1, s), 1);
   features_corridor_t direct;
-  assert_int_equal(features_corridor_compute(&ep.corridor_features, &scan, &truth, &direct), FEATURES_OK);
-  assert_true(ep.corridor_state.offset_m == direct.offset_m && ep.corridor_state.heading_rad == direct.heading_rad &&
-              ep.corridor_state.walls_seen == direct.walls_seen && ep.corridor_state.end_source == direct.end_source);
+  assert_int_equal(features_corridor_compute(tasks_corridor_features(&ep), &scan, &truth, &direct), FEATURES_OK);
+  const features_corridor_t* cs = tasks_corridor_state(&ep);
+  assert_true(cs->offset_m == direct.offset_m && cs->heading_rad == direct.heading_rad &&
+              cs->walls_seen == direct.walls_seen && cs->end_source == direct.end_source);
   assert_true(s[0] == direct.end_distance_m && s[1] == direct.lateral_frac && s[2] == direct.target_angle_rad);
-  assert_true(tasks_episode_speed_mps(&ep) == tasks_corridor_speed_mps(&ep.corridor, &direct));
+  assert_true(tasks_episode_speed_mps(&ep) == tasks_corridor_speed_mps((const tasks_corridor_spec_t*)tasks_episode_spec(&ep), &direct));
 
   double e[TASKS_MAX_STATE_DIM];
   assert_int_equal(tasks_episode_observe_pose(&ep, truth, e), 1);
   features_corridor_t exact;
-  assert_int_equal(features_corridor_from_pose(&ep.corridor_features, truth, &exact), FEATURES_OK);
+  assert_int_equal(features_corridor_from_pose(tasks_corridor_features(&ep), truth, &exact), FEATURES_OK);
   assert_true(e[0] == exact.end_distance_m && e[1] == exact.lateral_frac && e[2] == exact.target_angle_rad);
   // The measured state is within the features' stated accuracy of the exact one.
   assert_true(fabs(s[1] - e[1]) < 0.01 && fabs(s[2] - e[2]) < 0.025);
@@ -112,7 +113,7 @@ static void test_episode_corridor_observe_outcome_speed(void** state) {
   assert_int_equal(tasks_episode_observe_pose(&ep, pose(9.2, 0.0, 0.0), e), 1);
   o = tasks_episode_outcome(&ep, 0U, 11U);
   assert_true(o.reward == 10.0 && o.terminal == 1U && o.reason == TASKS_END_GOAL);
-  ep.corridor.step_limit = 5U;  // a spec's step limit may change between runs
+  tasks_spec_set_step_limit(ep.decl, tasks_episode_spec(&ep), 5U);  // a spec's step limit may change between runs
   assert_int_equal(tasks_episode_observe_pose(&ep, pose(3.0, 0.0, 0.0), e), 1);
   o = tasks_episode_outcome(&ep, 0U, 5U);
   assert_true(o.end_run == 1U && o.terminal == 0U && o.reason == TASKS_END_STEP_LIMIT);
@@ -125,7 +126,7 @@ static void test_episode_corridor_observe_outcome_speed(void** state) {
 }
 
 // Obstacles: the exact state of a pose is features_obstacles_from_pose with the spec's obstacles;
-// starts and drivers are the task's; an unknown task falls back to the corridor.
+// starts and drivers are the task's; no declaration is the corridor.
 static void test_episode_obstacles_pose_starts_drivers(void** state) {
   (void)state;
   tasks_obstacles_spec_t spec;
@@ -135,7 +136,7 @@ static void test_episode_obstacles_pose_starts_drivers(void** state) {
   spec.obstacles[1].y_m = 1.0;
   spec.obstacles[1].radius_m = 0.2;
   tasks_episode_t ep;
-  tasks_episode_init(&ep, TASKS_TASK_OBSTACLES, NULL, &spec);
+  tasks_episode_init(&ep, &tasks_obstacles_decl, &spec);
   assert_int_equal(ep.state_dim, 4);
   assert_true(tasks_episode_gamma(&ep) == 0.9 && tasks_episode_step_limit(&ep) == 500U);
   const features_pose_t p = tasks_episode_eval_start(&ep, 3);
@@ -144,7 +145,7 @@ static void test_episode_obstacles_pose_starts_drivers(void** state) {
   assert_int_equal(tasks_episode_observe_pose(&ep, p, s), 1);
   const features_disc_t discs[2] = {{-1.5, 0.0, 0.25}, {-1.0, 1.0, 0.2}};
   features_obstacles_t f;
-  assert_int_equal(features_obstacles_from_pose(&ep.obstacles_features, p, 0.0, 0.0, discs, 2U, PI, &f), FEATURES_OK);
+  assert_int_equal(features_obstacles_from_pose(tasks_obstacles_features(&ep), p, 0.0, 0.0, discs, 2U, PI, &f), FEATURES_OK);
   assert_true(s[0] == f.goal_bearing_rad && s[1] == f.goal_distance_m && s[2] == f.obstacle[0].bearing_rad &&
               s[3] == f.obstacle[0].distance_m);
   assert_true(tasks_episode_speed_mps(&ep) == spec.v_mps);
@@ -161,11 +162,12 @@ static void test_episode_obstacles_pose_starts_drivers(void** state) {
     assert_memory_equal(&t1, &t2, sizeof t1);
   }
   tasks_driver_t d1, d2;
-  tasks_driver_begin_run(&d1, TASKS_DRIVER_PROPORTIONAL, TASKS_TASK_OBSTACLES, 1.0, 5U);
-  tasks_driver_begin_run(&d2, TASKS_DRIVER_PROPORTIONAL, TASKS_TASK_OBSTACLES, 1.0, 5U);
-  assert_true(tasks_episode_driver_action(&ep, &d1) == tasks_driver_obstacles(&d2, &ep.obstacles_state));
-  tasks_episode_init(&ep, (tasks_task_t)7, NULL, NULL);
-  assert_int_equal(ep.task, TASKS_TASK_CORRIDOR);
+  tasks_episode_driver_begin(&ep, &d1, TASKS_DRIVER_PROPORTIONAL, 1.0, 5U);
+  tasks_driver_begin_run(&d2, TASKS_DRIVER_PROPORTIONAL, &tasks_obstacles_decl, 1.0, 5U);
+  assert_true(tasks_episode_driver_action(&ep, &d1) == tasks_driver_obstacles(&d2, tasks_obstacles_state(&ep)));
+  tasks_episode_init(&ep, NULL, NULL);
+  assert_true(ep.decl == &tasks_corridor_decl);
+  assert_null(tasks_obstacles_state(&ep));
   // Every call above is allocation-free.
   alloc_counter_begin();
   for (int i = 0; i < 100; ++i) {

@@ -7,6 +7,7 @@
 #define _POSIX_C_SOURCE 200809L
 #include "train.h"
 
+#include <tasks/decl.h>
 #include <fw/checkpoint.h>
 #include <fw/config.h>
 #include <fw/loop.h>
@@ -49,7 +50,7 @@ static void write_init(const fw_config_t* cfg, const char* path, double legacy_a
   hedger_destroy(h);
   fw_progress_t g;
   memset(&g, 0, sizeof g);
-  g.task = FW_TASK_OBSTACLES;
+  g.task = (int32_t)tasks_obstacles_decl.id;
   g.state_dim = hc.state_dim;
   g.schedule.phase = 2;
   g.schedule.training_runs = 40;
@@ -106,7 +107,7 @@ static void test_train_checkpoint_revisions(void** state) {
     assert_int_equal(read_section(out, &g), FW_PROGRESS_BYTES);
     assert_false(g.legacy_shift);
     assert_int_equal(g.schedule.phase, 2);
-    assert_int_equal(g.task, FW_TASK_OBSTACLES);
+    assert_int_equal(g.task, (int32_t)tasks_obstacles_decl.id);
   }
   (void)unlink(out);
   (void)unlink(init);

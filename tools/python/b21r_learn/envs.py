@@ -8,7 +8,8 @@ from gymnasium import spaces
 
 from . import _core
 
-ENV_IDS = {"corridor": "B21rCorridor-v0", "obstacles": "B21rObstacles-v0"}
+# Every task declared in lib/tasks (its registry) is an environment: task name -> Gymnasium id.
+ENV_IDS = {t["name"]: t["env_id"] for t in _core.tasks()}
 # tasks_end_reason_t -> name (info["reason"]).
 REASONS = ("none", "goal", "collision", "step_limit")
 _STARTS = {"training": _core.START_TRAINING, "eval": _core.START_EVAL, "pose": _core.START_POSE}
@@ -195,7 +196,8 @@ def _require_pillow():
 
 
 def register_envs():
-    """Registers B21rCorridor-v0 and B21rObstacles-v0 with Gymnasium (done on import)."""
+    """Registers every declared task (B21rCorridor-v0, B21rObstacles-v0, ...) with Gymnasium (done on
+    import)."""
     for task, env_id in ENV_IDS.items():
         if env_id not in gymnasium.registry:
             # The paper's step limit truncates inside the environment: no TimeLimit wrapper.

@@ -78,10 +78,13 @@ void check_env(sim_env_status_t st, const char* what) {
   throw std::runtime_error(msg);
 }
 
-tasks_task_t parse_task(const std::string& s) {
-  if (s == "corridor") return TASKS_TASK_CORRIDOR;
-  if (s == "obstacles") return TASKS_TASK_OBSTACLES;
-  throw nb::value_error(("unknown task '" + s + "' (corridor, obstacles)").c_str());
+// The declared task of a name (tasks/decl.h); the error lists the declared ones.
+const tasks_decl_t* parse_task(const std::string& s) {
+  const tasks_decl_t* d = tasks_find(s.c_str());
+  if (d != nullptr) return d;
+  std::string names;
+  for (uint32_t i = 0; i < tasks_count(); ++i) names += std::string(i == 0 ? "" : ", ") + tasks_decl_at(i)->name;
+  throw nb::value_error(("unknown task '" + s + "' (" + names + ")").c_str());
 }
 
 // ---- configuration structs as keyword arguments --------------------------------------------
@@ -179,58 +182,64 @@ features_pose_t pose_from(nb::handle v) {
   return features_pose_t{std::get<0>(t), std::get<1>(t), std::get<2>(t)};
 }
 
-template <typename S>
-nb::object eval_starts_get(const S& s) {
-  nb::list l;
-  for (const features_pose_t& p : s.eval_starts) l.append(pose_get(p));
-  return l;
+// A declared task's specification as keyword arguments: its declared parameters (by name), the
+// common fields every task has (through the declaration's offsets) and its evaluation poses.
+double spec_double(const void* spec, size_t off) {
+  double v;
+  std::memcpy(&v, static_cast<const unsigned char*>(spec) + off, sizeof v);
+  return v;
 }
 
-template <typename S>
-void eval_starts_set(S& s, nb::handle v) {
-  const nb::list l = nb::cast<nb::list>(v);
-  if (l.size() != TASKS_N_EVAL_STARTS) throw nb::value_error("eval_starts: exactly 10 poses (x, y, theta)");
-  for (size_t i = 0; i < TASKS_N_EVAL_STARTS; ++i) s.eval_starts[i] = pose_from(l[i]);
+void spec_set_double(const tasks_decl_t* d, void* spec, size_t off, double v) {
+  (void)d;
+  std::memcpy(static_cast<unsigned char*>(spec) + off, &v, sizeof v);
 }
 
-nb::object obstacles_get(const tasks_obstacles_spec_t& s) {
-  nb::list l;
-  for (uint32_t k = 0; k < s.n_obstacles && k < TASKS_MAX_OBSTACLES; ++k)
-    l.append(nb::make_tuple(s.obstacles[k].x_m, s.obstacles[k].y_m, s.obstacles[k].radius_m));
-  return l;
-}
-
-void obstacles_set(tasks_obstacles_spec_t& s, nb::handle v) {
-  const nb::list l = nb::cast<nb::list>(v);
-  if (l.size() > TASKS_MAX_OBSTACLES) throw nb::value_error("obstacles: at most 4 (x, y, radius)");
-  s.n_obstacles = static_cast<uint32_t>(l.size());
-  for (size_t k = 0; k < l.size(); ++k) {
-    const auto t = nb::cast<std::tuple<double, double, double>>(l[k]);
-    s.obstacles[k] = tasks_circle_t{std::get<0>(t), std::get<1>(t), std::get<2>(t)};
+void apply_spec(const tasks_decl_t* d, void* spec, const nb::dict& kwargs) {
+  for (auto [key, value] : kwargs) {
+    const std::string k = nb::cast<std::string>(key);
+    if (tasks_param_find(d, k.c_str()) != nullptr) {
+      const double v = nb::cast<double>(value);
+      if (tasks_spec_set_param(d, spec, k.c_str(), v) != 0) {
+        const tasks_param_t* p = tasks_param_find(d, k.c_str());
+        throw nb::value_error((std::string(d->name) + " spec: " + k + " must be in [" + std::to_string(p->min) + ", " +
+                               std::to_string(p->max) + "] (" + p->help + ")").c_str());
+      }
+    } else if (k == "step_limit") {
+      tasks_spec_set_step_limit(d, spec, nb::cast<uint32_t>(value));
+    } else if (k == "dt_s") {
+      tasks_spec_set_dt_s(d, spec, nb::cast<double>(value));
+    } else if (k == "gamma") {
+      spec_set_double(d, spec, d->off_gamma, nb::cast<double>(value));
+    } else if (k == "robot_radius_m") {
+      spec_set_double(d, spec, d->off_robot_radius_m, nb::cast<double>(value));
+    } else if (k == "eval_starts") {
+      const nb::list l = nb::cast<nb::list>(value);
+      if (l.size() != TASKS_N_EVAL_STARTS) throw nb::value_error("eval_starts: exactly 10 poses (x, y, theta)");
+      for (size_t i = 0; i < TASKS_N_EVAL_STARTS; ++i) {
+        const features_pose_t p = pose_from(l[i]);
+        std::memcpy(static_cast<unsigned char*>(spec) + d->off_eval_starts + i * sizeof p, &p, sizeof p);
+      }
+    } else {
+      std::string names = "step_limit, dt_s, gamma, robot_radius_m, eval_starts";
+      for (uint32_t i = 0; i < d->n_params; ++i) names += std::string(", ") + d->params[i].name;
+      throw nb::type_error((std::string(d->name) + " spec: unknown setting '" + k + "' (known: " + names + ")").c_str());
+    }
   }
 }
 
-using CSpec = tasks_corridor_spec_t;
-const Field<CSpec> kCorridorFields[] = {
-    B21R_F64(CSpec, length_m),        B21R_F64(CSpec, width_m),         B21R_F64(CSpec, goal_distance_m),
-    B21R_F64(CSpec, robot_radius_m),  B21R_F64(CSpec, v_centre_mps),    B21R_F64(CSpec, v_wall_mps),
-    B21R_F64(CSpec, dt_s),            B21R_U32(CSpec, step_limit),      B21R_F64(CSpec, goal_reward),
-    B21R_F64(CSpec, gamma),           B21R_F64(CSpec, lookahead_m),     B21R_F64(CSpec, train_jitter_x_m),
-    B21R_F64(CSpec, train_jitter_y_m), B21R_F64(CSpec, train_jitter_theta_rad),
-    Field<CSpec>{"eval_starts", eval_starts_get<CSpec>, eval_starts_set<CSpec>},
-};
-
-using OSpec = tasks_obstacles_spec_t;
-const Field<OSpec> kObstaclesFields[] = {
-    B21R_F64(OSpec, goal_x_m),         B21R_F64(OSpec, goal_y_m),       B21R_F64(OSpec, goal_radius_m),
-    B21R_F64(OSpec, arena_min_x_m),    B21R_F64(OSpec, arena_max_x_m),  B21R_F64(OSpec, arena_min_y_m),
-    B21R_F64(OSpec, arena_max_y_m),    B21R_F64(OSpec, robot_radius_m), B21R_F64(OSpec, v_mps),
-    B21R_F64(OSpec, dt_s),             B21R_U32(OSpec, step_limit),     B21R_F64(OSpec, goal_reward),
-    B21R_F64(OSpec, collision_reward), B21R_F64(OSpec, gamma),          B21R_F64(OSpec, train_jitter_x_m),
-    B21R_F64(OSpec, train_jitter_y_m), B21R_F64(OSpec, train_jitter_theta_rad),
-    Field<OSpec>{"obstacles", obstacles_get, obstacles_set},
-    Field<OSpec>{"eval_starts", eval_starts_get<OSpec>, eval_starts_set<OSpec>},
-};
+nb::dict spec_dict(const tasks_decl_t* d, const void* spec) {
+  nb::dict out;
+  for (uint32_t i = 0; i < d->n_params; ++i) out[d->params[i].name] = spec_double(spec, d->params[i].offset);
+  out["dt_s"] = tasks_spec_dt_s(d, spec);
+  out["step_limit"] = tasks_spec_step_limit(d, spec);
+  out["gamma"] = tasks_spec_gamma(d, spec);
+  out["robot_radius_m"] = tasks_spec_robot_radius(d, spec);
+  nb::list l;
+  for (uint32_t i = 0; i < TASKS_N_EVAL_STARTS; ++i) l.append(pose_get(tasks_spec_eval_start(d, spec, i)));
+  out["eval_starts"] = l;
+  return out;
+}
 
 using Lim = tasks_command_limits_t;
 const Field<Lim> kLimitFields[] = {
@@ -256,11 +265,7 @@ class Env {
     }
     sim_env_config_t cfg;
     sim_env_config_default(&cfg, parse_task(task), b);
-    if (cfg.task == TASKS_TASK_CORRIDOR) {
-      apply_fields(cfg.corridor, kCorridorFields, spec, "corridor spec");
-    } else {
-      apply_fields(cfg.obstacles, kObstaclesFields, spec, "obstacles spec");
-    }
+    apply_spec(cfg.task, cfg.spec, spec);
     apply_fields(cfg.limits, kLimitFields, limits, "command limits");
     if (!laser_noise_sigma_m.is_none()) cfg.laser_noise_sigma_m = nb::cast<double>(laser_noise_sigma_m);
     if (!laser_error_code_prob.is_none()) cfg.laser_error_code_prob = nb::cast<double>(laser_error_code_prob);
@@ -338,8 +343,7 @@ class Env {
     d["bounds"] = nb::make_tuple(w->bounds_min_x_m, w->bounds_min_y_m, w->bounds_max_x_m, w->bounds_max_y_m);
     const tasks_episode_t* ep = sim_env_episode(env_);
     d["robot_radius_m"] = tasks_episode_robot_radius(ep);
-    const features_laser_mount_t& m = ep->task == TASKS_TASK_CORRIDOR ? ep->corridor_features.scan.mount
-                                                                       : ep->obstacles_features.scan.mount;
+    const features_laser_mount_t& m = *tasks_episode_laser_mount(ep);
     d["laser_mount"] = nb::make_tuple(m.x_m, m.y_m, m.yaw_rad);
     return d;
   }
@@ -347,9 +351,9 @@ class Env {
   // The task's settings in use (the spec, the limits), for reports and plots.
   nb::dict spec() const {
     const sim_env_config_t* c = sim_env_get_config(env_);
-    nb::dict d = c->task == TASKS_TASK_CORRIDOR ? fields_dict(c->corridor, kCorridorFields)
-                                                : fields_dict(c->obstacles, kObstaclesFields);
     const tasks_episode_t* ep = sim_env_episode(env_);
+    nb::dict d = spec_dict(c->task, tasks_episode_spec_const(ep));
+    d["task"] = std::string(c->task->name);
     d["omega_max_radps"] = tasks_episode_omega_max(ep);
     d["limits"] = fields_dict(c->limits, kLimitFields);
     d["laser_noise_sigma_m"] = c->laser_noise_sigma_m;
@@ -361,20 +365,18 @@ class Env {
   nb::dict features() const {
     const tasks_episode_t* ep = sim_env_episode(env_);
     nb::dict d;
-    if (ep->task == TASKS_TASK_CORRIDOR) {
-      const features_corridor_t& f = ep->corridor_state;
-      d["offset_m"] = f.offset_m;
-      d["heading_rad"] = f.heading_rad;
-      d["width_m"] = f.width_m;
-      d["walls_seen"] = static_cast<int>(f.walls_seen);
-      d["end_wall_seen"] = f.end_wall_seen != 0;
-      d["lateral_source"] = static_cast<int>(f.lateral_source);
-      d["end_source"] = static_cast<int>(f.end_source);
-    } else {
-      const features_obstacles_t& f = ep->obstacles_state;
-      d["n_visible"] = static_cast<int>(f.n_visible);
-      d["nearest_any_m"] = f.nearest_any_m;
-      d["obstacle_visible"] = f.obstacle[0].visible != 0;
+    if (const features_corridor_t* f = tasks_corridor_state(ep)) {
+      d["offset_m"] = f->offset_m;
+      d["heading_rad"] = f->heading_rad;
+      d["width_m"] = f->width_m;
+      d["walls_seen"] = static_cast<int>(f->walls_seen);
+      d["end_wall_seen"] = f->end_wall_seen != 0;
+      d["lateral_source"] = static_cast<int>(f->lateral_source);
+      d["end_source"] = static_cast<int>(f->end_source);
+    } else if (const features_obstacles_t* o = tasks_obstacles_state(ep)) {
+      d["n_visible"] = static_cast<int>(o->n_visible);
+      d["nearest_any_m"] = o->nearest_any_m;
+      d["obstacle_visible"] = o->obstacle[0].visible != 0;
     }
     return d;
   }
@@ -411,7 +413,7 @@ class Driver {
     if (fixed_gain_.has_value()) apply_gain(*fixed_gain_);
   }
   double act(const Env& env) {
-    if (sim_env_episode(env.raw())->task != task_) throw nb::value_error("the driver is for another task");
+    if (sim_env_episode(env.raw())->decl != task_) throw nb::value_error("the driver is for another task");
     return sim_env_driver_action(env.raw(), &d_);
   }
   double gain() const { return d_.gain; }
@@ -430,15 +432,13 @@ class Driver {
     }
     if (!std::isfinite(g) || g <= 0.0) throw nb::value_error("gain must be a positive number [1/s]");
   }
-  void apply_gain(double g) {
-    d_.gain = g;
-    // The obstacle example policy's law holds its gain (as the controller's evaluate_example_gain).
-    if (d_.task == TASKS_TASK_OBSTACLES && kind_ == TASKS_DRIVER_PROPORTIONAL) d_.law[0] = g;
-  }
+  // The proportional law is set again with the gain (a law may hold it, as the obstacle task's does),
+  // as the controller's evaluate_example_gain.
+  void apply_gain(double g) { tasks_driver_set_gain(&d_, task_, g); }
 
   tasks_driver_t d_{};
   tasks_driver_kind_t kind_ = TASKS_DRIVER_PROPORTIONAL;
-  tasks_task_t task_;
+  const tasks_decl_t* task_;
   double omega_max_;
   std::optional<double> fixed_gain_;
 };
@@ -723,6 +723,28 @@ nb::tuple mean_ci95(const std::vector<double>& values) {
   return nb::make_tuple(mean, half);
 }
 
+// The registry's declarations, for the Gymnasium registration and for tools.
+nb::list declared_tasks() {
+  nb::list out;
+  for (uint32_t i = 0; i < tasks_count(); ++i) {
+    const tasks_decl_t* d = tasks_decl_at(i);
+    nb::dict t;
+    t["name"] = d->name;
+    t["title"] = d->title;
+    t["env_id"] = d->env_id;
+    t["id"] = static_cast<int>(d->id);
+    nb::list names;
+    for (uint32_t k = 0; k < d->state_dim; ++k) names.append(d->state_names[k]);
+    t["state_names"] = names;
+    nb::dict params;
+    for (uint32_t k = 0; k < d->n_params; ++k)
+      params[d->params[k].name] = nb::make_tuple(d->params[k].min, d->params[k].max, d->params[k].help);
+    t["parameters"] = params;
+    out.append(t);
+  }
+  return out;
+}
+
 }  // namespace
 
 NB_MODULE(_core, m) {
@@ -792,6 +814,9 @@ NB_MODULE(_core, m) {
       .def_prop_ro("serialized_max_size", &Hedger::serialized_max_size);
   m.attr("POINT_PROTECTED") = HEDGER_POINT_PROTECTED;
 
+  m.def("tasks", &declared_tasks,
+        "The declared tasks (lib/tasks registry) as dicts: name, title, env_id, id, state_names, "
+        "parameters (name -> (min, max, help)).");
   m.def("read_checkpoint", &read_checkpoint, "path"_a);
   m.def("read_checkpoint_progress", &read_checkpoint_progress, "meta"_a,
         "The controller's section of a checkpoint (the meta bytes of read_checkpoint) as a dict: task, "

@@ -43,11 +43,12 @@ extern "C" {
 /// further source is cited as "an earlier setting".
 #define FW_CONFIG_MAX_SOURCES 8U
 
-/// Learning task (ARCHITECTURE.md, "The experiments of the paper").
-typedef enum fw_task { FW_TASK_CORRIDOR = 0, FW_TASK_OBSTACLES = 1 } fw_task_t;
-/// The task's name as the task key takes it ("corridor", "obstacles"); "unknown" for any other
-/// value (a log or file written by something else). Pure, O(1); a static string.
+/// The declared task's name of an id (tasks_decl_t.id) as the task key takes it ("corridor",
+/// "obstacles", ...); "unknown" for an id no declaration has (a log or file written by something
+/// else). Pure, O(tasks); a static string.
 const char* fw_task_name(int32_t task);
+/// Evaluation poses a configuration can give (eval_poses).
+#define FW_CONFIG_MAX_POSES 16
 /// Wire protocol of the base.
 typedef enum fw_base_protocol { FW_BASE_RFLEX = 0, FW_BASE_CANOPEN = 1 } fw_base_protocol_t;
 /// Who drives in phase one.
@@ -111,7 +112,9 @@ typedef struct fw_config_origins {
 /// Every setting of the controller. Field names carry units. Defaults: fw_config_defaults().
 typedef struct fw_config {
   // What to do.
-  int32_t task;                    ///< fw_task_t
+  int32_t task;                    ///< the declared task's id (tasks_decl_t.id; key: its name)
+  /// the task's parameters as "name=value,name=value" (tasks_decl_t.params; "" = the defaults)
+  char task_params[FW_CONFIG_STR_MAX];
   int32_t mode;                    ///< fw_mode_t
   int32_t evaluate_policy;         ///< fw_eval_policy_t (mode = evaluate only)
   double evaluate_example_gain;    ///< evaluate_policy = example: its gain [1/s]; 0 = nominal
@@ -205,6 +208,10 @@ typedef struct fw_config {
   double auto_switch_ratio;        ///< auto: ready when eval mean ≤ ratio × mean example run
   int32_t eval_every_runs;         ///< an evaluation block every N training runs (paper: 5)
   int32_t eval_starts;             ///< evaluation start poses per block [1, 16] (paper: 10)
+  /// evaluation poses of the configuration's own: x, y, theta per pose (task frame; n poses set,
+  /// 0 = the task's); training starts stay around the task's poses
+  double eval_poses[3 * FW_CONFIG_MAX_POSES];
+  int32_t eval_poses_n;
   bool eval_at_start;              ///< also evaluate before the first training run
   int32_t max_steps_per_run;       ///< step limit of a run (0 = the task's default)
   double explore_sigma_radps;      ///< phase two: std-dev of the exploration noise
@@ -292,6 +299,13 @@ void fw_config_print(const fw_config_t* cfg, FILE* out);
 /// Writes a CPU mask as the list syntax of rt_cpus ("0,2-3"; "" for 0) into out (cap bytes,
 /// NUL-terminated, truncated if too small). O(FW_CONFIG_MAX_CPUS).
 void fw_config_format_cpus(uint64_t mask, char* out, size_t cap);
+
+/// Calls fn(user, name, value) for each parameter of task_params, in order, after checking that
+/// the task declares it and the value is in its range (fn may be NULL: checks only). Returns 0,
+/// or -1 with a message naming the parameter, the task's parameters or the range. O(length).
+typedef void (*fw_config_task_param_fn)(void* user, const char* name, double value);
+int fw_config_each_task_param(const fw_config_t* cfg, fw_config_task_param_fn fn, void* user, char* err,
+                              size_t err_cap);
 
 /// Tick period [µs] derived from tick_rate_hz (rounded to the nearest µs).
 int64_t fw_config_period_us(const fw_config_t* cfg);

@@ -5,7 +5,7 @@
 /// Byte layout of revision 2 (FW_PROGRESS_BYTES, integers little-endian):
 /// ```
 ///  0  8  magic "FWMETA02"
-///  8  4  task (fw_task_t)                    12  4  state dimension
+///  8  4  task (its declaration's id)        12  4  state dimension
 /// 16  4  phase                               20  4  training runs (both phases)
 /// 24  4  phase-one runs                      28  4  phase-two runs
 /// 32  4  evaluation blocks                   36  4  successful phase-one runs
@@ -22,7 +22,7 @@
 /// Decoding validates every field against the ranges below, so a section with a valid CRC but
 /// impossible contents (a bug, or bytes written by something else) is refused like a corrupt
 /// file instead of steering the schedule. Ranges (fw_progress_decode):
-/// - task: FW_TASK_CORRIDOR or FW_TASK_OBSTACLES; state dimension 1..HEDGER_MAX_STATE_DIM;
+/// - task: the id of a declared task (tasks/decl.h); state dimension 1..HEDGER_MAX_STATE_DIM;
 /// - phase 1 or 2; every counter and the run id + 1 in [0, INT32_MAX];
 /// - training runs = phase-one runs + phase-two runs; phase-two runs = 0 in phase 1;
 /// - successful phase-one runs <= phase-one runs; with none, their sum and shortest are 0;
@@ -54,7 +54,7 @@ extern "C" {
 
 /// What a checkpoint records besides the learned state.
 typedef struct fw_progress {
-  int32_t task;                     ///< fw_task_t the learned state belongs to
+  int32_t task;                     ///< the declared task's id the learned state belongs to
   uint32_t state_dim;               ///< its state dimension
   learn_schedule_progress_t schedule;  ///< schedule progress (fw/schedule.h)
   int32_t run_id;                   ///< last run started, -1 = none

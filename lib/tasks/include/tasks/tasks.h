@@ -24,11 +24,6 @@
 extern "C" {
 #endif
 
-/// Which task. Values equal the TASK_* constants of the b21r.experience_t LCM message.
-typedef enum tasks_task {
-  TASKS_TASK_CORRIDOR = 0,
-  TASKS_TASK_OBSTACLES = 1,
-} tasks_task_t;
 
 /// Number of fixed evaluation start poses per task (paper: "ten pre-specified starting poses").
 #define TASKS_N_EVAL_STARTS 10
@@ -234,7 +229,7 @@ double tasks_clamp_omega(double omega_radps, double omega_max_radps);
 /// Kind of driver.
 typedef enum tasks_driver_kind {
   /// The paper's "simple policy": omega = k * theta, k drawn per run (uniform in the task's gain
-  /// range, see tasks_driver_begin_run). Corridor: theta = target_angle_rad. Obstacles: theta =
+  /// range, see tasks_driver_begin_run in tasks/decl.h). Corridor: theta = target_angle_rad. Obstacles: theta =
   /// goal bearing bent away from a near obstacle (see tasks_driver_obstacles).
   TASKS_DRIVER_PROPORTIONAL = 0,
   /// A simulated person with a joystick: reaction delay (0.3..0.8 s), a dead band (ignores small
@@ -259,10 +254,10 @@ typedef enum tasks_driver_kind {
 #define TASKS_DRIVER_LAW_PARAMS 3
 
 /// A driver's complete state; caller-owned, plain data (copyable), about 360 bytes.
-/// Set up with tasks_driver_begin_run at the start of every run.
+/// Set up with tasks_driver_begin_run (tasks/decl.h) at the start of every run.
 typedef struct tasks_driver {
   uint8_t kind;             ///< tasks_driver_kind_t
-  uint8_t task;             ///< tasks_task_t
+  uint8_t task;             ///< the task's id (tasks_decl_t.id)
   double omega_max_radps;   ///< output bound
   double gain;              ///< proportional gain of this run [1/s] (PROPORTIONAL, HUMAN)
   /// Control-law parameters. Corridor (used by OPTIMAL): {gain [1/s], look-ahead [m], unused}:
@@ -300,12 +295,30 @@ typedef struct tasks_driver {
 #define TASKS_PROPORTIONAL_OBSTACLES_GAIN_MIN 0.8
 #define TASKS_PROPORTIONAL_OBSTACLES_GAIN_MAX 2.0
 
-/// Starts a run: sets kind, task and bound, seeds the private stream with run_seed, draws the
-/// run's gain (PROPORTIONAL, HUMAN) and temperament (HUMAN), clears the state. Invalid kind or
-/// task fall back to PROPORTIONAL / CORRIDOR; a non-finite or non-positive omega_max gives 1.0.
-/// O(TASKS_HUMAN_MAX_DELAY).
-void tasks_driver_begin_run(tasks_driver_t* d, tasks_driver_kind_t kind, tasks_task_t task,
-                            double omega_max_radps, uint64_t run_seed);
+/// The common start of a driver's run (tasks_episode_driver_begin calls it, then the task's
+/// law and, for a person, tasks_driver_begin_human and the task's own temperament): sets kind,
+/// the task's id and the bound (a non-finite or non-positive omega_max gives 1.0), seeds the
+/// private stream with run_seed and draws the run's gain uniformly in [gain_min, gain_max] for
+/// every kind, so that the streams of the kinds stay comparable. An invalid kind is PROPORTIONAL.
+void tasks_driver_begin_common(tasks_driver_t* d, tasks_driver_kind_t kind, uint8_t task_id, double omega_max_radps,
+                               uint64_t run_seed, double gain_min, double gain_max);
+
+/// A simulated person's temperament for this run (HUMAN): gain, reaction delay, dead band,
+/// hand noise, drift, lapses, a favourite offset, aim distance and side. Draws from d->rng.
+void tasks_driver_begin_human(tasks_driver_t* d);
+
+/// The simulated person's hand for one step: `error` is what the person tries to null (an angle,
+/// +: turn left), seen after the reaction delay and through the dead band, with coarse stick
+/// positions held a while, hand noise, drift and lapses; `danger` (a collision looks imminent)
+/// cuts a lapse short and forces a correction after 0.1 s. Any task's HUMAN driver uses it.
+/// Returns the stick command [rad/s] within the bound. Advances the person's state. O(1).
+double tasks_driver_human_step(tasks_driver_t* d, double error, int danger);
+
+/// The corridor's and the obstacle task's control laws and the obstacle task's temperament
+/// (their declarations' driver_law / driver_human).
+void tasks_driver_law_corridor(tasks_driver_t* d);
+void tasks_driver_law_obstacles(tasks_driver_t* d);
+void tasks_driver_human_obstacles(tasks_driver_t* d);
 
 /// The driver's rotation command for the corridor task given this tick's state [rad/s], within
 /// [-omega_max, omega_max], finite. PROPORTIONAL: gain * target_angle_rad (the paper's simple

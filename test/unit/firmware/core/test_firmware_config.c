@@ -2,7 +2,9 @@
 // Config parsing: defaults, every error names source, key and allowed values; overrides; the
 // reference file in firmware/app is exactly the generated documentation of the defaults.
 #define _POSIX_C_SOURCE 200809L
+#include <tasks/decl.h>
 #include "fw/config.h"
+#include "fw/config_task.h"
 
 #include <b21r_test/alloc_counter.h>
 
@@ -283,7 +285,7 @@ static void test_config_comments_quotes_and_crlf_parse(void** state) {
   assert_int_equal(fw_config_load_file(&c, p, err, sizeof err), 0);
   assert_string_equal(c.log_file, "out dir/a # b.log");
   assert_true(c.tick_rate_hz == 20.0);
-  assert_int_equal(c.task, FW_TASK_OBSTACLES);
+  assert_int_equal(c.task, (int32_t)tasks_obstacles_decl.id);
   assert_string_equal(c.checkpoint_file, "plain/path.ckpt");
   assert_int_equal(fw_config_period_us(&c), 50000);
 }
@@ -647,15 +649,97 @@ static void test_config_learner_key(void** state) {
 // (a log's task byte written by something else).
 static void test_config_task_name(void** state) {
   (void)state;
-  assert_string_equal(fw_task_name(FW_TASK_CORRIDOR), "corridor");
-  assert_string_equal(fw_task_name(FW_TASK_OBSTACLES), "obstacles");
+  assert_string_equal(fw_task_name((int32_t)tasks_corridor_decl.id), "corridor");
+  assert_string_equal(fw_task_name((int32_t)tasks_obstacles_decl.id), "obstacles");
   assert_string_equal(fw_task_name(2), "unknown");
   assert_string_equal(fw_task_name(-1), "unknown");
   fw_config_t c;
   fw_config_defaults(&c);
   char err[FW_CONFIG_ERR_MAX];
-  assert_int_equal(fw_config_set(&c, "task", fw_task_name(FW_TASK_OBSTACLES), "test", err, sizeof err), 0);
-  assert_int_equal(c.task, FW_TASK_OBSTACLES);
+  assert_int_equal(fw_config_set(&c, "task", fw_task_name((int32_t)tasks_obstacles_decl.id), "test", err, sizeof err), 0);
+  assert_int_equal(c.task, (int32_t)tasks_obstacles_decl.id);
+}
+
+// task_params: the task's own parameters by name, checked against the declared task (at validate,
+// so the order of task and task_params does not matter) with errors naming the fix; applied by
+// fw_config_task; corridor_length_m is the corridor's length_m.
+static void test_config_task_params(void** state) {
+  (void)state;
+  fw_config_t c;
+  fw_config_defaults(&c);
+  char err[FW_CONFIG_ERR_MAX];
+  assert_int_equal(fw_config_set(&c, "task_params", " width_m = 3 ,goal_reward=5", "test", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
+  tasks_episode_t ep;
+  tasks_command_limits_t lim;
+  assert_int_equal(fw_config_task(&c, &ep, &lim, err, sizeof err), 0);
+  assert_ptr_equal(ep.decl, &tasks_corridor_decl);
+  assert_true(tasks_spec_get_param(ep.decl, tasks_episode_spec_const(&ep), "width_m") == 3.0);
+  assert_true(tasks_spec_get_param(ep.decl, tasks_episode_spec_const(&ep), "goal_reward") == 5.0);
+  assert_true(tasks_spec_get_param(ep.decl, tasks_episode_spec_const(&ep), "length_m") == c.corridor_length_m);
+  // task_params wins over corridor_length_m (it is the more specific setting).
+  assert_int_equal(fw_config_set(&c, "task_params", "length_m=20", "test", err, sizeof err), 0);
+  assert_int_equal(fw_config_task(&c, &ep, &lim, err, sizeof err), 0);
+  assert_true(tasks_spec_get_param(ep.decl, tasks_episode_spec_const(&ep), "length_m") == 20.0);
+
+  // A parameter of another task: the message names the task, where it was set and the choices.
+  assert_int_equal(fw_config_set(&c, "task", "obstacles", "a.conf:3", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), -1);
+  assert_non_null(strstr(err, "task obstacles (set at a.conf:3) has no parameter 'length_m'"));
+  assert_non_null(strstr(err, "goal_radius_m"));
+  assert_int_equal(fw_config_task(&c, &ep, &lim, err, sizeof err), -1);
+  // Out of range: the range and the parameter's help.
+  assert_int_equal(fw_config_set(&c, "task_params", "goal_radius_m=9", "test", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), -1);
+  assert_non_null(strstr(err, "goal_radius_m = '9', expected a number in [0.05, 5]"));
+  assert_int_equal(fw_config_set(&c, "task_params", "goal_radius_m=abc", "test", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), -1);
+  assert_int_equal(fw_config_set(&c, "task_params", "goal_radius_m", "test", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), -1);
+  assert_non_null(strstr(err, "expected name=value"));
+  assert_int_equal(fw_config_set(&c, "task_params", "goal_radius_m=0.5,v_mps=0.4", "test", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
+  assert_int_equal(fw_config_task(&c, &ep, &lim, err, sizeof err), 0);
+  assert_ptr_equal(ep.decl, &tasks_obstacles_decl);
+  assert_true(tasks_spec_get_param(ep.decl, tasks_episode_spec_const(&ep), "v_mps") == 0.4);
+}
+
+// eval_poses: the evaluation blocks' own poses; fewer than eval_starts is refused naming both
+// keys; bad syntax names the expected form; fw_config_task gives them to the episode.
+static void test_config_eval_poses(void** state) {
+  (void)state;
+  fw_config_t c;
+  fw_config_defaults(&c);
+  char err[FW_CONFIG_ERR_MAX];
+  assert_int_equal(fw_config_set(&c, "eval_poses", "1,0.5,0.1; 2,-0.5,-0.1", "b.conf:7", err, sizeof err), 0);
+  assert_int_equal(c.eval_poses_n, 2);
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), -1);
+  assert_non_null(strstr(err, "b.conf:7: eval_poses gives 2 poses, but eval_starts"));
+  assert_int_equal(fw_config_set(&c, "eval_starts", "2", "test", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
+  tasks_episode_t ep;
+  assert_int_equal(fw_config_task(&c, &ep, NULL, err, sizeof err), 0);
+  assert_int_equal(tasks_episode_n_eval_starts(&ep), 2);
+  const features_pose_t p1 = tasks_episode_eval_start(&ep, 1);
+  assert_true(p1.x_m == 2.0 && p1.y_m == -0.5 && p1.theta_rad == -0.1);
+  const char* bad[] = {"1,2", "1,2,3;", "a,b,c", "1,2,nan", "1,2,3,4",
+                       "0,0,0;0,0,0;0,0,0;0,0,0;0,0,0;0,0,0;0,0,0;0,0,0;0,0,0;0,0,0;0,0,0;0,0,0;0,0,0;0,0,0;0,0,0;0,0,0;0,0,0"};
+  for (size_t i = 0; i < sizeof bad / sizeof bad[0]; ++i) {
+    fw_config_t d = c;
+    assert_int_equal(fw_config_set(&d, "eval_poses", bad[i], "test", err, sizeof err), -1);
+    assert_non_null(strstr(err, "eval_poses"));
+    assert_int_equal(d.eval_poses_n, 2);  // nothing changed
+  }
+  // Round trip through the file format; "" restores the task's own poses.
+  char buf[4096];
+  FILE* f = fmemopen(buf, sizeof buf, "w");
+  fw_config_print(&c, f);
+  fclose(f);
+  assert_non_null(strstr(buf, "eval_poses = \"1,0.5,0.1; 2,-0.5,-0.1\""));
+  assert_int_equal(fw_config_set(&c, "eval_poses", "", "test", err, sizeof err), 0);
+  assert_int_equal(c.eval_poses_n, 0);
+  assert_int_equal(fw_config_task(&c, &ep, NULL, err, sizeof err), 0);
+  assert_int_equal(tasks_episode_n_eval_starts(&ep), TASKS_N_EVAL_STARTS);
 }
 
 int main(int argc, char** argv) {
@@ -681,6 +765,8 @@ int main(int argc, char** argv) {
       cmocka_unit_test(test_config_program_refuses_joystick_without_operator),
       cmocka_unit_test(test_config_learner_key),
       cmocka_unit_test(test_config_task_name),
+      cmocka_unit_test(test_config_task_params),
+      cmocka_unit_test(test_config_eval_poses),
   };
   return cmocka_run_group_tests_name("firmware.config", tests, setup, teardown);
 }

@@ -2,6 +2,7 @@
 // The checkpoint's controller section: exact round trips, the byte layout of revision 2 (56
 // bytes), every field out of its documented range refused with the field named, and revision 1
 // (96 or 104 bytes, with the policy shift of older controllers) read with its shift reported.
+#include <tasks/decl.h>
 #include "fw/config.h"
 #include "fw/progress.h"
 
@@ -17,7 +18,7 @@
 static fw_progress_t sample(void) {
   fw_progress_t p;
   memset(&p, 0, sizeof p);
-  p.task = FW_TASK_OBSTACLES;
+  p.task = (int32_t)tasks_obstacles_decl.id;
   p.state_dim = 4;
   p.schedule.phase = 2;
   p.schedule.training_runs = 42;
@@ -77,7 +78,7 @@ static void test_progress_round_trip_and_layout(void** state) {
   uint8_t b[FW_PROGRESS_BYTES];
   assert_int_equal(fw_progress_encode(&p, b), FW_PROGRESS_BYTES);
   assert_memory_equal(b, "FWMETA02", 8);
-  assert_int_equal(get_u32(b, 8), FW_TASK_OBSTACLES);
+  assert_int_equal(get_u32(b, 8), (int32_t)tasks_obstacles_decl.id);
   assert_int_equal(get_u32(b, 12), 4);
   assert_int_equal(get_u32(b, 16), 2);
   assert_int_equal(get_u32(b, 20), 42);
@@ -101,7 +102,7 @@ static void test_progress_round_trip_and_layout(void** state) {
   // A fresh start: no run yet, phase 1, nothing counted.
   fw_progress_t fresh;
   memset(&fresh, 0, sizeof fresh);
-  fresh.task = FW_TASK_CORRIDOR;
+  fresh.task = (int32_t)tasks_corridor_decl.id;
   fresh.state_dim = 4;
   fresh.schedule.phase = 1;
   fresh.run_id = -1;
