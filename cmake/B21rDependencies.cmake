@@ -20,7 +20,8 @@ if(NOT TARGET b21r::lcm)
     IMPORTED_LOCATION "${LCM_LIBRARY}"
     INTERFACE_INCLUDE_DIRECTORIES "${LCM_INCLUDE_DIR}")
 endif()
-find_file(LCM_JAR lcm.jar PATHS /usr/share/java /usr/local/share/java)
+# The jar is the build machine's (Java is the same on every architecture), also in a cross build.
+find_file(LCM_JAR lcm.jar PATHS /usr/share/java /usr/local/share/java NO_CMAKE_FIND_ROOT_PATH)
 
 # ODE (double precision in Debian) and libccd: pkg-config only.
 if(B21R_BUILD_SIM)

@@ -21,13 +21,18 @@ and then:
    interceptor) preloaded, leak detection off (the interpreter keeps memory until exit): such an
    extension does not load otherwise.
 
+Installed by the Debian package (docs/robot.md), the tools sit beside the generated types and
+the LCM binding in one folder (/usr/lib/b21r-controller/python): ensure() then does nothing, and
+Debian's python3 runs them.
+
 Only the standard library is used here, so the module works under any Python 3.
 """
 import os
 import sys
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
 VENV = REPO / "build" / "venv"
 VENV_PYTHON = VENV / "bin" / "python3"
 # Searched in this order for the generated Python types (build/<preset>/python/b21r).
@@ -69,9 +74,17 @@ def find_build(marker="python/b21r/__init__.py"):
     return None
 
 
+def installed():
+    """True when this module is the Debian package's (the generated types beside it)."""
+    return (HERE / "b21r" / "__init__.py").is_file()
+
+
 def ensure(need_types=True):
     """Re-executes under the project's venv if needed, then makes the generated types importable.
-    Returns the build folder used (a Path), or None when need_types is False and none exists."""
+    Returns the build folder used (a Path), or None when need_types is False and none exists;
+    installed by the package, its own folder."""
+    if installed():
+        return HERE
     if not _in_venv():
         if os.environ.get(_GUARD) == "1" or not VENV_PYTHON.exists():
             sys.exit(

@@ -11,6 +11,8 @@
 #include "io_posix.h"
 #include "realtime.h"
 
+#include <drivers/notify.h>
+
 #include <b21r/b21r_command_t.h>
 #include <b21r/b21r_teleop_t.h>
 #include <lcm/lcm.h>
@@ -22,6 +24,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 enum { EXIT_USAGE = 2, EXIT_CHECKPOINT = 3, EXIT_DEVICE = 4 };
 
@@ -68,7 +71,9 @@ static void usage(FILE* f) {
           "refused (before any device is opened); 4 a device did not start; 5 lockstep: a device sent\n"
           "nothing for lockstep_timeout_s; 6 a device was lost (end of file, EIO, ENODEV, hang-up) with\n"
           "device_lost_action = exit, or in lockstep; 128+N after signal N (the base is stopped and\n"
-          "braked and the learned state saved first).\n");
+          "braked and the learned state saved first).\n"
+          "Under systemd (Type=notify, NOTIFY_SOCKET set) it sends READY=1 once its devices are open and\n"
+          "the first tick is done, and WATCHDOG=1 every WATCHDOG_USEC/2 after a tick's command.\n");
 }
 
 // ---- LCM receive thread --------------------------------------------------------------------
@@ -121,6 +126,61 @@ static int apply_realtime(const fw_config_t* cfg, fw_loop_t* loop, char* err, si
 }
 
 static void publisher_notify(void* user) { fw_publisher_notify((fw_publisher_t*)user); }
+
+// ---- the tick loop and the service manager ---------------------------------------------------
+
+// Test fault B21R_TEST_HANG_AFTER_TICKS=N (docs/robot.md): the tick thread blocks for good after
+// tick N's command, as a tick stuck in a driver or a bug would; signals are taken and ignored. It
+// shows that the watchdog pings stop and that the base's own command timeout stops the robot.
+static int64_t test_hang_after_ticks(char* err, size_t err_cap) {
+  const char* v = getenv("B21R_TEST_HANG_AFTER_TICKS");
+  if (v == NULL || *v == '\0') {
+    return 0;
+  }
+  char* end = NULL;
+  errno = 0;
+  const long long n = strtoll(v, &end, 10);
+  if (errno != 0 || end == v || *end != '\0' || n < 1) {
+    snprintf(err, err_cap, "B21R_TEST_HANG_AFTER_TICKS='%s' is not a positive tick count (a test setting: unset it)", v);
+    return -1;
+  }
+  return (int64_t)n;
+}
+
+static void test_hang(int64_t tick) {
+  fprintf(stderr, "b21r-controller: test fault: the tick thread hangs after tick %lld (B21R_TEST_HANG_AFTER_TICKS)\n",
+          (long long)tick);
+  for (;;) {
+    pause();
+  }
+}
+
+// fw_loop_run's loop, with the service manager told of it (drivers/notify.h): READY=1 once the
+// devices are open and the first tick is done, WATCHDOG=1 at half the manager's interval. Both go
+// after fw_loop_tick has sent the tick's command, and never wait. Returns the exit status.
+static int run_ticks(fw_loop_t* loop, const fw_config_t* cfg, drv_notify_t* notify, int64_t hang_after) {
+  for (int64_t ticks = 1;; ++ticks) {
+    const bool more = fw_loop_tick(loop, fw_loop_wait(loop));
+    if (ticks == hang_after) {
+      test_hang(ticks);
+    }
+    if (ticks == 1) {
+      char status[600];
+      snprintf(status, sizeof status, "running: laser %s, base %s", cfg->laser_device,
+               cfg->base_protocol == FW_BASE_RFLEX ? cfg->base_device
+                                                   : (cfg->can_socket[0] != '\0' ? cfg->can_socket : cfg->can_interface));
+      (void)drv_notify_ready(notify, io_posix_now_us(), status);
+    } else {
+      (void)drv_notify_tick(notify, io_posix_now_us());
+    }
+    if (!more) {
+      break;
+    }
+  }
+  fw_loop_stats_t st;
+  fw_loop_get_stats(loop, &st);
+  return st.exit_status;
+}
 
 int main(int argc, char** argv) {
   fw_config_t cfg;
@@ -197,6 +257,22 @@ int main(int argc, char** argv) {
   if (print_config) {
     fw_config_print(&cfg, stdout);
     return 0;
+  }
+  // The service manager (systemd, Type=notify) and the test fault, before anything is opened.
+  drv_notify_t notify;
+  const int64_t hang_after = test_hang_after_ticks(err, sizeof err);
+  if (hang_after < 0 || drv_notify_open(&notify, getenv("NOTIFY_SOCKET"), getenv("WATCHDOG_USEC"),
+                                        getenv("WATCHDOG_PID"), getpid(), err, sizeof err) != 0) {
+    fprintf(stderr, "b21r-controller: %s\n", err);
+    return EXIT_USAGE;
+  }
+  if (hang_after > 0) {
+    fprintf(stderr, "b21r-controller: warning: B21R_TEST_HANG_AFTER_TICKS=%lld: a test fault is armed\n",
+            (long long)hang_after);
+  }
+  if (notify.watchdog_us > 0) {
+    fprintf(stderr, "b21r-controller: service watchdog %.3f s: pinged every %.3f s after the tick's command\n",
+            (double)notify.watchdog_us / 1e6, (double)notify.watchdog_us / 2e6);
   }
 
   // Signals: stop the base, brake, checkpoint, exit (handled by the tick).
@@ -299,8 +375,12 @@ int main(int argc, char** argv) {
       status = EXIT_DEVICE;
       fw_loop_signal(loop, 0);
     } else {
-      status = fw_loop_run(loop);
+      status = run_ticks(loop, &cfg, &notify, hang_after);
     }
+    char stopping[64];
+    snprintf(stopping, sizeof stopping, status > 128 ? "stopping: signal %d" : "stopping: exit status %d",
+             status > 128 ? status - 128 : status);
+    (void)drv_notify_stopping(&notify, stopping);
     if (fw_loop_shutdown(loop) != 0 && status == 0) {
       fprintf(stderr, "b21r-controller: the final checkpoint could not be written\n");
       status = EXIT_CHECKPOINT;
@@ -327,5 +407,6 @@ int main(int argc, char** argv) {
   if (lcm != NULL) {
     lcm_destroy(lcm);
   }
+  drv_notify_close(&notify);
   return status;
 }

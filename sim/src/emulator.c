@@ -623,10 +623,12 @@ sim_emu_ctrl_t sim_emu_control(sim_emu_t* e, const char* line, char* reply, size
     sim_plant_get_state(e->plant, &s);
     const uint64_t reports = e->rflex != NULL ? sim_rflex_get_counters(e->rflex)->reports
                                               : sim_cia402_get_counters(e->cia402)->frames_out;
-    (void)snprintf(reply, cap, "ok t=%.3f streaming=%d scans=%llu base_reports=%llu contacts=%llu",
+    const uint64_t trips = e->rflex != NULL ? sim_rflex_get_counters(e->rflex)->watchdog_trips
+                                            : sim_cia402_get_counters(e->cia402)->rpdo_timeouts;
+    (void)snprintf(reply, cap, "ok t=%.3f streaming=%d scans=%llu base_reports=%llu contacts=%llu watchdog_trips=%llu",
                    s.t_s, sim_emu_streaming(e) ? 1 : 0,
                    (unsigned long long)sim_lms_get_counters(e->laser)->scans,
-                   (unsigned long long)reports, (unsigned long long)s.contacts_total);
+                   (unsigned long long)reports, (unsigned long long)s.contacts_total, (unsigned long long)trips);
     return SIM_EMU_CTRL_OK;
   }
   if (strcmp(tok[0], "svg") == 0 && n == 2) {

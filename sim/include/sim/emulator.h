@@ -66,7 +66,8 @@
 ///   base_silent: the rFLEX, or on CANopen the drives (the bump-panel node keeps sending).
 ///   drive_fault: CANopen base only. bumper_silent: CANopen only; the bump-panel node sends
 ///   nothing (no PDO, no heartbeat) for that long.
-/// - `status`: `ok t=<s> streaming=<0|1> scans=<n> base_reports=<n> contacts=<n>`.
+/// - `status`: `ok t=<s> streaming=<0|1> scans=<n> base_reports=<n> contacts=<n> watchdog_trips=<n>`
+///   (watchdog_trips: times the base's command watchdog stopped it: rFLEX trips, CiA 402 RPDO timeouts).
 /// - `svg <path>`: writes the trace picture (sim/svg.h).
 /// - `quit`: reply `ok bye`; sim_emu_control returns SIM_EMU_CTRL_QUIT (the program exits).
 ///

@@ -1,8 +1,10 @@
 # SPDX-License-Identifier: MIT
 """fwtest: shared helpers of the firmware integration tests (the unmodified b21r-controller
 against the b21r-sim emulator in lockstep): start/stop the emulator, talk to its control socket,
-run the controller, read its LCM event log."""
+run the controller, read its LCM event log. B21R_TARGET_EMULATOR (a command, e.g.
+"qemu-aarch64 -L SYSROOT", set by a cross build's CTest) runs both programs under it."""
 import os
+import shlex
 import shutil
 import signal
 import socket
@@ -12,6 +14,9 @@ import tempfile
 import time
 
 from b21r_log import read_log  # noqa: F401  (re-exported for the tests)
+
+# The cross build's emulator of the target machine (CMAKE_CROSSCOMPILING_EMULATOR), or nothing.
+TARGET = shlex.split(os.environ.get("B21R_TARGET_EMULATOR", ""))
 
 
 def fail(msg):
@@ -34,7 +39,7 @@ class Sim:
         for p in (self.ctl, self.endpoints):
             if os.path.exists(p):
                 os.unlink(p)
-        self.proc = subprocess.Popen([*prefix, exe, "--world", world, *(["--lockstep"] if lockstep else []), "--base", base,
+        self.proc = subprocess.Popen([*prefix, *TARGET, exe, "--world", world, *(["--lockstep"] if lockstep else []), "--base", base,
                                       "--seed", str(seed), "--control", self.ctl, "--endpoints", self.endpoints,
                                       *extra],
                                      stdout=self.log, stderr=subprocess.STDOUT)
@@ -70,7 +75,7 @@ class Sim:
 
 
 def controller_cmd(exe, sim, workdir, name, settings):
-    cmd = [exe, "--endpoints", sim.endpoints, "--set", "lockstep=true", "--set", "lcm_url=none",
+    cmd = [*TARGET, exe, "--endpoints", sim.endpoints, "--set", "lockstep=true", "--set", "lcm_url=none",
            "--set", "progress=true", "--log", os.path.join(workdir, name + ".lcmlog")]
     for k, v in settings.items():
         cmd += ["--set", "%s=%s" % (k, v)]

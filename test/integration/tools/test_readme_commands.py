@@ -13,12 +13,18 @@ repository's top folder, as an operator would type it after tools/setup.sh and a
 - A few commands are run for real, exactly as the README writes them (checked verbatim), with
   files made here in place of the README's placeholders: sending an operator command, reading
   a log, drawing its trajectories, offline training from it, converting it to MCAP, drawing
-  what the trained checkpoint learned.
+  what the trained checkpoint learned; the installed programs of docs/robot.md as their sources in
+  this checkout (b21r-teleop: tools/b21r_teleop.py, ...), the controller on the package's
+  /etc/b21r/b21r-controller.conf as this build makes it.
 - The lcm-spy command is started for real under Xvfb (with PROBE_JAR, the accessibility probe
   of the lcm-spy tests): it must open its window and show a B21R_STATUS message sent to the URL
   the command names, decoded.
+- Every `cmake|ctest|cpack --preset NAME` names a preset of CMakePresets.json of that kind.
+- The commands of docs/robot.md that need root and a robot (sudo, systemctl, journalctl) are not
+  run; the unit, configuration file and package file they name are checked against the package's.
 Run inside netns-run: the commands that publish on LCM's default URL stay in this namespace.
 usage: test_readme_commands.py REPO BUILD_DIR [PROBE_JAR]"""
+import json
 import os
 import re
 import shutil
@@ -46,8 +52,55 @@ REAL = [
     ("tools/b21r_mcap.py build/sessions/NAME/controller.lcmlog", {"build/sessions/NAME": "{tmp}"}),
     ("tools/b21r_policy_map.py --checkpoint build/sessions/NAME/hedger.ckpt",
      {"build/sessions/NAME/hedger.ckpt": "{tmp}/trained.ckpt"}),
+    # docs/robot.md: the package's programs, as their sources here.
+    ("b21r-teleop --command CONFIRM_START_POSE", {"b21r-teleop": "tools/b21r_teleop.py"}),
+    ("b21r-log FILE --runs", {"b21r-log": "tools/b21r_log.py", "FILE": "{log}"}),
+    ("b21r-controller --config /etc/b21r/b21r-controller.conf --print-config",
+     {"b21r-controller --config": "{build}/bin/b21r-controller --config",
+      "/etc/b21r/b21r-controller.conf": "{build}/package/b21r-controller.conf"}),
 ]
 SPY_COMMAND = "LCM_DEFAULT_URL='udpm://239.255.76.67:7667?ttl=0' build/host-release/bin/b21r-lcm-spy"
+PRESET_KINDS = {"cmake": "configurePresets", "cmake --build": "buildPresets", "cmake --workflow": "workflowPresets",
+                "ctest": "testPresets", "cpack": "packagePresets"}
+
+
+def check_presets(repo, text):
+    with open(os.path.join(repo, "CMakePresets.json")) as f:
+        presets = json.load(f)
+    n = 0
+    for m in re.finditer(r"\b(cmake --build|cmake --workflow|cmake|ctest|cpack) --preset ([A-Za-z0-9_-]+)", text):
+        kind = PRESET_KINDS[m.group(1)]
+        if m.group(2) not in {p["name"] for p in presets.get(kind, [])}:
+            fwtest.fail("`%s` names no preset of %s" % (m.group(0), kind))
+        n += 1
+    fwtest.note("%d `--preset` commands name existing presets" % n)
+
+
+def check_robot_commands(repo):
+    """docs/robot.md's root-and-robot commands: not run; what they name is the package's."""
+    with open(os.path.join(repo, "docs/robot.md")) as f:
+        text = f.read()
+    with open(os.path.join(repo, "CMakeLists.txt")) as f:
+        version = re.search(r"project\(b21r_learning\s+VERSION\s+([0-9.]+)", f.read()).group(1)
+    with open(os.path.join(repo, "firmware/app/package/conffiles")) as f:
+        conffiles = f.read().split()
+    units = [u[:-len(".service")] for u in os.listdir(os.path.join(repo, "firmware/app/package")) if u.endswith(".service")]
+    lines = [ln.split("#")[0].strip() for ln in text.splitlines()]
+    shown = [ln for ln in lines if re.match(r"(sudo |sudoedit |systemctl |journalctl )", ln)]
+    shown += [c for c in re.findall(r"`((?:sudo |systemctl |journalctl )[^`]*)`", text)]
+    if not shown:
+        fwtest.fail("docs/robot.md shows no systemctl/journalctl command")
+    for cmd in shown:
+        for unit in re.findall(r"\bb21r-[a-z-]+(?=\s|$)", cmd.replace("sudo ", "")):
+            if ("systemctl" in cmd or "journalctl" in cmd) and unit not in units:
+                fwtest.fail("`%s`: no unit %s.service in the package (%s)" % (cmd, unit, units))
+        for path in re.findall(r"/etc/\S+", cmd):
+            if path not in conffiles:
+                fwtest.fail("`%s`: %s is not the package's configuration file %s" % (cmd, path, conffiles))
+        for deb in re.findall(r"b21r-controller_([0-9.]+)_[a-z0-9]+\.deb", cmd):
+            if deb != version:
+                fwtest.fail("`%s`: the package's version is %s" % (cmd, version))
+        fwtest.note("%-44s needs root and the robot: not run; names the package's files" % cmd[:44])
 
 
 def readme_text(repo):
@@ -135,6 +188,8 @@ def main():
                           if p[0] != "venv"))
     if not tools or not programs:
         fwtest.fail("no tool commands found in the READMEs")
+    check_presets(repo, text)
+    check_robot_commands(repo)
     for t in tools:
         path = os.path.join(repo, t)
         if not os.access(path, os.X_OK):

@@ -281,6 +281,8 @@ static void test_emu_realtime_rates_and_watchdog(void** state) {
   // 0.6 s ramp at 0.5 m/s^2 ... the robot moved about 0.3 m/s for ~1 s, then stopped.
   assert_true(s.x_m > 1.2 && s.x_m < 1.45);
   assert_int_equal(sim_rflex_get_counters(sim_emu_rflex(e))->watchdog_trips, 1);
+  assert_int_equal(ctl(e, "status"), SIM_EMU_CTRL_OK);  // the control socket reports the trip
+  assert_non_null(strstr(g_reply, " watchdog_trips=1"));
   sim_emu_destroy(e);
 }
 
