@@ -12,6 +12,7 @@
 #include <tasks/decl.h>
 #include "fw/checkpoint.h"
 #include "fw/config.h"
+#include "fw/config_task.h"
 #include "fw/loop.h"
 #include "fw/progress.h"
 #include "fuzz_util.h"
@@ -107,7 +108,7 @@ static void fix_crcs(uint8_t* f, size_t n, uint8_t flags) {
 // in the middle of phase one and in phase two; each with flags 0 and 3.
 static void write_seeds(const char* dir) {
   hedger_config_t hc;
-  fw_loop_learner_config(&g_cfg, &hc);
+  fw_config_hedger(&g_cfg, &hc);
   hedger_t* h = NULL;
   FUZZ_CHECK(hedger_create(&h, &hc) == HEDGER_OK);
   static uint8_t payload[1 << 20];

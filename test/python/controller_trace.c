@@ -13,6 +13,7 @@
 //                         <checkpoint path>
 #define _POSIX_C_SOURCE 200809L
 #include "fw/checkpoint.h"
+#include "fw/config_task.h"
 #include "fw/loop.h"
 #include "fw/pubq.h"
 #include "inproc_sim.h"
@@ -190,7 +191,7 @@ int main(int argc, char** argv) {
 
   // The learned state as the controller saved it, loaded into a fresh HEDGER.
   hedger_config_t hc;
-  fw_loop_learner_config(&c, &hc);
+  fw_config_hedger(&c, &hc);
   size_t meta_size = 0, payload_size = 0;
   if (fw_checkpoint_peek(c.checkpoint_file, &meta_size, &payload_size, err, sizeof err) != 1) {
     fprintf(stderr, "controller_trace: no checkpoint: %s\n", err);

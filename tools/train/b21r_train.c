@@ -3,7 +3,6 @@
 #include "train.h"
 
 #include <fw/config.h>
-#include <fw/loop.h>
 
 #include <stdio.h>
 #include <stdlib.h>

@@ -4,11 +4,10 @@
 #include "train.h"
 
 #include <fw/checkpoint.h>
-#include <fw/progress.h>
+#include <fw/config_task.h>
 #include <fw/errfmt.h>
-#include <fw/io.h>
-#include <fw/loop.h>
-#include <fw/pubq.h>
+#include <fw/progress.h>
+#include <learn/learn.h>
 
 #include <b21r/b21r_experience_t.h>
 #include <lcm/eventlog.h>
@@ -23,8 +22,10 @@
 struct trainer {
   fw_config_t cfg;
   train_options_t opt;
-  hedger_config_t hc;
-  hedger_t* hedger;
+  void* storage;         // the agent's (learn_storage_size), allocated once
+  learn_t* agent;
+  hedger_t* hedger;      // the agent's learner
+  uint32_t state_dim;    // the learner's state dimension
   train_stats_t stats;
   // The run under way: the controller ends a run (hedger_end_run) before the next one starts.
   bool in_run;
@@ -42,9 +43,48 @@ static double now_s(void) {
 }
 
 trainer_t* trainer_create(const fw_config_t* cfg, const train_options_t* opt, char* err, size_t err_cap) {
+  if (cfg->learner == FW_LEARNER_TABULAR) {
+    fw_errfmt(err, err_cap, "learner = tabular: the offline trainer trains HEDGER only (learner = hedger or lwa)");
+    return NULL;
+  }
+  // The learning framework exactly as the controller sets it up from cfg (fw/config_task.h), but
+  // in phase two from the start: its progress is what the trained checkpoint says, so that the
+  // controller resumes from it with the learned policy.
+  tasks_episode_t ep;
+  if (fw_config_task(cfg, &ep, NULL, err, err_cap) != 0) {
+    return NULL;
+  }
+  learn_task_t task;
+  fw_config_learn_task(cfg, &ep, &task);
+  learn_config_t lc;
+  fw_config_learn_settings(cfg, &lc);
+  lc.mode = LEARN_MODE_LEARN;
+  lc.schedule.evaluate_only = false;
+  lc.schedule.switch_mode = LEARN_SWITCH_RUNS;
+  lc.schedule.phase_one_runs = 0;
+  if (lc.schedule.phase_two_runs < 1) {
+    lc.schedule.phase_two_runs = 1;
+  }
+  const size_t bytes = learn_storage_size(&task, &lc);
+  if (bytes == 0) {
+    fw_errfmt(err, err_cap, "the learner cannot be set up with these settings (check the hedger_* keys)");
+    return NULL;
+  }
   trainer_t* t = (trainer_t*)calloc(1, sizeof *t);
-  if (t == NULL) {
-    fw_errfmt(err, err_cap, "out of memory");
+  void* storage = aligned_alloc(LEARN_STORAGE_ALIGN, (bytes + LEARN_STORAGE_ALIGN - 1U) / LEARN_STORAGE_ALIGN *
+                                                         LEARN_STORAGE_ALIGN);
+  if (t == NULL || storage == NULL) {
+    fw_errfmt(err, err_cap, "out of memory (%zu bytes for the learner)", bytes);
+    free(t);
+    free(storage);
+    return NULL;
+  }
+  char why[LEARN_ERR_MAX];
+  learn_t* agent = learn_init(storage, bytes, &task, &lc, why, sizeof why);
+  if (agent == NULL || learn_get_learner(agent)->hedger == NULL) {
+    fw_errfmt(err, err_cap, "cannot set up the learner with the controller's settings: %s", why);
+    free(t);
+    free(storage);
     return NULL;
   }
   t->cfg = *cfg;
@@ -55,19 +95,10 @@ trainer_t* trainer_create(const fw_config_t* cfg, const train_options_t* opt, ch
   if (!(t->opt.progress_period_s > 0.0)) {
     t->opt.progress_period_s = 1.0;
   }
-  if (cfg->learner == FW_LEARNER_TABULAR) {
-    fw_errfmt(err, err_cap, "learner = tabular: the offline trainer trains HEDGER only (learner = hedger or lwa)");
-    free(t);
-    return NULL;
-  }
-  fw_loop_learner_config(cfg, &t->hc);
-  const hedger_status_t hs = hedger_create(&t->hedger, &t->hc);
-  if (hs != HEDGER_OK) {
-    fw_errfmt(err, err_cap, "cannot set up HEDGER with the controller's settings (%s; check the hedger_* keys)",
-        hedger_status_str(hs));
-    free(t);
-    return NULL;
-  }
+  t->storage = storage;
+  t->agent = agent;
+  t->hedger = learn_get_learner(agent)->hedger;
+  t->state_dim = learn_agent_state_dim(agent);
   t->next_seq = -1;
   t->started_s = now_s();
   t->progress_next_s = t->started_s + t->opt.progress_period_s;
@@ -78,7 +109,7 @@ void trainer_destroy(trainer_t* t) {
   if (t == NULL) {
     return;
   }
-  hedger_destroy(t->hedger);
+  free(t->storage);
   free(t);
 }
 
@@ -128,13 +159,11 @@ int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t er
   return rc;
 }
 
-// The controller's between-runs step (loop.c finish_run): the backward replay, if configured.
+// The controller's between-runs step: the backward replay, if configured.
 static void end_run(trainer_t* t) {
   if (t->in_run && t->run_learned) {
-    uint32_t replayed = 0;
-    (void)hedger_end_run(t->hedger, &replayed);
+    t->stats.replayed += learn_offline_end_run(t->agent);
     t->stats.runs++;
-    t->stats.replayed += replayed;
   }
   t->in_run = false;
   t->run_learned = false;
@@ -153,17 +182,17 @@ static void report_progress(trainer_t* t, const char* path, bool final) {
   const hedger_counters_t* c = hedger_counters(t->hedger);
   fprintf(t->opt.progress, "b21r-train: %s: %llu experiences learned (%.0f/s), %llu runs, store %u/%u\n", path,
           (unsigned long long)t->stats.used, dt > 0.0 ? (double)t->stats.used / dt : 0.0,
-          (unsigned long long)t->stats.runs, c->store_fill, t->hc.capacity);
+          (unsigned long long)t->stats.runs, c->store_fill, hedger_get_config(t->hedger)->capacity);
   fflush(t->opt.progress);
 }
 
 // One decoded experience. Returns 0, or -1 with a message when the log does not fit cfg.
 static int learn(trainer_t* t, const b21r_experience_t* e, const char* path, char* err, size_t err_cap) {
-  if (e->task != (int8_t)t->cfg.task || e->state_dim != (int8_t)t->hc.state_dim) {
+  if (e->task != (int8_t)t->cfg.task || e->state_dim != (int8_t)t->state_dim) {
     fw_errfmt(err, err_cap,
         "%s: experience seq %lld is of task %s with %d state dimensions, but the configuration says task = %s (%u): "
         "give the configuration the controller ran with (--config, or --set task = ... and state_rotation = ...)",
-        path, (long long)e->seq, fw_task_name(e->task), (int)e->state_dim, fw_task_name(t->cfg.task), t->hc.state_dim);
+        path, (long long)e->seq, fw_task_name(e->task), (int)e->state_dim, fw_task_name(t->cfg.task), t->state_dim);
     return -1;
   }
   const bool restart = t->next_seq > 0 && e->seq == 0;
@@ -180,9 +209,7 @@ static int learn(trainer_t* t, const b21r_experience_t* e, const char* path, cha
     t->stats.skipped_eval++;
     return 0;
   }
-  const hedger_status_t hs =
-      hedger_update(t->hedger, e->s, e->action_radps, e->reward, e->s_next, e->terminal ? 1 : 0, NULL);
-  if (hs == HEDGER_OK) {
+  if (learn_offline_transition(t->agent, e->s, e->action_radps, e->reward, e->s_next, e->terminal != 0, NULL)) {
     t->stats.used++;
     t->run_learned = true;
   } else {
@@ -250,149 +277,21 @@ void trainer_finish(trainer_t* t) {
 
 // ---- the checkpoint ------------------------------------------------------------------------
 //
-// The checkpoint's meta section is the controller's own encoding of its schedule's progress
-// (fw/checkpoint.h: "fw_loop's own encoding"). The trainer does not write it itself: it asks
-// the controller's loop for it, through the public fw/loop.h API only. A loop made with the
-// given configuration, but with no phase-one runs left, starts in phase two; its orderly
-// shutdown writes a checkpoint whose meta section says so. That section, with the trained
-// HEDGER as the payload, is the trainer's checkpoint. The loop is never started: it sees an I/O
-// binding that has no devices.
-
-static int64_t null_now(void* user) {
-  (void)user;
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return (int64_t)ts.tv_sec * 1000000 + ts.tv_nsec / 1000;
-}
-static int null_wait(void* user, int64_t deadline_us) {
-  (void)user;
-  (void)deadline_us;
-  return 0;
-}
-static int null_laser_poll(void* user, int64_t now_us, lms_scan_t* out) {
-  (void)user;
-  (void)now_us;
-  (void)out;
-  return 0;
-}
-static ssize_t null_base_read(void* user, uint8_t* buf, size_t cap) {
-  (void)user;
-  (void)buf;
-  (void)cap;
-  return 0;
-}
-static int null_base_write(void* user, const uint8_t* buf, size_t n) {
-  (void)user;
-  (void)buf;
-  (void)n;
-  return 0;
-}
-static int null_can_read(void* user, canopen_frame_t* frame) {
-  (void)user;
-  (void)frame;
-  return 0;
-}
-static int null_can_write(void* user, const canopen_frame_t* frame) {
-  (void)user;
-  (void)frame;
-  return 0;
-}
-
-static const fw_io_vtable_t k_no_devices = {
-    .now_us = null_now,
-    .wait = null_wait,
-    .laser_poll = null_laser_poll,
-    .base_read = null_base_read,
-    .base_write = null_base_write,
-    .can_read = null_can_read,
-    .can_write = null_can_write,
-};
-
-// The controller's meta section for "phase two from the start" under cfg, into a malloc'ed
-// buffer. Returns its size, or 0 with a message.
-static size_t phase_two_meta(const fw_config_t* cfg, const char* dir, uint8_t** meta, char* err, size_t err_cap) {
-  fw_config_t c = *cfg;
-  c.mode = FW_MODE_LEARN;
-  c.phase_switch = FW_SWITCH_RUNS;
-  c.phase_one_runs = 0;
-  if (c.phase_two_runs < 1) {
-    c.phase_two_runs = 1;
-  }
-  c.reposition = FW_REPOSITION_OPERATOR;
-  c.checkpoint_file[0] = '\0';
-  c.log_file[0] = '\0';
-  c.experience_log_file[0] = '\0';
-  *meta = NULL;
-  char tmp[FW_CONFIG_STR_MAX + 64];
-  snprintf(tmp, sizeof tmp, "%s/.b21r-train-meta-%ld.ckpt", dir, (long)getpid());
-  const fw_io_t io = {.vt = &k_no_devices, .user = NULL};
-  // The loop's messages (its shutdown notice) go to a queue nobody drains: not to the terminal.
-  fw_pubq_t* q = fw_pubq_create(16U);
-  const fw_loop_outputs_t out = {.queue = q};
-  fw_loop_t* loop = q != NULL ? fw_loop_create(&c, &io, &out, err, err_cap) : NULL;
-  fw_ckpt_writer_t* w = NULL;
-  size_t meta_size = 0;
-  size_t payload_size = 0;
-  size_t meta_cap = 0;
-  size_t payload_cap = 0;
-  if (loop != NULL) {
-    fw_loop_checkpoint_capacity(loop, &meta_cap, &payload_cap);
-    w = fw_ckpt_writer_create(tmp, meta_cap, payload_cap, err, err_cap);
-  }
-  if (w != NULL) {
-    fw_loop_attach_checkpoints(loop, w);
-    if (fw_loop_shutdown(loop) == 0) {
-      *meta = (uint8_t*)malloc(meta_cap + 1U);
-      void* payload = malloc(payload_cap + 1U);
-      if (*meta == NULL || payload == NULL ||
-          fw_checkpoint_read(tmp, *meta, meta_cap + 1U, &meta_size, payload, payload_cap + 1U, &payload_size, err,
-                             err_cap) != 1) {
-        meta_size = 0;
-      }
-      free(payload);
-    } else {
-      fw_errfmt(err, err_cap, "cannot write a temporary checkpoint in %s", dir);
-    }
-  } else if (q == NULL) {
-    fw_errfmt(err, err_cap, "out of memory");
-  }
-  fw_ckpt_writer_destroy(w);
-  fw_loop_destroy(loop);
-  fw_pubq_destroy(q);
-  (void)unlink(tmp);
-  if (meta_size == 0) {
-    free(*meta);
-    *meta = NULL;
-  }
-  return meta_size;
-}
+// The controller's section says: this task and state dimension, phase two from the start (the
+// agent's schedule, set up so), no run started. The controller resumes from it with the learned
+// policy.
 
 int trainer_write_checkpoint(trainer_t* t, const char* path, bool overwrite, char* err, size_t err_cap) {
   if (!overwrite && access(path, F_OK) == 0) {
     fw_errfmt(err, err_cap, "%s exists; give --force to replace it (or another output file)", path);
     return -1;
   }
-  char dir[FW_CONFIG_STR_MAX];
-  const char* slash = strrchr(path, '/');
-  if (slash == NULL) {
-    snprintf(dir, sizeof dir, ".");
-  } else if ((size_t)(slash - path) < sizeof dir) {
-    memcpy(dir, path, (size_t)(slash - path));
-    dir[slash - path] = '\0';
-    if (dir[0] == '\0') {
-      snprintf(dir, sizeof dir, "/");
-    }
-  } else {
-    fw_errfmt(err, err_cap, "%s: path too long", path);
-    return -1;
-  }
-  uint8_t* meta = NULL;
-  char why[FW_LOOP_ERR_MAX];
-  size_t meta_size = phase_two_meta(&t->cfg, dir, &meta, why, sizeof why);
-  if (meta_size == 0) {
-    fw_errfmt(err, err_cap, "%s: cannot build the controller's section of the checkpoint: %s", path, why);
-    return -1;
-  }
+  const fw_progress_t g = {.task = t->cfg.task,
+                           .state_dim = t->state_dim,
+                           .schedule = learn_schedule(t->agent)->p,
+                           .run_id = -1};
+  uint8_t meta[FW_PROGRESS_BYTES];
+  const size_t meta_size = fw_progress_encode(&g, meta);
   const size_t cap = hedger_serialized_size(t->hedger);
   void* payload = malloc(cap);
   size_t written = 0;
@@ -405,6 +304,5 @@ int trainer_write_checkpoint(trainer_t* t, const char* path, bool overwrite, cha
     rc = fw_checkpoint_write(path, meta, meta_size, payload, written, err, err_cap);
   }
   free(payload);
-  free(meta);
   return rc;
 }

@@ -1,19 +1,21 @@
 // SPDX-License-Identifier: MIT
-/// train.h — Offline training of HEDGER from the controller's experience logs (b21r-train).
+/// train.h — Offline training from the controller's experience logs (b21r-train), through the
+/// learning framework (lib/learn) set up exactly as the controller sets it up from the same
+/// configuration (fw/config_task.h), never through the controller's loop.
 ///
 /// Q-learning is off-policy: every logged transition (s, a, r, s', terminal), whoever chose the
 /// action (example policy, joystick, learned policy, exploration), is a valid training sample.
-/// The trainer feeds the logs' B21R_EXPERIENCE messages, in file order, through exactly the calls
-/// the controller makes online (hedger_update per experience, hedger_end_run after each run, so
-/// the backward replay of hedger_replay too), with the HEDGER settings the controller derives from
-/// the same configuration (fw_loop_learner_config). Training from the log of a session therefore
+/// The trainer feeds the logs' B21R_EXPERIENCE messages, in file order, through the framework's
+/// offline calls, which are the online ones (learn_offline_transition per experience: the update
+/// with q' the greedy value at s'; learn_offline_end_run after each run: the backward replay of
+/// hedger_replay). Training from the log of a session therefore
 /// gives the learned state that session ended with, bit for bit; training from several logs gives
 /// the state of one controller that had lived through them all in order.
 ///
 /// By default only the experiences the controller learned from are used (training runs; not
 /// evaluation runs, where learning is off); train_options_t.include_eval adds those too.
 ///
-/// Memory: one HEDGER instance of the configured capacity (hedger_storage_size), one decoded
+/// Memory: one agent of the configured capacity (learn_storage_size), one decoded
 /// event at a time (the logs are streamed, never loaded whole). Not thread-safe.
 #ifndef B21R_TOOLS_TRAIN_H
 #define B21R_TOOLS_TRAIN_H
@@ -45,12 +47,12 @@ typedef struct train_options {
 typedef struct train_stats {
   uint64_t events;            ///< log events read (all channels)
   uint64_t experiences;       ///< B21R_EXPERIENCE messages decoded
-  uint64_t used;              ///< experiences given to hedger_update successfully
+  uint64_t used;              ///< experiences learned (learn_offline_transition succeeded)
   uint64_t skipped_eval;      ///< experiences of evaluation runs left out (include_eval off)
   uint64_t refused;           ///< experiences HEDGER refused (non-finite values): counted, skipped
   uint64_t undecodable;       ///< messages on the channel that did not decode as experience_t
   uint64_t seq_gaps;          ///< gaps in the experiences' seq (lost messages in the recording)
-  uint64_t runs;              ///< runs ended (hedger_end_run calls)
+  uint64_t runs;              ///< runs ended (learn_offline_end_run calls)
   uint64_t replayed;          ///< updates done by backward replay at run ends
   /// --init's file was written by an older controller whose policy added a shift learned from
   /// ranked pairs of runs (fw_progress_t.legacy_shift): its values are trained on, the shift is gone
@@ -60,8 +62,9 @@ typedef struct train_stats {
 
 typedef struct trainer trainer_t;
 
-/// Builds a trainer for the controller configuration cfg (already validated): HEDGER with the
-/// controller's settings (fw_loop_learner_config). Returns NULL with a message on failure.
+/// Builds a trainer for the controller configuration cfg (already validated): the learning
+/// framework with the controller's settings, in phase two from the start (what the written
+/// checkpoint says). Returns NULL with a message on failure.
 trainer_t* trainer_create(const fw_config_t* cfg, const train_options_t* opt, char* err, size_t err_cap);
 
 /// Starts from the learned state of an existing checkpoint (the controller's or a trainer's)

@@ -181,3 +181,18 @@ void fw_config_print_task_params(FILE* out) {
     }
   }
 }
+
+void fw_config_hedger(const fw_config_t* cfg, hedger_config_t* out) {
+  tasks_episode_t ep;
+  char err[FW_CONFIG_ERR_MAX];
+  if (fw_config_task(cfg, &ep, NULL, err, sizeof err) != 0) {
+    tasks_episode_init(&ep, NULL, NULL);
+  }
+  learn_task_t task;
+  fw_config_learn_task(cfg, &ep, &task);
+  learn_config_t lc;
+  fw_config_learn_settings(cfg, &lc);
+  learn_learner_config_t llc;
+  learn_learner_config(&task, &lc, &llc);
+  *out = llc.hedger;
+}

@@ -40,25 +40,6 @@ static void setup_task(fw_loop_t* L) {
   (void)fw_config_task(cfg, &L->ep, &L->limits, err, sizeof err);
 }
 
-void fw_loop_learner_config(const fw_config_t* cfg, hedger_config_t* out) {
-  // A throw-away loop state carries the task the learner's configuration depends on.
-  fw_loop_t* L = (fw_loop_t*)calloc(1, sizeof *L);
-  if (L == NULL) {
-    *out = hedger_config_default();
-    return;
-  }
-  L->cfg = *cfg;
-  setup_task(L);
-  learn_task_t task;
-  fw_config_learn_task(cfg, &L->ep, &task);
-  learn_config_t lc;
-  fw_config_learn_settings(cfg, &lc);
-  learn_learner_config_t llc;
-  learn_learner_config(&task, &lc, &llc);
-  *out = llc.hedger;
-  free(L);
-}
-
 fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_loop_outputs_t* out, char* err,
                           size_t err_cap) {
   if (fw_config_validate(cfg, err, err_cap) != 0) {

@@ -531,6 +531,38 @@ bool learn_finish_now(learn_t* a, learn_experience_t* exp) {
   return had;
 }
 
+bool learn_offline_transition(learn_t* a, const double* s, double action, double reward, const double* s_next,
+                              bool terminal, learn_experience_t* exp) {
+  double q_next = 0.0;
+  if (!terminal) {
+    (void)learn_learner_greedy(&a->learner, s_next, NULL, &q_next);
+  }
+  double q = 0.0;
+  hedger_kind_t kind = HEDGER_KIND_UNKNOWN;
+  if (!learn_learner_learn(&a->learner, s, action, reward, s_next, terminal, q_next, &q, &kind)) {
+    return false;
+  }
+  a->steps++;
+  if (exp != NULL) {
+    memset(exp, 0, sizeof *exp);
+    memcpy(exp->s, s, a->state_dim * sizeof(double));
+    memcpy(exp->s_next, s_next, a->state_dim * sizeof(double));
+    exp->a = action;
+    exp->reward = reward;
+    exp->terminal = terminal;
+    exp->q = isfinite(q) ? q : 0.0;
+    exp->q_kind = kind;
+  }
+  return true;
+}
+
+uint64_t learn_offline_end_run(learn_t* a) {
+  const uint64_t before = learn_learner_stats(&a->learner).replayed_updates;
+  learn_learner_end_run_begin(&a->learner);
+  (void)learn_learner_end_run_step(&a->learner, UINT32_MAX);
+  return learn_learner_stats(&a->learner).replayed_updates - before;
+}
+
 void learn_request_phase_two(learn_t* a) { learn_schedule_request_phase_two(&a->sched); }
 
 const learn_schedule_t* learn_schedule(const learn_t* a) { return &a->sched; }

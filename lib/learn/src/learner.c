@@ -121,6 +121,8 @@ learn_learner_stats_t learn_learner_stats(const learn_learner_t* lr) {
     st.capacity = tabq_cells(lr->tabq);
     st.predictions_lwa = c->predictions_known;
     st.predictions_unknown = c->predictions_unknown;
+    st.updates = c->updates;
+    st.replayed_updates = c->replayed_updates;
     return st;
   }
   const hedger_counters_t* c = hedger_counters(lr->hedger);
@@ -131,5 +133,7 @@ learn_learner_stats_t learn_learner_stats(const learn_learner_t* lr) {
   st.predictions_unknown = c->predictions_unknown;
   st.evictions = c->evictions;
   st.rebuilds = c->rebuilds;
+  st.updates = c->updates;
+  st.replayed_updates = c->replayed_updates;
   return st;
 }

@@ -13,6 +13,7 @@
 // Arguments: `--set key=value` (repeatable) measures another setting, e.g. a larger hedger_k_max.
 #define _POSIX_C_SOURCE 200809L
 #include "fw/checkpoint.h"
+#include "fw/config_task.h"
 #include "loop_harness.h"
 
 #include <hedger/hedger.h>
@@ -45,7 +46,7 @@ static int cmp_i64(const void* a, const void* b) {
 // Writes a checkpoint holding n synthetic samples with plausible corridor values.
 static int write_store(const fw_config_t* cfg, uint32_t n, const char* path) {
   hedger_config_t hc;
-  fw_loop_learner_config(cfg, &hc);
+  fw_config_hedger(cfg, &hc);
   hedger_t* h = NULL;
   if (hedger_create(&h, &hc) != HEDGER_OK) {
     return -1;

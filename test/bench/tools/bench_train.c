@@ -24,6 +24,8 @@
 #include "loop_harness.h"
 #include "train.h"
 
+#include <fw/config_task.h>
+
 #include <hedger/hedger.h>
 #include <lcm/eventlog.h>
 
@@ -197,7 +199,7 @@ static int measure(fw_config_t* c, const char* dir, measured_t* m) {
     return -1;
   }
   hedger_config_t hc;
-  fw_loop_learner_config(c, &hc);
+  fw_config_hedger(c, &hc);
   exp_rec_t* x = (exp_rec_t*)malloc((size_t)n_log * sizeof *x);
   if (x == NULL) {
     return -1;

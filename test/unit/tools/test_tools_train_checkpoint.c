@@ -10,7 +10,7 @@
 #include <tasks/decl.h>
 #include <fw/checkpoint.h>
 #include <fw/config.h>
-#include <fw/loop.h>
+#include <fw/config_task.h>
 #include <fw/progress.h>
 #include <hedger/hedger.h>
 
@@ -39,7 +39,7 @@ static fw_config_t obstacle_config(void) {
 // section in phase two, of revision 2 (legacy_a < 0) or of revision 1 with its shift's a = legacy_a.
 static void write_init(const fw_config_t* cfg, const char* path, double legacy_a) {
   hedger_config_t hc;
-  fw_loop_learner_config(cfg, &hc);
+  fw_config_hedger(cfg, &hc);
   hedger_t* h = NULL;
   assert_int_equal(hedger_create(&h, &hc), HEDGER_OK);
   const double s[5] = {0.1, 2.5, -0.3, 1.2, 0.0};

@@ -26,6 +26,7 @@
 
 #include <fw/checkpoint.h>
 #include <fw/config.h>
+#include <fw/config_task.h>
 #include <fw/loop.h>
 #include <fw/progress.h>
 #include <learn/schedule.h>
@@ -679,7 +680,7 @@ nb::dict controller_learner_config(const std::string& task, const nb::dict& sett
       throw nb::value_error(err);
   }
   hedger_config_t hc;
-  fw_loop_learner_config(&cfg, &hc);
+  fw_config_hedger(&cfg, &hc);
   return fields_dict(hc, kHedgerFields);
 }
 

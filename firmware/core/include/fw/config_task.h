@@ -39,6 +39,13 @@ void fw_config_learn_task(const fw_config_t* cfg, const tasks_episode_t* ep, lea
 /// cfg->seed as the controller derives them).
 void fw_config_learn_settings(const fw_config_t* cfg, learn_config_t* out);
 
+/// The HEDGER configuration the controller derives from cfg (state dimension, action bounds, input
+/// scales, capacity, ...), for offline tools that build compatible HEDGER states or read
+/// checkpoints (learner = lwa: local_model = HEDGER_LOCAL_LWA; learner = tabular uses no HEDGER,
+/// and this is the configuration HEDGER would have). An undeclared task or a bad task_params
+/// gives the corridor's defaults (validate cfg first). O(parameters).
+void fw_config_hedger(const fw_config_t* cfg, hedger_config_t* out);
+
 /// The seeds the controller derives from cfg->seed, in this order: the training start poses,
 /// exploration, HEDGER's eviction generator, the drivers' per-run streams.
 typedef struct fw_config_seeds {

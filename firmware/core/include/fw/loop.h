@@ -126,12 +126,6 @@ typedef struct fw_loop_stats {
 fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_loop_outputs_t* out, char* err,
                           size_t err_cap);
 
-/// The learner's configuration the loop derives from cfg (state dimension, action bounds, input
-/// scales, capacity, ...), for offline tools that build compatible HEDGER states or read
-/// checkpoints (learner = lwa: local_model = HEDGER_LOCAL_LWA; learner = tabular uses no HEDGER,
-/// and this is the configuration HEDGER would have). O(1).
-void fw_loop_learner_config(const fw_config_t* cfg, hedger_config_t* out);
-
 /// Capacities a checkpoint writer needs for this loop (meta section, learner's payload at a full
 /// store), to size fw_ckpt_writer_create(). O(1).
 void fw_loop_checkpoint_capacity(const fw_loop_t* loop, size_t* meta_bytes, size_t* payload_bytes);

@@ -279,6 +279,18 @@ bool learn_replaying(const learn_t* a);
 /// at most replay_passes × the run's length updates. *exp and the return as learn_after_command.
 bool learn_finish_now(learn_t* a, learn_experience_t* exp);
 
+/// Offline learning from logged transitions (b21r-train), through exactly the calls a run makes
+/// online: the update of (s, a, r, s', terminal) with q' the learner's greedy value at s' (0 when
+/// terminal), recorded for the run's backward replay. The schedule and the run bookkeeping are not
+/// touched; s and s_next have learn_agent_state_dim values. *exp (may be NULL) receives the
+/// update's record. Returns false when the learner refused the transition (a value not finite;
+/// nothing changed). Cost: one greedy search and one update.
+bool learn_offline_transition(learn_t* a, const double* s, double action, double reward, const double* s_next,
+                              bool terminal, learn_experience_t* exp);
+/// The end of a logged run: its whole backward replay at once (not for a tick), as a training run
+/// ends online. Returns the replayed updates. O(replay_passes × the run's length) updates.
+uint64_t learn_offline_end_run(learn_t* a);
+
 /// The operator's START_PHASE_TWO: phase two starts at the next run boundary. O(1).
 void learn_request_phase_two(learn_t* a);
 

@@ -57,6 +57,8 @@ typedef struct learn_learner_stats_s {
   uint64_t predictions_unknown;
   uint64_t evictions;
   uint64_t rebuilds;
+  uint64_t updates;              ///< training updates, including replayed ones
+  uint64_t replayed_updates;     ///< updates done by backward replay
 } learn_learner_stats_t;
 
 /// Bytes of storage the learner of cfg needs (a multiple of LEARN_LEARNER_ALIGN); 0 when cfg is
