@@ -3,7 +3,7 @@
 // bump-panel node over CANopen frames. Both feed the same odometry integrator
 // (rflex_odometry_t: heading first, then translation) and the same bumper mask (bit p = panel p,
 // the rFLEX DIO numbering).
-#include "loop_internal.h"
+#include "base.h"
 
 #include <math.h>
 #include <stdio.h>

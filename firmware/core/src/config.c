@@ -3,7 +3,6 @@
 // the parser, the error messages, --help and the reference file cannot drift apart.
 #include "fw/config.h"
 #include "fw/errfmt.h"
-#include "fw/progress.h"
 
 #include <hedger/hedger.h>
 #include <tasks/decl.h>

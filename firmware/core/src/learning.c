@@ -12,7 +12,8 @@
 // replay updates, then checkpoint_points_per_tick points of the save, and the next run starts
 // when the work is done. The work is counted in updates and points, never in time, so a lockstep
 // run stays a function of its inputs however loaded the machine is.
-#include "loop_internal.h"
+#include "learning.h"
+#include "outputs.h"
 #include "fw/config_task.h"
 #include "fw/progress.h"
 

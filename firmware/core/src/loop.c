@@ -6,9 +6,15 @@
 // action, run.c) → act (clamp, send) → learn (the step's update and between-run work, learning.c,
 // only after the command went out) → publish (pose, scan, status).
 #define _POSIX_C_SOURCE 200809L
-#include "loop_internal.h"
-#include "fw/config_task.h"
 
+#include "fw/loop.h"
+
+#include "base.h"
+#include "learning.h"
+#include "operator.h"
+#include "outputs.h"
+#include "run.h"
+#include "fw/config_task.h"
 #include "fw/prefault.h"
 
 #include <math.h>

@@ -2,7 +2,8 @@
 // Operator input: B21R_TELEOP and B21R_COMMAND arrive on another thread (the LCM receiver) into
 // small mailboxes; the tick drains and validates them (finite, in range, newer sequence number,
 // fresh).
-#include "loop_internal.h"
+#include "operator.h"
+#include "outputs.h"
 
 #include <math.h>
 #include <stdio.h>

@@ -2,7 +2,8 @@
 // The loop's messages: experience, pose, scan, evaluation block, status, and text lines, all
 // handed to the publisher queue (reserve / fill in place / commit: never blocks, a full queue
 // drops and counts).
-#include "loop_internal.h"
+#include "outputs.h"
+#include "base.h"
 
 #include <math.h>
 #include <stdarg.h>
@@ -279,7 +280,7 @@ void fw_out_config(fw_loop_t* L) {
   c->max_rotation_accel_radps2 = L->limits.max_rotation_accel_radps2;
   c->teleop_timeout_s = L->cfg.teleop_timeout_s;
   c->tick_rate_hz = L->cfg.tick_rate_hz;
-  c->step_limit = (int32_t)fw_run_step_limit(L);
+  c->step_limit = (int32_t)tasks_episode_step_limit(&L->ep);
   c->task = (int8_t)L->cfg.task;
   c->lockstep = L->cfg.lockstep ? 1 : 0;
   fw_pubq_commit(L->out.queue);

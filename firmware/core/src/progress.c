@@ -2,7 +2,6 @@
 // The checkpoint's controller section: encoding and a validating decoder (fw/progress.h).
 #include "fw/progress.h"
 
-#include "fw/config.h"
 #include "le_bytes.h"
 #include "fw/errfmt.h"
 

@@ -3,12 +3,12 @@
 // driver of each run (the example policy, a simulated person, the evaluated reference), the
 // observation of each step, and the run's end record. Who acts and what is learned is the
 // framework's (lib/learn).
-#include "loop_internal.h"
+#include "run.h"
+#include "learning.h"
+#include "outputs.h"
 
 #include <math.h>
 #include <string.h>
-
-uint32_t fw_run_step_limit(const fw_loop_t* L) { return tasks_episode_step_limit(&L->ep); }
 
 bool fw_run_running(const fw_loop_t* L) {
   return L->mode == B21R_STATUS_T_MODE_RUNNING || L->mode == B21R_STATUS_T_MODE_EVALUATING;

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: MIT
-// Private state of the loop core and the functions its files share:
+// Private state of the loop core (struct fw_loop), shared by the files of the loop, each of which
+// declares its own functions in its own private header:
 //   loop.c      the tick (sense → safety → decide → act → learn → publish), pacing, start-up,
 //               shutdown;
 //   run.c       the run lifecycle (repositioning, start poses, the task's driver, run ends) around
@@ -10,8 +11,8 @@
 //   outputs.c   the messages (experience, pose, scan, eval, status, text lines);
 //   operator.c  B21R_TELEOP / B21R_COMMAND mailboxes and their validation;
 //   base.c      the base adapters (rFLEX bytes, CANopen frames).
-#ifndef FW_LOOP_INTERNAL_H
-#define FW_LOOP_INTERNAL_H
+#ifndef FW_LOOP_STATE_H
+#define FW_LOOP_STATE_H
 
 #include "fw/loop.h"
 #include "fw/safety.h"
@@ -234,81 +235,4 @@ struct fw_loop {
   int64_t pace_ticks;
 };
 
-// ---- base.c: protocol adapters ----
-int fw_base_start(fw_loop_t* L, char* err, size_t err_cap);
-void fw_base_poll(fw_loop_t* L, int64_t now_us);
-bool fw_base_all_reports(const fw_loop_t* L);
-bool fw_base_any_report(const fw_loop_t* L);
-void fw_base_clear_flags(fw_loop_t* L);
-void fw_base_evaluate_faults(fw_loop_t* L, int64_t now_us);
-void fw_base_command(fw_loop_t* L, double v_mps, double w_radps, bool stopping);
-void fw_base_shutdown(fw_loop_t* L);
-/// The base's device came back (reopened after a loss): repeat its start-up without waiting
-/// (rFLEX start packets; CANopen NMT start, the drives are enabled again tick by tick) and take
-/// the next odometry as a new baseline.
-void fw_base_restart(fw_loop_t* L);
-uint64_t fw_base_bytes_dropped(const fw_loop_t* L);
-uint64_t fw_base_checksum_errors(const fw_loop_t* L);
-
-// ---- outputs.c ----
-void fw_loop_log(fw_loop_t* L, int stream, const char* format, ...) __attribute__((format(printf, 3, 4)));
-void fw_out_experience(fw_loop_t* L, const learn_experience_t* e);
-void fw_out_pose(fw_loop_t* L);
-void fw_out_scan(fw_loop_t* L);
-void fw_out_eval(fw_loop_t* L, const learn_eval_block_t* block);
-void fw_out_status(fw_loop_t* L);
-/// B21R_CONFIG (once, at start-up).
-void fw_out_config(fw_loop_t* L);
-/// B21R_RUN of the run that ended, if one is waiting (after its last experience went out).
-void fw_out_run_end(fw_loop_t* L);
-void fw_out_notify(fw_loop_t* L);
-int8_t fw_out_status_mode(const fw_loop_t* L);
-
-// ---- operator.c ----
-void fw_operator_drain(fw_loop_t* L, int64_t now_us);
-
-// ---- run.c ----
-uint32_t fw_run_step_limit(const fw_loop_t* L);
-bool fw_run_joystick_drives(const fw_loop_t* L);
-bool fw_run_running(const fw_loop_t* L);
-/// The pose of the run's odometry (run_odometry: (0, 0, 0) where the run started).
-features_pose_t fw_run_odom_pose(const fw_loop_t* L);
-/// Once per tick after base.odometry's update: run_starting restarts run_odometry at the
-/// current counts; otherwise it integrates the same counts as base.odometry. O(1).
-void fw_run_odometry_update(fw_loop_t* L, bool run_starting);
-/// The state of the newest scan (features at the odometry pose, and the learner's state from
-/// them); false when unusable. *finite: every value of the learner's state is finite.
-bool fw_run_observe(fw_loop_t* L, bool* finite);
-void fw_run_begin_repositioning(fw_loop_t* L);
-/// Repositioning: requests the start pose, and starts the run once it stands (and the learner is
-/// idle). Sets *v/*w and returns true when the run's first command was decided.
-bool fw_run_reposition(fw_loop_t* L, bool state_ok, double* v, double* w);
-/// One step of a running run (a new, usable state this tick); contact = the bumper fired.
-void fw_run_step(fw_loop_t* L, uint8_t contact, double* v, double* w);
-/// Ends a running run that has no terminal state: end_reason B21R_RUN_T_END_*, stop_reason the
-/// fw_stop_reason_t of a safety stop (else 0), why a static string (kept by B21R_RUN).
-void fw_run_abort(fw_loop_t* L, int8_t end_reason, int32_t stop_reason, const char* why);
-/// While stopped for a bump in the emulator: asks for the next start pose once.
-void fw_run_request_pose_while_stopped(fw_loop_t* L);
-
-// ---- learning.c ----
-/// Sets up the framework for the configured task in one block allocated here (the only
-/// allocation); -1 with a message.
-int fw_learning_init(fw_loop_t* L, char* err, size_t err_cap);
-void fw_learning_free(fw_loop_t* L);
-/// After the command: the queued step's update (or prediction) and its experience message, and a
-/// slice of between-run work (the framework's replay, then the checkpoint).
-void fw_learning_after_command(fw_loop_t* L);
-/// A training run ended (its last transition is queued): replay and checkpoint follow.
-void fw_learning_run_ended(fw_loop_t* L);
-/// True when no between-run work is left (a run may start).
-bool fw_learning_idle(const fw_loop_t* L);
-/// Finishes all between-run work at once (shutdown; not for the tick): the replay (at most
-/// hedger_replay_passes × the run's length updates), so that the checkpoint holds it.
-void fw_learning_finish_now(fw_loop_t* L);
-/// Serialises the learned state and the schedule's progress into the writer at once (shutdown).
-void fw_learning_checkpoint_now(fw_loop_t* L);
-/// Emits the held progress lines once the checkpoint they wait for is written (force: now).
-void fw_out_release_lines(fw_loop_t* L, bool force);
-
-#endif  // FW_LOOP_INTERNAL_H
+#endif  // FW_LOOP_STATE_H
