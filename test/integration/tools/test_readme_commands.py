@@ -13,8 +13,9 @@ repository's top folder, as an operator would type it after tools/setup.sh and a
 - A few commands are run for real, exactly as the README writes them (checked verbatim), with
   files made here in place of the README's placeholders: sending an operator command (signed with
   the key in the plain environment's home, for a controller session this test announces: the
-  command must arrive with a valid mac), reading a log, drawing its trajectories, offline training
-  from it.
+  command must arrive with a valid mac), creating and identifying an operator key, reading a log,
+  drawing its trajectories, offline training from it.
+The READMEs are README.md, sim/README.md and docs/robot.md.
 Run inside netns-run: the commands that publish on LCM's default URL stay in this namespace.
 usage: test_readme_commands.py REPO BUILD_DIR"""
 import os
@@ -39,6 +40,8 @@ PLAIN_ENV = {"PATH": "/usr/local/bin:/usr/bin:/bin", "HOME": "", "LANG": "C.UTF-
 # Commands run for real: (text as the README shows it, placeholder substitutions).
 REAL = [
     ("tools/b21r_teleop.py --command CONFIRM_START_POSE", {}),
+    ("tools/b21r_key.py create /etc/b21r/operator.key", {"/etc/b21r/operator.key": "{tmp}/etc/b21r/operator.key"}),
+    ("tools/b21r_key.py id", {}),
     ("tools/b21r_log.py FILE --gaps --runs", {"FILE": "{log}"}),
     ("tools/b21r_trajectories.py LOG --out runs.png", {"LOG": "{log}", "runs.png": "{tmp}/runs.png"}),
     ("build/host-release/bin/b21r-train --config robot.conf --out trained.ckpt run1.lcmlog run2.lcmlog",
@@ -49,7 +52,7 @@ REAL = [
 
 def readme_text(repo):
     parts = []
-    for path in ("README.md", "sim/README.md"):
+    for path in ("README.md", "sim/README.md", "docs/robot.md"):
         with open(os.path.join(repo, path)) as f:
             parts.append(f.read())
     return "\n".join(parts)
@@ -172,7 +175,10 @@ def main():
         time.sleep(0.3)
         if command_t.CONFIRM_START_POSE not in controller.commands:
             fwtest.fail("`tools/b21r_teleop.py --command CONFIRM_START_POSE`: no signed command arrived")
-        fwtest.note("the operator command arrived signed for the session")
+        made = os.path.join(tmp, "etc", "b21r", "operator.key")
+        if oct(os.stat(made).st_mode & 0o777) != "0o600" or len(b21r_opauth.load_key(made)) != 32:
+            fwtest.fail("`tools/b21r_key.py create`: %s is not a key with mode 600" % made)
+        fwtest.note("the operator command arrived signed for the session; the new key has mode 600")
     finally:
         if controller is not None:
             controller.stop = True
