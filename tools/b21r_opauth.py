@@ -205,14 +205,19 @@ class SessionTracker:
 
 
 class Signer:
-    """Signs and publishes operator messages for the current session. seq counts the messages of
-    each channel, from the wall clock in µs when the signer was made (so a restarted tool goes on
-    above the seqs it sent before), one up per message, so that the controller's window of 64
-    covers the last 64 messages. Several tools of one operator share the count: a signer that hears
-    an authentic message of the current session on its channels (another tool's, e.g. a one-shot
-    --command) moves its own count above it; a forged one cannot move it (its mac is checked)."""
+    """Signs and publishes operator messages for the current session. seq starts from the wall
+    clock in µs when the signer is made (so a restarted tool goes on above the seqs it sent
+    before). On B21R_TELEOP it then counts the messages, one up each, so that the controller's
+    window of 64 covers the last 64 (a joystick drives from one tool at a time). On B21R_COMMAND it
+    is the wall clock in µs (one up at least), so that the commands of several tools keep their
+    order even where one tool does not hear the other (a person at the robot confirming the start
+    pose with ttl=0 while a remote operator's tool runs: the remote PAUSE that follows is newer).
+    The tools' clocks must agree to well under the time between two commands (NTP). A signer that
+    hears an authentic message of the current session on its channels (another tool's) also moves
+    its own seq above it; a forged one cannot move it (its mac is checked)."""
 
     CHANNELS = ("B21R_TELEOP", "B21R_COMMAND")
+    CLOCKED = ("B21R_COMMAND",)
 
     def __init__(self, lc, key, sessions, wall=time.time):
         from b21r import command_t, teleop_t
@@ -239,8 +244,11 @@ class Signer:
         self.last_seq[channel] = m.seq
 
     def next_seq(self, channel):
-        self.last_seq[channel] += 1
-        return self.last_seq[channel]
+        seq = self.last_seq[channel] + 1
+        if channel in self.CLOCKED:
+            seq = max(seq, int(self.wall() * 1e6))
+        self.last_seq[channel] = seq
+        return seq
 
     def publish(self, channel, msg):
         """Fills msg's seq, key_id, session and mac and publishes it. Returns False (nothing sent)

@@ -200,7 +200,7 @@ class Sessions(unittest.TestCase):
         self.assertTrue(again.publish("B21R_TELEOP", t))
         sent = [(ch, (teleop_t if ch == "B21R_TELEOP" else command_t).decode(d)) for ch, d in self.lc.sent]
         self.assertEqual([m.seq for ch, m in sent if ch == "B21R_TELEOP"], [1000000001, 1000000002, 2000000001])
-        self.assertEqual([m.seq for ch, m in sent if ch == "B21R_COMMAND"], [1000000001])
+        self.assertEqual([m.seq for ch, m in sent if ch == "B21R_COMMAND"], [2000000000])  # the clock
         for ch, m in sent:
             self.assertEqual(bytes(m.session), NONCE)
             self.assertEqual(bytes(m.mac), oa.mac(KEY, ch, m))
@@ -219,6 +219,22 @@ class Sessions(unittest.TestCase):
         self.assertEqual(signer.last_seq["B21R_COMMAND"], 3000000001)
         signer.publish("B21R_COMMAND", command_t())
         self.assertEqual(command_t.decode(self.lc.sent[-1][1]).seq, 3000000002)
+
+    def test_commands_of_tools_that_do_not_hear_each_other_keep_their_order(self):
+        # A person at the robot confirms with a one-shot tool (ttl=0: the remote tool does not hear
+        # it); the remote operator's tool, started earlier, then pauses: its PAUSE must be newer.
+        self.announce(session(10))
+        wall = [1000.0]
+        remote = oa.Signer(self.lc, KEY, self.tracker, wall=lambda: wall[0])
+        remote.publish("B21R_TELEOP", teleop_t())
+        wall[0] = 1500.0
+        local = oa.Signer(FakeLcm(), KEY, self.tracker, wall=lambda: wall[0])
+        local.publish("B21R_COMMAND", command_t())
+        wall[0] = 1501.0
+        remote.publish("B21R_COMMAND", command_t())
+        confirm = command_t.decode(local.lc.sent[-1][1]).seq
+        pause = command_t.decode(self.lc.sent[-1][1]).seq
+        self.assertGreater(pause, confirm)
 
 if __name__ == "__main__":
     unittest.main(argv=[sys.argv[0]] + sys.argv[1:])
