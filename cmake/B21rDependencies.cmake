@@ -52,6 +52,12 @@ endif()
 
 find_package(Threads REQUIRED)
 
+# OpenSSL's libcrypto: HMAC-SHA256, SHA-256 and the CSPRNG of the authenticated operator messages
+# (firmware/core/src/opauth.c). Debian's libssl-dev; FindOpenSSL gives OpenSSL::Crypto.
+if(B21R_BUILD_FIRMWARE)
+  find_package(OpenSSL 3 REQUIRED COMPONENTS Crypto)
+endif()
+
 if(B21R_BUILD_JAVA_TYPES)
   find_package(Java 11 COMPONENTS Development)
   if(NOT Java_FOUND OR NOT LCM_JAR)

@@ -16,7 +16,9 @@ Command line:
 The controller's --log file stamps events with the wall clock (the controller's own time, which
 is simulated in lockstep, is each message's utime); its --experience-log file with utime.
 Messages are decoded by their LCM type fingerprint, so every type of the project is read
-whatever the channel is called. A controller restart inside one recording (seq starting again
+whatever the channel is called; B21R_TELEOP and B21R_COMMAND recorded before they were signed
+decode as teleop_v1_t and command_v1_t. Events of a type this build does not know (another
+version of a message) are skipped, and listing the events says how many, per channel. A controller restart inside one recording (seq starting again
 at 0) begins a new segment and is not counted as a gap.
 Runs from a plain shell after tools/setup.sh and a build (b21r_bootstrap finds the venv and the
 generated types).
@@ -50,9 +52,10 @@ def _types_by_fingerprint():
 FINGERPRINTS = _types_by_fingerprint()
 
 
-def read_log(path, channels=None):
+def read_log(path, channels=None, skipped=None):
     """All events of the log with a B21R type (optionally only the given channels), decoded, in
-    file order: [(timestamp_us, channel, message)]. Events of unknown types are skipped."""
+    file order: [(timestamp_us, channel, message)]. Events of unknown types are skipped, and
+    counted per channel in the dict `skipped` when one is given."""
     out = []
     log = lcm.EventLog(path, "r")
     try:
@@ -61,6 +64,8 @@ def read_log(path, channels=None):
                 continue
             t = FINGERPRINTS.get(bytes(ev.data[:8]))
             if t is None:
+                if skipped is not None:
+                    skipped[ev.channel] = skipped.get(ev.channel, 0) + 1
                 continue
             out.append((ev.timestamp, ev.channel, t.decode(ev.data)))
     finally:
@@ -203,7 +208,8 @@ def main():
             exps = [m for _, ch, m in events if isinstance(m, b21r.experience_t)]
             records = [m for _, ch, m in events if isinstance(m, b21r.run_t)]
         else:
-            events = read_log(args.log, set(args.channel) if args.channel else None)
+            skipped = {}
+            events = read_log(args.log, set(args.channel) if args.channel else None, skipped)
     except IOError as exc:
         sys.exit("b21r_log: cannot read %s: %s" % (args.log, exc))
     if args.config:
@@ -217,6 +223,11 @@ def main():
         sys.stdout.write(msg.text)
         return 0
     if not (args.gaps or args.runs):
+        if skipped:
+            print("b21r_log: skipped %d events of message types this build does not know (%s): recorded by "
+                  "another version of the controller or the tools" %
+                  (sum(skipped.values()), ", ".join("%s %d" % kv for kv in sorted(skipped.items()))), file=sys.stderr)
+            sys.stderr.flush()
         for t, ch, m in events:
             fields = {k: getattr(m, k) for k in m.__slots__}
             print(t, ch, fields)

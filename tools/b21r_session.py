@@ -9,7 +9,7 @@ learned state), then the recorder, the viewers and the emulator, each waited for
 is done, a crash) the others are stopped the same way.
 
     b21r_session.py [--out DIR] [--world FILE] [--base rflex|canopen] [--lockstep [--pace X]]
-                    [--lcm-url URL] [--spy | --no-spy] [--foxglove [--foxglove-port N]
+                    [--lcm-url URL] [--key FILE] [--spy | --no-spy] [--foxglove [--foxglove-port N]
                     [--foxglove-host ADDR]] [--config FILE] [--set KEY=VALUE]...
                     [-- CONTROLLER_ARGS...]
 
@@ -19,7 +19,10 @@ state; a second session with the same --out resumes from it), the programs' outp
 controller.log, progress.txt, logger.log, spy.log, foxglove.log) and, with --base canopen, the CAN
 trace bus.log (candump -L). The controller's progress lines are shown as they come.
 LCM: a host-local URL (udpm with ttl=0: nothing leaves this machine) unless --lcm-url is given;
-B21R_TELEOP and B21R_COMMAND from tools/b21r_teleop.py with the same --lcm-url reach the controller.
+B21R_TELEOP and B21R_COMMAND from tools/b21r_teleop.py with the same --lcm-url reach the controller,
+signed with the operator key: --key FILE, default $B21R_OPERATOR_KEY, else
+~/.config/b21r/operator.key (where b21r_teleop.py looks too), created (mode 600) when missing; the
+controller gets it as operator_key_file (docs/robot.md, "Network and security").
 --lockstep runs emulator and controller in lockstep, paced at --pace times real time (default 20:
 minutes instead of hours, and lcm-logger and lcm-spy keep up over UDP, so session.lcmlog holds
 every message); --pace 0 runs as fast as the controller goes, where lcm-logger may miss messages
@@ -41,6 +44,8 @@ import subprocess
 import sys
 import threading
 import time
+
+import b21r_opauth
 
 HOST_LOCAL_URL = "udpm://239.255.76.67:7667?ttl=0"
 # lcm-logger's socket receive buffer over udpm [bytes]: about 1.5 s of a 20x lockstep run, so a
@@ -169,6 +174,8 @@ def main():
                     help="with --lockstep: at most X times real time (0: as fast as possible; default %(default)g)")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--lcm-url", default=HOST_LOCAL_URL, help="LCM provider (default: %(default)s)")
+    ap.add_argument("--key", metavar="FILE", help="operator key (default: $B21R_OPERATOR_KEY, else "
+                    "~/.config/b21r/operator.key; created when missing)")
     spy = ap.add_mutually_exclusive_group()
     spy.add_argument("--spy", dest="spy", action="store_true", default=None, help="start b21r-lcm-spy")
     spy.add_argument("--no-spy", dest="spy", action="store_false", help="do not start b21r-lcm-spy")
@@ -184,6 +191,15 @@ def main():
     if args.pace < 0:
         ap.error("--pace must be 0 (as fast as possible) or a positive factor of real time")
 
+    key_path = args.key or os.environ.get("B21R_OPERATOR_KEY") or b21r_opauth.user_key_path()
+    try:
+        if not os.path.exists(key_path):
+            key = b21r_opauth.create_key(key_path)
+            say("created the operator key %s (mode 600, key id %s): b21r_teleop.py signs with it"
+                % (key_path, b21r_opauth.key_id(key).hex()))
+        b21r_opauth.load_key(key_path)
+    except (b21r_opauth.KeyFileError, OSError) as exc:
+        sys.exit("b21r-session: %s" % exc)
     out = args.out or str(repo / "build" / "sessions" / time.strftime("%Y%m%d-%H%M%S"))
     os.makedirs(out, exist_ok=True)
     out = os.path.abspath(out)
@@ -235,6 +251,7 @@ def main():
         for c in args.config:
             ccmd += ["--config", c]
         ccmd += ["--endpoints", endpoints, "--set", "lcm_url=" + args.lcm_url, "--set", "progress=true",
+                 "--set", "operator_key_file=" + os.path.abspath(key_path),
                  "--set", "lockstep=%s" % ("true" if args.lockstep else "false"),
                  *(["--set", "lockstep_realtime_factor=%g" % args.pace] if args.lockstep else []),
                  "--checkpoint", os.path.join(out, "hedger.ckpt"), "--log", os.path.join(out, "controller.lcmlog")]

@@ -22,6 +22,11 @@ Both send B21R_TELEOP at --rate Hz (default 20) while the deadman is held, and s
 phase, run and last stop reason from B21R_STATUS.
 One command and exit:
     b21r_teleop.py --command START_PHASE_TWO|CONFIRM_START_POSE|PAUSE|RESUME|SHUTDOWN
+Every message is signed with the operator key (--key FILE; default $B21R_OPERATOR_KEY, else
+~/.config/b21r/operator.key, else /etc/b21r/operator.key) for the controller's current session,
+which the tool takes from B21R_SESSION: until one signed with the same key arrives nothing is sent
+(and --command waits up to --wait-s for it). The controller refuses anything else (docs/robot.md,
+"Network and security"; tools/b21r_key.py creates a key).
 Runs from a plain shell after tools/setup.sh and a build (b21r_bootstrap finds the venv and the
 generated types).
 """
@@ -45,6 +50,7 @@ import tomllib
 
 import lcm
 
+import b21r_opauth
 from b21r import command_t, status_t, teleop_t
 
 COMMANDS = {"START_PHASE_TWO": command_t.START_PHASE_TWO, "CONFIRM_START_POSE": command_t.CONFIRM_START_POSE,
@@ -346,33 +352,35 @@ def load_pad_map(path, device_name, pad=None):
 class Teleop:
     """Publishes B21R_TELEOP at a steady rate while the deadman is held, values clamped to the
     limits; on release one message with the deadman released (the controller stops at its next
-    tick), then silence (the controller also stops by itself after teleop_timeout_s)."""
+    tick), then silence (the controller also stops by itself after teleop_timeout_s). Messages go
+    out signed by signer (b21r_opauth.Signer), and only while it has a session: without one the
+    controller hears nothing, and stops."""
 
-    def __init__(self, lc, max_rotation, max_translation, rate_hz, clock=time.monotonic, wall=time.time):
+    def __init__(self, lc, max_rotation, max_translation, rate_hz, signer, clock=time.monotonic, wall=time.time):
         self.lc = lc
         self.max_rotation = max_rotation
         self.max_translation = max_translation
         self.period = 1.0 / rate_hz
+        self.signer = signer
         self.clock = clock
         self.wall = wall
-        self.seq = int(wall() * 1e6)  # increases across restarts of this tool (the controller refuses repeats)
-        self.cmd_seq = self.seq
         self.active = False
         self.next_send = None
         self.rotation = 0.0
         self.translation = 0.0
         self.sent = 0
+        self.unsent = 0  # messages due while there was no session
 
     def _publish(self, deadman):
-        self.seq += 1
         m = teleop_t()
         m.utime = int(self.wall() * 1e6)
-        m.seq = self.seq
         m.deadman = deadman
         m.rotation_radps = self.rotation if deadman else 0.0
         m.translation_mps = self.translation if deadman else 0.0
-        self.lc.publish("B21R_TELEOP", m.encode())
-        self.sent += 1
+        if self.signer.publish("B21R_TELEOP", m):
+            self.sent += 1
+        else:
+            self.unsent += 1
 
     def step(self, now, deadman, rotation, translation):
         """rotation, translation: requests [rad/s], [m/s]; clamped here to the limits."""
@@ -397,24 +405,24 @@ class Teleop:
             self.step(self.clock(), False, 0.0, 0.0)
 
     def command(self, name):
-        self.cmd_seq = max(self.cmd_seq, self.seq) + 1
-        send_command(self.lc, name, self.cmd_seq, self.wall)
+        """Sends one operator command; False when there is no session to sign it for."""
+        return send_command(self.signer, name, self.wall)
 
 
-def send_command(lc, name, seq, wall=time.time):
+def send_command(signer, name, wall=time.time):
     m = command_t()
     m.utime = int(wall() * 1e6)
-    m.seq = seq
     m.command = COMMANDS[name]
     m.argument = 0
-    lc.publish("B21R_COMMAND", m.encode())
+    return signer.publish("B21R_COMMAND", m)
 
 
 class ControllerState:
-    """The newest B21R_STATUS, as text for the display."""
+    """The newest B21R_STATUS and the session, as text for the display."""
 
-    def __init__(self, lc, clock=time.monotonic):
+    def __init__(self, lc, sessions=None, clock=time.monotonic):
         self.clock = clock
+        self.sessions = sessions
         self.msg = None
         self.received = None
         lc.subscribe("B21R_STATUS", self._on_status)
@@ -427,8 +435,9 @@ class ControllerState:
         self.received = self.clock()
 
     def lines(self):
+        session = [self.sessions.describe()] if self.sessions is not None else []
         if self.msg is None:
-            return ["controller: no B21R_STATUS yet (is b21r-controller running, with LCM on this URL?)"]
+            return ["controller: no B21R_STATUS yet (is b21r-controller running, with LCM on this URL?)", *session]
         s = self.msg
         age = self.clock() - self.received
         stop = STOP_NAMES.get(s.stop_reason, str(s.stop_reason))
@@ -438,7 +447,13 @@ class ControllerState:
                "last stop: %s%s" % (stop, (" - " + s.stop_detail) if s.stop_detail else ""),
                "teleop accepted %d, refused %d (out of range %d, stale %d, repeated %d, NaN %d)" %
                (s.teleop_accepted, s.teleop_rejected, s.teleop_rejected_range, s.teleop_rejected_stale,
-                s.teleop_rejected_seq, s.teleop_rejected_nan)]
+                s.teleop_rejected_seq, s.teleop_rejected_nan),
+               "operator messages refused: malformed %d, unauthenticated %d, other key %d, wrong mac %d, "
+               "other session %d, replayed %d, old seq %d" %
+               (s.operator_refused_malformed, s.operator_refused_unauthenticated, s.operator_refused_key,
+                s.operator_refused_mac, s.operator_refused_session, s.operator_refused_replay,
+                s.operator_refused_old),
+               *session]
         return out
 
 
@@ -531,8 +546,7 @@ def gamepad_loop(lc, js, pad, teleop, state, display, stop, clock=time.monotonic
         now = clock()
         deadman, rot, trans, due = pad.evaluate(js, now)
         for cname in due:
-            teleop.command(cname)
-            note = "sent %s" % cname
+            note = ("sent %s" % cname) if teleop.command(cname) else "%s not sent: no session" % cname
         teleop.step(now, deadman and not js.lost, rot * teleop.max_rotation, trans * teleop.max_translation)
         if js.lost:
             note = "joystick lost (%s): messages stopped" % js.path
@@ -611,8 +625,8 @@ def keyboard_loop(lc, teleop, state, display, stop, hold_s, clock=time.monotonic
             elif k == ord("s"):
                 trans = max(-teleop.max_translation, round(trans - 0.1, 2))
             elif k in command_keys:
-                teleop.command(command_keys[k])
-                note = "sent %s" % command_keys[k]
+                sent = teleop.command(command_keys[k])
+                note = ("sent %s" % command_keys[k]) if sent else "%s not sent: no session" % command_keys[k]
         if quit_now:
             break
         now = clock()
@@ -646,7 +660,11 @@ def probe(js, stop):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--lcm-url", default=None, help="LCM provider (default: LCM's default or $LCM_DEFAULT_URL)")
+    ap.add_argument("--key", metavar="FILE", help="operator key (default: $B21R_OPERATOR_KEY, else "
+                    "~/.config/b21r/operator.key, else /etc/b21r/operator.key)")
     ap.add_argument("--command", choices=sorted(COMMANDS), help="send one operator command and exit")
+    ap.add_argument("--wait-s", type=float, default=5.0, metavar="S",
+                    help="--command: wait this long for the controller's session (default %(default)s)")
     src = ap.add_mutually_exclusive_group()
     src.add_argument("--joystick", metavar="DEV", help="joystick device, FIFO of js_event records, or a recording "
                      "(default: /dev/input/js0 when present)")
@@ -666,13 +684,24 @@ def main(argv=None):
     ap.add_argument("--no-ui", action="store_true", help="print state changes as lines instead of a full-screen view")
     args = ap.parse_args(argv)
     for name, v, hi in (("--max-rotation", args.max_rotation, 4.0), ("--max-translation", args.max_translation, 2.0),
-                        ("--rate", args.rate, 100.0), ("--key-hold-s", args.key_hold_s, 5.0)):
+                        ("--rate", args.rate, 100.0), ("--key-hold-s", args.key_hold_s, 5.0),
+                        ("--wait-s", args.wait_s, 60.0)):
         if not 0.0 < v <= hi:
             ap.error("%s must be in (0, %g]" % (name, hi))
 
+    try:
+        key = b21r_opauth.load_key(b21r_opauth.find_key_path(args.key))
+    except b21r_opauth.KeyFileError as exc:
+        sys.exit("b21r_teleop: %s" % exc)
     lc = lcm.LCM(args.lcm_url) if args.lcm_url else lcm.LCM()
+    sessions = b21r_opauth.SessionTracker(lc, key)
+    signer = b21r_opauth.Signer(lc, key, sessions)
     if args.command:
-        send_command(lc, args.command, int(time.time() * 1e6))
+        deadline = time.monotonic() + args.wait_s
+        while sessions.current() is None and time.monotonic() < deadline:
+            lc.handle_timeout(50)
+        if not send_command(signer, args.command):
+            sys.exit("b21r_teleop: %s not sent: %s" % (args.command, sessions.describe()))
         return 0
 
     stop = Stop()
@@ -687,8 +716,8 @@ def main(argv=None):
             ap.error("--probe needs a joystick (none under /dev/input/js*; give --joystick DEV)")
         return probe(Joystick(joystick), stop)
 
-    teleop = Teleop(lc, args.max_rotation, args.max_translation, args.rate)
-    state = ControllerState(lc)
+    teleop = Teleop(lc, args.max_rotation, args.max_translation, args.rate, signer)
+    state = ControllerState(lc, sessions)
     tty = sys.stdin.isatty() and sys.stdout.isatty() and not args.no_ui
     if joystick is None:
         if not tty:

@@ -9,18 +9,16 @@
 #include "fw/publisher.h"
 #include "fw/pubq.h"
 #include "io_posix.h"
+#include "operator_rx.h"
 #include "realtime.h"
 
 #include <drivers/notify.h>
 
-#include <b21r/b21r_command_t.h>
-#include <b21r/b21r_teleop_t.h>
 #include <lcm/lcm.h>
 
 #include <errno.h>
 #include <pthread.h>
 #include <signal.h>
-#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -63,9 +61,10 @@ static void usage(FILE* f) {
           "  --help                  this text\n"
           "\n"
           "LCM channels: publishes B21R_CONFIG (once), B21R_EXPERIENCE, B21R_RUN (one per run end),\n"
-          "B21R_STATUS, B21R_POSE, B21R_EVAL (B21R_SCAN with publish_scan = true); listens to\n"
-          "B21R_TELEOP (joystick with deadman) and B21R_COMMAND (START_PHASE_TWO, CONFIRM_START_POSE,\n"
-          "PAUSE, RESUME, SHUTDOWN).\n"
+          "B21R_STATUS, B21R_POSE, B21R_EVAL (B21R_SCAN with publish_scan = true), B21R_SESSION; listens\n"
+          "to B21R_TELEOP (joystick with deadman) and B21R_COMMAND (START_PHASE_TWO, CONFIRM_START_POSE,\n"
+          "PAUSE, RESUME, SHUTDOWN), taken only signed with operator_key_file for this start (B21R_SESSION)\n"
+          "and, with lcm_scope = host (the default), only from this host (docs/robot.md).\n"
           "Exit status: 0 schedule done or SHUTDOWN; 2 usage or configuration error (including rt_*\n"
           "settings the process lacks the privilege for); 3 checkpoint\n"
           "refused (before any device is opened); 4 a device did not start; 5 lockstep: a device sent\n"
@@ -74,38 +73,6 @@ static void usage(FILE* f) {
           "braked and the learned state saved first).\n"
           "Under systemd (Type=notify, NOTIFY_SOCKET set) it sends READY=1 once its devices are open and\n"
           "the first tick is done, and WATCHDOG=1 every WATCHDOG_USEC/2 after a tick's command.\n");
-}
-
-// ---- LCM receive thread --------------------------------------------------------------------
-
-typedef struct receiver {
-  lcm_t* lcm;
-  fw_loop_t* loop;
-  fw_publisher_t* pub;  // records what the operator sent in the --log file
-  b21r_teleop_t_subscription_t* teleop_sub;
-  b21r_command_t_subscription_t* command_sub;
-  atomic_bool stop;
-  pthread_t thread;
-} receiver_t;
-
-static void on_teleop(const lcm_recv_buf_t* rbuf, const char* channel, const b21r_teleop_t* msg, void* user) {
-  receiver_t* r = (receiver_t*)user;
-  fw_loop_post_teleop(r->loop, msg, io_posix_now_us());
-  fw_publisher_record(r->pub, channel, rbuf->data, rbuf->data_size);
-}
-
-static void on_command(const lcm_recv_buf_t* rbuf, const char* channel, const b21r_command_t* msg, void* user) {
-  receiver_t* r = (receiver_t*)user;
-  fw_loop_post_command(r->loop, msg, io_posix_now_us());
-  fw_publisher_record(r->pub, channel, rbuf->data, rbuf->data_size);
-}
-
-static void* receiver_main(void* arg) {
-  receiver_t* r = (receiver_t*)arg;
-  while (!atomic_load(&r->stop)) {
-    (void)lcm_handle_timeout(r->lcm, 100);
-  }
-  return NULL;
 }
 
 // rt_* settings, then pre-faulting (after mlockall, so that the touched pages stay locked).
@@ -284,14 +251,21 @@ int main(int argc, char** argv) {
   sigaction(SIGTERM, &sa, NULL);
   signal(SIGPIPE, SIG_IGN);
 
+  // LCM: the URL against lcm_scope, the operator key and the session (operator_rx.h), then LCM.
   lcm_t* lcm = NULL;
+  static operator_rx_t rx;  // static: the loop reads its counters until the very end
   if (strcmp(cfg.lcm_url, "none") != 0) {
-    lcm = lcm_create(cfg.lcm_url[0] != '\0' ? cfg.lcm_url : NULL);
+    const char* url = NULL;
+    if (operator_rx_prepare(&rx, &cfg, &url, err, sizeof err) != 0) {
+      fprintf(stderr, "b21r-controller: %s\n", err);
+      return EXIT_USAGE;
+    }
+    lcm = lcm_create(url);
     if (lcm == NULL) {
       fprintf(stderr,
               "b21r-controller: cannot open LCM at '%s' (multicast needs a route: e.g. ip route add 224.0.0.0/4 dev "
               "lo; or set lcm_url = none)\n",
-              cfg.lcm_url[0] != '\0' ? cfg.lcm_url : "the default URL");
+              url);
       return EXIT_DEVICE;
     }
   }
@@ -308,7 +282,8 @@ int main(int argc, char** argv) {
   io_posix_init(&io, &cfg);
   const fw_io_t binding = io_posix_binding(&io);
   const fw_loop_outputs_t out = {
-      .queue = q, .notify = publisher_notify, .notify_user = pub, .checkpoints = NULL, .publisher = pub};
+      .queue = q, .notify = publisher_notify, .notify_user = pub, .checkpoints = NULL, .publisher = pub,
+      .operator_auth = lcm != NULL ? &rx.auth : NULL};
   fw_loop_t* loop = fw_loop_create(&cfg, &binding, &out, err, sizeof err);
   if (loop == NULL) {
     fprintf(stderr, "b21r-controller: %s\n", err);
@@ -349,13 +324,9 @@ int main(int argc, char** argv) {
     status = EXIT_DEVICE;
   }
 
-  receiver_t rx = {.lcm = lcm, .loop = loop, .pub = pub};
-  atomic_init(&rx.stop, false);
-  bool rx_running = false;
-  if (status == 0 && lcm != NULL) {
-    rx.teleop_sub = b21r_teleop_t_subscribe(lcm, "B21R_TELEOP", on_teleop, &rx);
-    rx.command_sub = b21r_command_t_subscribe(lcm, "B21R_COMMAND", on_command, &rx);
-    rx_running = pthread_create(&rx.thread, NULL, receiver_main, &rx) == 0;
+  if (status == 0 && lcm != NULL && operator_rx_start(&rx, lcm, loop, pub, err, sizeof err) != 0) {
+    fprintf(stderr, "b21r-controller: %s\n", err);
+    status = EXIT_DEVICE;
   }
 
   if (status == 0) {
@@ -387,15 +358,8 @@ int main(int argc, char** argv) {
     }
   }
 
-  if (rx_running) {
-    atomic_store(&rx.stop, true);
-    pthread_join(rx.thread, NULL);
-  }
-  if (rx.teleop_sub != NULL) {
-    b21r_teleop_t_unsubscribe(lcm, rx.teleop_sub);
-  }
-  if (rx.command_sub != NULL) {
-    b21r_command_t_unsubscribe(lcm, rx.command_sub);
+  if (lcm != NULL) {
+    operator_rx_stop(&rx);
   }
   g_loop = NULL;
   fw_publisher_flush(pub);

@@ -214,6 +214,36 @@ def more_seeds() -> None:
     write("base_dispatch", "canopen_injected", b"\x01" + genuine + frames + genuine + b"\x02" * 8 + genuine)
 
 
+
+def opauth_record(op: int, body: bytes) -> bytes:
+    return bytes([op, len(body)]) + body
+
+
+def opauth_msg(seq: int, what: int = 1, rot: float = 0.5, arg: int = 0, choice: int = 0, where: int = 0) -> bytes:
+    """The body of an op-1 record of fuzz_opauth.c: a message the target builds and signs."""
+    return struct.pack("<qBdiBB", seq, what, rot, arg, choice, where)
+
+
+def opauth_seeds() -> None:
+    # fuzz_opauth: records [op][len][bytes]; op 1/5 build a TELEOP/COMMAND and sign it, 2 replays
+    # the last one, 0/4 feed raw bytes, 3/7 check an LCM URL (host / network scope).
+    teleop_v1 = bytes.fromhex("7cc1b7370df20bb8") + struct.pack(">qqbdd", 1, 2 ** 63 - 1, 1, 0.8, 0.0)
+    command_v1 = bytes.fromhex("3652044819c40f11") + struct.pack(">qqbi", 1, 2 ** 63 - 2, 5, 0)
+    write("opauth", "window", b"".join(opauth_record(1, opauth_msg(s)) for s in (10, 12, 11, 11, 12 - 64, 12 + 64))
+          + opauth_record(2, b"") + opauth_record(1, opauth_msg(2 ** 63 - 1)))
+    write("opauth", "refusals", opauth_record(1, opauth_msg(5, choice=1)) + opauth_record(1, opauth_msg(6, choice=2))
+          + opauth_record(1, opauth_msg(7, choice=4)) + opauth_record(1, opauth_msg(8, choice=8, where=40))
+          + opauth_record(1, opauth_msg(9)) + opauth_record(0, teleop_v1) + opauth_record(4, command_v1)
+          + opauth_record(0, teleop_v1[:-3]) + opauth_record(0, b"\xa5" * 97))
+    write("opauth", "commands", b"".join(opauth_record(5, opauth_msg(s, what=c, arg=s)) for s, c in
+                                         ((1, 3), (2, 4), (2, 4), (4, 5), (3, 1))) + opauth_record(2, b""))
+    write("opauth", "urls", b"".join(opauth_record(op, u.encode()) for op, u in (
+        (3, "udpm://239.255.76.67:7667?ttl=0"), (3, "udpm://239.255.76.67:7667?ttl=1"), (7, "udpm://239.1.2.3:9?ttl=1"),
+        (3, "memq://"), (3, "tcpq://192.0.2.1:7700"), (7, "tcpq://192.0.2.1:7700"), (3, "udpm://10.0.0.1:7667"),
+        (3, "udpm://"), (3, "udpm://239.255.76.67?recv_buf_size=1&ttl=0x0"))))
+
+
 if __name__ == "__main__":
     main()
     more_seeds()
+    opauth_seeds()

@@ -78,6 +78,7 @@ static const choice_t k_rt_scheduler[] = {
     {"other", FW_RT_OTHER}, {"fifo", FW_RT_FIFO}, {"rr", FW_RT_RR}, {NULL, 0}};
 static const choice_t k_learner[] = {
     {"hedger", FW_LEARNER_HEDGER}, {"lwa", FW_LEARNER_LWA}, {"tabular", FW_LEARNER_TABULAR}, {NULL, 0}};
+static const choice_t k_lcm_scope[] = {{"host", FW_LCM_SCOPE_HOST}, {"network", FW_LCM_SCOPE_NETWORK}, {NULL, 0}};
 static const choice_t k_switch[] = {
     {"runs", FW_SWITCH_RUNS}, {"operator", FW_SWITCH_OPERATOR}, {"auto", FW_SWITCH_AUTO}, {NULL, 0}};
 
@@ -303,6 +304,17 @@ static const key_desc_t k_keys[] = {
 
   {"Output", "lcm_url", KIND_STRING, OFF(lcm_url), 0, 0, false, false, NULL, "",
    "LCM provider (\"\" = LCM's default or $LCM_DEFAULT_URL; \"none\" = no LCM)"},
+  {NULL, "lcm_scope", KIND_ENUM, OFF(lcm_scope), 0, 0, false, false, k_lcm_scope, "host",
+   "who exchanges LCM messages with the controller. host: this machine only (udpm with ttl=0, memq or "
+   "file; the controller takes only what came over loopback, so no other machine reaches it, not even by "
+   "unicast to its port). network: other machines too (a udpm ttl of 1, tcpq): everyone on that network sees "
+   "every message and can send to the controller, which still takes only operator messages signed with "
+   "operator_key_file (docs/robot.md, \"Network and security\")"},
+  {NULL, "operator_key_file", KIND_STRING, OFF(operator_key_file), 0, 0, false, false, NULL, "",
+   "operator key: B21R_TELEOP and B21R_COMMAND are taken only when signed with it for this start of the "
+   "controller (B21R_SESSION); a file of 64 hexadecimal digits that only its owner (the controller's user or "
+   "root) may read or write, made by tools/b21r_key.py create FILE (e.g. /etc/b21r/operator.key). \"\" = no "
+   "key: every operator message is refused, so joystick driving and reposition = operator need one"},
   {NULL, "status_period_ticks", KIND_INT, OFF(status_period_ticks), 1, 100000, false, false, NULL, "1",
    "publish B21R_STATUS every N ticks"},
   {NULL, "publish_scan", KIND_BOOL, OFF(publish_scan), 0, 0, false, false, NULL, "false",
@@ -1099,10 +1111,7 @@ int fw_config_validate_program(const fw_config_t* cfg, char* err, size_t err_cap
   if (fw_config_validate(cfg, err, err_cap) != 0) {
     return -1;
   }
-  if (cfg->mode != FW_MODE_LEARN || cfg->phase_driver != FW_DRIVER_JOYSTICK) {
-    return 0;
-  }
-  if (cfg->lockstep) {
+  if (cfg->mode == FW_MODE_LEARN && cfg->phase_driver == FW_DRIVER_JOYSTICK && cfg->lockstep) {
     fw_errfmt(err, err_cap,
         "%s: phase_one_driver = joystick needs real time, but lockstep = true (set at %s): the emulator's time "
         "only advances with the loop, so no operator can drive it; set lockstep = false (and run b21r-sim "
@@ -1110,13 +1119,38 @@ int fw_config_validate_program(const fw_config_t* cfg, char* err, size_t err_cap
         origin_of(cfg, "phase_one_driver").text, origin_of(cfg, "lockstep").text);
     return -1;
   }
-  if (strcmp(cfg->lcm_url, "none") == 0) {
+  if (cfg->mode == FW_MODE_LEARN && cfg->phase_driver == FW_DRIVER_JOYSTICK && strcmp(cfg->lcm_url, "none") == 0) {
     fw_errfmt(err, err_cap,
         "%s: phase_one_driver = joystick needs B21R_TELEOP over LCM, but lcm_url = none (set at %s); set lcm_url "
         "(\"\" = LCM's default, e.g. udpm://239.255.76.67:7667?ttl=0 for this host only) or "
         "phase_one_driver = example",
         origin_of(cfg, "phase_one_driver").text, origin_of(cfg, "lcm_url").text);
     return -1;
+  }
+  // What only the operator can say is taken only signed with the operator key (fw/opauth.h): a
+  // configuration that waits for it without a key would wait for ever.
+  const bool lcm_on = strcmp(cfg->lcm_url, "none") != 0;
+  if (lcm_on && cfg->operator_key_file[0] == '\0') {
+    const char* needs = NULL;
+    const char* key = NULL;
+    if (cfg->reposition == FW_REPOSITION_OPERATOR) {
+      needs = "reposition = operator waits for the operator's CONFIRM_START_POSE before every run";
+      key = "reposition";
+    } else if (cfg->mode == FW_MODE_LEARN && cfg->phase_driver == FW_DRIVER_JOYSTICK) {
+      needs = "phase_one_driver = joystick drives with the operator's B21R_TELEOP";
+      key = "phase_one_driver";
+    } else if (cfg->mode == FW_MODE_LEARN && cfg->phase_switch == FW_SWITCH_OPERATOR) {
+      needs = "phase_switch = operator waits for the operator's START_PHASE_TWO";
+      key = "phase_switch";
+    }
+    if (needs != NULL) {
+      fw_errfmt(err, err_cap,
+          "%s: %s, which the controller takes only signed with the operator key, but operator_key_file is not set "
+          "(%s); create a key with tools/b21r_key.py create /etc/b21r/operator.key and set operator_key_file to "
+          "it (docs/robot.md, \"Network and security\")",
+          origin_of(cfg, key).text, needs, origin_of(cfg, "operator_key_file").text);
+      return -1;
+    }
   }
   return 0;
 }

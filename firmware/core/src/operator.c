@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: MIT
-// Operator input: B21R_TELEOP and B21R_COMMAND arrive on another thread (the LCM receiver) into
-// small mailboxes; the tick drains and validates them (finite, in range, newer sequence number,
-// fresh).
+// Operator input: B21R_TELEOP and B21R_COMMAND arrive on another thread (the LCM receiver, which
+// takes only authenticated, fresh ones: fw/opauth.h) into small mailboxes; the tick drains and
+// validates them (finite, in range, newer sequence number, fresh; a stop is always obeyed).
 #include "operator.h"
 #include "outputs.h"
 
@@ -52,15 +52,26 @@ static void take_teleop(fw_loop_t* L, const b21r_teleop_t* m, int64_t arrival_us
   L->teleop_rejected++;
 }
 
+static bool is_stop(const b21r_command_t* m) {
+  return m->command == B21R_COMMAND_T_PAUSE || m->command == B21R_COMMAND_T_SHUTDOWN;
+}
+
+// Commands reach the mailbox authenticated and fresh (fw/opauth.h: their window takes reordered
+// ones). A command older than the newest taken was overtaken by the operator's later word and is
+// dropped, unless it is a stop: stopping is always safe, so a PAUSE or SHUTDOWN is obeyed whatever
+// came before it.
 static void take_command(fw_loop_t* L, const b21r_command_t* m) {
+  const bool older = L->cmd_have_seq && m->seq <= L->cmd_last_seq;
   if (m->command < B21R_COMMAND_T_START_PHASE_TWO || m->command > B21R_COMMAND_T_SHUTDOWN ||
-      (L->cmd_have_seq && m->seq <= L->cmd_last_seq)) {
+      (older && !is_stop(m))) {
     L->commands_rejected++;
     return;
   }
   L->commands_accepted++;
-  L->cmd_have_seq = true;
-  L->cmd_last_seq = m->seq;
+  if (!older) {
+    L->cmd_have_seq = true;
+    L->cmd_last_seq = m->seq;
+  }
   switch (m->command) {
     case B21R_COMMAND_T_START_PHASE_TWO:
       learn_request_phase_two(L->agent);
@@ -127,6 +138,17 @@ void fw_loop_post_teleop(fw_loop_t* L, const b21r_teleop_t* msg, int64_t arrival
 void fw_loop_post_command(fw_loop_t* L, const b21r_command_t* msg, int64_t arrival_us) {
   (void)arrival_us;
   pthread_mutex_lock(&L->mbox_mu);
+  if (L->cmd_n == FW_MAILBOX && is_stop(msg)) {
+    // A full mailbox makes room for a stop: the oldest command that is not one goes (counted).
+    for (uint32_t i = 0; i < L->cmd_n; ++i) {
+      if (!is_stop(&L->cmd_box[i])) {
+        memmove(&L->cmd_box[i], &L->cmd_box[i + 1], (L->cmd_n - i - 1) * sizeof L->cmd_box[0]);
+        L->cmd_n--;
+        L->mbox_overflow_cmd++;
+        break;
+      }
+    }
+  }
   if (L->cmd_n == FW_MAILBOX) {
     L->mbox_overflow_cmd++;
   } else {

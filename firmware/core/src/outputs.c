@@ -223,8 +223,10 @@ void fw_out_status(fw_loop_t* L) {
   s->base_packets = L->base_packets;
   s->base_bytes_dropped = (int64_t)fw_base_bytes_dropped(L);
   s->base_checksum_errors = (int64_t)fw_base_checksum_errors(L);
+  // Refusals of the receive thread's authentication count as refused operator input too.
+  const fw_opauth_counters_t auth = fw_opauth_counters(L->out.operator_auth);
   s->teleop_accepted = L->teleop_accepted;
-  s->teleop_rejected = L->teleop_rejected;
+  s->teleop_rejected = L->teleop_rejected + (int64_t)auth.refused[FW_OPAUTH_TELEOP];
   s->lcm_queue_drops = (int64_t)fw_pubq_drops(L->out.queue, -1);
   // One snapshot of the writer's counters (each read takes the writer's lock).
   fw_ckpt_counters_t ckpt;
@@ -240,7 +242,7 @@ void fw_out_status(fw_loop_t* L) {
   s->teleop_rejected_seq = L->teleop_rejected_seq;
   s->teleop_rejected_stale = L->teleop_rejected_stale;
   s->commands_accepted = L->commands_accepted;
-  s->commands_rejected = L->commands_rejected;
+  s->commands_rejected = L->commands_rejected + (int64_t)auth.refused[FW_OPAUTH_COMMAND];
   s->checkpoint_failures = (int64_t)ckpt.failed;
   s->laser_restarts = (int64_t)ls.restarts;
   s->odometry_rejected = (int64_t)(L->base.odometry.rejected_trans + L->base.odometry.rejected_rot);
@@ -259,6 +261,13 @@ void fw_out_status(fw_loop_t* L) {
   s->late_starts = t.late_starts;
   s->missed_periods = t.missed_periods;
   s->gap_max_ever_us = t.gap_max_ever_us;
+  s->operator_refused_malformed = (int64_t)auth.by_verdict[FW_OPAUTH_MALFORMED];
+  s->operator_refused_unauthenticated = (int64_t)auth.by_verdict[FW_OPAUTH_UNAUTHENTICATED];
+  s->operator_refused_key = (int64_t)auth.by_verdict[FW_OPAUTH_KEY];
+  s->operator_refused_mac = (int64_t)auth.by_verdict[FW_OPAUTH_MAC];
+  s->operator_refused_session = (int64_t)auth.by_verdict[FW_OPAUTH_SESSION];
+  s->operator_refused_replay = (int64_t)auth.by_verdict[FW_OPAUTH_REPLAY];
+  s->operator_refused_old = (int64_t)auth.by_verdict[FW_OPAUTH_OLD];
   fw_pubq_commit(L->out.queue);
 }
 

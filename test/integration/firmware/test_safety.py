@@ -16,6 +16,7 @@ import subprocess
 import sys
 import time
 
+import b21r_opauth
 import fwtest
 from b21r_log import read_log
 
@@ -92,13 +93,15 @@ def main():
             fwtest.fail("no checkpoint after SIGTERM")
         if base == "rflex":
             # Joystick phase one without a deadman message: the robot must not move.
+            key = os.path.join(d, "operator.key")  # joystick driving needs the operator key
+            b21r_opauth.create_key(key)
             with open(os.path.join(d, "joy.controller.log"), "w") as err, \
                     open(os.path.join(d, "joy.progress.txt"), "w") as out:
                 joy = subprocess.Popen(fwtest.controller_cmd(controller, sim, d, "joy",
                                                              {"lockstep": "false", "phase_one_driver": "joystick",
                                                               # joystick driving needs LCM (no teleop
                                                               # ever arrives over memq://)
-                                                              "lcm_url": "memq://",
+                                                              "lcm_url": "memq://", "operator_key_file": key,
                                                               "checkpoint_file": ckpt, "phase_one_runs": 1000}),
                                    stdout=out, stderr=err)
             wait_for(os.path.join(d, "joy.controller.log"), "resumed from", 0, 30, joy)

@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: MIT
 """The controller's --log explains itself: a short emulated session (lockstep, paced at 5x real
 time, LCM udpm inside a private network namespace) in which an operator sends B21R_TELEOP and
-PAUSE / RESUME / SHUTDOWN over LCM. The log must hold, in order:
+PAUSE / RESUME / SHUTDOWN over LCM, signed with the operator key. The log must hold, in order:
 - B21R_CONFIG first (every key, the command limits);
 - the operator's B21R_TELEOP and B21R_COMMAND, as received;
 - one B21R_RUN end record per run, after the run's experiences, also for runs that end without a
@@ -18,6 +18,7 @@ import subprocess
 import sys
 import time
 
+import b21r_opauth
 import fwtest
 import lcm
 
@@ -77,14 +78,16 @@ def main():
     log_path = os.path.join(d, "session.lcmlog")
     lc = lcm.LCM(URL)
     w = Watcher(lc)
+    key_path = os.path.join(d, "operator.key")
+    key = b21r_opauth.create_key(key_path)
+    signer = b21r_opauth.Signer(lc, key, b21r_opauth.SessionTracker(lc, key))
     sent = {"B21R_TELEOP": 0, "B21R_COMMAND": 0}
-    seq = [0]
 
     def command(c):
-        seq[0] += 1
         m = b21r.command_t()
-        m.utime, m.seq, m.command = int(time.time() * 1e6), seq[0], c
-        lc.publish("B21R_COMMAND", m.encode())
+        m.utime, m.command = int(time.time() * 1e6), c
+        if not signer.publish("B21R_COMMAND", m):
+            fwtest.fail("no B21R_SESSION from the controller")
         sent["B21R_COMMAND"] += 1
 
     wall_start = int(time.time() * 1e6)
@@ -94,14 +97,16 @@ def main():
                                      "--set", "lcm_url=" + URL, "--set", "lockstep_realtime_factor=%g" % FACTOR,
                                      "--set", "max_steps_per_run=%d" % STEP_LIMIT, "--set", "phase_one_runs=1000",
                                      "--set", "eval_every_runs=1000", "--set", "progress=true",
-                                     "--set", "safety_auto_resume=false", "--log", log_path],
+                                     "--set", "safety_auto_resume=false", "--set", "operator_key_file=" + key_path,
+                                     "--log", log_path],
                                     stdout=out, stderr=err)
         try:
             pump_until(lc, lambda: len(w.runs) >= 2, 60, "two runs", proc)
             for i in range(5):  # the example policy drives: they are received, counted and recorded
                 t = b21r.teleop_t()
-                t.utime, t.seq, t.deadman, t.rotation_radps = int(time.time() * 1e6), i + 1, False, 0.0
-                lc.publish("B21R_TELEOP", t.encode())
+                t.utime, t.deadman, t.rotation_radps = int(time.time() * 1e6), False, 0.0
+                if not signer.publish("B21R_TELEOP", t):
+                    fwtest.fail("no B21R_SESSION from the controller")
                 sent["B21R_TELEOP"] += 1
             # PAUSE early in a run: it ends as a safety stop (operator pause), without a terminal state.
             pump_until(lc, lambda: w.status is not None and w.status.mode == b21r.status_t.MODE_RUNNING

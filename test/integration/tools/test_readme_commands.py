@@ -11,10 +11,12 @@ repository's top folder, as an operator would type it after tools/setup.sh and a
 - The shell scripts they name are executable and parse (bash -n); they are not run (set-up and
   the main job).
 - A few commands are run for real, exactly as the README writes them (checked verbatim), with
-  files made here in place of the README's placeholders: sending an operator command, reading
-  a log, drawing its trajectories, offline training from it, converting it to MCAP, drawing
-  what the trained checkpoint learned; the installed programs of docs/robot.md as their sources in
-  this checkout (b21r-teleop: tools/b21r_teleop.py, ...), the controller on the package's
+  files made here in place of the README's placeholders: sending an operator command (signed with
+  the key in the plain environment's home, for a controller session this test announces: the
+  command must arrive with a valid mac), creating and identifying an operator key, reading a log,
+  drawing its trajectories, offline training from it, converting it to MCAP, drawing what the
+  trained checkpoint learned; the installed programs of docs/robot.md as their sources in this
+  checkout (b21r-teleop: tools/b21r_teleop.py, ...), the controller on the package's
   /etc/b21r/b21r-controller.conf as this build makes it.
 - The lcm-spy command is started for real under Xvfb (with PROBE_JAR, the accessibility probe
   of the lcm-spy tests): it must open its window and show a B21R_STATUS message sent to the URL
@@ -22,6 +24,7 @@ repository's top folder, as an operator would type it after tools/setup.sh and a
 - Every `cmake|ctest|cpack --preset NAME` names a preset of CMakePresets.json of that kind.
 - The commands of docs/robot.md that need root and a robot (sudo, systemctl, journalctl) are not
   run; the unit, configuration file and package file they name are checked against the package's.
+The READMEs are README.md, sim/README.md and docs/*.md.
 Run inside netns-run: the commands that publish on LCM's default URL stay in this namespace.
 usage: test_readme_commands.py REPO BUILD_DIR [PROBE_JAR]"""
 import json
@@ -31,18 +34,23 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 
 import lcm
-from b21r import experience_t, pose_t, status_t
+from b21r import command_t, experience_t, pose_t, session_t, status_t
 
+import b21r_opauth
 import fwtest
 
-PLAIN_ENV = {"PATH": "/usr/local/bin:/usr/bin:/bin", "HOME": os.environ.get("HOME", "/root"), "LANG": "C.UTF-8"}
+# HOME: a fresh one (made in main), as an operator's after set-up, with the operator key installed.
+PLAIN_ENV = {"PATH": "/usr/local/bin:/usr/bin:/bin", "HOME": "", "LANG": "C.UTF-8"}
 
 # Commands run for real: (text as the README shows it, placeholder substitutions).
 REAL = [
     ("tools/b21r_teleop.py --command CONFIRM_START_POSE", {}),
+    ("tools/b21r_key.py create /etc/b21r/operator.key", {"/etc/b21r/operator.key": "{tmp}/etc/b21r/operator.key"}),
+    ("tools/b21r_key.py id", {}),
     ("tools/b21r_log.py FILE --gaps --runs", {"FILE": "{log}"}),
     ("tools/b21r_trajectories.py LOG --out runs.png", {"LOG": "{log}", "runs.png": "{tmp}/runs.png"}),
     ("build/host-release/bin/b21r-train --config robot.conf --out trained.ckpt run1.lcmlog run2.lcmlog",
@@ -179,6 +187,37 @@ def write_session_log(path):
     log.close()
 
 
+class Controller:
+    """A controller's session as the operator tools see it: B21R_SESSION announced (signed) five
+    times a second on LCM's default URL, and the B21R_COMMANDs that arrive with a valid mac."""
+
+    def __init__(self, key):
+        self.key = key
+        self.lc = lcm.LCM()
+        self.nonce = os.urandom(16)
+        self.commands = []
+        self.lc.subscribe("B21R_COMMAND", self._on_command)
+        self.stop = False
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _on_command(self, channel, data):
+        m = command_t.decode(data)
+        if bytes(m.session) == self.nonce and bytes(m.mac) == b21r_opauth.mac(self.key, channel, m):
+            self.commands.append(m.command)
+
+    def _run(self):
+        next_t = 0.0
+        while not self.stop:
+            if time.monotonic() >= next_t:
+                s = session_t()
+                s.utime, s.started_us = int(time.time() * 1e6), int(time.time() * 1e6)
+                s.key_id, s.nonce = b21r_opauth.key_id(self.key), self.nonce
+                self.lc.publish("B21R_SESSION", b21r_opauth.sign(self.key, "B21R_SESSION", s))
+                next_t = time.monotonic() + 0.2
+            self.lc.handle_timeout(50)
+
+
 def main():
     repo, build = sys.argv[1:3]
     probe_jar = sys.argv[3] if len(sys.argv) > 3 else ""
@@ -217,7 +256,11 @@ def main():
         fwtest.note("build/%s/bin/%-18s --help ok" % (preset, name))
 
     tmp = tempfile.mkdtemp(prefix="b21r-readme-")
+    controller = None
     try:
+        PLAIN_ENV["HOME"] = os.path.join(tmp, "home")
+        key = b21r_opauth.create_key(os.path.join(PLAIN_ENV["HOME"], ".config", "b21r", "operator.key"))
+        controller = Controller(key)
         log = os.path.join(tmp, "session.lcmlog")
         write_session_log(log)
         shutil.copy(log, os.path.join(tmp, "controller.lcmlog"))  # docs/tools.md's session folder
@@ -234,11 +277,21 @@ def main():
             if rc != 0:
                 fwtest.fail("`%s` (as `%s`): exit %d\n%s" % (shown, cmd, rc, out))
             fwtest.note("%-34s ran: %s" % (shown.split()[0], out.strip().splitlines()[-1] if out.strip() else "ok"))
+        time.sleep(0.3)
+        if command_t.CONFIRM_START_POSE not in controller.commands:
+            fwtest.fail("`tools/b21r_teleop.py --command CONFIRM_START_POSE`: no signed command arrived")
+        made = os.path.join(tmp, "etc", "b21r", "operator.key")
+        if oct(os.stat(made).st_mode & 0o777) != "0o600" or len(b21r_opauth.load_key(made)) != 32:
+            fwtest.fail("`tools/b21r_key.py create`: %s is not a key with mode 600" % made)
+        fwtest.note("the operator command arrived signed for the session; the new key has mode 600")
         if probe_jar:
             run_spy(repo, build, probe_jar, tmp, text)
         else:
             fwtest.note("no lcm-spy probe (no JDK in this build): lcm-spy checked with --help only")
     finally:
+        if controller is not None:
+            controller.stop = True
+            controller.thread.join(2)
         shutil.rmtree(tmp, ignore_errors=True)
     print("PASS")
     return 0

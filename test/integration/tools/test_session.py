@@ -6,7 +6,9 @@ runs one SIGINT to the launcher stops everything in order (the controller first:
 learned state; the emulator last), every program it started is gone, the launcher's exit status
 is the controller's (130), and the recordings are written: the controller's own log holds every
 run it finished, lcm-logger's recording holds experiences, the checkpoint exists. A second
-session in the same folder resumes from the checkpoint; SIGTERM stops it the same way.
+session in the same folder resumes from the checkpoint; SIGTERM stops it the same way. The
+launcher creates the operator key where B21R_OPERATOR_KEY names it (mode 600, checked by loading it)
+and the controller signs its session with it.
 usage: test_session.py SESSION_TOOL"""
 import os
 import re
@@ -15,14 +17,17 @@ import subprocess
 import sys
 import time
 
+import b21r_opauth
 import fwtest
 from b21r_log import experience_gaps, read_log, runs_from_experiences
 
 
 def start(tool, out, log):
+    key = os.path.join(os.path.dirname(out), "operator.key")  # made by the launcher on first use
     return subprocess.Popen([sys.executable, tool, "--out", out, "--lockstep", "--no-spy",
                              "--set", "phase_one_runs=1000", "--set", "eval_every_runs=1000"],
-                            stdout=log, stderr=subprocess.STDOUT, env=dict(os.environ, DISPLAY=""))
+                            stdout=log, stderr=subprocess.STDOUT,
+                            env=dict(os.environ, DISPLAY="", B21R_OPERATOR_KEY=key))
 
 
 def wait_for(path, pattern, count, timeout, proc):
@@ -76,6 +81,11 @@ def main():
             err = f.read()
         if "SAFETY STOP (signal)" not in err or "final checkpoint" not in err:
             fwtest.fail("the controller did not stop on the signal:\n%s" % err)
+        # The launcher made the operator key (mode 600) and gave it to the controller.
+        key_path = os.path.join(d, "operator.key")
+        kid = b21r_opauth.key_id(b21r_opauth.load_key(key_path)).hex()
+        if "key id %s" % kid not in err:
+            fwtest.fail("the controller does not use the launcher's key %s (id %s):\n%s" % (key_path, kid, err))
         exps = [m for _, _, m in read_log(os.path.join(out, "controller.lcmlog"), {"B21R_EXPERIENCE"})]
         done = [r for r in runs_from_experiences(exps) if r["goal"]]
         if len(done) < 3 or experience_gaps(exps):

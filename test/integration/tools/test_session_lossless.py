@@ -42,7 +42,8 @@ def session(tool, out, pace):
         cmd += ["--set", s]
     t0 = time.time()
     with open(out + ".launcher.txt", "w") as log:
-        p = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT, timeout=600, env=dict(os.environ, DISPLAY=""))
+        p = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT, timeout=600,
+                           env=dict(os.environ, DISPLAY="", B21R_OPERATOR_KEY=out + ".operator.key"))
     if p.returncode != 0:
         fwtest.fail("session (pace %g) exit status %d; see %s.launcher.txt" % (pace, p.returncode, out))
     return time.time() - t0

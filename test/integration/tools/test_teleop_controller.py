@@ -22,6 +22,7 @@ import time
 import lcm
 from b21r import pose_t, status_t, teleop_t
 
+import b21r_opauth
 import fwtest
 import b21r_teleop as tt
 
@@ -30,6 +31,7 @@ TIMEOUT_S = 0.3
 TICK_S = 0.1
 SLACK_S = 1.0  # this process's view of a shared 2-core machine: only for the robot standing still
 LIMIT = 1.0
+KEY = None  # the operator key file, made in main()
 
 
 class Bus:
@@ -116,7 +118,7 @@ def gamepad(bus, teleop_tool, d):
     os.mkfifo(fifo)
     log = open(os.path.join(d, "teleop-gamepad.log"), "w")
     tool = subprocess.Popen([sys.executable, teleop_tool, "--joystick", fifo, "--no-ui", "--lcm-url", URL,
-                             "--max-rotation", str(LIMIT)], stdout=log, stderr=subprocess.STDOUT)
+                             "--key", KEY, "--max-rotation", str(LIMIT)], stdout=log, stderr=subprocess.STDOUT)
     js = open(fifo, "wb", buffering=0)  # waits for the tool to open it
     try:
         js.write(b"".join(tt.JS_EVENT.pack(0, 0, tt.JS_EVENT_BUTTON | tt.JS_EVENT_INIT, b) for b in range(9)))
@@ -158,7 +160,8 @@ def gamepad(bus, teleop_tool, d):
 def keyboard(bus, teleop_tool, d):
     master, slave = pty.openpty()
     env = dict(os.environ, TERM="xterm", LINES="30", COLUMNS="160")
-    tool = subprocess.Popen([sys.executable, teleop_tool, "--keyboard", "--lcm-url", URL, "--key-hold-s", "0.5"],
+    tool = subprocess.Popen([sys.executable, teleop_tool, "--keyboard", "--lcm-url", URL, "--key", KEY,
+                             "--key-hold-s", "0.5"],
                             stdin=slave, stdout=slave, stderr=slave, env=env, close_fds=True)
     os.close(slave)
     drain = threading.Thread(target=lambda: _drain(master), daemon=True)
@@ -210,7 +213,10 @@ def _drain(fd):
 
 def main():
     controller, sim_exe, world, teleop_tool = sys.argv[1:5]
+    global KEY
     d = fwtest.workdir("teleop")
+    KEY = os.path.join(d, "operator.key")
+    b21r_opauth.create_key(KEY)
     ok = False
     sim = fwtest.Sim(sim_exe, world, d, "sim", seed=3, lockstep=False)
     bus = Bus()
@@ -218,7 +224,8 @@ def main():
     try:
         err = open(os.path.join(d, "controller.log"), "w")
         proc = subprocess.Popen([controller, "--endpoints", sim.endpoints, "--set", "lcm_url=" + URL,
-                                 "--set", "phase_one_driver=joystick", "--set", "teleop_timeout_s=%g" % TIMEOUT_S,
+                                 "--set", "phase_one_driver=joystick", "--set", "operator_key_file=" + KEY,
+                                 "--set", "teleop_timeout_s=%g" % TIMEOUT_S,
                                  "--set", "max_rotation_radps=%g" % LIMIT, "--set", "phase_one_runs=50",
                                  "--set", "safety_clear_ticks=5", "--set", "progress=true",
                                  # the between-run replay in a few ticks: this test is about the

@@ -39,11 +39,15 @@ public final class MsgsRoundTrip {
         d = golden(dir, "b21r_teleop_t");
         b21r.teleop_t t = new b21r.teleop_t(d);
         check(Arrays.equals(encode(t), d), "teleop_t re-encodes identically");
-        check(t.deadman && t.rotation_radps == 0.3, "teleop_t fields");
+        check(t.deadman && t.rotation_radps == 0.3 && t.mac[0] == (byte) 0xC0, "teleop_t fields");
 
         d = golden(dir, "b21r_command_t");
         b21r.command_t c = new b21r.command_t(d);
         check(Arrays.equals(encode(c), d) && c.command == b21r.command_t.CONFIRM_START_POSE, "command_t");
+
+        d = golden(dir, "b21r_session_t");
+        b21r.session_t se = new b21r.session_t(d);
+        check(Arrays.equals(encode(se), d) && se.started_us == 1700000000000000L && se.nonce[0] == 0x42, "session_t");
 
         d = golden(dir, "b21r_pose_t");
         b21r.pose_t p = new b21r.pose_t(d);

@@ -3,12 +3,15 @@
 // With a directory argument, the encoded bytes are also written there (<type>.bin) for the
 // Python and Java round-trip tests, which decode them and check the same field values.
 #include <b21r/b21r_command_t.h>
+#include <b21r/b21r_command_v1_t.h>
 #include <b21r/b21r_eval_t.h>
 #include <b21r/b21r_experience_t.h>
 #include <b21r/b21r_pose_t.h>
 #include <b21r/b21r_scan_t.h>
 #include <b21r/b21r_status_t.h>
+#include <b21r/b21r_session_t.h>
 #include <b21r/b21r_teleop_t.h>
+#include <b21r/b21r_teleop_v1_t.h>
 #include <b21r_test/alloc_counter.h>
 
 #include <setjmp.h>
@@ -94,24 +97,69 @@ static void test_msgs_experience_round_trip_equal(void** state) {
 static void test_msgs_teleop_round_trip_no_allocation(void** state) {
   (void)state;
   b21r_teleop_t m = {.utime = 5, .seq = 6, .deadman = 1, .rotation_radps = 0.3, .translation_mps = 0.4};
+  for (int i = 0; i < 8; ++i) {
+    m.key_id[i] = (uint8_t)(0xA0 + i);
+  }
+  for (int i = 0; i < 16; ++i) {
+    m.session[i] = (uint8_t)(0xB0 + i);
+  }
+  for (int i = 0; i < 32; ++i) {
+    m.mac[i] = (uint8_t)(0xC0 + i);
+  }
   b21r_teleop_t out;
   alloc_counter_begin();
   ROUND_TRIP(b21r_teleop_t, m, out);
   assert_int_equal(alloc_counter_end(), 0);
   assert_true(out.deadman == 1 && out.rotation_radps == 0.3 && out.translation_mps == 0.4);
   assert_int_equal(out.seq, 6);
+  assert_memory_equal(out.key_id, m.key_id, 8);
+  assert_memory_equal(out.session, m.session, 16);
+  assert_memory_equal(out.mac, m.mac, 32);
 }
 
 // command_t is decoded by the firmware: decoding must not allocate.
 static void test_msgs_command_round_trip_no_allocation(void** state) {
   (void)state;
   b21r_command_t m = {.utime = 9, .seq = 10, .command = B21R_COMMAND_T_CONFIRM_START_POSE, .argument = 3};
+  m.mac[31] = 0x7F;
   b21r_command_t out;
   alloc_counter_begin();
   ROUND_TRIP(b21r_command_t, m, out);
   assert_int_equal(alloc_counter_end(), 0);
   assert_int_equal(out.command, B21R_COMMAND_T_CONFIRM_START_POSE);
   assert_int_equal(out.argument, 3);
+  assert_int_equal(out.mac[31], 0x7F);
+}
+
+// session_t: fixed-size, decoded by the operator tools.
+static void test_msgs_session_round_trip_equal(void** state) {
+  (void)state;
+  b21r_session_t m = {.utime = 11, .started_us = 1700000000000000LL};
+  m.nonce[0] = 0x42;
+  m.key_id[7] = 0x17;
+  m.mac[0] = 0x99;
+  b21r_session_t out;
+  ROUND_TRIP(b21r_session_t, m, out);
+  assert_true(out.started_us == 1700000000000000LL && out.nonce[0] == 0x42 && out.mac[0] == 0x99);
+}
+
+// The old unauthenticated types keep the fingerprints of the B21R_TELEOP and B21R_COMMAND they
+// were (LCM leaves a type's name out of its fingerprint), so that old recordings decode with them.
+static void test_msgs_v1_types_keep_the_old_fingerprints(void** state) {
+  (void)state;
+  const b21r_teleop_v1_t t = {.utime = 1, .seq = 2, .deadman = 1, .rotation_radps = 0.5};
+  b21r_teleop_v1_t tout;
+  ROUND_TRIP(b21r_teleop_v1_t, t, tout);
+  static const uint8_t teleop_v1[8] = {0x7c, 0xc1, 0xb7, 0x37, 0x0d, 0xf2, 0x0b, 0xb8};
+  assert_memory_equal(g_buf_a, teleop_v1, 8);
+  const b21r_command_v1_t c = {.utime = 1, .seq = 2, .command = B21R_COMMAND_T_SHUTDOWN};
+  b21r_command_v1_t cout;
+  ROUND_TRIP(b21r_command_v1_t, c, cout);
+  static const uint8_t command_v1[8] = {0x36, 0x52, 0x04, 0x48, 0x19, 0xc4, 0x0f, 0x11};
+  assert_memory_equal(g_buf_a, command_v1, 8);
+  // ... and neither decodes as the authenticated type, nor the other way round.
+  b21r_teleop_t now;
+  assert_true(b21r_teleop_t_decode(g_buf_a, 0, (int)sizeof g_buf_a, &now) < 0);
 }
 
 static void test_msgs_pose_round_trip_equal(void** state) {
@@ -198,6 +246,8 @@ int main(int argc, char** argv) {
       cmocka_unit_test(test_msgs_experience_round_trip_equal),
       cmocka_unit_test(test_msgs_teleop_round_trip_no_allocation),
       cmocka_unit_test(test_msgs_command_round_trip_no_allocation),
+      cmocka_unit_test(test_msgs_session_round_trip_equal),
+      cmocka_unit_test(test_msgs_v1_types_keep_the_old_fingerprints),
       cmocka_unit_test(test_msgs_pose_round_trip_equal),
       cmocka_unit_test(test_msgs_eval_round_trip_equal),
       cmocka_unit_test(test_msgs_status_round_trip_equal),

@@ -34,6 +34,18 @@ class RoundTrip(unittest.TestCase):
     def test_teleop(self):
         m = self.check(b21r.teleop_t, "b21r_teleop_t")
         self.assertEqual((m.seq, m.deadman, m.rotation_radps, m.translation_mps), (6, True, 0.3, 0.4))
+        self.assertEqual((bytes(m.key_id), bytes(m.session), bytes(m.mac)),
+                         (bytes(range(0xA0, 0xA8)), bytes(range(0xB0, 0xC0)), bytes(range(0xC0, 0xE0))))
+
+    def test_session(self):
+        m = self.check(b21r.session_t, "b21r_session_t")
+        self.assertEqual((m.started_us, bytes(m.nonce)[0], bytes(m.mac)[0]), (1700000000000000, 0x42, 0x99))
+
+    def test_old_types(self):
+        m = self.check(b21r.teleop_v1_t, "b21r_teleop_v1_t")
+        self.assertEqual((m.seq, m.deadman, m.rotation_radps), (2, True, 0.5))
+        m = self.check(b21r.command_v1_t, "b21r_command_v1_t")
+        self.assertEqual(m.command, b21r.command_t.SHUTDOWN)
 
     def test_command(self):
         m = self.check(b21r.command_t, "b21r_command_t")

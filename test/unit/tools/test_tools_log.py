@@ -11,7 +11,7 @@ import tempfile
 import unittest
 
 import lcm
-from b21r import experience_t, pose_t
+from b21r import command_t, command_v1_t, experience_t, pose_t, teleop_v1_t
 
 import b21r_log
 
@@ -124,6 +124,28 @@ class CommandLine(unittest.TestCase):
         self.assertEqual(len(events), 1)
         self.assertEqual(events[0][1], "SOME_OTHER_NAME")
         self.assertEqual(events[0][2].seq, 7)
+
+    def test_old_operator_messages_read_and_unknown_types_named(self):
+        # A recording from before the operator messages were signed: its TELEOP and COMMAND decode
+        # as the v1 types; an event of a type this build does not know is skipped and named.
+        with tempfile.TemporaryDirectory() as d:
+            path = os.path.join(d, "old.lcmlog")
+            old_t = teleop_v1_t()
+            old_t.seq, old_t.deadman, old_t.rotation_radps = 3, True, 0.25
+            old_c = command_v1_t()
+            old_c.seq, old_c.command = 4, command_t.PAUSE
+            log = lcm.EventLog(path, "w", overwrite=True)
+            log.write_event(1, "B21R_TELEOP", old_t.encode())
+            log.write_event(2, "B21R_COMMAND", old_c.encode())
+            log.write_event(3, "B21R_STATUS", b"\x01\x02\x03\x04\x05\x06\x07\x08 an older status_t")
+            log.close()
+            events = b21r_log.read_log(path)
+            p = subprocess.run([sys.executable, TOOL, path], capture_output=True, text=True, timeout=60)
+        self.assertEqual([type(m) for _, _, m in events], [teleop_v1_t, command_v1_t])
+        self.assertEqual((events[0][2].rotation_radps, events[1][2].command), (0.25, command_t.PAUSE))
+        self.assertEqual(p.returncode, 0)
+        self.assertIn("skipped 1 events of message types this build does not know (B21R_STATUS 1)", p.stderr)
+        self.assertEqual(len(p.stdout.splitlines()), 2)
 
 
 if __name__ == "__main__":

@@ -7,8 +7,9 @@ opens does not count), B21R_TELEOP at the configured rate while it is held, the 
 the limit the tool is told and clamped to it (the full negative deflection, -32768, would
 otherwise exceed it), the release sends one message with the deadman released and then nothing,
 a lost device releases, commands fire once per press and long-press commands only after their
-hold time; the map file's errors name the file, the pad and the key; the keyboard's deadman is
-never latched."""
+hold time; every message is signed for the session (its mac verifies with the key, it carries the
+key id and the session nonce) and nothing goes out without a session; the map file's errors name
+the file, the pad and the key; the keyboard's deadman is never latched."""
 import os
 import struct
 import sys
@@ -20,11 +21,38 @@ import unittest
 import lcm
 from b21r import command_t, teleop_t
 
+import b21r_opauth
 import b21r_teleop as tt
 
 LIMIT_ROT = 0.6
 LIMIT_TRANS = 0.5
 RATE = 20.0
+KEY = bytes(range(32))
+NONCE = bytes(range(16))
+
+
+class FixedSession:
+    """A session as the tracker would hold it after a B21R_SESSION (nonce None: none yet)."""
+
+    def __init__(self, nonce=NONCE):
+        self.nonce = nonce
+
+    def current(self):
+        return self.nonce
+
+    def describe(self):
+        return "session %s" % self.nonce
+
+
+def signer(lc, session=None):
+    return b21r_opauth.Signer(lc, KEY, session or FixedSession())
+
+
+def check_signed(test, channel, msgs):
+    for m in msgs:
+        test.assertEqual(bytes(m.key_id), b21r_opauth.key_id(KEY))
+        test.assertEqual(bytes(m.session), NONCE)
+        test.assertEqual(bytes(m.mac), b21r_opauth.mac(KEY, channel, m), "%s: wrong mac" % channel)
 
 
 def ev(t_ms, kind, number, value, init=False):
@@ -55,7 +83,7 @@ class Capture:
     def run(self, js_path, stop=None, pad="default"):
         js = tt.Joystick(js_path)
         padmap = tt.load_pad_map(tt.DEFAULT_MAP, js.name, pad)
-        teleop = tt.Teleop(self.lc, LIMIT_ROT, LIMIT_TRANS, RATE)
+        teleop = tt.Teleop(self.lc, LIMIT_ROT, LIMIT_TRANS, RATE, signer(self.lc))
         state = tt.ControllerState(self.lc)
         self.t0 = time.monotonic()
         tt.gamepad_loop(self.lc, js, padmap, teleop, state, Quiet(), stop or tt.Stop(), exit_when_lost=True)
@@ -138,6 +166,10 @@ class GamepadRecording(unittest.TestCase):
         self.assertTrue(last_held and last_held[0][1].deadman)
         self.assertAlmostEqual(last_held[0][1].rotation_radps, -LIMIT_ROT, places=12)
         self.assertFalse(last_held[-1][1].deadman, "the end of the recording must release the deadman")
+
+    def test_every_message_signed_for_the_session(self):
+        check_signed(self, "B21R_TELEOP", [m for _, m in self.msgs])
+        check_signed(self, "B21R_COMMAND", [c for _, c in self.cap.commands])
 
     def test_commands_once_per_press_and_long_press(self):
         got = [(round(t - self.cap.t0, 2), c.command) for t, c in self.cap.commands]
@@ -239,7 +271,7 @@ class Keyboard(unittest.TestCase):
         got = []
         lc.subscribe("B21R_TELEOP", lambda c, d: got.append(teleop_t.decode(d)))
         clock = [0.0]
-        t = tt.Teleop(lc, LIMIT_ROT, LIMIT_TRANS, 10.0, clock=lambda: clock[0])
+        t = tt.Teleop(lc, LIMIT_ROT, LIMIT_TRANS, 10.0, signer(lc), clock=lambda: clock[0])
         for i in range(10):  # 1 s held at a 10 Hz send rate, requesting more than the limit
             clock[0] = i * 0.1
             t.step(clock[0], True, 5.0, -5.0)
@@ -252,6 +284,22 @@ class Keyboard(unittest.TestCase):
         self.assertTrue(all(m.deadman and m.rotation_radps == LIMIT_ROT and m.translation_mps == -LIMIT_TRANS
                             for m in got[:10]))
         self.assertFalse(got[10].deadman)
+        check_signed(self, "B21R_TELEOP", got)
+
+    def test_nothing_sent_without_a_session(self):
+        lc = lcm.LCM("memq://")
+        got = []
+        lc.subscribe("B21R_TELEOP", lambda c, d: got.append(d))
+        lc.subscribe("B21R_COMMAND", lambda c, d: got.append(d))
+        t = tt.Teleop(lc, LIMIT_ROT, LIMIT_TRANS, 10.0, signer(lc, FixedSession(None)), clock=lambda: 0.0)
+        for i in range(5):
+            t.step(i * 0.1, True, 0.3, 0.0)
+        t.step(0.5, False, 0.0, 0.0)
+        self.assertFalse(t.command("PAUSE"))
+        while lc.handle_timeout(0):
+            pass
+        self.assertEqual(got, [])
+        self.assertEqual((t.sent, t.unsent), (0, 6))
 
 
 if __name__ == "__main__":

@@ -68,6 +68,11 @@ typedef enum fw_reposition {
   FW_REPOSITION_OPERATOR = 0,  ///< status REPOSITIONING until B21R_COMMAND CONFIRM_START_POSE
   FW_REPOSITION_EMULATOR = 1,  ///< the emulator's control socket `reset x y theta`
 } fw_reposition_t;
+/// Who may exchange LCM messages with the controller (fw/lcm_scope.h).
+typedef enum fw_lcm_scope {
+  FW_LCM_SCOPE_HOST = 0,     ///< this host only: ttl=0, receive confined to loopback
+  FW_LCM_SCOPE_NETWORK = 1,  ///< other hosts too (operator messages still authenticated)
+} fw_lcm_scope_t;
 /// What the controller does when a device is gone (end of file, EIO, ENODEV, hang-up).
 typedef enum fw_device_lost_action {
   FW_DEVICE_LOST_REOPEN = 0,   ///< stop, close it, reopen with back-off, resume when it is back
@@ -223,6 +228,10 @@ typedef struct fw_config {
 
   // Output.
   char lcm_url[FW_CONFIG_STR_MAX]; ///< LCM provider URL; "" = LCM's default; "none" = off
+  int32_t lcm_scope;               ///< fw_lcm_scope_t: host (default) or network (fw/lcm_scope.h)
+  /// operator key (fw/opauth.h): B21R_TELEOP / B21R_COMMAND are taken only signed with it; "" =
+  /// none (every operator message refused)
+  char operator_key_file[FW_CONFIG_STR_MAX];
   int32_t status_period_ticks;     ///< publish STATUS every N ticks
   bool publish_scan;               ///< also publish B21R_SCAN
   int32_t queue_capacity;          ///< publisher queue slots (power of two)

@@ -42,6 +42,7 @@
 #include "fw/checkpoint.h"
 #include "fw/config.h"
 #include "fw/io.h"
+#include "fw/opauth.h"
 #include "fw/publisher.h"
 #include "fw/pubq.h"
 #include "fw/safety.h"
@@ -69,6 +70,9 @@ typedef struct fw_loop_outputs {
   void* notify_user;
   fw_ckpt_writer_t* checkpoints;   ///< background checkpoint writer (cfg.checkpoint_file)
   const fw_publisher_t* publisher; ///< its counters go on STATUS (lock-free reads)
+  /// the receive thread's check of operator messages (fw/opauth.h): its refusals go on STATUS
+  /// (lock-free reads); messages reach the loop (fw_loop_post_*) only once taken by it
+  const fw_opauth_t* operator_auth;
 } fw_loop_outputs_t;
 
 /// Exit status of fw_loop_run() when, in lockstep, a device sent nothing for lockstep_timeout_s
@@ -182,7 +186,9 @@ void fw_loop_signal(fw_loop_t* loop, int signal_number);
 /// when the mailbox is full the oldest message is replaced (and counted as rejected).
 void fw_loop_post_teleop(fw_loop_t* loop, const b21r_teleop_t* msg, int64_t arrival_us);
 
-/// Hands a received B21R_COMMAND to the loop (validated in the tick). Thread-safe.
+/// Hands a received B21R_COMMAND to the loop (validated in the tick: a known command; a command
+/// older than the newest one taken is dropped, except a stop: PAUSE and SHUTDOWN are always
+/// obeyed). Thread-safe.
 void fw_loop_post_command(fw_loop_t* loop, const b21r_command_t* msg, int64_t arrival_us);
 
 /// Snapshot of the counters and state (tick thread only).

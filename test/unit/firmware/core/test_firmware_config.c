@@ -423,6 +423,7 @@ static void test_config_program_refuses_joystick_without_operator(void** state) 
   fw_config_t c;
   char err[FW_CONFIG_ERR_MAX];
   fw_config_defaults(&c);
+  assert_int_equal(fw_config_set(&c, "operator_key_file", "/etc/b21r/operator.key", "robot.conf:2", err, sizeof err), 0);
   assert_int_equal(fw_config_set(&c, "phase_one_driver", "joystick", "robot.conf:7", err, sizeof err), 0);
   assert_int_equal(fw_config_set_arg(&c, "lockstep=true", err, sizeof err), 0);
   assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
@@ -446,6 +447,51 @@ static void test_config_program_refuses_joystick_without_operator(void** state) 
   c.queue_capacity = 1000;
   assert_int_equal(fw_config_validate_program(&c, err, sizeof err), -1);
   assert_non_null(strstr(err, "power of two"));
+}
+
+// What only the operator can say (CONFIRM_START_POSE with reposition = operator, joystick driving,
+// START_PHASE_TWO with phase_switch = operator) is taken only signed with the operator key: without
+// operator_key_file such a configuration is refused, naming the key that waits for the operator,
+// operator_key_file and how to make a key. With LCM off, or nothing to wait for, no key is needed.
+// lcm_scope takes host (the default) or network.
+static void test_config_program_needs_operator_key(void** state) {
+  (void)state;
+  fw_config_t c;
+  char err[FW_CONFIG_ERR_MAX];
+  fw_config_defaults(&c);
+  assert_int_equal(c.lcm_scope, FW_LCM_SCOPE_HOST);
+  assert_string_equal(c.operator_key_file, "");
+  assert_int_equal(fw_config_validate(&c, err, sizeof err), 0);
+  assert_int_equal(fw_config_validate_program(&c, err, sizeof err), -1);
+  assert_non_null(strstr(err, "default: reposition = operator waits for the operator's CONFIRM_START_POSE"));
+  assert_non_null(strstr(err, "operator_key_file is not set"));
+  assert_non_null(strstr(err, "tools/b21r_key.py create"));
+  fw_config_t robot = c;
+  assert_int_equal(fw_config_set(&robot, "operator_key_file", "/etc/b21r/operator.key", "robot.conf:2", err,
+                                 sizeof err), 0);
+  assert_int_equal(fw_config_validate_program(&robot, err, sizeof err), 0);
+  fw_config_t quiet = c;
+  assert_int_equal(fw_config_set_arg(&quiet, "lcm_url=none", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate_program(&quiet, err, sizeof err), 0);
+  // In the emulator the example driver needs nothing of the operator ...
+  assert_int_equal(fw_config_set(&c, "reposition", "emulator", "--set", err, sizeof err), 0);
+  assert_int_equal(fw_config_set(&c, "emulator_control", "/tmp/sim.sock", "--set", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate_program(&c, err, sizeof err), 0);
+  // ... the joystick and the operator's phase switch do.
+  fw_config_t joystick = c;
+  assert_int_equal(fw_config_set(&joystick, "phase_one_driver", "joystick", "robot.conf:7", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate_program(&joystick, err, sizeof err), -1);
+  assert_non_null(strstr(err, "robot.conf:7: phase_one_driver = joystick drives with the operator's B21R_TELEOP"));
+  fw_config_t switched = c;
+  assert_int_equal(fw_config_set(&switched, "phase_switch", "operator", "robot.conf:8", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate_program(&switched, err, sizeof err), -1);
+  assert_non_null(strstr(err, "robot.conf:8: phase_switch = operator waits for the operator's START_PHASE_TWO"));
+  assert_int_equal(fw_config_set(&switched, "operator_key_file", "k", "--set", err, sizeof err), 0);
+  assert_int_equal(fw_config_validate_program(&switched, err, sizeof err), 0);
+  assert_int_equal(fw_config_set(&c, "lcm_scope", "network", "--set", err, sizeof err), 0);
+  assert_int_equal(c.lcm_scope, FW_LCM_SCOPE_NETWORK);
+  assert_int_equal(fw_config_set(&c, "lcm_scope", "world", "--set", err, sizeof err), -1);
+  assert_non_null(strstr(err, "lcm_scope"));
 }
 
 // Every cross-key error starts with the file and line (or option) of the offending key and
@@ -763,6 +809,7 @@ int main(int argc, char** argv) {
       cmocka_unit_test(test_config_set_allocates_nothing),
       cmocka_unit_test(test_config_retired_pair_keys_refused),
       cmocka_unit_test(test_config_program_refuses_joystick_without_operator),
+      cmocka_unit_test(test_config_program_needs_operator_key),
       cmocka_unit_test(test_config_learner_key),
       cmocka_unit_test(test_config_task_name),
       cmocka_unit_test(test_config_task_params),

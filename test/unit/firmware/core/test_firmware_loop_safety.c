@@ -527,8 +527,9 @@ static void test_loop_config_and_run_records(void** state) {
   harness_close(&g_h);
 }
 
-// Operator commands: PAUSE stops (reported as paused) until RESUME; repeated or unknown commands
-// are rejected; START_PHASE_TWO switches after the current run; SHUTDOWN ends the loop.
+// Operator commands: PAUSE stops (reported as paused) until RESUME; unknown commands and commands
+// older than the newest taken are rejected, except stops: a PAUSE or SHUTDOWN is obeyed whatever
+// came before it; START_PHASE_TWO switches after the current run; SHUTDOWN ends the loop.
 static void test_loop_operator_commands(void** state) {
   (void)state;
   open_running(false, NULL);
@@ -544,16 +545,19 @@ static void test_loop_operator_commands(void** state) {
   harness_run(&g_h, 20);
   fw_loop_get_stats(g_h.loop, &st);
   assert_int_equal(st.stop_reason, FW_STOP_OPERATOR);
-  fw_loop_post_command(g_h.loop, &cmd, 0);  // repeated seq: rejected
   cmd.seq = 2;
   cmd.command = 42;  // unknown
   fw_loop_post_command(g_h.loop, &cmd, 0);
+  cmd.seq = 0;
+  cmd.command = B21R_COMMAND_T_RESUME;  // older than the PAUSE: overtaken by it, rejected
+  fw_loop_post_command(g_h.loop, &cmd, 0);
+  harness_run(&g_h, 20);
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.mode, B21R_STATUS_T_MODE_PAUSED);
+  assert_int_equal(st.commands_rejected, 2);
   cmd.seq = 3;
-  cmd.command = B21R_COMMAND_T_RESUME;
   fw_loop_post_command(g_h.loop, &cmd, 0);
   expect_resume(20 + REPLAY_TICKS);
-  fw_loop_get_stats(g_h.loop, &st);
-  assert_int_equal(st.commands_rejected, 2);
   cmd.seq = 4;
   cmd.command = B21R_COMMAND_T_START_PHASE_TWO;
   fw_loop_post_command(g_h.loop, &cmd, 0);
@@ -562,12 +566,50 @@ static void test_loop_operator_commands(void** state) {
     fw_loop_get_stats(g_h.loop, &st);
   }
   assert_int_equal(st.phase, 2);
-  cmd.seq = 5;
+  // Stop wins: a PAUSE older than the newest command taken is obeyed all the same (once a run of
+  // phase two is under way).
+  for (int i = 0; i < 3000 && !(st.mode == B21R_STATUS_T_MODE_RUNNING && fabs(fake_v()) > 0.05); ++i) {
+    harness_run(&g_h, 1);
+    fw_loop_get_stats(g_h.loop, &st);
+  }
+  cmd.seq = 1;
+  cmd.command = B21R_COMMAND_T_PAUSE;
+  fw_loop_post_command(g_h.loop, &cmd, 0);
+  expect_stop_within(FW_STOP_OPERATOR, 2);
+  cmd.seq = 6;
+  cmd.command = B21R_COMMAND_T_RESUME;
+  fw_loop_post_command(g_h.loop, &cmd, 0);
+  expect_resume(20 + REPLAY_TICKS);
+  cmd.seq = 5;  // older than the RESUME, and obeyed: a stop
   cmd.command = B21R_COMMAND_T_SHUTDOWN;
   fw_loop_post_command(g_h.loop, &cmd, 0);
   harness_run(&g_h, 2);
   fw_loop_get_stats(g_h.loop, &st);
   assert_true(st.done);
+  assert_int_equal(st.commands_rejected, 2);
+  harness_close(&g_h);
+}
+
+// A full command mailbox makes room for a stop: eight commands wait, then a PAUSE comes; the
+// oldest waiting command that is not a stop gives way (counted as rejected), and the PAUSE stops.
+static void test_loop_mailbox_full_keeps_the_stop(void** state) {
+  (void)state;
+  open_running(false, NULL);
+  b21r_command_t cmd;
+  memset(&cmd, 0, sizeof cmd);
+  cmd.command = B21R_COMMAND_T_CONFIRM_START_POSE;
+  for (int i = 0; i < 8; ++i) {
+    cmd.seq = i + 1;
+    fw_loop_post_command(g_h.loop, &cmd, 0);
+  }
+  cmd.seq = 9;
+  cmd.command = B21R_COMMAND_T_PAUSE;
+  fw_loop_post_command(g_h.loop, &cmd, 0);
+  expect_stop_within(FW_STOP_OPERATOR, 2);
+  fw_loop_stats_t st;
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.commands_accepted, 8);
+  assert_int_equal(st.commands_rejected, 1);
   harness_close(&g_h);
 }
 
@@ -638,6 +680,7 @@ int main(void) {
       cmocka_unit_test(test_loop_teleop_out_of_range_reported),
       cmocka_unit_test(test_loop_config_and_run_records),
       cmocka_unit_test(test_loop_operator_commands),
+      cmocka_unit_test(test_loop_mailbox_full_keeps_the_stop),
       cmocka_unit_test(test_loop_corrupt_bytes_counted),
       cmocka_unit_test(test_loop_late_start_and_missed_periods_counted),
   };
