@@ -23,8 +23,14 @@ import sys
 from paired_stats import T95_ONE_SIDED_DF9, mean, paired, report, run_sessions
 
 SEEDS = list(range(1, 11))
-ASSERTED = {"beats_human": True, "reaches": True, "falls": True, "beats_examples": True,
-            "near_optimal": True}
+# Without the ranked pairs (removed: their policy terms were the reference law's coordinates) the
+# greedy policy on HEDGER's values beats the sloppy human but not the proportional policy or the
+# optimal controller, and not every phase-two block reaches every pose: measured over these 10
+# seeds, final minus proportional +17.5 ± 2.2 steps, minus optimal +19.2 ± 2.2, phase two's fall
+# -1.8 ± 3.0. Those claims are printed with their numbers (FAILS) and not asserted until the
+# learner that meets them (issue 40) is in place.
+ASSERTED = {"beats_human": True, "reaches": False, "falls": False, "beats_examples": False,
+            "near_optimal": False}
 
 
 def main():
