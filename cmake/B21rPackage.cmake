@@ -31,7 +31,8 @@ foreach(_kv IN ITEMS
     "rt_scheduler=fifo"
     "rt_lock_memory=true"
     "rt_prefault=true"
-    "checkpoint_file=\"/var/lib/b21r/hedger.ckpt\"")
+    "checkpoint_file=\"/var/lib/b21r/hedger.ckpt\""
+    "operator_key_file=\"/etc/b21r/operator.key\"")
   string(REPLACE "=" ";" _kv "${_kv}")
   list(GET _kv 0 _key)
   list(GET _kv 1 _value)
@@ -47,7 +48,8 @@ file(WRITE "${B21R_ROBOT_CONF}.new"
   "# Every key with its documentation, allowed values and default (b21r-controller\n"
   "# --print-reference-config); the package sets these for the service: the tick thread at\n"
   "# SCHED_FIFO 50 with memory locked and pre-faulted (the unit's LimitRTPRIO/LimitMEMLOCK allow\n"
-  "# it), the learned state in /var/lib/b21r. Set the devices below, then:\n"
+  "# it), the learned state in /var/lib/b21r, the operator key that postinst makes (copy it to the\n"
+  "# operator's machine: docs/robot.md, \"The operator key\"). Set the devices below, then:\n"
   "#   systemctl enable --now b21r-controller\n\n"
   "${_b21r_conf}")
 file(COPY_FILE "${B21R_ROBOT_CONF}.new" "${B21R_ROBOT_CONF}" ONLY_IF_DIFFERENT)
