@@ -23,6 +23,8 @@ FILES = [
     "usr/lib/sysusers.d/b21r-controller.conf",
     "usr/lib/b21r-controller/python/b21r_teleop.py",
     "usr/lib/b21r-controller/python/b21r_log.py",
+    "usr/lib/b21r-controller/python/b21r_key.py",
+    "usr/lib/b21r-controller/python/b21r_opauth.py",
     "usr/lib/b21r-controller/python/b21r_bootstrap.py",
     "usr/lib/b21r-controller/python/b21r_gamepads.toml",
     "usr/lib/b21r-controller/python/b21r/__init__.py",
@@ -32,10 +34,11 @@ FILES = [
     "usr/share/doc/b21r-controller/lcm-python/COPYING",
 ]
 LINKS = {"usr/bin/b21r-teleop": "../lib/b21r-controller/python/b21r_teleop.py",
-         "usr/bin/b21r-log": "../lib/b21r-controller/python/b21r_log.py"}
+         "usr/bin/b21r-log": "../lib/b21r-controller/python/b21r_log.py",
+         "usr/bin/b21r-key": "../lib/b21r-controller/python/b21r_key.py"}
 # The service's settings in the configuration file (on top of the reference's defaults).
 CONF = ["rt_scheduler = fifo", "rt_lock_memory = true", "rt_prefault = true",
-        'checkpoint_file = "/var/lib/b21r/hedger.ckpt"']
+        'checkpoint_file = "/var/lib/b21r/hedger.ckpt"', 'operator_key_file = "/etc/b21r/operator.key"']
 # What the unit must say (the list: real-time limits, restart, state, watchdog, user).
 UNIT = ["Type=notify", "WatchdogSec=", "Restart=on-failure", "LimitRTPRIO=99", "LimitMEMLOCK=infinity",
         "StateDirectory=b21r", "User=b21r", "SuccessExitStatus=143",

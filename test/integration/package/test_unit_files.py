@@ -55,7 +55,7 @@ def main():
         note("the controller accepts /etc/b21r/b21r-controller.conf")
 
         env = {"PATH": "/usr/bin:/bin", "HOME": d}  # a plain environment: no venv, no PYTHONPATH
-        for tool, want in (("b21r-log", "--gaps"), ("b21r-teleop", "--command")):
+        for tool, want in (("b21r-log", "--gaps"), ("b21r-teleop", "--command"), ("b21r-key", "create")):
             r = run(["/usr/bin/python3", os.path.join(root, "usr/bin", tool), "--help"], env=env)
             if r.returncode != 0 or want not in r.stdout:
                 fail("installed %s --help (exit %d):\n%s" % (tool, r.returncode, r.stdout[-2000:]))
@@ -64,7 +64,7 @@ def main():
                  os.path.join(root, "usr/lib/b21r-controller/python")], env=env)
         if r.returncode != 0 or "lcm ok" not in r.stdout:
             fail("the shipped LCM binding does not work on /usr/bin/python3:\n%s" % r.stdout)
-        note("b21r-log, b21r-teleop and the LCM binding run on /usr/bin/python3")
+        note("b21r-log, b21r-teleop, b21r-key and the LCM binding run on /usr/bin/python3")
         ok = True
     finally:
         if ok:
