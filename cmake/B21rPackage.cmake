@@ -83,10 +83,11 @@ set(CPACK_DEBIAN_PACKAGE_PRIORITY optional)
 # Stated by hand, the same for both architectures (a cross build cannot run dpkg-shlibdeps on the
 # target's libraries): the controller's shared libraries (libc, libstdc++ for HEDGER, LCM and the
 # GLib it needs), Debian's Python 3.11 for the tools (the LCM binding, which Debian does not
-# package, ships inside, see tools/CMakeLists.txt), and systemd (sysusers, the unit).
+# package, ships inside, see tools/CMakeLists.txt), OpenSSL's libcrypto (the operator messages' HMAC),
+# and systemd (sysusers, the unit).
 # test/package checks them: the installed programs run in a fresh Debian 12 root.
 set(CPACK_DEBIAN_PACKAGE_DEPENDS
-  "libc6 (>= 2.36), libstdc++6 (>= 12), libgcc-s1, liblcm1 (>= 1.3.1), libglib2.0-0 (>= 2.74), python3 (>= 3.11), systemd")
+  "libc6 (>= 2.36), libstdc++6 (>= 12), libgcc-s1, liblcm1 (>= 1.3.1), libglib2.0-0 (>= 2.74), libssl3 (>= 3.0), python3 (>= 3.11), systemd")
 set(CPACK_DEBIAN_PACKAGE_RECOMMENDS "liblcm-bin")
 set(CPACK_DEBIAN_PACKAGE_SUGGESTS "liblcm-java, default-jre")
 set(CPACK_DEBIAN_PACKAGE_CONTROL_EXTRA
