@@ -153,7 +153,8 @@ tasks_outcome_t tasks_doorway_outcome(const tasks_doorway_spec_t* spec, const fe
     o.terminal = 1U;
     o.end_run = 1U;
     o.reason = (uint8_t)TASKS_END_COLLISION;
-  } else if (f_next != NULL && f_next->valid != 0U && tasks_doorway_goal_distance(spec, f_next) <= spec->goal_radius_m) {
+  } else if (f_next != NULL && f_next->valid != 0U &&
+             tasks_doorway_goal_distance(spec, f_next) <= spec->goal_radius_m) {
     o.reward = spec->goal_reward;
     o.terminal = 1U;
     o.end_run = 1U;
@@ -182,7 +183,8 @@ void tasks_driver_law_doorway(tasks_driver_t* d) {
 
 // The example's target: the staging point on the door's centre line law[1] before the wall while
 // the robot is farther from the wall than that, then the goal. Its bearing, robot frame.
-static double example_target(const tasks_driver_t* d, const tasks_doorway_spec_t* spec, const features_doorway_t* f) {
+static double example_target(const tasks_driver_t* d, const tasks_doorway_spec_t* spec,
+                             const features_doorway_t* f) {
   const double approach = d->law[1];
   if (f->wall_distance_m > approach) {
     // The staging point is at (-approach, 0) in the door frame; the robot at (-wall distance,

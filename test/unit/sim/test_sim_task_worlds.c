@@ -90,7 +90,8 @@ static void test_task_worlds_doorway_file_matches_spec(void** state) {
   // The emulator and the task agree on what collides, across the door and the room.
   for (double x = spec.room_min_x_m; x <= spec.room_max_x_m; x += 0.0625) {
     for (double y = spec.room_min_y_m; y <= spec.room_max_y_m; y += 0.0625) {
-      assert_int_equal(sim_world_disc_collides(&g_spec, x, y, r) != 0, tasks_doorway_disc_collides(&spec, x, y, r) != 0);
+      assert_int_equal(sim_world_disc_collides(&g_spec, x, y, r) != 0,
+                       tasks_doorway_disc_collides(&spec, x, y, r) != 0);
     }
   }
   // The laser sees the jambs where they are: a ray along the door's edge from the robot's side

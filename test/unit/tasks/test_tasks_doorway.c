@@ -115,8 +115,8 @@ static void test_doorway_outcome(void** state) {
   features_doorway_config_t cfg;
   tasks_doorway_features_config(&s, &cfg);
   features_doorway_t at_goal, before;
-  assert_int_equal(features_doorway_from_pose(&cfg, (features_pose_t){s.goal_x_m - 0.2, s.goal_y_m, 0.0}, &at_goal),
-                   FEATURES_OK);
+  const features_pose_t near_goal = {s.goal_x_m - 0.2, s.goal_y_m, 0.0};
+  assert_int_equal(features_doorway_from_pose(&cfg, near_goal, &at_goal), FEATURES_OK);
   assert_int_equal(features_doorway_from_pose(&cfg, (features_pose_t){-2.0, 0.5, 0.0}, &before), FEATURES_OK);
   tasks_outcome_t o = tasks_doorway_outcome(&s, &at_goal, 0U, 10U);
   assert_true(o.reward == s.goal_reward && o.terminal == 1 && o.end_run == 1 && o.reason == TASKS_END_GOAL);
@@ -189,8 +189,8 @@ static void run_batch(tasks_driver_kind_t kind, int seeds, batch_t* b) {
       }
     }
   }
-  printf("[ doorway ] kind %d: runs %d, goals %d, collisions %d, mean steps to the goal %.1f, closest %.3f m\n", kind,
-         b->n, b->goals, b->collisions, b->goals > 0 ? b->steps_sum / b->goals : 0.0, b->min_clearance);
+  printf("[ doorway ] kind %d: runs %d, goals %d, collisions %d, mean steps to the goal %.1f, closest %.3f m\n",
+         kind, b->n, b->goals, b->collisions, b->goals > 0 ? b->steps_sum / b->goals : 0.0, b->min_clearance);
 }
 
 // The sloppy example (gain drawn per run) reaches the goal from most starts and clips a jamb now
