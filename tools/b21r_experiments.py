@@ -10,6 +10,8 @@ Commands (default: all):
            skipped (run again to resume; --rerun to redo)
   figures  the paper-style figures (PNG, with captions) from the result files
   report   docs/RESULTS.md: our numbers next to the paper's claims, every yes/no from a test
+           (--section doorway: only the doorway task's section and figure, the rest of the
+           report kept, for when the other experiments' results are not at hand)
   merge    one JSON per experiment with all its results (OUT/merged)
   all      run, merge, figures, report
 On first use it installs the sweep's Python packages (tools/requirements-experiments.txt: Ray,
@@ -19,6 +21,7 @@ Examples:
   tools/b21r_experiments.py                                    # everything, 10 seeds each
   tools/b21r_experiments.py run fig4_corridor_examples --seeds 3
   tools/b21r_experiments.py figures report
+  tools/b21r_experiments.py run report doorway --section doorway   # the doorway task, 10 seeds, its section
 """
 import b21r_bootstrap  # noqa: E402 (first: runs the tool in the project's venv)
 
@@ -98,6 +101,8 @@ def main():
     ap.add_argument("--rerun", action="store_true", help="run finished tasks again")
     ap.add_argument("--configs", default=str(CONFIGS), help="folder of the experiment files (default tools/experiments)")
     ap.add_argument("--runner", help="use this b21r-experiment instead of building the host-release one")
+    ap.add_argument("--section", choices=("doorway",),
+                    help="figures, report: only this section of an existing report (and its figure)")
     args = ap.parse_args()
     commands = [w for w in args.words if w in ("run", "figures", "report", "merge", "all")]
     names = [w for w in args.words if w not in commands]
@@ -134,11 +139,17 @@ def main():
             say("merged: %s" % p)
     fig_dir = os.path.join(os.path.dirname(os.path.abspath(args.report)), "figures")
     if "figures" in commands:
-        for p in figures.make_all(args.out, fig_dir, str(configs)):
+        for p in figures.make_all(args.out, fig_dir, str(configs), only=(args.section,) if args.section else None):
             say("figure: %s" % p)
     if "report" in commands:
-        report.write(args.out, fig_dir, args.report, str(configs))
-        say("report: %s" % args.report)
+        if args.section:
+            if not os.path.exists(args.report):
+                sys.exit("experiments: --section needs an existing report (%s); run the report without it" % args.report)
+            report.write_section(args.out, fig_dir, args.report, str(configs), args.section)
+            say("report: section %s of %s" % (args.section, args.report))
+        else:
+            report.write(args.out, fig_dir, args.report, str(configs))
+            say("report: %s" % args.report)
     return status
 
 

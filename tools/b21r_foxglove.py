@@ -12,7 +12,7 @@ generated from the LCM definitions (lib/msgs), field for field.
 | /laser | foxglove.LaserScan, frame laser (no return: NaN) | B21R_SCAN |
 | /tf | foxglove.FrameTransforms: world -> odom (per run), odom -> base_link, base_link -> laser | B21R_POSE, B21R_EXPERIENCE, B21R_RUN |
 | /odom/pose | foxglove.PoseInFrame, frame odom (the base's odometry) | B21R_POSE |
-| /world/pose | foxglove.PoseInFrame, frame world (the task frame: corridor or arena) | B21R_POSE + the run's start |
+| /world/pose | foxglove.PoseInFrame, frame world (the task frame: corridor, arena or room) | B21R_POSE + the run's start |
 | /world/trajectory | foxglove.PosesInFrame, frame world: the run so far (every TRAJECTORY_EVERY poses and at its end) | same |
 | /scene | foxglove.SceneUpdate, frame world: walls, obstacles, goal | B21R_CONFIG (task) and the world |
 | /command | JSON, geometry_msgs/Twist-shaped: linear.x [m/s], angular.z [rad/s] commanded | B21R_EXPERIENCE |
@@ -22,14 +22,19 @@ Every message's timestamp is its receive time (the LCM log event's time, or the 
 so that poses, transforms, scans and the scene share one clock; the controller's own time stays in
 the product messages' utime. The task-frame pose of a run: from its B21R_RUN start pose when the
 caller knows it beforehand (the converter reads the log twice), else from the run's first state
-(corridor: exact inverse of the features; obstacles: the goal and the nearest obstacle as two
-landmarks of the world), composed with the odometry since the run's first pose.
+(corridor: exact inverse of the features; doorway: the features' door frame placed at the world's
+door; obstacles: the goal and the nearest obstacle as two landmarks of the world), composed with
+the odometry since the run's first pose. The scene's world: the corridor of the configuration's
+length, or any other task's world as its declaration builds it (b21r_task_world), or --world FILE;
+where it cannot be built the scene stays empty and the reason is printed.
 """
 import math
+import sys
 
 from foxglove import messages as fm
 
 import b21r
+from b21r_task_world import declared_world, parse_task_params, task_name
 from b21r_trajectories import CORRIDOR, corridor_pose, read_world
 
 # The laser's mount on the B21r (sim/include/sim/plant.h: SIM_LASER_X_DEFAULT_M, and its height).
@@ -41,6 +46,7 @@ TRAJECTORY_MAX = 2000  # poses kept of a run (the step limit is 1000)
 
 TASK_CORRIDOR = b21r.experience_t.TASK_CORRIDOR
 TASK_OBSTACLES = b21r.experience_t.TASK_OBSTACLES
+TASK_DOORWAY = b21r.experience_t.TASK_DOORWAY
 
 # LCM channel -> the JSON topic of the product message.
 PRODUCT_TOPICS = {
@@ -174,18 +180,28 @@ def _transform(t_ns, parent, child, p, z=0.0):
 # ---- the world ------------------------------------------------------------------------------
 
 def world_for(task, config_settings, world_file=None, repo=None):
-    """The world drawn in the scene: world_file when given, else the task's default (the corridor
-    of the configuration's length; the obstacle task's sim/worlds/obstacle1.world)."""
+    """The world drawn in the scene: world_file when given; else the corridor of the configuration's
+    length for the corridor task; else any other task's world as its declaration builds it, with
+    the configuration's task_params (b21r_task_world). A task whose world cannot be built here
+    (no compiled b21r_learn, a task byte this build does not declare) draws no world, with the
+    reason in the result's "unavailable"."""
     if world_file is not None:
         return read_world(world_file)
-    if task == TASK_OBSTACLES:
-        return read_world(str(repo / "sim" / "worlds" / "obstacle1.world"))
-    length = CORRIDOR["length_m"]
+    if task == TASK_CORRIDOR:
+        length = CORRIDOR["length_m"]
+        try:
+            length = float(config_settings.get("corridor_length_m", length))
+        except (TypeError, ValueError):
+            pass
+        return {"walls": [], "cylinders": [], "goal": None, "starts": [], "corridor": (length, CORRIDOR["width_m"])}
+    from b21r_task_world import WorldUnavailable
+    name = task_name(task)
     try:
-        length = float(config_settings.get("corridor_length_m", length))
-    except (TypeError, ValueError):
-        pass
-    return {"walls": [], "cylinders": [], "goal": None, "starts": [], "corridor": (length, CORRIDOR["width_m"])}
+        if name is None:
+            raise WorldUnavailable("task byte %s is not a declared task" % task)
+        return declared_world(name, parse_task_params(config_settings.get("task_params")))
+    except WorldUnavailable as exc:
+        return {"walls": [], "cylinders": [], "goal": None, "starts": [], "corridor": None, "unavailable": str(exc)}
 
 
 def scene_entities(world, t_ns):
@@ -194,10 +210,17 @@ def scene_entities(world, t_ns):
     thick, height = 0.05, 0.5
     boxes = []
 
-    def wall(x0, y0, x1, y1):
+    def wall(x0, y0, x1, y1, t=None):
+        # A face (x0, y0) -> (x1, y1) with its solid of thickness t to the right (sim/world.h); a bare
+        # segment (no thickness) is drawn thin, centred on it.
         length = math.hypot(x1 - x0, y1 - y0)
-        boxes.append(fm.CubePrimitive(pose=_pose((x0 + x1) / 2, (y0 + y1) / 2, math.atan2(y1 - y0, x1 - x0), height / 2),
-                                      size=fm.Vector3(x=length, y=thick, z=height), color=wall_colour))
+        if length == 0.0:
+            return
+        cx, cy, w = (x0 + x1) / 2, (y0 + y1) / 2, thick
+        if t is not None and t > 0.0:
+            cx, cy, w = cx + (y1 - y0) / length * t / 2, cy - (x1 - x0) / length * t / 2, t
+        boxes.append(fm.CubePrimitive(pose=_pose(cx, cy, math.atan2(y1 - y0, x1 - x0), height / 2),
+                                      size=fm.Vector3(x=length, y=w, z=height), color=wall_colour))
 
     goal = []
     if world.get("corridor") is not None:
@@ -231,13 +254,21 @@ def scene_entities(world, t_ns):
 def start_from_state(task, s, world):
     """The task-frame pose (x, y, theta) at a learner state s of the task, or None where the
     state does not determine it. Corridor: the inverse of the features (end distance, lateral
-    fraction, target angle). Obstacles: the goal (the world's) and the nearest obstacle (the
-    world's cylinder that fits the two ranges best) as landmarks; None without a visible obstacle."""
+    fraction, target angle). Doorway: the door frame of the features (wall distance, offset,
+    heading; features/doorway.h) placed at the world's door (the gap between its two walls across
+    the room). Obstacles: the goal (the world's) and the nearest obstacle (the world's cylinder that
+    fits the two ranges best) as landmarks; None without a visible obstacle."""
     if task == TASK_CORRIDOR:
         x, y, th = corridor_pose(s)
         if world.get("corridor") is not None:
             x += world["corridor"][0] - CORRIDOR["length_m"]  # corridor_pose assumes the default length
         return (x, y, th)
+    if task == TASK_DOORWAY:
+        door = door_of(world)
+        if door is None or len(s) < 3:
+            return None
+        wall_x, door_y = door
+        return (wall_x - s[0], door_y + s[1], s[2])
     if task != TASK_OBSTACLES or world.get("goal") is None or not world.get("cylinders") or len(s) < 4:
         return None
     gb, gd, ob, od = s[0], s[1], s[2], s[3]
@@ -256,6 +287,23 @@ def start_from_state(task, s, world):
         if best is None or mismatch < best[0]:
             best = (mismatch, pose)
     return best[1]
+
+
+def door_of(world):
+    """(x of the wall's centre plane, y of the door's centre) of a world with a dividing wall along
+    y made of walls on one line with a gap between them (the doorway task's), or None."""
+    lines = {}
+    for w in world.get("walls", []):
+        if len(w) >= 5 and abs(w[0] - w[2]) < 1e-9 and w[1] != w[3]:
+            # The centre plane: the solid lies to the face's right.
+            centre = w[0] + (w[4] / 2 if w[3] > w[1] else -w[4] / 2)
+            lines.setdefault(round(centre, 6), []).append((min(w[1], w[3]), max(w[1], w[3])))
+    for x, spans in sorted(lines.items()):
+        spans.sort()
+        for (_, hi), (lo, _) in zip(spans, spans[1:]):
+            if lo > hi:
+                return (x, (hi + lo) / 2)
+    return None
 
 
 class Converter:
@@ -281,11 +329,16 @@ class Converter:
         self.trajectory = []
         self.poses_since = 0
         self.first_states = {}   # run_id -> (task, first state) of runs whose first pose may come later
+        self.warned = set()      # reasons already given for a world not drawn
 
     # -- world --
     def _scene(self, t_ns, task):
         self.task = task
         self.world = world_for(task, self.settings, self.world_file, self.repo)
+        why = self.world.get("unavailable")
+        if why and why not in self.warned:
+            self.warned.add(why)
+            print("b21r_foxglove: no world drawn for task %s: %s" % (task, why), file=sys.stderr)
         return [("/scene", scene_entities(self.world, t_ns))]
 
     def _ensure_world(self, t_ns, task=None):

@@ -111,7 +111,7 @@ def main():
     ap.add_argument("log", help="LCM event log")
     ap.add_argument("--out", help="MCAP file to write (default: LOG with .mcap)")
     ap.add_argument("--world", help="b21r-sim world file to draw (default: the task's: the corridor of the "
-                                    "recorded length, or sim/worlds/obstacle1.world)")
+                                    "recorded length, or the task's world as declared, with the recorded task_params)")
     ap.add_argument("--force", action="store_true", help="replace an existing output file")
     args = ap.parse_args()
     out = args.out or os.path.splitext(args.log)[0] + ".mcap"

@@ -20,8 +20,9 @@ Hatched grey: HEDGER's "unknown" region, where no stored experience supports any
 greedy search finds no known action): the controller there holds course in an evaluation and lets
 the example policy advise in training; white: poses the robot cannot take (in a wall or obstacle).
 Slices: corridor: lateral position (fraction of the width, 0 = left wall) x target angle, at
---end-distance from the end (default 5 m); obstacles: the robot's position in the arena, facing
-the goal. The learner's state also holds the last command sent (state_rotation): the slice uses
+--end-distance from the end (default 5 m); any other task (obstacles, doorway, ...): the robot's
+position over the region of its evaluation poses and its goal (0.8 m around them), facing the
+goal, with the task's world (walls, obstacles, goal) drawn over it. The learner's state also holds the last command sent (state_rotation): the slice uses
 the learned policy's own command (a_k+1 = pi(s, a_k), four steps from the teacher's; drawn is
 pi(s, a_3)), i.e. the robot as it drives itself; the value panel at that command too.
 The learner's settings are the controller's defaults for the checkpoint's task; give --set for
@@ -46,11 +47,17 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 import b21r_learn  # noqa: E402
+from b21r_task_world import wall_outline  # noqa: E402
 
-# The example policy's gain ranges (lib/tasks tasks.h TASKS_PROPORTIONAL_*_GAIN_*): the teacher
-# is drawn at the middle, the nominal gain the main job's reference uses.
-NOMINAL_GAIN = {"corridor": (0.5 + 2.0) / 2, "obstacles": (0.8 + 2.0) / 2}
 FIXED_POINT_STEPS = 4
+SLICE_MARGIN_M = 0.8
+
+
+def nominal_gain(task):
+    """The example policy's nominal gain: the middle of the task's declared gain range (the teacher
+    is drawn there, as the main job's reference is)."""
+    lo, hi = next(t["gain_range"] for t in b21r_learn._core.tasks() if t["name"] == task)
+    return (lo + hi) / 2
 
 
 def parse_set(items):
@@ -99,18 +106,24 @@ def slice_poses(task, env, grid, end_distance):
             poses.append(row)
         return (fs, angles, "lateral position (fraction of the width, 0 = left wall)", "target angle [rad]"), poses
     w = env.core.world()
+    if w["goal"] is None:
+        sys.exit("b21r_policy_map: task %s has no goal disc to face; its slice is not defined (the corridor's "
+                 "slice is its own)" % task)
     gx, gy, _ = w["goal"]
-    xs = np.linspace(-3.8, 0.6, grid)
-    ys = np.linspace(-2.2, 2.2, grid)
+    starts = env.task_spec["eval_starts"]
+    px = [p[0] for p in starts] + [gx]
+    py = [p[1] for p in starts] + [gy]
+    xs = np.linspace(min(px) - SLICE_MARGIN_M, max(px) + SLICE_MARGIN_M, grid)
+    ys = np.linspace(min(py) - SLICE_MARGIN_M, max(py) + SLICE_MARGIN_M, grid)
     poses = [[(x, y, math.atan2(gy - y, gx - x)) for x in xs] for y in ys]
-    return (xs, ys, "x [m] (arena; goal at the origin)", "y [m]"), poses
+    return (xs, ys, "x [m] (task frame; goal at (%g, %g))" % (gx, gy), "y [m]"), poses
 
 
 def compute(h, progress, cfg, grid, end_distance):
     task = progress["task"]
     env = gymnasium.make(b21r_learn.envs.ENV_IDS[task], backend="kinematic").unwrapped
     omega_max = env.core.action_bound
-    teacher = b21r_learn.Driver("proportional", task, gain=NOMINAL_GAIN[task])
+    teacher = b21r_learn.Driver("proportional", task, gain=nominal_gain(task))
     optimal = b21r_learn.Driver("optimal", task)
     (ax_x, ax_y, label_x, label_y), poses = slice_poses(task, env, grid, end_distance)
     shape = (len(ax_y), len(ax_x))
@@ -162,7 +175,7 @@ def summary(r, progress, path):
         "mean_abs_learned_minus_optimal_radps": float(d_learned.mean()) if d_learned.size else None,
         "mean_abs_teacher_minus_optimal_radps": float(d_teacher.mean()) if d_teacher.size else None,
         "learned_closer_fraction": float((d_learned < d_teacher).mean()) if d_learned.size else None,
-        "teacher_gain": NOMINAL_GAIN[r["task"]], "phase": progress["phase"],
+        "teacher_gain": nominal_gain(r["task"]), "phase": progress["phase"],
         "training_runs": progress["training_runs"], "slice": {"x": r["label_x"], "y": r["label_y"],
                                                              "end_distance_m": r["end_distance"]},
     }
@@ -193,12 +206,18 @@ def draw(r, s, out_png, title):
         ax.set_xlabel(r["label_x"], fontsize=8)
         if k == 0:
             ax.set_ylabel(r["label_y"], fontsize=8)
-        if r["task"] == "obstacles":
+        if r["task"] != "corridor":  # a slice in the task frame: the world over it
             wd = r["world"]
+            for wall in wd["walls"]:
+                solid = wall_outline(wall)
+                if solid is not None:
+                    ax.add_patch(plt.Polygon(solid, closed=True, color="#555555", zorder=3))
             for cx, cy, rad in wd["cylinders"]:
                 ax.add_patch(plt.Circle((cx, cy), rad, color="#8a6d3b", zorder=3))
             gx, gy, gr = wd["goal"]
             ax.add_patch(plt.Circle((gx, gy), gr, facecolor="none", edgecolor="#2e7d32", lw=2, ls="--", zorder=3))
+            ax.set_xlim(extent[0], extent[1])
+            ax.set_ylim(extent[2], extent[3])
     unk = "%.0f %% of the slice unknown to HEDGER (hatched)" % (100 * s["unknown_fraction"])
     if s["mean_abs_learned_minus_optimal_radps"] is not None:
         unk += "; where known, |learned - optimal| %.3f rad/s vs |teacher - optimal| %.3f (learned closer in %.0f %%)" % (

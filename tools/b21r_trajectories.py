@@ -12,11 +12,14 @@ order (the same colour scale as b21r-sim's --trace-svg picture) with a legend (a
 there are many), a triangle at each start pose, a circle at each end pose, a red cross where a
 run ended in a collision, and the goal.
 Frames: B21R_POSE is the base's odometry, continuous over the whole session. In the task frame
-(the corridor's, = the emulator's world frame) each run is placed at its start pose, recovered
-from the run's first B21R_EXPERIENCE state (corridor task: end distance, lateral position and
-target angle give x, y and heading), and the corridor, its goal line and the evaluation start
-poses are drawn (--world FILE draws that world instead of the default corridor). Other tasks, and
-logs without experiences, are drawn in the odometry frame, where the goal is unknown.
+(= the emulator's world frame) each run is placed at its start pose: the one its B21R_RUN record
+gives (any task; the controller's --log has them), else the one recovered from the run's first
+B21R_EXPERIENCE state for the corridor task (end distance, lateral position and target angle give
+x, y and heading). The task's world is drawn: the corridor and its goal line, or any other task's
+walls, obstacles and goal as its declaration builds them (lib/tasks, through b21r_learn; the
+configuration's task_params are not in an experience log: give --world FILE for another room);
+--world FILE draws that world instead. Runs whose start is unknown (another task's log without run
+records, logs without experiences) are drawn in the odometry frame, where the goal is unknown.
 Phases, evaluation blocks and run ends come from B21R_EXPERIENCE and B21R_EVAL; without them all
 runs are drawn in one panel.
 Runs from a plain shell after tools/setup.sh and a build (b21r_bootstrap finds the venv and the
@@ -38,6 +41,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 
 from b21r import experience_t  # noqa: E402
 from b21r_log import read_log  # noqa: E402
+from b21r_task_world import WorldUnavailable, declared_world, task_name, wall_outline  # noqa: E402
 
 # B21R_RUN end_reason -> the names below ("stopped": a safety stop or pause, "shutdown").
 RUN_END_NAMES = {0: "goal", 1: "collision", 2: "limit", 3: "stopped", 4: "shutdown"}
@@ -59,6 +63,7 @@ class Run:
         self.phase = None
         self.evaluating = None
         self.first_state = None
+        self.start_record = None  # the task-frame start of its B21R_RUN record, where the log has one
         self.task = None
         self.end = None       # "goal", "collision", "limit", "stopped", "shutdown" or None (unknown)
         self.block = None
@@ -79,6 +84,8 @@ class Run:
 
     @property
     def start_task(self):
+        if self.start_record is not None:
+            return self.start_record
         if self.first_state is None or self.task != experience_t.TASK_CORRIDOR:
             return None
         return corridor_pose(self.first_state)
@@ -127,6 +134,7 @@ def load(path):
         r = runs[run_id]
         r.phase, r.evaluating, r.task = m.phase, m.kind == 1, m.task
         r.end = RUN_END_NAMES.get(m.end_reason, "limit")
+        r.start_record = (m.start_x_m, m.start_y_m, m.start_theta_rad)
     out = [runs[i] for i in order if runs[i].poses]
     for r in out:
         r.poses.sort()
@@ -180,7 +188,7 @@ def read_world(path):
                 x0, y0, x1, y1 = v
                 w["walls"] += [(x0, y0, x1, y0), (x1, y0, x1, y1), (x1, y1, x0, y1), (x0, y1, x0, y0)]
             elif t[0] == "wall" and len(v) >= 4:
-                w["walls"].append(tuple(v[:4]))
+                w["walls"].append(tuple(v[:5]) if len(v) >= 5 else tuple(v[:4]) + (0.10,))
             elif t[0] == "cylinder" and len(v) >= 3:
                 w["cylinders"].append(tuple(v[:3]))
             elif t[0] == "goal" and len(v) >= 3:
@@ -198,9 +206,16 @@ def _is_number(x):
         return False
 
 
-def default_world():
-    return {"walls": [], "cylinders": [], "goal": None, "starts": [],
-            "corridor": (CORRIDOR["length_m"], CORRIDOR["width_m"])}
+def default_world(task=experience_t.TASK_CORRIDOR):
+    """The world of the log's task: the paper's corridor, or another task's as declared. Raises
+    WorldUnavailable (with the reason) where it cannot be built."""
+    if task == experience_t.TASK_CORRIDOR:
+        return {"walls": [], "cylinders": [], "goal": None, "starts": [],
+                "corridor": (CORRIDOR["length_m"], CORRIDOR["width_m"])}
+    name = task_name(task)
+    if name is None:
+        raise WorldUnavailable("the log's task byte %d is not a declared task" % task)
+    return declared_world(name)
 
 
 def draw_world(ax, w):
@@ -210,8 +225,12 @@ def draw_world(ax, w):
         ax.plot([0, length, length, 0, 0], [width / 2, width / 2, -width / 2, -width / 2, width / 2], **kw)
         gx = length - CORRIDOR["goal_distance_m"]
         ax.plot([gx, gx], [-width / 2, width / 2], color="#2e7d32", lw=2, ls="--", zorder=1)
-    for x0, y0, x1, y1 in w["walls"]:
-        ax.plot([x0, x1], [y0, y1], **kw)
+    for wall in w["walls"]:
+        solid = wall_outline(wall)
+        if solid is not None:
+            ax.add_patch(plt.Polygon(solid, closed=True, color="#555555", zorder=1))
+        else:
+            ax.plot([wall[0], wall[2]], [wall[1], wall[3]], **kw)
     for x, y, r in w["cylinders"]:
         ax.add_patch(plt.Circle((x, y), r, color="#8a6d3b", zorder=1))
     if w["goal"] is not None:
@@ -262,7 +281,8 @@ def main():
     ap.add_argument("--out", required=True, help="picture file (.png, .svg, .pdf)")
     ap.add_argument("--panels", choices=("phase", "eval", "all"), default="phase")
     ap.add_argument("--frame", choices=("auto", "task", "odometry"), default="auto")
-    ap.add_argument("--world", help="b21r-sim world file drawn in the task frame (default: the paper's corridor)")
+    ap.add_argument("--world", help="b21r-sim world file drawn in the task frame (default: the log's task's world: "
+                                    "the paper's corridor, or the task's as declared)")
     ap.add_argument("--title", default=None)
     args = ap.parse_args()
     try:
@@ -274,11 +294,15 @@ def main():
     task_known = all(r.start_task is not None for r in runs)
     frame = args.frame if args.frame != "auto" else ("task" if task_known else "odometry")
     if frame == "task" and not task_known:
-        sys.exit("b21r_trajectories: the task frame needs the corridor task's B21R_EXPERIENCE of every run; "
-                 "use --frame odometry")
+        sys.exit("b21r_trajectories: the task frame needs every run's start pose: its B21R_RUN record (any task; "
+                 "the controller's --log has them) or, for the corridor task, its B21R_EXPERIENCE; use --frame odometry")
     world = None
     if frame == "task":
-        world = read_world(args.world) if args.world else default_world()
+        task = next((r.task for r in runs if r.task is not None), experience_t.TASK_CORRIDOR)
+        try:
+            world = read_world(args.world) if args.world else default_world(task)
+        except WorldUnavailable as exc:
+            sys.exit("b21r_trajectories: %s; give --world FILE (sim/worlds/) or use --frame odometry" % exc)
     panels = panels_of(runs, evals, args.panels)
     if not panels:
         sys.exit("b21r_trajectories: no runs for --panels %s in %s" % (args.panels, args.log))

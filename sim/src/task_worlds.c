@@ -3,6 +3,7 @@
 // declaration writes its world through a sink whose calls are the world file's directives.
 #include "sim/task_worlds.h"
 
+#include <math.h>
 #include <stdio.h>
 
 static int sink_corridor(void* user, double length_m, double width_m, int end) {
@@ -13,8 +14,18 @@ static int sink_arena(void* user, double min_x, double min_y, double max_x, doub
   return sim_world_add_arena((sim_world_t*)user, min_x, min_y, max_x, max_y) != SIM_WORLD_OK;
 }
 
+// The declaration's wall is centred on its line (tasks/decl.h); a world's wall is its face with
+// the solid to the right (sim/world.h): the face lies half the thickness to the line's left.
 static int sink_wall(void* user, double x0, double y0, double x1, double y1, double thickness_m) {
-  return sim_world_add_wall((sim_world_t*)user, x0, y0, x1, y1, thickness_m) != SIM_WORLD_OK;
+  const double len = hypot(x1 - x0, y1 - y0);
+  if (!(len > 0.0) || !isfinite(len)) {
+    return 1;
+  }
+  const double h = 0.5 * thickness_m;
+  const double lx = -(y1 - y0) / len;
+  const double ly = (x1 - x0) / len;
+  return sim_world_add_wall((sim_world_t*)user, x0 + h * lx, y0 + h * ly, x1 + h * lx, y1 + h * ly, thickness_m) !=
+         SIM_WORLD_OK;
 }
 
 static int sink_cylinder(void* user, double x, double y, double radius_m) {

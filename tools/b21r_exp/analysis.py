@@ -208,6 +208,54 @@ def obstacle_claims(S):
     return out
 
 
+def doorway_claims(S):
+    """Claims of the doorway task (not in the paper; the issue's): the learner against the sloppy
+    example policy and the reference controller, from the same 10 poses, failures at the step limit."""
+    seeds = S["seeds"]
+    n = S["n"]
+    fin = _col(seeds, "final", "mean_all")
+    out = [paired_claim(
+        "After phase two the learned policy is better than the sloppy example policy at its nominal gain, "
+        "evaluated from the same 10 poses (failures at the step limit).",
+        "learned, final block", fin, "example policy at its nominal gain, same poses", ref_col(seeds, "example"),
+        "less")]
+    best = best_example_ref(S)
+    if best is not None and best != "example":
+        out.append(paired_claim(
+            "... and better than the example policy at its best gain evaluated (%s)." % ref_label(best),
+            "learned, final block", fin, "%s, same poses" % ref_label(best), ref_col(seeds, best), "less"))
+    out.append(paired_claim(
+        "After phase two the learned policy is better than the phase-one (example) runs it learned from.",
+        "learned, final block", fin, "mean phase-one run (jittered starts, failures at the step limit)",
+        _col(seeds, "mean_example"), "less"))
+    out.append(paired_claim(
+        "At the end the learned policy is not significantly worse than the reference controller (one-sided).",
+        "learned, final block", fin, "reference (\"optimal\") controller, same poses", ref_col(seeds, "optimal"),
+        "greater", holds_if_significant=False))
+    fin_succ = _col(seeds, "final", "successes")
+    all10 = sum(1 for x in fin_succ if x == 10)
+    out.append(claim("The learned policy passes the door and reaches the goal from all 10 poses in the final block.",
+                     "final block: %s of 10 poses reached; all 10 in %d of %d seeds" % (
+                         fmt_ci(*stats.mean_ci(fin_succ)[:2]), all10, n),
+                     "count (every seed must)", n > 0 and all10 == n, n))
+    return out
+
+
+def outcome_counts(rs):
+    """Per seed, how runs ended: {"train": {phase: Counter}, "eval_final": Counter, "eval_all": Counter}
+    summed over seeds (goal / collision / step_limit / aborted), from the result files' run lists."""
+    out = {"train_1": {}, "train_2": {}, "eval_final": {}, "eval_all": {}}
+    for r in rs:
+        L = r["learning"]
+        last = L["blocks"][-1]["block"] if L["blocks"] else None
+        for x in L["runs"]:
+            keys = ["train_%d" % x["phase"]] if x["kind"] == "train" else ["eval_all"] + (
+                ["eval_final"] if x.get("block") == last else [])
+            for k in keys:
+                out[k][x["outcome"]] = out[k].get(x["outcome"], 0) + 1
+    return out
+
+
 def hours_claim(S):
     m, hw, n = S["training_hours"]
     holds = None if n < 2 else abs(m - PAPER_HOURS) <= max(hw, 0.5)

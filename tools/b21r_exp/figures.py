@@ -179,14 +179,16 @@ def command_for(name):
     return "tools/b21r_experiments.py run figures %s" % name
 
 
-def make_all(out, fig_dir, configs_dir, captions=None):
-    """Writes every figure the results allow; returns their paths. captions (dict) gets
-    {file name: caption}."""
+def make_all(out, fig_dir, configs_dir, captions=None, only=None):
+    """Writes every figure the results allow (only: the experiments of these names); returns their
+    paths. captions (dict) gets {file name: caption}."""
     os.makedirs(fig_dir, exist_ok=True)
     data = results.load(out, configs_dir)
     made = []
     caps = captions if captions is not None else {}
     for name, variants in data.items():
+        if only is not None and name not in only:
+            continue
         first = next(iter(variants.values()))
         title = first[0].get("title") or name
         kind = first[0]["kind"]

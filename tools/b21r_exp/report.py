@@ -32,8 +32,8 @@ class Doc:
     def prose(self, name):
         self.add("<!-- prose:%s -->" % name, self.old.get(name, PROSE_DEFAULT).rstrip("\n"), "<!-- /prose:%s -->" % name, "")
 
-    def claims(self, cs):
-        self.add("| the paper's claim | our measurement | test | holds? |", "|---|---|---|---|")
+    def claims(self, cs, header="the paper's claim"):
+        self.add("| %s | our measurement | test | holds? |" % header, "|---|---|---|---|")
         for c in cs:
             self.add("| %s | %s | %s | %s |" % (c["paper"], c["measure"], c["test"], verdict(c["holds"])))
         self.add("")
@@ -85,6 +85,133 @@ def curve_table(doc, S):
     doc.add("", "Comparators (mean steps over seeds, failures at the step limit): %s; best example (shortest "
             "phase-one run) %s; mean phase-one run %s." % (refs or "none", fmt_ci(*S["best_example"][:2]),
                                                             fmt_ci(*S["mean_example"][:2])), "")
+
+
+# Sections that can be regenerated alone (`tools/b21r_experiments.py report --section NAME`): each
+# lies between `<!-- section:NAME -->` and `<!-- /section:NAME -->` in the report.
+SECTION_RE = re.compile(r"<!-- section:([a-z0-9_]+) -->\n.*?<!-- /section:\1 -->\n+", re.S)
+DOORWAY = "doorway"
+DOORWAY_HEADING = "Doorway passing (a third task, not in the paper)"
+
+
+def doorway_section(doc, data, rel, caps):
+    """The doorway task: the learner against the sloppy example policy and the reference controller
+    from the same poses, how the runs ended, the learning curve. Returns (S, claims) or (None, [])."""
+    doc.add("<!-- section:%s -->" % DOORWAY, "## %s" % DOORWAY_HEADING, "",
+            "A room divided by a wall with a door 1 m wide (the B21r is 0.52 m across), the goal 1.5 m beyond "
+            "it; the state is the door's frame as the laser finds it (wall distance, offset from the door's "
+            "centre line, heading, distance to the nearer jamb: `features/doorway.h`); reward +1 at the goal, -1 "
+            "on a collision, both ending the run; gamma 0.95; 0.4 m/s. Phase one is driven by a sloppy "
+            "proportional example (it heads for a point 1.5 m before the door, then for the goal; gain drawn per "
+            "run in 1-2); the reference controller (a searched line-following law) evaluates only. Same protocol "
+            "as Figs. 4 and 9-10. The task is a declaration (`lib/tasks/src/task_doorway.c`); no learner, loop or "
+            "trainer code changed to add it.", "")
+    if DOORWAY not in data:
+        doc.add("_Not run yet: `tools/b21r_experiments.py run report %s --section %s`._" % (DOORWAY, DOORWAY), "")
+        doc.prose(DOORWAY)
+        doc.add("<!-- /section:%s -->" % DOORWAY, "")
+        return None, []
+    rs = next(iter(data[DOORWAY].values()))
+    S = analysis.learn_summary(rs)
+    doc.add("Made by: `tools/b21r_experiments.py run report %s --section %s` (seeds %s; file "
+            "`tools/experiments/%s.conf`; without `--section` the whole report is regenerated)." % (
+                DOORWAY, DOORWAY, seeds_of(rs), DOORWAY), "")
+    fig = DOORWAY + ".png"
+    doc.figure(os.path.join(rel, fig), DOORWAY, caps.get(fig, ""))
+    cs = analysis.doorway_claims(S)
+    doc.claims(cs, header="the claim (the issue's; not in the paper)")
+    seeds = S["seeds"]
+    n_poses = len(seeds[0]["final_steps"] or []) if seeds else 0
+    doc.add("The final block and the comparators from the same %d poses (mean over seeds, 95 %% CI; a failure "
+            "is a collision or the step limit of %d):" % (n_poses, S["step_limit"]), "",
+            "| policy | steps, failures at the limit | steps, successful runs | successes / %d |" % n_poses,
+            "|---|---|---|---|")
+
+    def row(label, blocks):
+        blocks = [b for b in blocks if b is not None]
+        doc.add("| %s | %s | %s | %s |" % (label, fmt_ci(*stats.mean_ci([b["mean_all"] for b in blocks])[:2]),
+                                           fmt_ci(*stats.mean_ci([b["mean_succ"] for b in blocks])[:2]),
+                                           fmt_ci(*stats.mean_ci([b["successes"] for b in blocks])[:2])))
+
+    row("learned policy, final block", [x["final"] for x in seeds])
+    row("learned policy, last phase-one block", [x["last_phase_one"] for x in seeds])
+    for k in sorted(S["refs"], key=lambda k: (k != "optimal", k)):
+        row(analysis.ref_label(k) + ("" if k != "optimal" else " (reference)"), [x["refs"].get(k) for x in seeds])
+    doc.add("")
+    # Where the failures are: per evaluation pose, the seeds whose run from it failed.
+    try:  # the poses as the task declares them (the result files hold their count only)
+        from b21r_task_world import WorldUnavailable, declared_world
+        starts = declared_world(DOORWAY)["starts"]
+    except (ImportError, WorldUnavailable):
+        starts = []
+    names = sorted(S["refs"], key=lambda k: (k != "example", k != "optimal", k))
+
+    def fails(blocks, i):
+        return sum(1 for b in blocks if b is not None and i < len(b) and not b[i])
+
+    final_ok = [r["learning"]["blocks"][-1]["success"] if r["learning"]["blocks"] else None for r in rs]
+    p1_ok = [([b for b in r["learning"]["blocks"] if b["phase"] == 1] or [None])[-1] for r in rs]
+    p1_ok = [b["success"] if b is not None else None for b in p1_ok]
+    doc.add("Failures by evaluation pose (seeds, of %d, whose run from the pose failed):" % len(rs), "",
+            "| pose | learned, final block | learned, last phase-one block | %s |" % " | ".join(
+                analysis.ref_label(k) for k in names), "|---|---|---|" + "---|" * len(names))
+    for i in range(n_poses):
+        label = "%d" % i if i >= len(starts) else "%d (%.1f, %.1f, %.1f)" % (i, *starts[i])
+        doc.add("| %s | %d | %d | %s |" % (label, fails(final_ok, i), fails(p1_ok, i), " | ".join(
+            "%d" % fails([r["references"][k]["success"] if k in r["references"] else None for r in rs], i)
+            for k in names)))
+    doc.add("")
+    oc = analysis.outcome_counts(rs)
+
+    def ends(c):
+        return ", ".join("%s %d" % (k.replace("_", " "), c.get(k, 0)) for k in ("goal", "collision", "step_limit")
+                         if c.get(k, 0) or k != "step_limit") or "none"
+
+    doc.add("How the runs ended, all seeds together: phase-one training runs (the example policy) %s; phase-two "
+            "training runs %s; the learner's evaluation runs %s, of which the final block's %s. (The comparators' "
+            "failures are in the table above; the runner records them as failures without their cause.)" % (
+                ends(oc["train_1"]), ends(oc["train_2"]), ends(oc["eval_all"]), ends(oc["eval_final"])), "")
+    curve_table(doc, S)
+    sources_table(doc, S)
+    doc.prose(DOORWAY)
+    doc.add("<!-- /section:%s -->" % DOORWAY, "")
+    return S, cs
+
+
+def write_section(out, fig_dir, path, configs_dir, section=DOORWAY):
+    """Regenerates one marked section of an existing report (and its figure) from the result files,
+    keeping every other line: for when the other experiments' results are not at hand. A report
+    without the section gets it before the section that follows it in a whole report ("Learning
+    without examples"), else at the end."""
+    if section != DOORWAY:
+        raise ValueError("only the section '%s' can be regenerated alone" % DOORWAY)
+    data = results.load(out, configs_dir)
+    with open(path) as f:
+        text = f.read()
+    old = {m.group(1): m.group(2) for m in PROSE_RE.finditer(text)}
+    doc = Doc(old)
+    caps = {}
+    figures.make_all(out, fig_dir, configs_dir, caps, only=(section,))
+    rel = os.path.relpath(fig_dir, os.path.dirname(os.path.abspath(path)))
+    doorway_section(doc, data, rel, caps)
+    repo = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    doc.lines.insert(3, "_This section was generated on its own (`tools/b21r_experiments.py report --section %s`) from "
+                        "the result files in `%s` on %s, source commit `%s`._" % (
+                            section, os.path.relpath(out, repo) if os.path.isabs(out) else out,
+                            time.strftime("%Y-%m-%d"), git_commit(repo)))
+    doc.lines.insert(4, "")
+    new = "\n".join(doc.lines) + "\n"
+    m = [x for x in SECTION_RE.finditer(text) if x.group(1) == section]
+    if m:
+        text = text[: m[0].start()] + new + text[m[0].end():]
+    else:
+        at = text.find("\n## Learning without examples")
+        text = text[: at + 1] + new + text[at + 1:] if at >= 0 else text.rstrip("\n") + "\n\n" + new
+    tmp = path + ".tmp"
+    with open(tmp, "w") as f:
+        f.write(text)
+    os.replace(tmp, path)
+    return path
 
 
 def write(out, fig_dir, path, configs_dir):
@@ -150,6 +277,11 @@ def write(out, fig_dir, path, configs_dir):
     else:
         doc.add("_Not run yet: `tools/b21r_experiments.py run fig9_10_obstacles`._", "")
     doc.prose("obstacles")
+
+    S, cs = doorway_section(doc, data, rel, caps)
+    if S is not None:
+        summary_claims += [("Doorway passing", c) for c in cs]
+        hours.append(hours_row(DOORWAY, S))
 
     doc.add("## Learning without examples: the corridor (Fig. 6)", "")
     if "fig6_explore_corridor" in data:

@@ -9,6 +9,7 @@
 static const tasks_decl_t* const k_tasks[] = {
     &tasks_corridor_decl,
     &tasks_obstacles_decl,
+    &tasks_doorway_decl,
 };
 
 #define N_TASKS (sizeof k_tasks / sizeof k_tasks[0])

@@ -80,15 +80,10 @@ static double jitter_norm(double dx, double dy, double dth, double jx, double jy
   return n;
 }
 
-// Shared training-start sampler of both tasks: picks an evaluation start at random and jitters it
-// within the box (jx, jy, jth) until the pose is both clearly different from the evaluation pose
-// and clear of the world (`is_clear(spec, pose)`). Returns 1 with the pose in *out, or 0 after
-// TASKS_START_ATTEMPTS tries with *out = the last pose tried and *base_out = the chosen evaluation
-// start, so the caller can apply its task's fallback. O(TASKS_START_ATTEMPTS).
-static int jittered_start(const features_pose_t eval_starts[TASKS_N_EVAL_STARTS], uint32_t index, double jx,
-                          double jy, double jth, int (*is_clear)(const void* spec, features_pose_t),
-                          const void* spec, rng_t* rng, features_pose_t* out,
-                          features_pose_t* base_out) {
+// The training-start sampler of every task (tasks_internal.h).
+int tasks_jittered_start(const features_pose_t eval_starts[TASKS_N_EVAL_STARTS], uint32_t index, double jx,
+                         double jy, double jth, int (*is_clear)(const void* spec, features_pose_t),
+                         const void* spec, rng_t* rng, features_pose_t* out, features_pose_t* base_out) {
   const features_pose_t base = eval_starts[index % TASKS_N_EVAL_STARTS];
   *base_out = base;
   *out = base;
@@ -125,7 +120,7 @@ features_pose_t tasks_corridor_training_start_near(const tasks_corridor_spec_t* 
                                                    rng_t* rng) {
   features_pose_t p;
   features_pose_t base;
-  if (jittered_start(spec->eval_starts, index, spec->train_jitter_x_m, spec->train_jitter_y_m,
+  if (tasks_jittered_start(spec->eval_starts, index, spec->train_jitter_x_m, spec->train_jitter_y_m,
                      spec->train_jitter_theta_rad, corridor_pose_clear, spec, rng, &p, &base)) {
     return p;
   }
@@ -264,7 +259,7 @@ features_pose_t tasks_obstacles_training_start_near(const tasks_obstacles_spec_t
                                                     rng_t* rng) {
   features_pose_t p;
   features_pose_t base;
-  if (jittered_start(spec->eval_starts, index, spec->train_jitter_x_m, spec->train_jitter_y_m,
+  if (tasks_jittered_start(spec->eval_starts, index, spec->train_jitter_x_m, spec->train_jitter_y_m,
                      spec->train_jitter_theta_rad, obstacles_pose_clear, spec, rng, &p, &base)) {
     return p;
   }

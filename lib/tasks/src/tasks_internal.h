@@ -27,6 +27,16 @@ static inline int tasks_all_finite(const double* v, uint32_t n) {
   return 1;
 }
 
+/// The training-start sampler of every task: jitters evaluation start `index` (modulo
+/// TASKS_N_EVAL_STARTS) within the box (jx, jy, jth) until the pose is both clearly different
+/// from the evaluation pose (at least TASKS_MIN_JITTER_NORM of the box) and clear of the world
+/// (`is_clear(spec, pose)`). Returns 1 with the pose in *out, or 0 after TASKS_START_ATTEMPTS
+/// tries with *out = the last pose tried and *base_out = the evaluation start, so the caller can
+/// apply its task's fallback. Three draws per attempt. O(TASKS_START_ATTEMPTS).
+int tasks_jittered_start(const features_pose_t eval_starts[TASKS_N_EVAL_STARTS], uint32_t index, double jx,
+                         double jy, double jth, int (*is_clear)(const void* spec, features_pose_t),
+                         const void* spec, rng_t* rng, features_pose_t* out, features_pose_t* base_out);
+
 /// The obstacle features an ideal laser gives at a pose in the arena: features_obstacles_from_pose
 /// with spec's discs (the first TASKS_MAX_OBSTACLES) and the LMS200's 180° field of view. Shared
 /// by tasks_episode_observe_pose and the obstacle rollouts (recovery.c). O(obstacles), pure.

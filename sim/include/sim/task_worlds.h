@@ -5,7 +5,11 @@
 /// - corridor: `corridor length width 1` (closed at both ends, corridor frame = world frame), the
 ///   ten evaluation start poses in order; name "corridor<length>";
 /// - obstacles: `arena` of the spec's box, one cylinder per obstacle, the goal disc, the ten
-///   evaluation start poses in order; name "obstacles<n>".
+///   evaluation start poses in order; name "obstacles<n>";
+/// - doorway: `arena` of the room, the dividing wall as two `wall`s on either side of the door
+///   (a declaration's wall is centred on its line; the world's face is moved half the thickness
+///   to the line's left so that its solid, to the face's right, is centred), the goal disc, the
+///   ten evaluation start poses; name "doorway".
 /// The shipped files in sim/worlds/ equal the worlds built from the default specifications
 /// (tested by sim.task_worlds).
 ///

@@ -13,7 +13,11 @@ definitions the file carries, the product messages as JSON):
 - the task-frame pose of each run starts at its B21R_RUN start pose and stays in the corridor;
   the scene holds the corridor's four walls and the goal;
 - the live bridge's estimate of a run's start from its first state (no B21R_RUN beforehand)
-  matches the recorded start poses, in the corridor and among obstacles (a short obstacle session).
+  matches the recorded start poses, in the corridor and among obstacles (a short obstacle session);
+- a short doorway session (a task the tools know only from its declaration): its log converts,
+  every run's task-frame pose starts at its record and stays in the room, the scene holds the
+  room's four walls, the dividing wall's two and the goal disc, and the start estimates from the
+  first state match the records.
 usage: test_mcap.py CONTROLLER SIM REPO MCAP_TOOL"""
 import math
 import os
@@ -62,7 +66,12 @@ def decode_pb(entries):
     return res
 
 
-def check_log(log_path, tool, world_check=True):
+CORRIDOR_ROOM = {"box": (-0.3, 10.3, -1.0, 1.0), "walls": 4, "goal": "cubes", "name": "the corridor"}
+DOORWAY_ROOM = {"box": (-4.5, 3.0, -3.0, 3.0), "walls": 6, "goal": "cylinders", "name": "the doorway's room"}
+TASK_NAMES = {bf.TASK_CORRIDOR: "corridor", bf.TASK_OBSTACLES: "obstacles", bf.TASK_DOORWAY: "doorway"}
+
+
+def check_log(log_path, tool, world_check=True, room=CORRIDOR_ROOM):
     out = log_path[:-len(".lcmlog")] + ".mcap"
     p = subprocess.run([sys.executable, tool, log_path, "--out", out], stdout=subprocess.PIPE,
                        stderr=subprocess.STDOUT, text=True, timeout=300)
@@ -115,10 +124,11 @@ def check_log(log_path, tool, world_check=True):
         if len(world) != len(poses):
             fwtest.fail("/world/pose: %d messages for %d poses of runs" % (len(world), len(poses)))
         first = {}
+        x0, x1, y0, y1 = room["box"]
         for (t, p), (_, w) in zip(poses, world):
             x, y = w.pose.position.x, w.pose.position.y
-            if not (-0.3 < x < 10.3 and -1.0 < y < 1.0):
-                fwtest.fail("task-frame pose (%.2f, %.2f) of run %d lies outside the corridor" % (x, y, p.run_id))
+            if not (x0 < x < x1 and y0 < y < y1):
+                fwtest.fail("task-frame pose (%.2f, %.2f) of run %d lies outside %s" % (x, y, p.run_id, room["name"]))
             first.setdefault(p.run_id, (x, y))
         for run_id, (x, y) in first.items():
             r = records.get(run_id)
@@ -130,8 +140,9 @@ def check_log(log_path, tool, world_check=True):
         if not scene:
             fwtest.fail("no /scene")
         ents = {e.id: e for e in scene[0][1].entities}
-        if len(ents["walls"].cubes) != 4 or not ents["goal"].cubes:
-            fwtest.fail("the scene does not hold the corridor's 4 walls and its goal: %s" % list(ents))
+        if len(ents["walls"].cubes) != room["walls"] or not getattr(ents["goal"], room["goal"]):
+            fwtest.fail("the scene does not hold %s's %d walls and its goal: %s" % (room["name"], room["walls"],
+                                                                                  list(ents)))
     fwtest.note("%s: %d LCM messages, %d MCAP messages on %d topics; counts, times and values match%s" % (
         os.path.basename(out), len(events), sum(len(v) for v in mc.values()), len(mc),
         "; %d runs start at their recorded pose" % n_checked if n_checked else ""))
@@ -157,9 +168,9 @@ def check_start_estimates(events, task, tol_m, tol_rad):
         n += 1
     if n == 0 or worst[0] > tol_m or worst[1] > tol_rad:
         fwtest.fail("%s: start estimates of %d runs off by up to %.3f m, %.3f rad (tolerance %g m, %g rad)" %
-                    (["corridor", "obstacles"][task], n, worst[0], worst[1], tol_m, tol_rad))
+                    (TASK_NAMES[task], n, worst[0], worst[1], tol_m, tol_rad))
     fwtest.note("%s: the start from the first state of %d runs within %.3f m, %.3f rad of the record" %
-                (["corridor", "obstacles"][task], n, worst[0], worst[1]))
+                (TASK_NAMES[task], n, worst[0], worst[1]))
 
 
 _repo = None
@@ -205,6 +216,23 @@ def main():
         if rc != 0:
             fwtest.fail("obstacle session: exit %d\n%s" % (rc, err[-2000:]))
         check_start_estimates(read_log(log), bf.TASK_OBSTACLES, 0.15, 0.1)
+        sim.close()
+        sim = None
+
+        sim = fwtest.Sim(sim_exe, os.path.join(repo, "sim", "worlds", "doorway.world"), d, "doorway")
+        rc, err, log = fwtest.run_controller(controller, sim, d, "doorway",
+                                             {"task": "doorway", "phase_one_runs": 4, "phase_two_runs": 1,
+                                              "eval_every_runs": 100}, 240)
+        if rc != 0:
+            fwtest.fail("doorway session: exit %d\n%s" % (rc, err[-2000:]))
+        events = check_log(log, tool, room=DOORWAY_ROOM)
+        runs = [m for _, _, m in events if isinstance(m, run_t)]
+        train = [r for r in runs if r.kind == run_t.KIND_TRAINING]
+        if len(train) != 5 or any(r.task != bf.TASK_DOORWAY for r in runs):
+            fwtest.fail("doorway session: %d training run records of %d, tasks %s" % (
+                len(train), len(runs), sorted({r.task for r in runs})))
+        fwtest.note("doorway session: training runs ended %s" % [r.detail for r in train])
+        check_start_estimates(events, bf.TASK_DOORWAY, 0.15, 0.1)
         ok = True
     finally:
         if logger is not None and logger.poll() is None:

@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
 # SPDX-License-Identifier: MIT
 """tools.policy_map: tools/b21r_policy_map.py on real checkpoints. Short lockstep sessions
-(corridor with one phase-two run; obstacles in phase one) write checkpoints; the tool, run as an
-operator runs it, writes policy_map_<task>.png (a real picture of the expected size) and its
-numbers (JSON):
+(corridor with one phase-two run; obstacles and doorway in phase one) write checkpoints; the
+tool, run as an operator runs it, writes policy_map_<task>.png (a real picture of the expected
+size) and its numbers (JSON):
 - on a checkpoint whose store is empty (the corridor file's controller section with a fresh
   learner's bytes, written in the checkpoint format of fw/checkpoint.h) every reachable cell is
   HEDGER's unknown region, and the picture differs from the learned one;
@@ -67,7 +67,9 @@ def main():
         for task, world, settings in (
                 ("corridor", "corridor10.world", {"phase_one_runs": 6, "phase_two_runs": 1, "eval_every_runs": 100}),
                 ("obstacles", "obstacle1.world", {"task": "obstacles", "phase_one_runs": 6, "phase_two_runs": 0,
-                                                   "eval_every_runs": 100})):
+                                                   "eval_every_runs": 100}),
+                ("doorway", "doorway.world", {"task": "doorway", "phase_one_runs": 6, "phase_two_runs": 0,
+                                              "eval_every_runs": 100})):
             sim = fwtest.Sim(sim_exe, os.path.join(repo, "sim", "worlds", world), d, task)
             ckpt = os.path.join(d, task + ".ckpt")
             rc, err, _ = fwtest.run_controller(controller, sim, d, task, dict(settings, checkpoint_file=ckpt), 300)

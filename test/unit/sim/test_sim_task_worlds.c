@@ -13,6 +13,8 @@
 #include "sim/task_worlds.h"
 #include "sim/world.h"
 
+#include <tasks/doorway.h>
+
 #ifndef SIM_WORLDS_DIR
 #error "SIM_WORLDS_DIR must name sim/worlds"
 #endif
@@ -66,6 +68,39 @@ static void test_task_worlds_obstacle_file_matches_spec(void** state) {
   assert_true(g_file.goal.radius_m == spec.goal_radius_m);
 }
 
+// doorway.world is the default doorway spec; the declaration's walls (centred on their lines)
+// become solids centred on the wall's plane, so the emulator's collision test is the task's.
+static void test_task_worlds_doorway_file_matches_spec(void** state) {
+  (void)state;
+  tasks_doorway_spec_t spec;
+  tasks_doorway_spec_default(&spec);
+  assert_int_equal(sim_world_from_task(&tasks_doorway_decl, &spec, &g_spec), SIM_WORLD_OK);
+  load("doorway.world");
+  assert_same_geometry(0.0);
+  assert_string_equal(g_spec.name, "doorway");
+  const double r = spec.robot_radius_m;
+  const double h = 0.5 * spec.wall_thickness_m;
+  for (int side = -1; side <= 1; side += 2) {
+    const double x = spec.wall_x_m + side * (h + r);
+    assert_false(sim_world_disc_collides(&g_spec, x + side * 1e-3, -2.0, r));
+    assert_true(sim_world_disc_collides(&g_spec, x - side * 1e-3, -2.0, r));
+    assert_false(sim_world_disc_collides(&g_spec, x + side * 1e-3, 2.0, r));
+    assert_true(sim_world_disc_collides(&g_spec, x - side * 1e-3, 2.0, r));
+  }
+  // The emulator and the task agree on what collides, across the door and the room.
+  for (double x = spec.room_min_x_m; x <= spec.room_max_x_m; x += 0.0625) {
+    for (double y = spec.room_min_y_m; y <= spec.room_max_y_m; y += 0.0625) {
+      assert_int_equal(sim_world_disc_collides(&g_spec, x, y, r) != 0,
+                       tasks_doorway_disc_collides(&spec, x, y, r) != 0);
+    }
+  }
+  // The laser sees the jambs where they are: a ray along the door's edge from the robot's side
+  // passes, one just inside the jamb meets its face at x = -h.
+  const double half = 0.5 * spec.door_width_m;
+  assert_true(isinf(sim_world_raycast(&g_spec, -2.0, half - 0.01, 0.0, 2.5)));
+  assert_true(fabs(sim_world_raycast(&g_spec, -2.0, half + 0.01, 0.0, 10.0) - (2.0 - h)) < 1e-9);
+}
+
 // Every evaluation start leaves the robot clear of walls and obstacles, and bad specs fail.
 static void test_task_worlds_starts_clear_and_bad_specs_fail(void** state) {
   (void)state;
@@ -90,6 +125,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_task_worlds_corridor_file_matches_spec),
       cmocka_unit_test(test_task_worlds_obstacle_file_matches_spec),
+      cmocka_unit_test(test_task_worlds_doorway_file_matches_spec),
       cmocka_unit_test(test_task_worlds_starts_clear_and_bad_specs_fail),
   };
   return cmocka_run_group_tests_name("sim.task_worlds", tests, NULL, NULL);

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: MIT
-// Test helper: whole episodes of the two tasks in the synthetic world (kinematic synchro drive
+// Test helper: whole episodes of the tasks in the synthetic world (kinematic synchro drive
 // at the spec's control period, features from synthetic LMS200 scans, the tasks' rewards).
 #ifndef B21R_TEST_TASKS_TASK_SIM_H
 #define B21R_TEST_TASKS_TASK_SIM_H
@@ -8,6 +8,7 @@
 
 #include <b21r_test/synthetic_world.h>
 #include <features/features.h>
+#include <tasks/doorway.h>
 #include <tasks/tasks.h>
 
 /// Episode options. task_sim_opts_default: LMS200 180° at 1°, 1 cm noise, exact odometry, no
@@ -40,5 +41,10 @@ task_sim_result_t task_sim_corridor(const tasks_corridor_spec_t* spec, features_
 /// Runs the obstacle task from `start` (arena frame) with the driver (already begun).
 task_sim_result_t task_sim_obstacles(const tasks_obstacles_spec_t* spec, features_pose_t start,
                                      tasks_driver_t* driver, const task_sim_opts_t* opts);
+
+/// Runs the doorway task from `start` (task frame) with the driver (already begun). The dividing
+/// wall is two solid blocks (faces, far faces and the jambs' end faces as segments).
+task_sim_result_t task_sim_doorway(const tasks_doorway_spec_t* spec, features_pose_t start,
+                                   tasks_driver_t* driver, const task_sim_opts_t* opts);
 
 #endif  // B21R_TEST_TASKS_TASK_SIM_H

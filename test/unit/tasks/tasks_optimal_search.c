@@ -4,7 +4,8 @@
 // synthetic world (three sensor-noise seeds). A run that fails, or that brings the robot's edge
 // within MIN_CLEARANCE_M of a wall or obstacle, disqualifies the parameters: the reference is
 // the fastest controller that keeps a safety margin, as a careful driver would. The winners are
-// baked into lib/tasks/src/drivers.c. Usage: tasks_optimal_search [corridor|obstacles]
+// baked into lib/tasks/src/drivers.c (the doorway's into lib/tasks/src/task_doorway.c). Usage:
+// tasks_optimal_search [corridor|obstacles|doorway]
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -21,6 +22,8 @@ static double score(const tasks_decl_t* task, const double law[TASKS_DRIVER_LAW_
   tasks_corridor_spec_default(&cs);
   tasks_obstacles_spec_t os;
   tasks_obstacles_spec_default(&os);
+  tasks_doorway_spec_t ds;
+  tasks_doorway_spec_default(&ds);
   task_sim_opts_t o;
   task_sim_opts_default(&o);
   double sum = 0.0;
@@ -32,9 +35,9 @@ static double score(const tasks_decl_t* task, const double law[TASKS_DRIVER_LAW_
       tasks_driver_begin_run(&d, TASKS_DRIVER_OPTIMAL, task, 1.0, seed);
       memcpy(d.law, law, sizeof d.law);
       const task_sim_result_t r =
-          task == &tasks_corridor_decl
-              ? task_sim_corridor(&cs, tasks_corridor_eval_start(&cs, i), &d, &o)
-              : task_sim_obstacles(&os, tasks_obstacles_eval_start(&os, i), &d, &o);
+          task == &tasks_corridor_decl    ? task_sim_corridor(&cs, tasks_corridor_eval_start(&cs, i), &d, &o)
+          : task == &tasks_obstacles_decl ? task_sim_obstacles(&os, tasks_obstacles_eval_start(&os, i), &d, &o)
+                                          : task_sim_doorway(&ds, tasks_doorway_eval_start(&ds, i), &d, &o);
       if (r.reason != TASKS_END_GOAL || r.min_clearance_m < MIN_CLEARANCE_M) {
         return INFINITY;
       }
@@ -81,9 +84,27 @@ static void search_obstacles(void) {
          best);
 }
 
+// The doorway's line-following law: gain and look-ahead onto the door's centre line.
+static void search_doorway(void) {
+  double best = INFINITY, bg = 0.0, bl = 0.0;
+  for (double g = 0.5; g <= 4.01; g += 0.25) {
+    for (double l = 0.25; l <= 3.01; l += 0.25) {
+      const double law[TASKS_DRIVER_LAW_PARAMS] = {g, l, 0.0};
+      const double s = score(&tasks_doorway_decl, law);
+      if (s < best) {
+        best = s;
+        bg = g;
+        bl = l;
+      }
+    }
+  }
+  printf("doorway: gain %.2f lookahead %.2f m -> mean %.2f steps\n", bg, bl, best);
+}
+
 int main(int argc, char** argv) {
   const int all = argc < 2;
   if (all || strcmp(argv[1], "corridor") == 0) search_corridor();
   if (all || strcmp(argv[1], "obstacles") == 0) search_obstacles();
+  if (all || strcmp(argv[1], "doorway") == 0) search_doorway();
   return 0;
 }

@@ -2,13 +2,15 @@
 """b21r_learn: the RWI B21r tasks of Smart & Kaelbling (ICRA 2002) as Gymnasium environments, and
 HEDGER as a Python learner, both computed by the C code the robot runs.
 
-Importing the package registers two environments:
+Importing the package registers one environment per declared task (lib/tasks' registry):
 
 - ``B21rCorridor-v0``: corridor following (state: end distance, lateral fraction, target angle);
 - ``B21rObstacles-v0``: obstacle avoidance (state: goal bearing and distance, nearest obstacle's
-  bearing and distance).
+  bearing and distance);
+- ``B21rDoorway-v0``: doorway passing (state: wall distance, offset from the door's centre line,
+  heading relative to the wall's normal, nearer jamb's distance).
 
-Both take ``backend="ode"`` (the emulated B21r: ODE plant, ray-cast LMS200 with noise, rFLEX
+All take ``backend="ode"`` (the emulated B21r: ODE plant, ray-cast LMS200 with noise, rFLEX
 protocol; what the controller sees) or ``backend="kinematic"`` (the idealised model, exact state,
 fast). See :class:`b21r_learn.envs.B21rEnv`.
 

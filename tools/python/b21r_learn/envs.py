@@ -16,12 +16,14 @@ _STARTS = {"training": _core.START_TRAINING, "eval": _core.START_EVAL, "pose": _
 
 
 class B21rEnv(gymnasium.Env):
-    """One of the paper's tasks on the emulated B21r (``backend="ode"``) or the idealised kinematic
-    model (``backend="kinematic"``).
+    """One of the declared tasks (lib/tasks) on the emulated B21r (``backend="ode"``) or the
+    idealised kinematic model (``backend="kinematic"``).
 
     - Observation: the task's state vector exactly as the controller computes it (float64):
       corridor ``[end distance m, lateral fraction, target angle rad]``, obstacles
-      ``[goal bearing rad, goal distance m, obstacle bearing rad, obstacle distance m]``.
+      ``[goal bearing rad, goal distance m, obstacle bearing rad, obstacle distance m]``, doorway
+      ``[wall distance m, offset from the door's line m, heading rad, nearer jamb's distance m]``
+      (``b21r_learn._core.tasks()`` names every task's).
     - Action: rotation velocity [rad/s], shape (1,), within ``[-omega_max, omega_max]``
       (default 1 rad/s). The translation speed comes from the task's speed policy. Both are
       clamped like the controller's commands (velocity, then acceleration limits); the command
@@ -33,6 +35,7 @@ class B21rEnv(gymnasium.Env):
       ========= ============== ================ ===================================
       corridor  +10, ends      0, ends          0 (step limit 1000: truncated)
       obstacles +1, ends       -1, ends         0 (step limit 500: truncated)
+      doorway   +1, ends       -1, ends         0 (step limit 500: truncated)
       ========= ============== ================ ===================================
 
       The corridor's 0 at a wall is the paper's task ("10 for reaching the end of the corridor,

@@ -737,6 +737,7 @@ nb::list declared_tasks() {
     nb::list names;
     for (uint32_t k = 0; k < d->state_dim; ++k) names.append(d->state_names[k]);
     t["state_names"] = names;
+    t["gain_range"] = nb::make_tuple(d->gain_min, d->gain_max);
     nb::dict params;
     for (uint32_t k = 0; k < d->n_params; ++k)
       params[d->params[k].name] = nb::make_tuple(d->params[k].min, d->params[k].max, d->params[k].help);
@@ -776,8 +777,8 @@ NB_MODULE(_core, m) {
       .def(nb::init<const std::string&, const std::string&, double, std::optional<double>>(), "kind"_a, "task"_a,
            "omega_max_radps"_a = 1.0, "gain"_a = nb::none(),
            "kind: 'proportional' (the example policy), 'human' (the simulated joystick driver) or 'optimal' (the "
-           "hand-tuned reference); task: 'corridor' or 'obstacles'; gain: a fixed gain [1/s] for every run "
-           "(default: drawn per run, as the controller's phase one does)")
+           "hand-tuned reference); task: a declared task's name ('corridor', 'obstacles', 'doorway', ...); gain: a "
+           "fixed gain [1/s] for every run (default: drawn per run, as the controller's phase one does)")
       .def("begin_run", &Driver::begin_run, "seed"_a)
       .def("act", &Driver::act, "env"_a)
       .def_prop_rw("gain", &Driver::gain, &Driver::set_gain);
@@ -817,7 +818,7 @@ NB_MODULE(_core, m) {
 
   m.def("tasks", &declared_tasks,
         "The declared tasks (lib/tasks registry) as dicts: name, title, env_id, id, state_names, "
-        "parameters (name -> (min, max, help)).");
+        "gain_range (the example policy's (min, max) gain [1/s]), parameters (name -> (min, max, help)).");
   m.def("read_checkpoint", &read_checkpoint, "path"_a);
   m.def("read_checkpoint_progress", &read_checkpoint_progress, "meta"_a,
         "The controller's section of a checkpoint (the meta bytes of read_checkpoint) as a dict: task, "

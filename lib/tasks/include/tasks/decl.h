@@ -177,6 +177,7 @@ void tasks_driver_set_gain(tasks_driver_t* d, const tasks_decl_t* decl, double g
 /// The declared tasks (their definitions, for tests and tools that need one by name).
 extern const tasks_decl_t tasks_corridor_decl;
 extern const tasks_decl_t tasks_obstacles_decl;
+extern const tasks_decl_t tasks_doorway_decl;
 
 #ifdef __cplusplus
 }

@@ -697,7 +697,9 @@ static void test_config_task_name(void** state) {
   (void)state;
   assert_string_equal(fw_task_name((int32_t)tasks_corridor_decl.id), "corridor");
   assert_string_equal(fw_task_name((int32_t)tasks_obstacles_decl.id), "obstacles");
-  assert_string_equal(fw_task_name(2), "unknown");
+  assert_string_equal(fw_task_name((int32_t)tasks_doorway_decl.id), "doorway");
+  assert_null(tasks_by_id(200));  // no task declares it
+  assert_string_equal(fw_task_name(200), "unknown");
   assert_string_equal(fw_task_name(-1), "unknown");
   fw_config_t c;
   fw_config_defaults(&c);

@@ -116,7 +116,8 @@ static void test_progress_round_trip_and_layout(void** state) {
 static void test_progress_out_of_range_refused(void** state) {
   (void)state;
   const fw_progress_t p = sample();
-  expect_refused(&p, 8, 2, "task 2");
+  assert_null(tasks_by_id(200));  // no task declares it
+  expect_refused(&p, 8, 200, "task 200");
   expect_refused(&p, 12, 0, "state dimension 0");
   expect_refused(&p, 12, 9, "state dimension 9");
   expect_refused(&p, 16, 0, "phase 0");
