@@ -10,15 +10,18 @@ Commands (default: all):
            skipped (run again to resume; --rerun to redo)
   figures  the paper-style figures (PNG, with captions) from the result files
   report   docs/RESULTS.md: our numbers next to the paper's claims, every yes/no from a test
+           (--section reference_learners: only the reference learners' section and figures,
+           the rest of the report kept as it is)
   merge    one JSON per experiment with all its results (OUT/merged)
   all      run, merge, figures, report
 On first use it installs the sweep's Python packages (tools/requirements-experiments.txt: Ray,
-SciPy) into build/venv. Ray runs on this machine with all its cores unless --num-cpus or a
+SciPy, Stable-Baselines3 and PyTorch for the reference learners) into build/venv. Ray runs on this machine with all its cores unless --num-cpus or a
 cluster --address is given; it is shut down when the command ends.
 Examples:
   tools/b21r_experiments.py                                    # everything, 10 seeds each
   tools/b21r_experiments.py run fig4_corridor_examples --seeds 3
   tools/b21r_experiments.py figures report
+  tools/b21r_experiments.py run reference_learners --num-cpus 1   # SAC and PPO from scratch
 """
 import b21r_bootstrap  # noqa: E402 (first: runs the tool in the project's venv)
 
@@ -55,8 +58,9 @@ def ensure_packages():
     STAMP.write_text(want + "\n")
 
 
-def ensure_runner(jobs):
-    """Configures (once) and builds b21r-experiment in the host-release preset; returns its path."""
+def ensure_runner(jobs, python_module=False):
+    """Configures (once) and builds b21r-experiment in the host-release preset (and, with
+    python_module, the environments' Python module the reference learners use); returns its path."""
     build = REPO / "build" / PRESET
     log = REPO / "build" / "experiments-build.log"
     log.parent.mkdir(parents=True, exist_ok=True)
@@ -65,8 +69,9 @@ def ensure_runner(jobs):
             say("configuring the %s preset" % PRESET)
             if subprocess.call(["cmake", "--preset", PRESET], cwd=REPO, stdout=f, stderr=subprocess.STDOUT) != 0:
                 sys.exit("experiments: configuring failed (log: %s)" % log)
-        say("building b21r-experiment (%s preset, -j%d)" % (PRESET, jobs))
-        if subprocess.call(["cmake", "--build", "--preset", PRESET, "-j", str(jobs), "--target", "b21r_experiment"],
+        targets = ["b21r_experiment"] + (["b21r_learn_core"] if python_module else [])
+        say("building %s (%s preset, -j%d)" % (", ".join(targets), PRESET, jobs))
+        if subprocess.call(["cmake", "--build", "--preset", PRESET, "-j", str(jobs), "--target"] + targets,
                            cwd=REPO, stdout=f, stderr=subprocess.STDOUT) != 0:
             sys.exit("experiments: building b21r-experiment failed (log: %s)" % log)
     return str(build / "bin" / "b21r-experiment")
@@ -98,6 +103,8 @@ def main():
     ap.add_argument("--rerun", action="store_true", help="run finished tasks again")
     ap.add_argument("--configs", default=str(CONFIGS), help="folder of the experiment files (default tools/experiments)")
     ap.add_argument("--runner", help="use this b21r-experiment instead of building the host-release one")
+    ap.add_argument("--section", choices=("reference_learners",),
+                    help="report: regenerate only this section of an existing report (and its figures)")
     args = ap.parse_args()
     commands = [w for w in args.words if w in ("run", "figures", "report", "merge", "all")]
     names = [w for w in args.words if w not in commands]
@@ -106,15 +113,17 @@ def main():
     if "all" in commands:
         commands = ["run", "merge", "figures", "report"]
     ensure_packages()
-    from b21r_exp import figures, report, sweep  # after the packages exist
+    from b21r_exp import figures, reference, report, sweep  # after the packages exist
 
     status = 0
     configs = Path(args.configs).resolve()
     if "run" in commands:
-        exe = os.path.abspath(args.runner) if args.runner else ensure_runner(args.jobs)
+        paths = config_paths(configs, names)
+        python_module = any(reference.is_reference(c) for c in paths)
+        exe = os.path.abspath(args.runner) if args.runner else ensure_runner(args.jobs, python_module)
         plans = []
-        for c in config_paths(configs, names):
-            p = sweep.plan(exe, c, args.seeds)
+        for c in paths:
+            p = sweep.plan(exe, c, args.seeds, named=bool(names))
             if "unavailable" in p:
                 say("skipping %s: %s" % (p["name"], p["unavailable"]))
                 continue
@@ -134,11 +143,17 @@ def main():
             say("merged: %s" % p)
     fig_dir = os.path.join(os.path.dirname(os.path.abspath(args.report)), "figures")
     if "figures" in commands:
-        for p in figures.make_all(args.out, fig_dir, str(configs)):
+        for p in figures.make_all(args.out, fig_dir, str(configs), kinds=("reference",) if args.section else None):
             say("figure: %s" % p)
     if "report" in commands:
-        report.write(args.out, fig_dir, args.report, str(configs))
-        say("report: %s" % args.report)
+        if args.section:
+            if not os.path.exists(args.report):
+                sys.exit("experiments: --section needs an existing report (%s); run the report without it" % args.report)
+            report.write_section(args.out, fig_dir, args.report, str(configs), args.section)
+            say("report: section %s of %s" % (args.section, args.report))
+        else:
+            report.write(args.out, fig_dir, args.report, str(configs))
+            say("report: %s" % args.report)
     return status
 
 
