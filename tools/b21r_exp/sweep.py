@@ -70,7 +70,9 @@ def build_id(exe):
 
 
 def tasks_of(p):
-    return [Task(p["name"], p["config"], v, s) for v in p["variants"] for s in p["seeds"]]
+    """The plan's tasks, seed by seed (every variant of seed 1, then of seed 2, ...): a sweep on few
+    CPUs has paired results of every variant early, and a stopped one leaves whole seeds."""
+    return [Task(p["name"], p["config"], v, s) for s in p["seeds"] for v in p["variants"]]
 
 
 def command_of(exe, p):
