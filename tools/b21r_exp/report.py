@@ -88,7 +88,7 @@ def curve_table(doc, S):
 
 
 REFERENCE_SECTION = "reference_learners"
-SECTION_RE = re.compile(r"<!-- section:([a-z0-9_]+) -->\n.*?<!-- /section:\1 -->\n", re.S)
+SECTION_RE = re.compile(r"<!-- section:([a-z0-9_]+) -->\n.*?<!-- /section:\1 -->\n+", re.S)
 
 
 def reference_configs(configs_dir):
@@ -188,7 +188,7 @@ def write_section(out, fig_dir, path, configs_dir, section=REFERENCE_SECTION):
         text = text[: m[0].start()] + new + text[m[0].end():]
     else:
         at = text.find("\n## Ablations\n")
-        text = text[: at + 1] + new + "\n" + text[at + 1:] if at >= 0 else text.rstrip("\n") + "\n\n" + new
+        text = text[: at + 1] + new + text[at + 1:] if at >= 0 else text.rstrip("\n") + "\n\n" + new
     tmp = path + ".tmp"
     with open(tmp, "w") as f:
         f.write(text)
