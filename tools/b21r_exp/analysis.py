@@ -339,6 +339,7 @@ def progress_summary(progresses, label):
     k = min(len(p["evaluations"]) for p in progresses)
     row["curve"] = [{"training_steps": stats.mean_ci([p["evaluations"][i]["training_steps"] for p in progresses])[0],
                      "mean_all": stats.mean_ci([p["evaluations"][i]["mean_all"] for p in progresses]),
+                     "median_all": stats.median_ci([p["evaluations"][i]["mean_all"] for p in progresses]),
                      "successes": stats.mean_ci([p["evaluations"][i]["successes"] for p in progresses])}
                     for i in range(k)]
     return row
