@@ -10,18 +10,20 @@ Commands (default: all):
            skipped (run again to resume; --rerun to redo)
   figures  the paper-style figures (PNG, with captions) from the result files
   report   docs/RESULTS.md: our numbers next to the paper's claims, every yes/no from a test
-           (--section doorway: only the doorway task's section and figure, the rest of the
-           report kept, for when the other experiments' results are not at hand)
+           (--section doorway or reference_learners: only that section and its figures, the
+           rest of the report kept, for when the other experiments' results are not at hand)
   merge    one JSON per experiment with all its results (OUT/merged)
   all      run, merge, figures, report
 On first use it installs the sweep's Python packages (tools/requirements-experiments.txt: Ray,
-SciPy) into build/venv. Ray runs on this machine with all its cores unless --num-cpus or a
+SciPy) into build/venv, and Stable-Baselines3 and PyTorch (tools/requirements-reference.txt) the
+first time a reference learner runs. Ray runs on this machine with all its cores unless --num-cpus or a
 cluster --address is given; it is shut down when the command ends.
 Examples:
   tools/b21r_experiments.py                                    # everything, 10 seeds each
   tools/b21r_experiments.py run fig4_corridor_examples --seeds 3
   tools/b21r_experiments.py figures report
   tools/b21r_experiments.py run report doorway --section doorway   # the doorway task, 10 seeds, its section
+  tools/b21r_experiments.py run reference_learners --num-cpus 1   # SAC and PPO from scratch
 """
 import b21r_bootstrap  # noqa: E402 (first: runs the tool in the project's venv)
 
@@ -39,7 +41,7 @@ from pathlib import Path
 REPO = b21r_bootstrap.REPO
 CONFIGS = REPO / "tools" / "experiments"
 REQUIREMENTS = REPO / "tools" / "requirements-experiments.txt"
-STAMP = b21r_bootstrap.VENV / ".requirements-experiments.sha256"
+REFERENCE_REQUIREMENTS = REPO / "tools" / "requirements-reference.txt"
 PRESET = "host-release"
 
 
@@ -47,19 +49,22 @@ def say(msg):
     print("experiments: %s" % msg, flush=True)
 
 
-def ensure_packages():
-    """Installs tools/requirements-experiments.txt into the venv when it changed since last time."""
-    want = hashlib.sha256(REQUIREMENTS.read_bytes()).hexdigest()
-    if STAMP.exists() and STAMP.read_text().strip() == want:
+def ensure_packages(requirements=REQUIREMENTS, what="the sweep's Python packages"):
+    """Installs a requirements file into the venv when it changed since its last install (a stamp
+    per file in the venv)."""
+    stamp = b21r_bootstrap.VENV / (".%s.sha256" % requirements.stem)
+    want = hashlib.sha256(requirements.read_bytes()).hexdigest()
+    if stamp.exists() and stamp.read_text().strip() == want:
         return
-    say("installing the sweep's Python packages (%s) into %s" % (REQUIREMENTS.name, b21r_bootstrap.VENV))
+    say("installing %s (%s) into %s" % (what, requirements.name, b21r_bootstrap.VENV))
     subprocess.check_call([sys.executable, "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
-                           "-r", str(REQUIREMENTS)])
-    STAMP.write_text(want + "\n")
+                           "-r", str(requirements)])
+    stamp.write_text(want + "\n")
 
 
-def ensure_runner(jobs):
-    """Configures (once) and builds b21r-experiment in the host-release preset; returns its path."""
+def ensure_runner(jobs, python_module=False):
+    """Configures (once) and builds b21r-experiment in the host-release preset (and, with
+    python_module, the environments' Python module the reference learners use); returns its path."""
     build = REPO / "build" / PRESET
     log = REPO / "build" / "experiments-build.log"
     log.parent.mkdir(parents=True, exist_ok=True)
@@ -68,8 +73,9 @@ def ensure_runner(jobs):
             say("configuring the %s preset" % PRESET)
             if subprocess.call(["cmake", "--preset", PRESET], cwd=REPO, stdout=f, stderr=subprocess.STDOUT) != 0:
                 sys.exit("experiments: configuring failed (log: %s)" % log)
-        say("building b21r-experiment (%s preset, -j%d)" % (PRESET, jobs))
-        if subprocess.call(["cmake", "--build", "--preset", PRESET, "-j", str(jobs), "--target", "b21r_experiment"],
+        targets = ["b21r_experiment"] + (["b21r_learn_core"] if python_module else [])
+        say("building %s (%s preset, -j%d)" % (", ".join(targets), PRESET, jobs))
+        if subprocess.call(["cmake", "--build", "--preset", PRESET, "-j", str(jobs), "--target"] + targets,
                            cwd=REPO, stdout=f, stderr=subprocess.STDOUT) != 0:
             sys.exit("experiments: building b21r-experiment failed (log: %s)" % log)
     return str(build / "bin" / "b21r-experiment")
@@ -101,8 +107,8 @@ def main():
     ap.add_argument("--rerun", action="store_true", help="run finished tasks again")
     ap.add_argument("--configs", default=str(CONFIGS), help="folder of the experiment files (default tools/experiments)")
     ap.add_argument("--runner", help="use this b21r-experiment instead of building the host-release one")
-    ap.add_argument("--section", choices=("doorway",),
-                    help="figures, report: only this section of an existing report (and its figure)")
+    ap.add_argument("--section", choices=tuple(sorted(report.SECTIONS)),
+                    help="figures, report: only this section of an existing report (and its figures)")
     args = ap.parse_args()
     commands = [w for w in args.words if w in ("run", "figures", "report", "merge", "all")]
     names = [w for w in args.words if w not in commands]
@@ -111,15 +117,19 @@ def main():
     if "all" in commands:
         commands = ["run", "merge", "figures", "report"]
     ensure_packages()
-    from b21r_exp import figures, report, sweep  # after the packages exist
+    from b21r_exp import figures, reference, report, sweep  # after the packages exist
 
     status = 0
     configs = Path(args.configs).resolve()
     if "run" in commands:
-        exe = os.path.abspath(args.runner) if args.runner else ensure_runner(args.jobs)
+        paths = config_paths(configs, names)
+        python_module = any(reference.is_reference(c) for c in paths)
+        if python_module:  # Stable-Baselines3 and torch: only for the reference learners (about 5 GB)
+            ensure_packages(REFERENCE_REQUIREMENTS, "the reference learners' packages")
+        exe = os.path.abspath(args.runner) if args.runner else ensure_runner(args.jobs, python_module)
         plans = []
-        for c in config_paths(configs, names):
-            p = sweep.plan(exe, c, args.seeds)
+        for c in paths:
+            p = sweep.plan(exe, c, args.seeds, named=bool(names))
             if "unavailable" in p:
                 say("skipping %s: %s" % (p["name"], p["unavailable"]))
                 continue
@@ -139,7 +149,8 @@ def main():
             say("merged: %s" % p)
     fig_dir = os.path.join(os.path.dirname(os.path.abspath(args.report)), "figures")
     if "figures" in commands:
-        for p in figures.make_all(args.out, fig_dir, str(configs), only=(args.section,) if args.section else None):
+        for p in figures.make_all(args.out, fig_dir, str(configs),
+                                  only=report.SECTIONS[args.section]["figures"](str(configs)) if args.section else None):
             say("figure: %s" % p)
     if "report" in commands:
         if args.section:

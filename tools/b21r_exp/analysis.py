@@ -331,3 +331,90 @@ def ablation_comparisons(variants):
                       "hours": stats.paired(ha, hb, "two-sided"),
                       "same_data": all(a[s]["digest"] == b[s]["digest"] for s in common)})
     return summ, comps
+
+
+# ---- reference learners against the product's learner, by training steps ----------------------
+
+# The product's own learner beside the reference learners, from whichever of these results exist:
+# (experiment, variant, label). Both run the 10 m corridor on the emulated B21r.
+PRODUCT_PROGRESS = (
+    ("fig4_corridor_examples", "", "product: HEDGER, proportional examples (gains 0.5-2; Fig. 4 set-up)"),
+    ("ablation_teachers", "example_gain_range=0.25,0.35", "product: HEDGER, gentle teacher (gains 0.25-0.35)"),
+)
+TOLERANCES = (0.01, 0.03)
+LEARNER_LABELS = {"sac": "SAC (Stable-Baselines3)", "ppo": "PPO (Stable-Baselines3)", "td3": "TD3 (Stable-Baselines3)"}
+
+
+def fmt_steps(x):
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "n/a"
+    return "> budget" if math.isinf(x) else "{:,.0f}".format(x)
+
+
+def fmt_median(m, digits=0, fmt=None):
+    """A stats.median_ci as "median [lo, hi]"; censored values as "> budget"."""
+    f = fmt or (lambda v: fmt_steps(v) if digits == 0 else ("n/a" if math.isnan(v) else "%.*f" % (digits, v)))
+    med, lo, hi, n = m
+    if n == 0:
+        return "n/a"
+    if math.isnan(lo):
+        return f(med)
+    return "%s [%s, %s]" % (f(med), f(lo), f(hi))
+
+
+def progress_summary(progresses, label):
+    """Across seeds: steps to within each tolerance of the optimal controller and staying there
+    (median, 95 % interval; censored seeds count as more than the budget), training episodes
+    ending on a wall (in all, and until within 1 % and staying), the final evaluation, and the
+    learning curve (mean over seeds at each evaluation)."""
+    n = len(progresses)
+    row = {"label": label, "n": n, "seeds": sorted(p["seed"] for p in progresses),
+           "backend": sorted({p["backend"] for p in progresses}),
+           "budget": stats.median_ci([p["budget"] for p in progresses]),
+           "optimal": stats.mean_ci([p["optimal"] for p in progresses])}
+    for tol in TOLERANCES:
+        firsts = [results.within_from(p, tol) for p in progresses]
+        row["to_%g" % tol] = stats.median_ci([math.inf if i is None else p["evaluations"][i]["training_steps"]
+                                              for p, i in zip(progresses, firsts)])
+        row["censored_%g" % tol] = sum(1 for i in firsts if i is None)
+        row["walls_until_%g" % tol] = stats.median_ci([math.inf if i is None else p["evaluations"][i]["wall_episodes"]
+                                                       for p, i in zip(progresses, firsts)])
+    row["walls"] = stats.median_ci([p["evaluations"][-1]["wall_episodes"] for p in progresses])
+    row["walls_any"] = sum(1 for p in progresses if p["evaluations"][-1]["wall_episodes"] > 0)
+    row["final"] = stats.median_ci([p["evaluations"][-1]["mean_all"] for p in progresses])
+    row["final_mean"] = stats.mean_ci([p["evaluations"][-1]["mean_all"] for p in progresses])
+    row["final_all10"] = sum(1 for p in progresses if p["evaluations"][-1]["successes"] == p["evaluations"][-1]["n"])
+    k = min(len(p["evaluations"]) for p in progresses)
+    row["curve"] = [{"training_steps": stats.mean_ci([p["evaluations"][i]["training_steps"] for p in progresses])[0],
+                     "mean_all": stats.mean_ci([p["evaluations"][i]["mean_all"] for p in progresses]),
+                     "median_all": stats.median_ci([p["evaluations"][i]["mean_all"] for p in progresses]),
+                     "successes": stats.mean_ci([p["evaluations"][i]["successes"] for p in progresses])}
+                    for i in range(k)]
+    return row
+
+
+def reference_rows(variants):
+    """One progress_summary per variant of a reference experiment, in the file's order."""
+    rows = []
+    for v, rs in variants.items():
+        ps = [results.progress_of_reference(r) for r in rs]
+        name = ps[0]["learner"]
+        rows.append(progress_summary(ps, LEARNER_LABELS.get(name, name)))
+    return rows
+
+
+def product_rows(data):
+    """progress_summary of the product's learner for each PRODUCT_PROGRESS whose results exist,
+    and (experiment, variant, label) of those that do not."""
+    rows, missing = [], []
+    for exp, var, label in PRODUCT_PROGRESS:
+        variants = data.get(exp, {})
+        rs = variants.get(var) if var else (variants.get("") or next(iter(variants.values()), None))
+        ps = [p for p in (results.progress_of_learn(r) for r in rs or []) if p is not None]
+        if ps:
+            row = progress_summary(ps, label)
+            row["experiment"], row["variant"] = exp, var
+            rows.append(row)
+        else:
+            missing.append((exp, var, label))
+    return rows, missing

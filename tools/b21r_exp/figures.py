@@ -175,6 +175,50 @@ def ablation_figure(name, variants, title, path, command):
     return cap
 
 
+def reference_figure(rows, title, path, command):
+    """Learning curves against training steps: each reference learner (and the product's learner,
+    where its results exist), the median evaluation over seeds with the 95 % interval of the
+    median, the optimal controller and 1 % / 3 % above it; the lower panel zooms in on the optimal
+    controller."""
+    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(8, 7.6), gridspec_kw={"height_ratios": [1.3, 1]}, sharex=True)
+    styles = ["-", "--", "-.", ":"]
+    for i, r in enumerate(rows):
+        x = [c["training_steps"] for c in r["curve"]]
+        med = [c["median_all"] for c in r["curve"]]
+        product = r["label"].startswith("product")
+        for a in (ax, ax2):
+            line, = a.plot(x, [m[0] for m in med], linestyle=styles[i % len(styles)], marker="o" if product else None,
+                           markersize=3, linewidth=1.4, label="%s (%d seeds)" % (r["label"], r["n"]))
+            if all(not math.isnan(m[1]) for m in med):
+                a.fill_between(x, [m[1] for m in med], [m[2] for m in med], color=line.get_color(), alpha=0.12)
+    opt = rows[0]["optimal"] if rows else (math.nan, math.nan, 0)
+    for a in (ax, ax2):
+        if not math.isnan(opt[0]):
+            a.axhline(opt[0], color="black", linewidth=1.2, label="optimal controller (same poses)")
+            for tol, style in ((0.01, (0, (1, 1))), (0.03, (0, (4, 2)))):
+                a.axhline(opt[0] * (1 + tol), color="grey", linewidth=0.8, linestyle=style,
+                          label="%d %% above optimal" % round(100 * tol))
+        a.grid(alpha=0.3)
+    ax.set_ylim(0, 1050)
+    ax.set_ylabel("steps to the goal")
+    ax.set_title("\n".join(textwrap.wrap(title, 90)), fontsize=9)
+    ax.legend(fontsize=7, loc="upper right")
+    if not math.isnan(opt[0]):
+        ax2.set_ylim(opt[0] * 0.97, opt[0] * 1.25)
+    ax2.set_ylabel("steps (zoom)")
+    ax2.set_xlabel("training steps (environment steps of training; evaluation runs not counted)")
+    cap = ("%s: median over seeds of each evaluation's mean steps (the deterministic policy from the task's 10 "
+           "evaluation poses, a run that does not reach the goal counted at the step limit) against the training steps "
+           "so far; bands: the 95 %% interval of the median (order statistics; drawn from 6 seeds on). The product's "
+           "learner counts the training steps of both phases, its examples included. Black: the optimal controller "
+           "from the same poses; grey: 1 %% and 3 %% above it. Made by: %s" % (title, command))
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    _caption(fig, cap)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return cap
+
+
 def command_for(name):
     return "tools/b21r_experiments.py run figures %s" % name
 
@@ -207,6 +251,13 @@ def make_all(out, fig_dir, configs_dir, captions=None, only=None):
                 p = os.path.join(fig_dir, LEARN_FIGS.get(name, name + ".png"))
                 caps[os.path.basename(p)] = learn_figure(S, title, p, cmd)
                 made.append(p)
+        elif kind == "reference":
+            rows = analysis.reference_rows(variants)
+            if first[0]["task"] == "corridor":
+                rows += analysis.product_rows(data)[0]
+            p = os.path.join(fig_dir, name + ".png")
+            caps[os.path.basename(p)] = reference_figure(rows, title, p, cmd)
+            made.append(p)
         elif kind == "explore_corridor":
             p = os.path.join(fig_dir, "fig6_explore_corridor.png")
             caps[os.path.basename(p)] = explore_corridor_figure(analysis.explore_corridor_summary(variants), p, cmd)

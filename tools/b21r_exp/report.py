@@ -10,8 +10,8 @@ import re
 import subprocess
 import time
 
-from b21r_exp import analysis, figures, results, stats
-from b21r_exp.analysis import fmt_ci, fmt_p
+from b21r_exp import analysis, figures, reference, results, stats
+from b21r_exp.analysis import fmt_ci, fmt_median, fmt_p, fmt_steps
 
 PROSE_RE = re.compile(r"<!-- prose:([a-z0-9_]+) -->\n(.*?)<!-- /prose:\1 -->", re.S)
 PROSE_DEFAULT = "_(Prose to be written after the final run: what the numbers mean, and why we differ where we do.)_\n"
@@ -178,22 +178,107 @@ def doorway_section(doc, data, rel, caps):
     return S, cs
 
 
+REFERENCE_SECTION = "reference_learners"
+
+
+def reference_configs(configs_dir):
+    """Names of the reference experiments (experiment.kind = reference) in configs_dir."""
+    return [n[:-5] for n in sorted(os.listdir(configs_dir))
+            if n.endswith(".conf") and reference.is_reference(os.path.join(configs_dir, n))]
+
+
+def reference_section(doc, data, configs_dir, rel, caps):
+    """The reference learners against the product's learner, by training steps: one table and one
+    figure per reference experiment, from whichever result files exist."""
+    doc.add("<!-- section:%s -->" % REFERENCE_SECTION, "## Reference learners: standard learners from scratch, by training steps", "",
+            "What a user would pick instead of the product's learner: Stable-Baselines3 learners with their default "
+            "hyperparameters and no examples, trained on the product's Gymnasium environment and evaluated as the "
+            "product's evaluation blocks are (the deterministic policy from the task's 10 evaluation poses, a run "
+            "that does not reach the goal counted at the step limit), every 1,000 training steps and before "
+            "training. Steps are environment steps of training: for the product's learner those of both phases, its "
+            "examples included; evaluation runs are not counted for either. \"Within 1 % and staying\": the training "
+            "steps at the first evaluation from which every later one is within 1 % (3 %) of the optimal "
+            "controller's mean from the same poses; a seed whose final evaluation is not is censored (counted as "
+            "more than its budget; the column says how many). Medians over seeds with their distribution-free 95 % "
+            "interval in brackets (order statistics: for 10 seeds the 2nd and 9th of 10). Episodes ending on a wall: "
+            "training episodes that ended in a collision.", "")
+    names = reference_configs(configs_dir)
+    product, missing = analysis.product_rows(data)
+    for name in names:
+        doc.add("### %s" % name, "")
+        if name not in data:
+            doc.add("_Not run yet: `tools/b21r_experiments.py run %s`._" % name, "")
+            continue
+        variants = data[name]
+        rs = next(iter(variants.values()))
+        doc.add("Made by: `tools/b21r_experiments.py run %s` (seeds %s; file `tools/experiments/%s.conf`)." % (
+            name, seeds_of(rs), name), "")
+        fig = name + ".png"
+        doc.figure(os.path.join(rel, fig), name, caps.get(fig, ""))
+        rows = analysis.reference_rows(variants)
+        corridor = rs[0]["task"] == "corridor"
+        hp = {}
+        for r in variants.values():
+            R = r[0]["reference"]
+            hp[R["algorithm"]] = R["hyperparameters"]
+        if corridor:
+            rows = rows + product
+        opt = rows[0]["optimal"]
+        doc.add("Optimal controller from the same poses: %s steps." % fmt_ci(*opt[:2]), "",
+                "| learner | back-end | seeds | training steps (budget) | training steps to within 1 % and staying "
+                "(censored) | to within 3 % and staying (censored) | training episodes ending on a wall, in all "
+                "(seeds with any) | ... until within 1 % and staying | final evaluation: steps | final: 10/10 poses |",
+                "|---|---|---|---|---|---|---|---|---|---|")
+        for r in rows:
+            doc.add("| %s | %s | %d | %s | %s (%d) | %s (%d) | %s (%d) | %s | %s | %d of %d seeds |" % (
+                r["label"], ", ".join(r["backend"]), r["n"], fmt_steps(r["budget"][0]),
+                fmt_median(r["to_0.01"]), r["censored_0.01"], fmt_median(r["to_0.03"]), r["censored_0.03"],
+                fmt_median(r["walls"]), r["walls_any"], fmt_median(r["walls_until_0.01"]),
+                fmt_median(r["final"], 1), r["final_all10"], r["n"]))
+        if corridor:
+            for exp, var, label in missing:
+                doc.add("| %s | | | _not run yet: `tools/b21r_experiments.py run %s`%s_ | | | | | | |" % (
+                    label, exp, " (variant `%s`)" % var if var else ""))
+        doc.add("")
+        if corridor:
+            doc.add("The product's rows come from the result files of %s, whichever exist (the emulated B21r, "
+                    "evaluation blocks every 5 training runs, the training steps of both phases, examples "
+                    "included)." % ", ".join("`%s`%s" % (e, " (`%s`)" % v if v else "") for e, v, _ in
+                                             analysis.PRODUCT_PROGRESS), "")
+        doc.add("Hyperparameters (Stable-Baselines3's defaults, read back from the models): %s." % "; ".join(
+            "%s: %s" % (a.upper(), ", ".join("%s %s" % (k, v) for k, v in h.items())) for a, h in hp.items()), "")
+    doc.prose("reference_learners")
+    doc.add("<!-- /section:%s -->" % REFERENCE_SECTION, "")
+
+
+# The sections that can be regenerated alone: the experiments whose figures they show, and the
+# heading a whole report has after them (where a report without the section gets it).
+SECTIONS = {
+    DOORWAY: {"figures": lambda configs_dir: (DOORWAY,), "before": "\n## Learning without examples"},
+    REFERENCE_SECTION: {"figures": lambda configs_dir: tuple(reference_configs(configs_dir)),
+                        "before": "\n## Ablations\n"},
+}
+
+
 def write_section(out, fig_dir, path, configs_dir, section=DOORWAY):
-    """Regenerates one marked section of an existing report (and its figure) from the result files,
-    keeping every other line: for when the other experiments' results are not at hand. A report
-    without the section gets it before the section that follows it in a whole report ("Learning
-    without examples"), else at the end."""
-    if section != DOORWAY:
-        raise ValueError("only the section '%s' can be regenerated alone" % DOORWAY)
+    """Regenerates one marked section of an existing report (and its figures) from the result
+    files, keeping every other line: for when the other experiments' results are not at hand. A
+    report without the section gets it where a whole report has it (before the section that
+    follows it there), else at the end."""
+    if section not in SECTIONS:
+        raise ValueError("sections that can be regenerated alone: %s" % ", ".join(sorted(SECTIONS)))
     data = results.load(out, configs_dir)
     with open(path) as f:
         text = f.read()
     old = {m.group(1): m.group(2) for m in PROSE_RE.finditer(text)}
     doc = Doc(old)
     caps = {}
-    figures.make_all(out, fig_dir, configs_dir, caps, only=(section,))
+    figures.make_all(out, fig_dir, configs_dir, caps, only=SECTIONS[section]["figures"](configs_dir))
     rel = os.path.relpath(fig_dir, os.path.dirname(os.path.abspath(path)))
-    doorway_section(doc, data, rel, caps)
+    if section == DOORWAY:
+        doorway_section(doc, data, rel, caps)
+    else:
+        reference_section(doc, data, configs_dir, rel, caps)
     repo = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     doc.lines.insert(3, "_This section was generated on its own (`tools/b21r_experiments.py report --section %s`) from "
                         "the result files in `%s` on %s, source commit `%s`._" % (
@@ -205,7 +290,7 @@ def write_section(out, fig_dir, path, configs_dir, section=DOORWAY):
     if m:
         text = text[: m[0].start()] + new + text[m[0].end():]
     else:
-        at = text.find("\n## Learning without examples")
+        at = text.find(SECTIONS[section]["before"])
         text = text[: at + 1] + new + text[at + 1:] if at >= 0 else text.rstrip("\n") + "\n\n" + new
     tmp = path + ".tmp"
     with open(tmp, "w") as f:
@@ -352,6 +437,8 @@ def write(out, fig_dir, path, configs_dir):
     else:
         doc.add("_Not run yet: `tools/b21r_experiments.py run table1_explore_goal`._", "")
     doc.prose("table1")
+
+    reference_section(doc, data, configs_dir, rel, caps)
 
     doc.add("## Ablations", "")
     for name in sorted(n for n in os.listdir(configs_dir) if n.startswith("ablation_") and n.endswith(".conf")):

@@ -153,3 +153,59 @@ def explore_seed(r):
 def variant_value(variant):
     """'key=value' -> value (for axes); '' -> ''."""
     return variant.split("=", 1)[1] if "=" in variant else variant
+
+
+# ---- progress against training steps (reference learners and the product's learner alike) ------
+
+
+def _evaluation(training_steps, training_episodes, wall_episodes, steps, success):
+    return {"training_steps": int(training_steps), "training_episodes": int(training_episodes),
+            "wall_episodes": int(wall_episodes), "mean_all": sum(steps) / len(steps),
+            "successes": sum(1 for s in success if s), "n": len(steps)}
+
+
+def progress_of_reference(r):
+    """The evaluations of a reference learner's result (b21r_exp.reference) against training
+    steps, and its optimal controller from the same poses."""
+    R = r["reference"]
+    evals = [_evaluation(e["training_steps"], e["training_episodes"], e["wall_episodes"], e["steps"], e["success"])
+             for e in R["evaluations"]]
+    return {"seed": r["seed"], "learner": R["algorithm"], "backend": R["backend"], "evaluations": evals,
+            "optimal": sum(R["optimal"]["steps"]) / len(R["optimal"]["steps"]), "budget": R["train_steps"],
+            "step_limit": r["step_limit"]}
+
+
+def progress_of_learn(r):
+    """The evaluation blocks of the product's learner (a b21r-experiment learn result) against
+    the training steps of both phases, examples included (evaluation runs are not counted), and
+    the training runs so far that ended on a wall; None when the result has no optimal
+    reference."""
+    L = r["learning"]
+    opt = r.get("references", {}).get("optimal")
+    if opt is None or not L["blocks"]:
+        return None
+    train = sorted((x for x in L["runs"] if x["kind"] == "train"), key=lambda x: x["training_index"])
+    evals = []
+    for b in L["blocks"]:
+        done = train[: b["training_runs"]]
+        steps = b.get("training_steps", sum(x["steps"] for x in done))
+        walls = sum(1 for x in done if x["outcome"] == "collision")
+        evals.append(_evaluation(steps, b["training_runs"], walls, b["steps"], b["success"]))
+    return {"seed": r["seed"], "learner": "hedger", "backend": "ode", "evaluations": evals,
+            "optimal": sum(opt["steps"]) / len(opt["steps"]), "budget": L["totals"]["training_steps"],
+            "step_limit": r["step_limit"]}
+
+
+def within_from(progress, tolerance):
+    """The first evaluation from which every later one (itself included) is within `tolerance`
+    (0.01 = 1 %) of the optimal controller's mean steps from the same poses (both with failures at
+    the step limit): its index, or None when the final evaluation is not (censored)."""
+    bound = (1.0 + tolerance) * progress["optimal"]
+    first = None
+    for i, e in enumerate(progress["evaluations"]):
+        if e["mean_all"] <= bound + 1e-9:
+            if first is None:
+                first = i
+        else:
+            first = None
+    return first

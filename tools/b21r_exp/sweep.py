@@ -8,6 +8,11 @@ being mixed with new ones, and result folders of several machines can be merged 
 together. A failed task is reported by name with its error; the others go on
 and keep their results.
 
+An experiment file with `experiment.kind = reference` (b21r_exp.reference: Stable-Baselines3
+learners on the Gymnasium environments) is planned and run by that Python module instead of
+b21r-experiment, in the same tasks, result layout and resume rules; its results record the
+identity of that module, the packages' versions and the compiled environment instead.
+
 Ray: `ray.init()` on this machine by default (all cores; --num-cpus to limit), or the cluster at
 --address (every node needs this checkout at the same path and a build of b21r-experiment)."""
 import hashlib
@@ -19,7 +24,7 @@ import tempfile
 import time
 from dataclasses import dataclass
 
-from b21r_exp import results
+from b21r_exp import reference, results
 
 
 @dataclass(frozen=True)
@@ -33,13 +38,22 @@ class Task:
         return "%s%s seed %d" % (self.experiment, " [%s]" % self.variant if self.variant else "", self.seed)
 
 
-def plan(exe, config, seeds=None):
-    """The experiment's plan from b21r-experiment --plan: dict with name, kind, title, seeds,
-    variants, and 'unavailable' (a reason) when this build cannot run it."""
-    p = subprocess.run([exe, "--config", config, "--plan"], capture_output=True, text=True)
-    if p.returncode != 0:
-        raise RuntimeError("%s: %s" % (config, p.stderr.strip()))
-    d = json.loads(p.stdout)
+def plan(exe, config, seeds=None, named=True):
+    """The experiment's plan from b21r-experiment --plan (b21r_exp.reference for a reference
+    experiment): dict with name, kind, title, seeds, variants, and 'unavailable' (a reason) when
+    this build cannot run it or when it runs only on request and was not named (named=False)."""
+    if reference.is_reference(config):
+        try:
+            d = reference.plan(config)
+        except reference.ConfigError as e:
+            raise RuntimeError(str(e)) from None
+        if d.pop("on_request") and not named:
+            d["unavailable"] = "it runs only when named (tools/b21r_experiments.py run %s)" % d["name"]
+    else:
+        p = subprocess.run([exe, "--config", config, "--plan"], capture_output=True, text=True)
+        if p.returncode != 0:
+            raise RuntimeError("%s: %s" % (config, p.stderr.strip()))
+        d = json.loads(p.stdout)
     if seeds is not None:
         d["seeds"] = list(range(d["seeds"][0], d["seeds"][0] + seeds))
     d["config"] = os.path.abspath(config)
@@ -56,19 +70,31 @@ def build_id(exe):
 
 
 def tasks_of(p):
-    return [Task(p["name"], p["config"], v, s) for v in p["variants"] for s in p["seeds"]]
+    """The plan's tasks, seed by seed (every variant of seed 1, then of seed 2, ...): a sweep on few
+    CPUs has paired results of every variant early, and a stopped one leaves whole seeds."""
+    return [Task(p["name"], p["config"], v, s) for s in p["seeds"] for v in p["variants"]]
 
 
-def run_one(exe, task, build):
+def command_of(exe, p):
+    """The program that runs the plan's tasks (a list): b21r-experiment, or this interpreter
+    with b21r_exp.reference for a reference experiment."""
+    return [sys.executable, "-m", "b21r_exp.reference"] if p["kind"] == reference.KIND else [exe]
+
+
+def run_one(command, task, build):
     """Runs one task in a scratch folder; returns (ok, result text or error text, wall seconds).
-    The result records `build` (build_id of exe)."""
+    command: the program (a list, or the path of b21r-experiment). The result records `build`
+    (the identity of that program)."""
     t0 = time.time()
     with tempfile.TemporaryDirectory(prefix="b21r-exp-") as d:
         out = os.path.join(d, "result.json")
-        cmd = [exe, "--config", task.config, "--seed", str(task.seed), "--out", out]
+        cmd = ([command] if isinstance(command, str) else list(command)) + [
+            "--config", task.config, "--seed", str(task.seed), "--out", out]
         if task.variant:
             cmd += ["--variant", task.variant]
-        p = subprocess.run(cmd, capture_output=True, text=True)
+        # One thread per task (the reference learners' torch; numerical libraries).
+        env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+        p = subprocess.run(cmd, capture_output=True, text=True, env=env)
         if p.returncode != 0:
             return False, "exit status %d: %s" % (p.returncode, p.stderr.strip()[-2000:]), time.time() - t0
         with open(out) as f:
@@ -95,12 +121,20 @@ def fmt_s(s):
 def run(exe, plans, out, address=None, num_cpus=None, rerun=False, log=print):
     """Runs every task of the plans not finished yet. Returns the list of (task, error) that failed."""
     all_tasks = [t for p in plans for t in tasks_of(p)]
-    build = build_id(exe)
+    kinds = {p["name"]: p["kind"] for p in plans}
+    builds = {}
+    for k in sorted(set(kinds.values())):
+        builds[k] = reference.build_id() if k == reference.KIND else build_id(exe)
+    commands = {p["name"]: command_of(exe, p) for p in plans}
+
+    def build_of(t):
+        return builds[kinds[t.experiment]]
+
     done_before = {t: results.read_result(results.result_path(out, t.experiment, t.variant, t.seed)) for t in all_tasks}
-    stale = [t for t, r in done_before.items() if r is not None and r.get("build") != build]
+    stale = [t for t, r in done_before.items() if r is not None and r.get("build") != build_of(t)]
     todo = [t for t in all_tasks if rerun or done_before[t] is None or t in stale]
     log("sweep: %d tasks, %d finished already by this build (%s), %d to run%s" % (
-        len(all_tasks), len(all_tasks) - len(todo), build, len(todo),
+        len(all_tasks), len(all_tasks) - len(todo), ", ".join(sorted(set(builds.values()))), len(todo),
         " (%d of them made by another build: run again)" % len(stale) if stale and not rerun else ""))
     if not todo:
         return []
@@ -115,7 +149,7 @@ def run(exe, plans, out, address=None, num_cpus=None, rerun=False, log=print):
         remote = ray.remote(num_cpus=1)(run_one)
         log("sweep: Ray with %d CPUs (%s)" % (int(ray.cluster_resources().get("CPU", 0)),
                                               "cluster at %s" % address if address else "this machine"))
-        pending = {remote.remote(exe, t, build): t for t in todo}
+        pending = {remote.remote(commands[t.experiment], t, build_of(t)): t for t in todo}
         t0 = time.time()
         done = 0
         task_seconds = 0.0
