@@ -91,32 +91,19 @@
 ///   What it learns: with code examples on the corridor the greedy policy is an imitation of the
 ///   examples (κ = 100 leaves only the anchor and gives the same policy; seeds 1-10, before the
 ///   firmware's pairs: Fig. 4 final -0.2 ± 0.2): one tick's action changes the return by about 0.3
-///   step, far below the fit's standard error. Taught by one consistent teacher it reproduces it;
-///   what improves on the teacher is the firmware's pair shift, added to this greedy action
-///   (next item). The values carry the obstacle task (κ = 100: +47.3 ± 22.9); in the corridor,
-///   with the shift, they add nothing measurable (κ = 100: Fig. 4 +0.1 ± 0.2, Fig. 5 -0.2 ± 2.8).
+///   step, far below the fit's standard error. Taught by one consistent teacher it reproduces it.
 ///   docs/LEARNING.md records every alternative measured (lower pessimism, more data and
 ///   neighbours, exploration, held decisions, planning on the values, advantage weighting, one
-///   teacher or a mixture, the obstacle task's gap) and the diagnosis behind these choices. The
-///   one method that moves phase two past the imitation ranks whole runs instead of actions (next
-///   item).
+///   teacher or a mixture, the obstacle task's gap) and the diagnosis behind these choices.
 /// - Run tags and anchor weights (hedger_set_run_tag, hedger_weight_run, cfg.anchor_recency_runs):
-///   the caller ranks whole runs and the anchor (and the action range tilted with it) follows the
-///   better ones; the value fits do not see the weights. The firmware's pair_runs runs phase two
-///   (and, pair_phase_one by default, phase one's example runs from the 11th on) in pairs from one pose with
-///   opposite policy perturbations and the same exploration noise. By default (pair_shift_rate >
-///   0) it learns the ranking outside HEDGER, as a shift added to the greedy action, and weighs
-///   phase two's runs 0 here (phase one's paired examples 1), so the anchor stays the teachers'
-///   imitation (a neighbourhood of phase-two points only falls back to the kernel weights:
-///   counted in anchor_unweighted). With pair_shift_rate = 0 the ranking comes here instead: the
-///   faster run's points weigh 2 / (1 + e^(−d/τ)), τ = 1 step, the slower run's 2 minus that (a
-///   run that missed the goal, or is not yet ranked, 0); runs fade with e^(−age / 150 run tags).
-///   That moves the anchor only as far as the ranked runs outweigh the older data: Fig. 4 with
-///   100 phase-two runs, seeds 11-20, final block −1.2 ± 0.5 steps against no pairs, while the
-///   shift comes within 0.1 step of the optimal controller in about 25 phase-two runs (seeds
-///   11-20; docs/LEARNING.md, docs/RESULTS.md: ablation_pairs, ablation_pair_shift). In a scratch build without the
-///   ranking (every weight 1) the same perturbations gave +34.1 ± 42.7 and 83 failed runs. Cost: 8
-///   bytes per stored point; one O(fill) pass per weighted run, between runs.
+///   a caller that ranks whole runs can weigh their points in the anchor (and the action range
+///   tilted with it); the value fits do not see the weights. A faster run's points weigh
+///   2 / (1 + e^(-d/tau)), the slower run's 2 minus that, a run not yet ranked 0 (a neighbourhood
+///   of such points falls back to the kernel weights: counted in anchor_unweighted); runs fade with
+///   e^(-age / anchor_recency_runs run tags). The controller does not use them (every weight 1):
+///   the run ranking that did was removed with the controller's ranked pairs, whose terms were the
+///   reference law's coordinates (docs/LEARNING.md). Cost: 8 bytes per stored point; one O(fill)
+///   pass per weighted run, between runs.
 /// - kd-tree: static median-split tree in a fixed node pool, leaf size 16; new points go to a
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are

@@ -337,7 +337,7 @@ double tasks_driver_corridor(tasks_driver_t* d, const features_corridor_t* f);
 /// Half-angle of the cone around an obstacle at distance_m [m, robot centre to its nearest
 /// return] that a course must stay outside to pass it clearance_m away [rad]:
 /// asin(clearance_m / distance_m), or pi/2 at or within the clearance. The obstacle drivers' law
-/// (below) and the controller's obstacle pair term (fw_pair_basis) bend toward its edge. Pure, O(1).
+/// (below) bends toward its edge. Pure, O(1).
 double tasks_obstacles_cone_half_angle_rad(double clearance_m, double distance_m);
 
 /// The driver's rotation command for the obstacle task [rad/s]. The law: theta = goal bearing,
