@@ -70,8 +70,8 @@
 ///   cfg.greedy_pessimism). κ = 4: 0, 1, 2 gave collisions in evaluation, 3 and 4 none, 10 a
 ///   policy that only repeated its data. Where the state has too few neighbours, a second
 ///   attempt with a kernel greedy_reach times wider.
-///   The controller's defaults (learn_learner_config() from its configuration; chosen on seeds 11-20, confirmed on seeds
-///   1-10; paired differences in steps of 0.1 s, negative = shorter):
+///   The controller's defaults (learn_learner_config() from its configuration; chosen on seeds
+///   11-20, confirmed on seeds 1-10; paired differences in steps of 0.1 s, negative = shorter):
 ///   * the executed rotation (rad/s, scale 1 rad/s) as the last state entry (state_rotation):
 ///     the acceleration limit, 0.29 rad/s per tick, ties the next rotation to the last command.
 ///     Fig. 4 after phase one +1.3 ± 0.4 vs the example policy (was +2.0), failed phase-two
