@@ -99,7 +99,7 @@ static const key_desc_t k_keys[] = {
    "evaluate_policy = example: the example policy's gain [1/s] (0 = the middle of its training range)"},
   {NULL, "example_gain_range", KIND_DLIST, OFF(example_gain_range), 0, 100, true, false, NULL, "",
    "the example policy's gains [1/s] as lowest,highest: each run's gain is drawn uniformly in between "
-   "(\"\" = the task's range: corridor 0.5,2, obstacles 0.8,2)"},
+   "(\"\" = the task's range: b21r-controller --print-task-params)"},
   {NULL, "seed", KIND_U64, OFF(seed), 0, 9.2e18, false, false, NULL, "1",
    "root seed of every random generator (example gains, start poses, exploration)"},
   {NULL, "corridor_length_m", KIND_DOUBLE, OFF(corridor_length_m), 4, 200, false, false, NULL, "10",
@@ -214,7 +214,8 @@ static const key_desc_t k_keys[] = {
   {"Learning", "alpha", KIND_DOUBLE, OFF(alpha), 0, 1, true, false, NULL, "0.2",
    "learning rate (the paper: 0.2)"},
   {NULL, "gamma", KIND_DOUBLE, OFF(gamma), 0, 1, false, true, NULL, "0",
-   "discount factor; 0 = the task's (the paper: corridor 0.99, obstacles 0.9)"},
+   "discount factor; 0 = the task's (b21r-controller --print-task-params; the paper: corridor 0.99, "
+   "obstacles 0.9)"},
   {NULL, "learner", KIND_ENUM, OFF(learner), 0, 0, false, false, k_learner, "hedger",
    "value function: hedger (the paper's); lwa = HEDGER with locally weighted averaging only; tabular = "
    "Q-learning on a table of tabular_bins per state dimension x tabular_actions (no checkpoints)"},
@@ -233,8 +234,8 @@ static const key_desc_t k_keys[] = {
    "kernel bandwidth h in scaled input units (inputs scaled to about [0, 1])"},
   {NULL, "hedger_input_scale", KIND_DLIST, OFF(hedger_input_scale), 0, 1000, true, false, NULL, "",
    "raw units per scaled unit, comma-separated: each state dimension then the action (\"\" = the task's: "
-   "corridor 1,0.5,0.125,0.25 for end distance m, lateral fraction, target angle rad, rotation rad/s; obstacles "
-   "1,1,1,1,0.5; with state_rotation the executed rotation comes before the action, at 1 rad/s)"},
+   "b21r-controller --print-task-params; with state_rotation the executed rotation comes before the action, at "
+   "1 rad/s)"},
   {NULL, "hedger_merge_radius", KIND_DOUBLE, OFF(hedger_merge_radius), 0, 10, false, false, NULL, "0.02",
    "a new sample closer than this (scaled units) to a stored one is merged into it"},
   {NULL, "hedger_greedy_actions", KIND_INT, OFF(hedger_greedy_actions), 2, 64, false, false, NULL, "9",
@@ -257,7 +258,7 @@ static const key_desc_t k_keys[] = {
    "the greedy search ranks actions by value - this x the regression's standard error"},
   {NULL, "hedger_greedy_reach", KIND_DOUBLE, OFF(hedger_greedy_reach), 0, 100, false, false, NULL, "0",
    "state_model: where a state has too few neighbours, form the model again with the kernel widened by "
-   "this factor (1 = no; 0 = the task's: corridor 8, obstacles 3)"},
+   "this factor (1 = no; 0 = the task's: b21r-controller --print-task-params)"},
   {NULL, "phase_one_driver", KIND_ENUM, OFF(phase_driver), 0, 0, false, false, k_driver, "example",
    "phase one is driven by the example policy (code), the operator's joystick (B21R_TELEOP), or a "
    "simulated sloppy human driver (code)"},

@@ -179,6 +179,15 @@ void fw_config_print_task_params(FILE* out) {
       fprintf(out, "  %s = %.6g  (%.6g to %.6g) %s\n", p->name, tasks_spec_get_param(d, spec, p->name), p->min,
               p->max, p->help);
     }
+    // What the configuration's task-dependent keys mean when left at 0 or "" (their help points
+    // here, so that a new task needs no edit of the help texts).
+    fprintf(out, "  controller keys at the task's value: gamma = %.6g, example_gain_range = %.6g,%.6g, "
+                 "hedger_greedy_reach = %.6g, hedger_input_scale = ",
+            tasks_spec_gamma(d, spec), d->gain_min, d->gain_max, d->greedy_reach);
+    for (uint32_t k = 0; k < d->state_dim; ++k) fprintf(out, "%.6g,", d->state_scale[k]);
+    fprintf(out, "%.6g (the state, then the action; with state_rotation the executed rotation, at 1, before the "
+                 "action)\n",
+            d->action_scale);
   }
 }
 
