@@ -149,9 +149,18 @@ class MountainCar(unittest.TestCase):
         self.assertAlmostEqual(task["gamma"], 0.95)
         np.testing.assert_allclose(task["state_scale"], [0.18, 0.014], rtol=1e-6)
         self.assertEqual(Learner(make_env(), example, step_limit=50).task["step_limit"], 50)
+        # Settings in action units scale with the action range (the controller's are of +-1 rad/s).
+        defaults = b21r_learn.learner.controller_defaults()
+        pendulum = Learner(gymnasium.make("Pendulum-v1"), lambda obs: 0.0)  # torque in [-2, 2]
+        self.assertEqual(pendulum.task["step_limit"], 200)
+        self.assertAlmostEqual(pendulum.config["explore_sigma"], 2.0 * defaults["explore_sigma"])
+        self.assertAlmostEqual(pendulum.config["example_dither_sigma"], 2.0 * defaults["example_dither_sigma"])
+        self.assertAlmostEqual(pendulum.config["last_action_scale"], 2.0 * defaults["last_action_scale"])
+        self.assertAlmostEqual(pendulum.task["action_scale"], 0.5)
         # The controller's defaults, unless given.
         self.assertEqual(learner.config["phase_one_runs"], 30)
-        self.assertEqual(learner.config["bandwidth"], b21r_learn.learner.controller_defaults()["bandwidth"])
+        self.assertEqual(learner.config["explore_sigma"], defaults["explore_sigma"])  # an action range of +-1
+        self.assertEqual(learner.config["bandwidth"], defaults["bandwidth"])
         with self.assertRaisesRegex(TypeError, "unknown setting 'hedger_bandwith'"):
             Learner(make_env(), example, hedger_bandwith=0.3)
         with self.assertRaisesRegex(ValueError, "action space must be a Box of one value"):

@@ -83,7 +83,8 @@ def _choice(value, names, key):
 
 def controller_defaults():
     """The framework's settings of the controller's default configuration (fw_config_learn_settings
-    of b21r-controller's defaults), by learn_config_t field name: the Learner's defaults."""
+    of b21r-controller's defaults), by learn_config_t field name: the Learner's defaults (those in
+    action units as fractions of the robot's +-1 rad/s)."""
     return _core.ControllerTask().learn_settings()
 
 
@@ -264,7 +265,8 @@ class Learner:
       ``auto_switch_min_runs``, ``auto_switch_ratio``;
     - learner: ``learner`` ("hedger", "lwa", "tabular"), ``alpha`` (0.2), ``state_last_action``
       (the controller's ``state_rotation``, True: the learner's state ends with the last action
-      sent, 0 at a run's start), ``last_action_scale`` (1.0 action units per scaled unit),
+      sent, 0 at a run's start), ``last_action_scale`` (action units per scaled unit; half the
+      action range, as the controller's 1 rad/s of +-1 rad/s),
       ``hedger_capacity`` (20000 points), ``hedger_k_min``, ``hedger_k_max``, ``hedger_bandwidth``
       (scaled units), ``hedger_merge_radius``, ``hedger_greedy_actions``,
       ``hedger_greedy_method`` ("state_model", "per_action"), ``hedger_greedy_pessimism``,
@@ -272,10 +274,13 @@ class Learner:
       ``hedger_replay_lambda``, ``hedger_input_scale`` (overrides the scales: state, last action,
       action), ``tabular_bins``, ``tabular_actions``;
     - acting: ``explore_sigma`` (phase two's exploration offset, standard deviation in action
-      units; the controller's explore_sigma_radps), ``explore_probability`` (per training step,
-      the chance a segment starts), ``explore_hold_steps`` (a segment's length in steps; the
-      controller's explore_hold_s / tick period), ``example_noise`` (phase one's dither offset,
-      action units; example_noise_radps), ``advisor`` (True);
+      units; the controller's explore_sigma_radps, 0.1 rad/s of +-1 rad/s: default 0.05 of the
+      action range), ``explore_probability`` (per training step, the chance a segment starts;
+      0.2), ``explore_hold_steps`` (a segment's length in steps; the controller's explore_hold_s
+      / tick period: 1), ``example_noise`` (phase one's dither offset, action units; the
+      controller's example_noise_radps, 0.3 rad/s: default 0.15 of the action range),
+      ``advisor`` (True: in phase two's training runs the example's action where the learner
+      knows none);
     - ``learn_updates_per_tick``: backward-replay updates per slice between runs (the results do
       not depend on it).
 
@@ -308,6 +313,11 @@ class Learner:
         _, explore_seed, learner_seed, _ = _core.controller_seeds(self.seed)
         config.update(explore_seed=explore_seed, learner_seed=learner_seed, eval_starts=len(self._eval_starts),
                       input_scale=[])
+        # The controller's settings in action units (rad/s of a +-1 rad/s range) become the same
+        # fractions of this action range: the last action's scale, the exploration and the dither.
+        half_range = 0.5 * (learn_task["action_max"] - learn_task["action_min"])
+        for field in ("last_action_scale", "explore_sigma", "example_dither_sigma"):
+            config[field] *= half_range
         if self._log_runs and "phase_one_runs" not in settings:
             config["phase_one_runs"] = len(self._log_runs)
         for key, value in settings.items():
