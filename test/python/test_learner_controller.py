@@ -6,8 +6,9 @@ with an experiment file and the same --set overrides gives exactly the evaluatio
 b21r-experiment (the controller's loop against the in-process emulator) for the same seed, and
 every run alike: its steps, outcome and who drove each step (example, greedy, exploration,
 advisor), and every step's experience as the controller publishes it (the learner's state, the
-executed action, reward, next state, terminal, and Q(s, a) before the update). No tolerance: both compute every number with the same C code (lib/learn, lib/hedger,
-lib/tasks, the emulator) from the same inputs, and the environment equals the controller's run
+executed action, reward, next state, terminal, and Q(s, a) before the update). No tolerance: both
+compute every number with the same C code (lib/learn, lib/hedger, lib/tasks, the emulator) from
+the same inputs, and the environment equals the controller's run
 step for step (test_env_equivalence.py). Schedules are shortened (5 + 5 runs for the corridor's
 Fig. 4 set-up, 10 + 5 for the obstacle task's Figs. 9-10 set-up, with the simulated person's
 examples and collisions) to keep the test short; the full schedules match too (seed 1: every block

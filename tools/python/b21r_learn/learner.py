@@ -284,7 +284,15 @@ class Learner:
     - ``learn_updates_per_tick``: backward-replay updates per slice between runs (the results do
       not depend on it).
 
-    Results: :meth:`run` returns the evaluation blocks; :attr:`runs` holds every run.
+    Results. :meth:`run` returns :attr:`blocks`, one dict per evaluation block: block, phase,
+    training_runs (completed before it), n_starts, steps and success per start (a run that missed
+    the goal counts at the step limit), successes, failures, mean_steps over the successful runs
+    with its Student-t 95 % ci95_halfwidth (the controller's numbers), mean_return over all its
+    runs, store_fill. :attr:`runs`: one dict per run: run_id, kind ("training", "eval"), phase,
+    training_index / eval_index, steps (actions), return (summed reward), goal, outcome ("goal",
+    "terminal", "step_limit"), from_log, sources (steps by who chose the action: example,
+    joystick, greedy, exploration, advisor), store_fill (after its replay). :attr:`wall_time_s`:
+    time spent in :meth:`run`.
     """
 
     def __init__(self, env, example=None, *, transitions=None, seed=0, gamma=0.99, state_scale=None,
@@ -334,7 +342,6 @@ class Learner:
             raise ValueError("phase one has %d runs but no example policy drives them (give example=, or "
                              "transitions= with as many runs)" % config["phase_one_runs"])
         self.agent = _core.Agent(learn_task, config)
-        self._rng = np.random.default_rng(np.random.SeedSequence([self.seed, 0x42]))
         self._first_reset = True
         self.runs = []
         self.blocks = []
@@ -513,7 +520,8 @@ class Learner:
         while True:
             advice = float(np.reshape(self.example(obs), -1)[0]) if self.example is not None else 0.0
             action, _ = agent.act(advice, 0.0)
-            action = min(max(action, self.action_low), self.action_high)
+            if not self._b21r:  # a B21r environment clamps the command itself, as the controller does
+                action = min(max(action, self.action_low), self.action_high)
             sent = np.full(shape, action, dtype=dtype)
             obs, reward, terminated, truncated, info = env.step(sent)
             if self._b21r:

@@ -982,7 +982,8 @@ class Agent {
   const double* learner_state(const InVec& s, const char* what) const {
     if (s.shape(0) != learn_agent_state_dim(a_))
       throw nb::value_error((std::string(what) + ": the learner's state has " +
-                             std::to_string(learn_agent_state_dim(a_)) + " values, got " + std::to_string(s.shape(0)))
+                             std::to_string(learn_agent_state_dim(a_)) + " values, got " +
+                             std::to_string(s.shape(0)))
                                 .c_str());
     return s.data();
   }
@@ -1026,14 +1027,15 @@ class ControllerTask {
   ControllerTask(const nb::dict& settings, std::optional<std::string> config_file) {
     fw_config_defaults(&cfg_);
     char err[FW_CONFIG_ERR_MAX] = "";
-    if (config_file.has_value() &&
-        fw_config_load_file_with(&cfg_, config_file->c_str(), skip_experiment_key, nullptr, err, sizeof err) != 0)
+    if (config_file.has_value() && fw_config_load_file_with(&cfg_, config_file->c_str(), skip_experiment_key,
+                                                            nullptr, err, sizeof err) != 0)
       throw nb::value_error(err);
     for (auto [key, value] : settings) {
       const std::string k = nb::cast<std::string>(key);
       const std::string v = nb::isinstance<nb::bool_>(value) ? (nb::cast<bool>(value) ? "true" : "false")
                                                              : nb::cast<std::string>(nb::str(value));
-      if (fw_config_set(&cfg_, k.c_str(), v.c_str(), "settings", err, sizeof err) != 0) throw nb::value_error(err);
+      if (fw_config_set(&cfg_, k.c_str(), v.c_str(), "settings", err, sizeof err) != 0)
+        throw nb::value_error(err);
     }
     if (fw_config_validate(&cfg_, err, sizeof err) != 0) throw nb::value_error(err);
     if (cfg_.phase_driver == FW_DRIVER_JOYSTICK)
@@ -1083,7 +1085,8 @@ class ControllerTask {
 
   nb::list eval_starts() const {
     nb::list l;
-    for (uint32_t i = 0; i < tasks_episode_n_eval_starts(&ep_); ++i) l.append(pose_get(tasks_episode_eval_start(&ep_, i)));
+    for (uint32_t i = 0; i < tasks_episode_n_eval_starts(&ep_); ++i)
+      l.append(pose_get(tasks_episode_eval_start(&ep_, i)));
     return l;
   }
 
@@ -1096,7 +1099,8 @@ class ControllerTask {
   // evaluated reference, or the simulated person of phase one), its stream seeded per run.
   void begin_driver(Driver& d, int32_t run_id, bool eval, int32_t phase) const {
     if (d.task() != ep_.decl) throw nb::value_error("begin_driver: the driver is for another task");
-    uint64_t st = seeds_.driver ^ (static_cast<uint64_t>(static_cast<uint32_t>(run_id)) * 0x9E3779B97F4A7C15ULL);
+    const uint64_t id = static_cast<uint64_t>(static_cast<uint32_t>(run_id));
+    uint64_t st = seeds_.driver ^ (id * 0x9E3779B97F4A7C15ULL);
     const uint64_t run_seed = rng_splitmix64(&st);
     tasks_driver_kind_t kind = TASKS_DRIVER_PROPORTIONAL;
     const bool evaluate = cfg_.mode == FW_MODE_EVALUATE;
@@ -1315,9 +1319,9 @@ NB_MODULE(_core, m) {
   m.def("controller_learner_config", &controller_learner_config, "task"_a, "settings"_a = nb::dict());
 
   nb::class_<Agent>(m, "Agent",
-                    "One agent of the two-phase learning framework (lib/learn, learn/learn.h): task and settings "
-                    "as dicts of learn_task_t / learn_config_t fields by their C names. Its storage is allocated "
-                    "once, here; b21r_learn.Learner drives it.")
+                    "One agent of the two-phase learning framework (lib/learn, learn/learn.h): task and "
+                    "settings as dicts of learn_task_t / learn_config_t fields by their C names. Its storage "
+                    "is allocated once, here; b21r_learn.Learner drives it.")
       .def(nb::init<const nb::dict&, const nb::dict&>(), "task"_a, "config"_a = nb::dict())
       .def_prop_ro("task", &Agent::task)
       .def_prop_ro("config", &Agent::config)
