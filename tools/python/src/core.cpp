@@ -1376,12 +1376,23 @@ NB_MODULE(_core, m) {
       .def_prop_ro("env_id", &ControllerTask::env_id)
       .def_prop_ro("seed", &ControllerTask::seed)
       .def_prop_ro("step_limit", &ControllerTask::step_limit)
-      .def("learn_task", &ControllerTask::learn_task)
-      .def("learn_settings", &ControllerTask::learn_settings)
-      .def("seeds", &ControllerTask::seeds)
-      .def("env_spec", &ControllerTask::env_spec)
-      .def("env_limits", &ControllerTask::env_limits)
-      .def("eval_starts", &ControllerTask::eval_starts)
-      .def("training_start", &ControllerTask::training_start)
-      .def("begin_driver", &ControllerTask::begin_driver, "driver"_a, "run_id"_a, "eval"_a, "phase"_a);
+      .def("learn_task", &ControllerTask::learn_task,
+           "The task as the framework sees it (fw_config_learn_task): learn_task_t fields by name.")
+      .def("learn_settings", &ControllerTask::learn_settings,
+           "The framework's settings (fw_config_learn_settings, seeds included): learn_config_t fields by "
+           "name.")
+      .def("seeds", &ControllerTask::seeds,
+           "The derived seeds (fw_config_derive_seeds): pose, explore, learner, driver.")
+      .def("env_spec", &ControllerTask::env_spec,
+           "The task's specification as B21rEnv spec= (fw_config_task; without its own evaluation poses).")
+      .def("env_limits", &ControllerTask::env_limits, "The command limits as B21rEnv limits=.")
+      .def("eval_starts", &ControllerTask::eval_starts,
+           "The evaluation poses (x m, y m, theta rad; task frame): eval_poses, or the task's 10.")
+      .def("training_start", &ControllerTask::training_start,
+           "The next training start pose (x m, y m, theta rad), drawn from the controller's pose stream: "
+           "call once per training run, in order.")
+      .def("begin_driver", &ControllerTask::begin_driver, "driver"_a, "run_id"_a, "eval"_a, "phase"_a,
+           "Begins driver for run run_id as the controller's loop does: kind (example, the simulated person "
+           "of phase one, or the evaluated reference), the per-run seed, the gain (example_gain_range, "
+           "evaluate_example_gain).");
 }
