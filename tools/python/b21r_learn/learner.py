@@ -352,7 +352,7 @@ class Learner:
 
     @classmethod
     def from_controller_config(cls, settings=None, config_file=None, env=None, backend="ode", transitions=None,
-                               record_experiences=False):
+                               record_experiences=False, **env_kwargs):
         """A Learner set up as the controller sets up its own learning for the configuration
         ``settings`` (controller keys, e.g. ``{"task": "corridor", "seed": 1, "phase_two_runs": 5}``),
         optionally over ``config_file`` (a controller config or experiment file; its
@@ -365,14 +365,14 @@ class Learner:
         seed (test/python/test_learner_controller.py).
 
         ``env``: the task's environment with the configuration's specification and command limits
-        (default: made here, ``backend`` "ode" or "kinematic"; one given is checked against the
-        configuration). ``transitions``: phase one's examples from a log instead of the task's
+        (default: made here with ``backend`` "ode" or "kinematic" and ``env_kwargs``, e.g.
+        ``render_mode="rgb_array"``; one given is checked against the configuration). ``transitions``: phase one's examples from a log instead of the task's
         driver (see :class:`Learner` and :func:`read_experience_log`). ``record_experiences``: as
         for :class:`Learner`. The
         :class:`b21r_learn._core.ControllerTask` is kept as ``learner.controller``."""
         ct = _core.ControllerTask(dict(settings or {}), None if config_file is None else str(config_file))
         if env is None:
-            env = gymnasium.make(ct.env_id, backend=backend, spec=ct.env_spec(), limits=ct.env_limits())
+            env = gymnasium.make(ct.env_id, backend=backend, spec=ct.env_spec(), limits=ct.env_limits(), **env_kwargs)
         base = env.unwrapped
         if not _is_b21r(env) or base.task != ct.task_name:
             raise ValueError("from_controller_config: env must be the %s task's environment (%s)"
@@ -381,8 +381,10 @@ class Learner:
         differ = [k for k in want if k in spec and not _same(spec[k], want[k])]
         differ += [k for k, v in ct.env_limits().items() if not _same(spec["limits"][k], v)]
         if differ:
-            raise ValueError("from_controller_config: the environment's %s differ from the configuration's "
-                             "(make it with spec=ct.env_spec(), limits=ct.env_limits())" % ", ".join(differ))
+            raise ValueError("from_controller_config: the environment's %s differ from the configuration's: leave "
+                             "env out to have it made, or make it with spec= and limits= of "
+                             "b21r_learn._core.ControllerTask(settings).env_spec() and .env_limits()"
+                             % ", ".join(differ))
         poses = ct.eval_starts()
         learner = cls(env, _ControllerDriver(ct, env), transitions=transitions, seed=ct.seed, env_seed=ct.seed,
                       eval_starts=[{"options": {"pose": p}} for p in poses],
