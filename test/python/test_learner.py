@@ -2,7 +2,7 @@
 """b21r_learn.Learner on an environment that ships with Gymnasium: MountainCarContinuous-v0.
 
 Claims checked:
-- it learns (the README's example, run as written there): after the two-phase schedule (10
+- it learns (docs/python.md's example, run as written there): after the two-phase schedule (10
   example runs, 30 learned runs, an evaluation block every 5) the learned policy alone reaches
   the goal from all 10 evaluation starts, in fewer steps than the example policy from the same
   starts (by at least 10 %) and than its own first block; a random policy reaches it from none
@@ -15,8 +15,8 @@ Claims checked:
 - determinism: the same seed gives the same runs, another seed other runs;
 - the task interface comes from the environment and bad ones are refused with a message.
 
-Measured (Release, this 2-core machine shared with builds): the README's example 6-13 s, the
-whole test 10-30 s; with the README's settings seeds 1-12 all pass (final blocks 10/10 at 72-105
+Measured (Release, this 2-core machine shared with builds): the documented example 6-13 s, the
+whole test 10-30 s; with the documented settings seeds 1-12 all pass (final blocks 10/10 at 72-105
 steps against the example's 128.6).
 """
 import os
@@ -33,15 +33,15 @@ import numpy as np
 import b21r_learn
 from b21r_learn import Learner
 
-README = pathlib.Path(__file__).resolve().parents[2] / "README.md"
+PYTHON_DOC = pathlib.Path(__file__).resolve().parents[2] / "docs" / "python.md"
 
 
-def readme_example():
-    """The README's Learner example: the Python it feeds to build/venv/bin/python3, verbatim."""
+def documented_example():
+    """docs/python.md's Learner example: the Python it feeds to build/venv/bin/python3, verbatim."""
     m = re.search(r"build/venv/bin/python3 - <<'EOF'\n(import gymnasium, numpy as np, b21r_learn\n"
-                  r"env = gymnasium.make\(\"MountainCarContinuous-v0\"\).*?)\nEOF\n", README.read_text(), re.S)
+                  r"env = gymnasium.make\(\"MountainCarContinuous-v0\"\).*?)\nEOF\n", PYTHON_DOC.read_text(), re.S)
     if m is None:
-        raise AssertionError("README.md no longer shows the MountainCarContinuous-v0 example: update this test")
+        raise AssertionError("docs/python.md no longer shows the MountainCarContinuous-v0 example: update this test")
     return m.group(1)
 
 
@@ -73,12 +73,12 @@ def record(env, policy, seeds):
 
 class MountainCar(unittest.TestCase):
     def test_learned_policy_beats_the_example(self):
-        # The README's example, as it is written there (it prints its blocks).
+        # docs/python.md's example, as it is written there (it prints its blocks).
         t0 = time.perf_counter()
         ns = {}
-        exec(compile(readme_example(), "README.md", "exec"), ns)  # noqa: S102 (the project's own README)
+        exec(compile(documented_example(), "docs/python.md", "exec"), ns)  # noqa: S102 (the project's own documentation)
         learn_s = time.perf_counter() - t0
-        learner, example = ns["learner"], ns["example"]  # noqa: F811 (the README's example policy)
+        learner, example = ns["learner"], ns["example"]  # noqa: F811 (the documented example policy)
         blocks = learner.blocks
         self.assertTrue(learner.done)
         self.assertEqual(len(blocks), 8)
@@ -86,7 +86,7 @@ class MountainCar(unittest.TestCase):
         ex = learner.evaluate(policy=example)
         rng = np.random.default_rng(0)
         rand = learner.evaluate(policy=lambda obs: rng.uniform(-1.0, 1.0))
-        print("MountainCarContinuous-v0, seed %d: README example %.1f s, %d runs, store %d points" %
+        print("MountainCarContinuous-v0, seed %d: documented example %.1f s, %d runs, store %d points" %
               (learner.seed, learn_s, len(learner.runs), learner.runs[-1]["store_fill"]))
         for b in blocks:
             print("  block %d (phase %d, %2d training runs): %2d/10, mean %.1f steps, mean return %.1f" %
