@@ -30,7 +30,6 @@
 #include <fw/checkpoint.h>
 #include <fw/config.h>
 #include <fw/config_task.h>
-#include <fw/loop.h>
 #include <fw/progress.h>
 #include <learn/learn.h>
 #include <learn/schedule.h>
