@@ -1,22 +1,29 @@
 #!/usr/bin/env python3
 # SPDX-License-Identifier: MIT
-"""Learns the corridor task from Python: B21rCorridor-v0 (the emulated B21r by default) and HEDGER,
-with the paper's schedule and the controller's learner settings, and prints the evaluation blocks
-the way the main job does.
+"""Learns the corridor task from Python with the paper's schedule: b21r_learn.Learner (lib/learn,
+the learning framework the controller runs) on B21rCorridor-v0, set up from the controller's
+configuration exactly as the controller sets up its own learning, and prints the evaluation
+blocks the way the main job does.
 
-- Phase one (30 runs): the example policy (omega = k * theta, k drawn per run) drives; HEDGER
-  learns from every step, and replays each run backwards at its end.
-- Phase two (35 runs): the learned policy drives: HEDGER's greedy action where its value comes
-  from a local regression (LWR) and beats the example policy's action by 2 % (else the example
-  policy's action, the controller's advisor rule), plus N(0, 0.1) exploration on 20 % of steps.
+- Phase one (30 runs): the example policy (omega = k * theta, k drawn per run, with the
+  controller's dither) drives; HEDGER learns from every step and replays each run backwards.
+- Phase two (35 runs): the learned policy drives (greedy action plus the controller's exploration;
+  the example policy advises where the learner knows nothing) and keeps learning.
 - Every 5 training runs, an evaluation block: the 10 fixed start poses, learning off, the learned
-  policy alone (greedy; hold course where nothing is known). Reported: successes out of 10 and
-  the mean steps to the goal with its 95 % interval (successful runs), as the controller does.
-- Before learning, the two reference policies are evaluated from the same poses: the example
+  policy alone. Reported: successes out of 10 and the mean steps to the goal with its 95 %
+  interval (successful runs), as the controller does.
+- Before learning, the two reference policies are evaluated from the same poses as the
+  controller's evaluate mode does (each on a fresh emulator with the same seed): the example
   policy at its nominal gain and the hand-tuned "optimal" controller.
 
+On the ODE back-end (the default) every block, run and step equals the controller's for the same
+configuration and seed: `build/host-release/bin/b21r-experiment --config
+tools/experiments/fig4_corridor_examples.conf --seed N` gives the same numbers (checked by
+test/python/test_learner_controller.py). --set takes any controller key (b21r-controller
+--print-reference-config), e.g. --set hedger_capacity=2000.
+
 Usage: tools/b21r_learn_corridor.py [--backend ode|kinematic] [--seed N] [--phase-one-runs N]
-                                    [--phase-two-runs N] [--eval-every N]
+                                    [--phase-two-runs N] [--eval-every N] [--set KEY=VALUE]...
 """
 import b21r_bootstrap
 
@@ -25,55 +32,12 @@ b21r_bootstrap.ensure()
 import argparse  # noqa: E402
 import time  # noqa: E402
 
-import gymnasium  # noqa: E402
-import numpy as np  # noqa: E402
-
-import b21r_learn  # noqa: E402
-
-LWR = 2
-ADVISOR_MARGIN = 0.02
-EXPLORE_PROBABILITY = 0.2
-EXPLORE_SIGMA = 0.1
-NOMINAL_GAIN = 0.5 * (0.5 + 2.0)  # middle of the example policy's gain range
+from b21r_learn import Learner  # noqa: E402
 
 
-def learner_state(obs, executed, rotation):
-    """The controller's learner state: the task's features (the observation), then, with
-    state_rotation (the controller's default), the rotation the base executes: the last command
-    sent (0 when a run starts)."""
-    return np.append(obs, executed) if rotation else obs
-
-
-def run_episode(env, options, choose, learner=None, rotation=True):
-    """One run: choose(state) gives the rotation command; with a learner, every transition is
-    learned and the run replayed at its end. Returns (steps, reached the goal)."""
-    obs, _ = env.reset(options=options)
-    state = learner_state(obs, 0.0, rotation)
-    steps = 0
-    while True:
-        action = choose(state)
-        nxt, reward, terminated, truncated, info = env.step(np.array([action]))
-        steps += 1
-        nxt_state = learner_state(nxt, info["action"], rotation)
-        if learner is not None:
-            learner.update(state, info["action"], reward, None if terminated else nxt_state, terminated)
-        state = nxt_state
-        if terminated or truncated:
-            if learner is not None:
-                learner.end_run()
-            return steps, info["reason"] == "goal"
-
-
-def evaluate(env, choose_for_run, step_limit, rotation):
-    """The 10 evaluation poses; returns (successes, mean steps, 95 % half-width)."""
-    steps, successes = [], 0
-    for index in range(b21r_learn._core.N_EVAL_STARTS):
-        n, goal = run_episode(env, {"start": "eval", "eval_index": index}, choose_for_run(index), rotation=rotation)
-        successes += goal
-        if goal:
-            steps.append(float(n))
-    mean, half = b21r_learn.mean_ci95(steps)
-    return successes, mean, half
+def block_line(b):
+    return "%2d/%d reached the goal, mean %.1f +- %.1f steps" % (b["successes"], b["n_starts"], b["mean_steps"],
+                                                                 b["ci95_halfwidth"])
 
 
 def main():
@@ -83,78 +47,52 @@ def main():
     ap.add_argument("--phase-one-runs", type=int, default=30)
     ap.add_argument("--phase-two-runs", type=int, default=35)
     ap.add_argument("--eval-every", type=int, default=5)
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="a controller configuration key (b21r-controller --print-reference-config)")
     args = ap.parse_args()
     t0 = time.time()
 
-    env = gymnasium.make("B21rCorridor-v0", backend=args.backend)
-    env.reset(seed=args.seed)
-    core = env.unwrapped
-    step_limit = core.task_spec["step_limit"]
-    rng = np.random.default_rng(args.seed)
-    config = b21r_learn.controller_learner_config("corridor")
-    config["seed"] = args.seed
-    hedger = b21r_learn.Hedger(**config)
-    rotation = config["state_dim"] > env.observation_space.shape[0]  # state_rotation
-    driver = b21r_learn.Driver("proportional", "corridor")
-    print("learn-corridor: B21rCorridor-v0 (%s back-end), seed %d; HEDGER as the controller configures it "
+    # The main job's configuration: the controller's defaults (the corridor, 10 m, alpha 0.2,
+    # gamma 0.99), the schedule of the arguments, the seed.
+    settings = {"task": "corridor", "seed": args.seed, "phase_one_runs": args.phase_one_runs,
+                "phase_two_runs": args.phase_two_runs, "eval_every_runs": args.eval_every}
+    for kv in args.set:
+        key, sep, value = kv.partition("=")
+        if not sep:
+            ap.error("--set %r: expected KEY=VALUE" % kv)
+        settings[key] = value
+    learner = Learner.from_controller_config(settings=settings, backend=args.backend)
+    cfg = learner.agent.learner_config
+    print("learn-corridor: B21rCorridor-v0 (%s back-end), seed %d; lib/learn as the controller configures it "
           "(capacity %d, bandwidth %.2f, alpha %.1f, gamma %.2f, replay %s)"
-          % (args.backend, args.seed, config["capacity"], config["bandwidth"], config["alpha"], config["gamma"],
-             "on" if config["replay"] else "off"))
+          % (args.backend, args.seed, cfg["capacity"], cfg["bandwidth"], cfg["alpha"], cfg["gamma"],
+             "on" if cfg["replay"] else "off"))
 
-    # The reference lines: the example policy at its nominal gain, and the "optimal" controller.
-    for name, kind in (("example policy (k = %.2f)" % NOMINAL_GAIN, "proportional"), ("optimal controller", "optimal")):
-        ref = b21r_learn.Driver(kind, "corridor")
+    # The reference lines: the controller's evaluate mode, each on a fresh emulator with the seed.
+    for name, policy in (("example policy (nominal gain)", "example"), ("optimal controller", "optimal")):
+        ref = Learner.from_controller_config(settings=dict(settings, mode="evaluate", evaluate_policy=policy),
+                                             backend=args.backend)
+        print("REFERENCE %-30s %s" % (name, block_line(ref.run()[-1])))
 
-        def ref_for_run(index, ref=ref, kind=kind):
-            ref.begin_run(index)
-            if kind == "proportional":
-                ref.gain = NOMINAL_GAIN
-            return lambda obs: core.driver_action(ref)
-
-        ok, mean, half = evaluate(env, ref_for_run, step_limit, rotation)
-        print("REFERENCE %-26s %2d/10 reached the goal, mean %.1f +- %.1f steps" % (name, ok, mean, half))
-
-    def learned(obs):
-        action, _, _, known = hedger.greedy(obs)
-        return action if known else 0.0
-
-    def phase_two(obs):
-        advice = core.driver_action(driver)  # the driver runs every step so its state follows the run
-        action, value, kind, known = hedger.greedy(obs)
-        if known and kind == LWR:
-            pa = hedger.predict(obs, advice)
-            if pa.kind != 0 and value > pa.value + ADVISOR_MARGIN * abs(pa.value):
-                if rng.random() < EXPLORE_PROBABILITY:
-                    action += EXPLORE_SIGMA * rng.standard_normal()
-                return action
-        return advice
-
-    def phase_one(obs):
-        return core.driver_action(driver)
-
-    runs = args.phase_one_runs + args.phase_two_runs
-    example_steps = []
-    for run in range(runs):
-        phase = 1 if run < args.phase_one_runs else 2
-        driver.begin_run(int(rng.integers(0, 2**63 - 1)))
-        steps, goal = run_episode(env, {"start": "training"}, phase_one if phase == 1 else phase_two, learner=hedger,
-                                  rotation=rotation)
-        if phase == 1 and goal:
-            example_steps.append(steps)
-        print("run %4d  phase %d  train  %-7s %4d steps  store %d/%d"
-              % (run, phase, "goal" if goal else "no goal", steps, len(hedger), config["capacity"]))
-        if (run + 1) % args.eval_every == 0:
-            ok, mean, half = evaluate(env, lambda index: learned, step_limit, rotation)
-            print("EVAL block %2d after %3d training runs (phase %d): %2d/10 reached the goal, mean %.1f +- %.1f steps"
-                  % ((run + 1) // args.eval_every - 1, run + 1, phase, ok, mean, half))
-            if run + 1 == args.phase_one_runs:
+    def on_run(run, block):
+        kind = "eval" if run["kind"] == "eval" else "train"
+        print("run %4d  phase %d  %-5s  %-7s %4d steps  store %d/%d"
+              % (run["run_id"], run["phase"], kind, "goal" if run["goal"] else "no goal", run["steps"],
+                 run["store_fill"], cfg["capacity"]))
+        if block is not None:
+            print("EVAL block %2d after %3d training runs (phase %d): %s"
+                  % (block["block"], block["training_runs"], block["phase"], block_line(block)))
+            if block["phase"] == 1 and learner.agent.schedule()["phase"] == 2:
                 print("PHASE TWO: the learned policy drives from now on")
-    best = min(example_steps) if example_steps else float("nan")
-    counters = hedger.counters
+
+    learner.run(on_run=on_run)
+    best = learner.agent.schedule()["best_example_steps"]
+    stats = learner.agent.stats()
     print("learn-corridor: done in %.0f s; best example run %s steps; HEDGER answered %d LWR / %d LWA / %d unknown"
-          % (time.time() - t0, best, counters["predictions_lwr"], counters["predictions_lwa"],
-             counters["predictions_unknown"]))
+          % (time.time() - t0, best if best > 0 else "no", stats["predictions_lwr"], stats["predictions_lwa"],
+             stats["predictions_unknown"]))
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -14,6 +14,11 @@ All take ``backend="ode"`` (the emulated B21r: ODE plant, ray-cast LMS200 with n
 protocol; what the controller sees) or ``backend="kinematic"`` (the idealised model, exact state,
 fast). See :class:`b21r_learn.envs.B21rEnv`.
 
+The learning framework on any Gymnasium environment (a ``Box`` observation, a one-dimensional
+``Box`` action): :class:`Learner` runs lib/learn's two-phase schedule (examples from a policy or
+a recorded log, then learned control, evaluation blocks from fixed starts);
+``Learner.from_controller_config`` sets it up as the controller does for its own tasks.
+
 HEDGER: :class:`Hedger` (settings as keyword arguments, defaults from the C API), the example
 drivers :class:`Driver` (``Driver("proportional", "corridor", gain=1.5)``), and the controller's
 files: :func:`read_checkpoint`, :func:`read_checkpoint_progress` (the schedule's progress),
@@ -42,6 +47,7 @@ from ._core import (  # noqa: E402  (after the package path is complete)
     read_checkpoint_progress,
 )
 from .envs import B21rEnv, register_envs  # noqa: E402
+from .learner import Learner, read_experience_log  # noqa: E402
 
 KIND_NAMES = ("unknown", "lwa", "lwr")  # Prediction.kind / greedy kind -> name
 
@@ -51,6 +57,7 @@ __all__ = [
     "Hedger",
     "HedgerError",
     "KIND_NAMES",
+    "Learner",
     "POINT_PROTECTED",
     "Prediction",
     "controller_learner_config",
@@ -58,6 +65,7 @@ __all__ = [
     "mean_ci95",
     "read_checkpoint",
     "read_checkpoint_progress",
+    "read_experience_log",
     "register_envs",
 ]
 

@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
-// b21r_learn._core: the C environments of sim/env.h, the example drivers of lib/tasks and HEDGER
-// (lib/hedger/include/hedger/hedger.h) for Python, through nanobind. Thin on purpose: every
+// b21r_learn._core: the C environments of sim/env.h, the example drivers of lib/tasks, HEDGER
+// (lib/hedger/include/hedger/hedger.h), the two-phase learning framework (lib/learn/learn.h) and
+// the controller's derivation of a learning session from its configuration (fw/config_task.h) for
+// Python, through nanobind. Thin on purpose: every
 // number is computed by the C libraries the robot runs; this file converts types and errors.
 // Why nanobind: an environment step is a few microseconds of C, so the binding's own per-call
 // cost counts, and nanobind's is lower than pybind11's; its ndarray type checks dtype, shape and
@@ -18,6 +20,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <new>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -27,10 +30,11 @@
 #include <fw/checkpoint.h>
 #include <fw/config.h>
 #include <fw/config_task.h>
-#include <fw/loop.h>
 #include <fw/progress.h>
+#include <learn/learn.h>
 #include <learn/schedule.h>
 #include <hedger/hedger.h>
+#include <rng/rng.h>
 #include <sim/env.h>
 #include <tasks/episode.h>
 #include <tasks/tasks.h>
@@ -105,6 +109,16 @@ struct Field {
   Field<S> { #f, [](const S& s) -> nb::object { return nb::int_(s.f); }, [](S& s, nb::handle v) { s.f = nb::cast<uint32_t>(v); } }
 #define B21R_U64(S, f) \
   Field<S> { #f, [](const S& s) -> nb::object { return nb::int_(s.f); }, [](S& s, nb::handle v) { s.f = nb::cast<uint64_t>(v); } }
+
+// A field under another name (a nested member: "eval_every" for schedule.eval_every).
+#define B21R_I32_AS(S, name, f) \
+  Field<S> { name, [](const S& s) -> nb::object { return nb::int_(s.f); }, [](S& s, nb::handle v) { s.f = nb::cast<int32_t>(v); } }
+#define B21R_F64_AS(S, name, f) \
+  Field<S> { name, [](const S& s) -> nb::object { return nb::float_(s.f); }, [](S& s, nb::handle v) { s.f = nb::cast<double>(v); } }
+#define B21R_BOOL_AS(S, name, f) \
+  Field<S> { name, [](const S& s) -> nb::object { return nb::bool_(s.f); }, [](S& s, nb::handle v) { s.f = nb::cast<bool>(v); } }
+#define B21R_I32(S, f) B21R_I32_AS(S, #f, f)
+#define B21R_BOOL(S, f) B21R_BOOL_AS(S, #f, f)
 
 template <typename S, size_t N>
 void apply_fields(S& s, const Field<S> (&table)[N], const nb::dict& kwargs, const char* what) {
@@ -418,6 +432,17 @@ class Driver {
     return sim_env_driver_action(env.raw(), &d_);
   }
   double gain() const { return d_.gain; }
+  // The controller's driver of one run (ControllerTask::begin_driver): the kind and seed the loop
+  // chooses for the run; any fixed gain is dropped (the loop sets a run's gain itself).
+  void begin_controller_run(tasks_driver_kind_t kind, uint64_t seed) {
+    kind_ = kind;
+    fixed_gain_.reset();
+    tasks_driver_begin_run(&d_, kind_, task_, omega_max_, seed);
+  }
+  // The run's gain as the loop sets it (this run only).
+  void set_run_gain(double g) { apply_gain(g); }
+  const tasks_decl_t* task() const { return task_; }
+  double omega_max() const { return omega_max_; }
   // Setting the gain fixes it for this and every later run.
   void set_gain(double g) {
     check_gain(g);
@@ -646,6 +671,467 @@ class Hedger {
   hedger_t* h_ = nullptr;
 };
 
+// ---- the learning framework (lib/learn) -----------------------------------------------------
+
+// The task as the framework knows it (learn_task_t) and the framework's settings (learn_config_t),
+// by their C names. A new field of either struct is one more line here: every caller (the Python
+// Learner, tests) then sets it by name.
+nb::object task_vec_get(const learn_task_t& t, const double* v) {
+  nb::list l;
+  for (uint32_t i = 0; i < t.state_dim && i < LEARN_MAX_TASK_STATE; ++i) l.append(v[i]);
+  return l;
+}
+
+void task_vec_set(double* out, nb::handle v, const char* what) {
+  const std::vector<double> x = nb::cast<std::vector<double>>(v);
+  if (x.size() > LEARN_MAX_TASK_STATE)
+    throw nb::value_error((std::string(what) + ": at most " + std::to_string(LEARN_MAX_TASK_STATE) +
+                           " values (LEARN_MAX_TASK_STATE)").c_str());
+  for (size_t i = 0; i < x.size(); ++i) out[i] = x[i];
+}
+
+const Field<learn_task_t> kTaskFields[] = {
+    B21R_U32(learn_task_t, state_dim),
+    Field<learn_task_t>{"state_scale", [](const learn_task_t& t) { return task_vec_get(t, t.state_scale); },
+                        [](learn_task_t& t, nb::handle v) { task_vec_set(t.state_scale, v, "state_scale"); }},
+    Field<learn_task_t>{"state_min", [](const learn_task_t& t) { return task_vec_get(t, t.state_min); },
+                        [](learn_task_t& t, nb::handle v) { task_vec_set(t.state_min, v, "state_min"); }},
+    Field<learn_task_t>{"state_max", [](const learn_task_t& t) { return task_vec_get(t, t.state_max); },
+                        [](learn_task_t& t, nb::handle v) { task_vec_set(t.state_max, v, "state_max"); }},
+    B21R_F64(learn_task_t, action_min),
+    B21R_F64(learn_task_t, action_max),
+    B21R_F64(learn_task_t, action_scale),
+    B21R_F64(learn_task_t, gamma),
+    B21R_U32(learn_task_t, step_limit),
+    B21R_F64(learn_task_t, greedy_reach),
+};
+
+nb::object learn_input_scale_get(const learn_config_t& c) {
+  nb::list l;
+  for (uint32_t i = 0; i < c.input_scale_n && i <= LEARN_MAX_STATE; ++i) l.append(c.input_scale[i]);
+  return l;
+}
+
+void learn_input_scale_set(learn_config_t& c, nb::handle v) {
+  const std::vector<double> x = nb::cast<std::vector<double>>(v);
+  if (x.size() > LEARN_MAX_STATE + 1U)
+    throw nb::value_error("input_scale: at most the learner's state dimension + 1 values");
+  c.input_scale_n = static_cast<uint32_t>(x.size());
+  for (size_t i = 0; i < x.size(); ++i) c.input_scale[i] = x[i];
+}
+
+using LC = learn_config_t;
+const Field<LC> kLearnFields[] = {
+    B21R_I32(LC, mode),
+    B21R_I32(LC, phase_one_driver),
+    B21R_I32_AS(LC, "eval_every", schedule.eval_every),
+    B21R_I32_AS(LC, "eval_starts", schedule.eval_starts),
+    B21R_BOOL_AS(LC, "eval_at_start", schedule.eval_at_start),
+    B21R_I32_AS(LC, "phase_one_runs", schedule.phase_one_runs),
+    B21R_I32_AS(LC, "phase_two_runs", schedule.phase_two_runs),
+    B21R_I32_AS(LC, "switch_mode", schedule.switch_mode),
+    B21R_I32_AS(LC, "auto_min_runs", schedule.auto_min_runs),
+    B21R_F64_AS(LC, "auto_ratio", schedule.auto_ratio),
+    B21R_I32(LC, learner),
+    B21R_F64(LC, alpha),
+    B21R_F64(LC, gamma),
+    B21R_BOOL(LC, state_last_action),
+    B21R_F64(LC, last_action_scale),
+    B21R_U32(LC, capacity),
+    B21R_U32(LC, k_min),
+    B21R_U32(LC, k_max),
+    B21R_F64(LC, bandwidth),
+    B21R_F64(LC, merge_radius),
+    B21R_U32(LC, greedy_actions),
+    B21R_I32(LC, greedy_method),
+    B21R_F64(LC, greedy_pessimism),
+    B21R_F64(LC, greedy_reach),
+    B21R_BOOL(LC, replay),
+    B21R_U32(LC, replay_passes),
+    B21R_F64(LC, replay_lambda),
+    Field<LC>{"input_scale", learn_input_scale_get, learn_input_scale_set},
+    B21R_U32(LC, tabular_bins),
+    B21R_U32(LC, tabular_actions),
+    B21R_F64(LC, explore_sigma),
+    B21R_F64(LC, explore_probability),
+    B21R_U32(LC, explore_hold_steps),
+    B21R_F64(LC, example_dither_sigma),
+    B21R_BOOL(LC, advisor),
+    B21R_U32(LC, replay_updates_per_slice),
+    B21R_U64(LC, explore_seed),
+    B21R_U64(LC, learner_seed),
+};
+
+nb::dict plan_dict(const learn_plan_t& p) {
+  static const char* const kinds[] = {"training", "eval", "none"};
+  nb::dict d;
+  d["kind"] = kinds[p.kind >= 0 && p.kind <= 2 ? p.kind : 2];
+  d["phase"] = p.phase;
+  d["eval_index"] = p.eval_index;
+  d["training_index"] = p.training_index;
+  return d;
+}
+
+nb::dict block_dict(const learn_eval_block_t& b) {
+  nb::dict d;
+  d["block"] = b.block;
+  d["training_runs"] = b.training_runs;
+  d["phase"] = b.phase;
+  d["n_starts"] = b.n_starts;
+  nb::list steps, success;
+  for (int32_t i = 0; i < b.n_starts && i < LEARN_SCHEDULE_MAX_STARTS; ++i) {
+    steps.append(b.steps[i]);
+    success.append(b.success[i]);
+  }
+  d["steps"] = steps;
+  d["success"] = success;
+  d["successes"] = b.successes;
+  d["mean_steps"] = b.mean_steps;
+  d["ci95_halfwidth"] = b.ci95_halfwidth;
+  return d;
+}
+
+nb::dict run_end_dict(const learn_run_end_t& e) {
+  nb::dict d;
+  d["run_id"] = e.run_id;
+  d["plan"] = plan_dict(e.plan);
+  d["goal"] = e.goal;
+  d["aborted"] = e.aborted;
+  d["steps"] = e.steps;
+  d["total_reward"] = e.total_reward;
+  nb::list src;
+  for (int i = 0; i < LEARN_N_SOURCES; ++i) src.append(e.steps_by_source[i]);
+  d["steps_by_source"] = src;
+  d["eval_block"] = e.eval_block;
+  d["learning"] = e.learning;
+  d["block"] = e.block_done ? nb::object(block_dict(e.block)) : nb::none();
+  return d;
+}
+
+// One agent of the two-phase framework (learn/learn.h) in storage it owns, allocated once here
+// (learn_storage_size bytes, LEARN_STORAGE_ALIGN): nothing is allocated by the calls of a run.
+class Agent {
+ public:
+  Agent(const nb::dict& task, const nb::dict& config) {
+    std::memset(&task_, 0, sizeof task_);
+    task_.greedy_reach = 1.0;
+    apply_fields(task_, kTaskFields, task, "learn task");
+    cfg_ = learn_config_default();
+    apply_fields(cfg_, kLearnFields, config, "learn config");
+    char err[LEARN_ERR_MAX] = "";
+    const size_t bytes = learn_storage_size(&task_, &cfg_);
+    if (bytes == 0) {
+      // learn_init names the invalid setting (the task's, or the learner's: too small a store).
+      alignas(LEARN_STORAGE_ALIGN) unsigned char probe[LEARN_STORAGE_ALIGN];
+      (void)learn_init(probe, sizeof probe, &task_, &cfg_, err, sizeof err);
+      throw nb::value_error(err);
+    }
+    storage_ = static_cast<unsigned char*>(::operator new(bytes, std::align_val_t{LEARN_STORAGE_ALIGN}));
+    bytes_ = bytes;
+    a_ = learn_init(storage_, bytes_, &task_, &cfg_, err, sizeof err);
+    if (a_ == nullptr) {
+      release();
+      throw nb::value_error(err);
+    }
+    std::memset(&exp_, 0, sizeof exp_);
+  }
+  ~Agent() { release(); }
+  Agent(const Agent&) = delete;
+  Agent& operator=(const Agent&) = delete;
+
+  nb::dict task() const { return fields_dict(task_, kTaskFields); }
+  nb::dict config() const { return fields_dict(cfg_, kLearnFields); }
+  size_t storage_bytes() const { return bytes_; }
+  uint32_t state_dim() const { return learn_agent_state_dim(a_); }
+
+  // The learner's settings as derived by learn_learner_config (HEDGER's, by their C names).
+  nb::dict learner_config() const {
+    learn_learner_config_t lc;
+    learn_learner_config(&task_, &cfg_, &lc);
+    nb::dict d = fields_dict(lc.hedger, kHedgerFields);
+    d["kind"] = lc.kind;
+    return d;
+  }
+
+  nb::dict plan() const { return plan_dict(learn_plan(a_)); }
+  void begin_run() { learn_begin_run(a_); }
+  bool running() const { return learn_running(a_); }
+
+  bool observe(const InVec& features, double last_command) {
+    if (features.shape(0) != task_.state_dim)
+      throw nb::value_error(("observe: the task's state has state_dim = " + std::to_string(task_.state_dim) +
+                             " values, got " + std::to_string(features.shape(0)))
+                                .c_str());
+    return learn_observe(a_, features.data(), last_command);
+  }
+
+  NpF64 state() const { return new_array(learn_state(a_), learn_agent_state_dim(a_)); }
+  bool has_transition() const { return learn_has_transition(a_); }
+  int32_t run_actions() const { return learn_run_actions(a_); }
+
+  // The outcome of the last executed action; the run's end record when it ended the run.
+  nb::object transition(double reward, bool terminal, bool end_run, bool goal, int reason) {
+    const learn_outcome_t o = {reward, terminal, end_run, goal, static_cast<int8_t>(reason)};
+    learn_run_end_t e;
+    if (!learn_transition(a_, &o, &e)) return nb::none();
+    return run_end_dict(e);
+  }
+
+  nb::object abort_run() {
+    learn_run_end_t e;
+    if (!learn_abort_run(a_, &e)) return nb::none();
+    return run_end_dict(e);
+  }
+
+  nb::tuple act(double advice, double joystick) {
+    double a = 0.0;
+    int8_t source = 0;
+    learn_act(a_, advice, joystick, &a, &source);
+    return nb::make_tuple(a, static_cast<int>(source));
+  }
+
+  void executed(double action, double translation) { learn_executed(a_, action, translation); }
+
+  // learn_after_command: true when a transition was learned (or, evaluating, predicted); its
+  // record is then experience().
+  bool after_command() { return learn_after_command(a_, &exp_); }
+  bool finish_now() { return learn_finish_now(a_, &exp_); }
+  bool idle() const { return learn_idle(a_); }
+  bool replaying() const { return learn_replaying(a_); }
+  void request_phase_two() { learn_request_phase_two(a_); }
+
+  nb::dict experience() const {
+    nb::dict d;
+    d["run_id"] = exp_.run_id;
+    d["step_id"] = exp_.step_id;
+    d["phase"] = exp_.phase;
+    d["evaluating"] = exp_.evaluating;
+    d["source"] = static_cast<int>(exp_.source);
+    d["reason"] = static_cast<int>(exp_.reason);
+    d["s"] = new_array(exp_.s, exp_.state_dim);
+    d["a"] = exp_.a;
+    d["v"] = exp_.v;
+    d["reward"] = exp_.reward;
+    d["s_next"] = new_array(exp_.s_next, exp_.state_dim);
+    d["terminal"] = exp_.terminal;
+    d["q"] = exp_.q;
+    d["q_kind"] = static_cast<int>(exp_.q_kind);
+    return d;
+  }
+
+  nb::dict schedule() const {
+    const learn_schedule_t* s = learn_schedule(a_);
+    nb::dict d;
+    d["phase"] = s->p.phase;
+    d["training_runs"] = s->p.training_runs;
+    d["phase_one_runs"] = s->p.phase_one_runs;
+    d["phase_two_runs"] = s->p.phase_two_runs;
+    d["eval_blocks"] = s->p.eval_blocks;
+    d["example_runs"] = s->p.example_runs;
+    d["example_steps_sum"] = s->p.example_steps_sum;
+    d["best_example_steps"] = s->p.best_example_steps;
+    d["in_eval"] = s->in_eval;
+    d["done"] = s->done;
+    return d;
+  }
+
+  int32_t run_id() const { return learn_run_id(a_); }
+  int64_t steps() const { return learn_steps(a_); }
+
+  // The learned policy at a learner state (learn_agent_state_dim values): (action, value, known).
+  nb::tuple greedy(const InVec& s) {
+    double a = 0.0, v = 0.0;
+    const bool known = learn_learner_greedy(learn_get_learner(a_), learner_state(s, "greedy"), &a, &v);
+    return nb::make_tuple(a, v, known);
+  }
+
+  // Q(s, a) and how it was obtained (0 unknown, 1 LWA, 2 LWR).
+  nb::tuple predict(const InVec& s, double a) {
+    double q = 0.0;
+    hedger_kind_t kind = HEDGER_KIND_UNKNOWN;
+    if (!learn_learner_predict(learn_get_learner(a_), learner_state(s, "predict"), a, &q, &kind))
+      throw nb::value_error("predict: the learner refused the query (a non-finite value?)");
+    return nb::make_tuple(q, static_cast<int>(kind));
+  }
+
+  nb::dict stats() const {
+    const learn_learner_stats_t st = learn_learner_stats(learn_get_learner_const(a_));
+    nb::dict d;
+    d["fill"] = st.fill;
+    d["capacity"] = st.capacity;
+    d["predictions_lwr"] = st.predictions_lwr;
+    d["predictions_lwa"] = st.predictions_lwa;
+    d["predictions_unknown"] = st.predictions_unknown;
+    d["evictions"] = st.evictions;
+    d["rebuilds"] = st.rebuilds;
+    return d;
+  }
+
+  // HEDGER's learned state in the controller's checkpoint format (Hedger.load reads it).
+  nb::bytes save() const {
+    const hedger_t* h = learn_get_learner_const(a_)->hedger;
+    if (h == nullptr) throw nb::value_error("save: the tabular learner keeps no saved state");
+    std::vector<uint8_t> buf(hedger_serialized_size(h));
+    size_t written = 0;
+    check_hedger(hedger_save(h, buf.data(), buf.size(), &written), "hedger_save");
+    return nb::bytes(reinterpret_cast<const char*>(buf.data()), written);
+  }
+
+ private:
+  const double* learner_state(const InVec& s, const char* what) const {
+    if (s.shape(0) != learn_agent_state_dim(a_))
+      throw nb::value_error((std::string(what) + ": the learner's state has " +
+                             std::to_string(learn_agent_state_dim(a_)) + " values, got " +
+                             std::to_string(s.shape(0)))
+                                .c_str());
+    return s.data();
+  }
+  void release() {
+    if (storage_ != nullptr) ::operator delete(storage_, std::align_val_t{LEARN_STORAGE_ALIGN});
+    storage_ = nullptr;
+    a_ = nullptr;
+  }
+
+  learn_task_t task_{};
+  learn_config_t cfg_{};
+  unsigned char* storage_ = nullptr;
+  size_t bytes_ = 0;
+  learn_t* a_ = nullptr;
+  learn_experience_t exp_{};
+};
+
+// ---- a controller configuration as the learner's set-up -------------------------------------
+
+// Takes the keys of an experiment file that are not the controller's (experiment.*): they say what
+// to run around the controller, not how it learns.
+int skip_experiment_key(void* user, const char* key, const char* value, const char* source, char* err,
+                        size_t err_cap) {
+  (void)user;
+  (void)value;
+  (void)source;
+  (void)err;
+  (void)err_cap;
+  return std::strncmp(key, "experiment.", 11) == 0 ? 0 : 1;
+}
+
+// What a controller configuration (fw/config.h keys) makes of a run, derived by the controller's
+// own functions (fw/config_task.h): the task as the learner sees it, the framework's settings, the
+// seeds, the environment's specification and command limits, the evaluation poses, and the run's
+// training start pose and driver. Two things the loop keeps private (firmware/core/src/run.c,
+// begin_run and next_start_pose) are repeated here and named where they are: the drivers' per-run
+// seed and kind, and the gain range's rescaling. test_learner_controller.py checks the whole
+// against b21r-experiment, block for block.
+class ControllerTask {
+ public:
+  ControllerTask(const nb::dict& settings, std::optional<std::string> config_file) {
+    fw_config_defaults(&cfg_);
+    char err[FW_CONFIG_ERR_MAX] = "";
+    if (config_file.has_value() && fw_config_load_file_with(&cfg_, config_file->c_str(), skip_experiment_key,
+                                                            nullptr, err, sizeof err) != 0)
+      throw nb::value_error(err);
+    for (auto [key, value] : settings) {
+      const std::string k = nb::cast<std::string>(key);
+      const std::string v = nb::isinstance<nb::bool_>(value) ? (nb::cast<bool>(value) ? "true" : "false")
+                                                             : nb::cast<std::string>(nb::str(value));
+      if (fw_config_set(&cfg_, k.c_str(), v.c_str(), "settings", err, sizeof err) != 0)
+        throw nb::value_error(err);
+    }
+    if (fw_config_validate(&cfg_, err, sizeof err) != 0) throw nb::value_error(err);
+    if (cfg_.phase_driver == FW_DRIVER_JOYSTICK)
+      throw nb::value_error("phase_one_driver = joystick: a Learner has no operator; use example or human");
+    if (fw_config_task(&cfg_, &ep_, &limits_, err, sizeof err) != 0) throw nb::value_error(err);
+    seeds_ = fw_config_derive_seeds(cfg_.seed);
+    rng_seed(&pose_rng_, seeds_.pose);
+  }
+
+  std::string task_name() const { return ep_.decl->name; }
+  std::string env_id() const { return ep_.decl->env_id; }
+  uint64_t seed() const { return cfg_.seed; }
+
+  nb::dict learn_task() const {
+    learn_task_t t;
+    fw_config_learn_task(&cfg_, &ep_, &t);
+    return fields_dict(t, kTaskFields);
+  }
+
+  nb::dict learn_settings() const {
+    learn_config_t c;
+    fw_config_learn_settings(&cfg_, &c);
+    return fields_dict(c, kLearnFields);
+  }
+
+  nb::dict seeds() const {
+    nb::dict d;
+    d["pose"] = seeds_.pose;
+    d["explore"] = seeds_.explore;
+    d["learner"] = seeds_.learner;
+    d["driver"] = seeds_.driver;
+    return d;
+  }
+
+  // The environment's settings for this configuration (B21rEnv spec= and limits=): the task's
+  // specification as fw_config_task made it; its own 10 evaluation poses are left out (runs start
+  // from the poses given here, which may be more or fewer).
+  nb::dict env_spec() const {
+    nb::dict d = spec_dict(ep_.decl, tasks_episode_spec_const(&ep_));
+    nb::dict out;
+    for (auto [k, v] : d) {
+      if (nb::cast<std::string>(k) != "eval_starts") out[k] = v;
+    }
+    return out;
+  }
+  nb::dict env_limits() const { return fields_dict(limits_, kLimitFields); }
+
+  nb::list eval_starts() const {
+    nb::list l;
+    for (uint32_t i = 0; i < tasks_episode_n_eval_starts(&ep_); ++i)
+      l.append(pose_get(tasks_episode_eval_start(&ep_, i)));
+    return l;
+  }
+
+  uint32_t step_limit() const { return tasks_episode_step_limit(&ep_); }
+
+  // The next training start pose, as the loop draws it (one per training run, in order).
+  nb::object training_start() { return pose_get(tasks_episode_training_start(&ep_, &pose_rng_)); }
+
+  // The driver of run run_id as the loop begins it (run.c begin_run): the example policy (or the
+  // evaluated reference, or the simulated person of phase one), its stream seeded per run.
+  void begin_driver(Driver& d, int32_t run_id, bool eval, int32_t phase) const {
+    if (d.task() != ep_.decl) throw nb::value_error("begin_driver: the driver is for another task");
+    const uint64_t id = static_cast<uint64_t>(static_cast<uint32_t>(run_id));
+    uint64_t st = seeds_.driver ^ (id * 0x9E3779B97F4A7C15ULL);
+    const uint64_t run_seed = rng_splitmix64(&st);
+    tasks_driver_kind_t kind = TASKS_DRIVER_PROPORTIONAL;
+    const bool evaluate = cfg_.mode == FW_MODE_EVALUATE;
+    if (evaluate && cfg_.evaluate_policy == FW_EVAL_OPTIMAL) {
+      kind = TASKS_DRIVER_OPTIMAL;
+    } else if (evaluate && cfg_.evaluate_policy == FW_EVAL_HUMAN) {
+      kind = TASKS_DRIVER_HUMAN;
+    } else if (cfg_.phase_driver == FW_DRIVER_HUMAN && !eval && phase == 1) {
+      kind = TASKS_DRIVER_HUMAN;
+    }
+    d.begin_controller_run(kind, run_seed);
+    const double task_lo = ep_.decl->gain_min;
+    const double task_hi = ep_.decl->gain_max;
+    const bool ranged = cfg_.example_gain_range_n == 2;
+    const double lo = ranged ? cfg_.example_gain_range[0] : task_lo;
+    const double hi = ranged ? cfg_.example_gain_range[1] : task_hi;
+    if (ranged && kind == TASKS_DRIVER_PROPORTIONAL) {
+      d.set_run_gain(lo + (d.gain() - task_lo) * ((hi - lo) / (task_hi - task_lo)));
+    }
+    if (evaluate && cfg_.evaluate_policy == FW_EVAL_EXAMPLE) {
+      d.set_run_gain(cfg_.evaluate_example_gain > 0.0 ? cfg_.evaluate_example_gain : 0.5 * (lo + hi));
+    }
+  }
+
+ private:
+  fw_config_t cfg_{};
+  tasks_episode_t ep_{};
+  tasks_command_limits_t limits_{};
+  fw_config_seeds_t seeds_{};
+  rng_t pose_rng_{};
+};
+
 // ---- the controller's files and settings ----------------------------------------------------
 
 // (meta, payload) of a controller checkpoint file (fw/checkpoint.h), verified by its CRCs.
@@ -830,4 +1316,82 @@ NB_MODULE(_core, m) {
         "Per evaluation pose: fewest steps any policy can need to reach the corridor's goal, from "
         "kinematics (tasks_corridor_steps_lower_bound).");
   m.def("controller_learner_config", &controller_learner_config, "task"_a, "settings"_a = nb::dict());
+
+  nb::class_<Agent>(m, "Agent",
+                    "One agent of the two-phase learning framework (lib/learn, learn/learn.h): task and "
+                    "settings as dicts of learn_task_t / learn_config_t fields by their C names. Its storage "
+                    "is allocated once, here; b21r_learn.Learner drives it.")
+      .def(nb::init<const nb::dict&, const nb::dict&>(), "task"_a, "config"_a = nb::dict())
+      .def_prop_ro("task", &Agent::task)
+      .def_prop_ro("config", &Agent::config)
+      .def_prop_ro("learner_config", &Agent::learner_config)
+      .def_prop_ro("storage_bytes", &Agent::storage_bytes)
+      .def_prop_ro("state_dim", &Agent::state_dim)
+      .def("plan", &Agent::plan)
+      .def("begin_run", &Agent::begin_run)
+      .def_prop_ro("running", &Agent::running)
+      .def("observe", &Agent::observe, "features"_a, "last_command"_a)
+      .def("state", &Agent::state)
+      .def("has_transition", &Agent::has_transition)
+      .def("run_actions", &Agent::run_actions)
+      .def("transition", &Agent::transition, "reward"_a, "terminal"_a, "end_run"_a, "goal"_a, "reason"_a = 0)
+      .def("abort_run", &Agent::abort_run)
+      .def("act", &Agent::act, "advice"_a, "joystick"_a = 0.0)
+      .def("executed", &Agent::executed, "action"_a, "translation"_a = 0.0)
+      .def("after_command", &Agent::after_command)
+      .def("finish_now", &Agent::finish_now)
+      .def("idle", &Agent::idle)
+      .def("replaying", &Agent::replaying)
+      .def("request_phase_two", &Agent::request_phase_two)
+      .def("experience", &Agent::experience)
+      .def("schedule", &Agent::schedule)
+      .def_prop_ro("run_id", &Agent::run_id)
+      .def_prop_ro("steps", &Agent::steps)
+      .def("greedy", &Agent::greedy, "state"_a)
+      .def("predict", &Agent::predict, "state"_a, "action"_a)
+      .def("stats", &Agent::stats)
+      .def("save", &Agent::save);
+  m.def("learn_config_default", []() { return fields_dict(learn_config_default(), kLearnFields); },
+        "lib/learn's defaults (learn_config_default) by field name.");
+  m.def(
+      "controller_seeds",
+      [](uint64_t root) {
+        const fw_config_seeds_t sd = fw_config_derive_seeds(root);
+        return nb::make_tuple(sd.pose, sd.explore, sd.learner, sd.driver);
+      },
+      "root"_a,
+      "The seeds the controller derives from its seed (fw_config_derive_seeds): (pose, explore, learner, "
+      "driver).");
+  m.attr("LEARN_MAX_TASK_STATE") = LEARN_MAX_TASK_STATE;
+  m.attr("LEARN_SCHEDULE_MAX_STARTS") = LEARN_SCHEDULE_MAX_STARTS;
+
+  nb::class_<ControllerTask>(m, "ControllerTask",
+                             "What a controller configuration makes of a learning session, by the controller's "
+                             "own derivations (fw/config_task.h): settings as controller keys, optionally over a "
+                             "config or experiment file (its experiment.* keys are skipped).")
+      .def(nb::init<const nb::dict&, std::optional<std::string>>(), "settings"_a = nb::dict(),
+           "config_file"_a = nb::none())
+      .def_prop_ro("task_name", &ControllerTask::task_name)
+      .def_prop_ro("env_id", &ControllerTask::env_id)
+      .def_prop_ro("seed", &ControllerTask::seed)
+      .def_prop_ro("step_limit", &ControllerTask::step_limit)
+      .def("learn_task", &ControllerTask::learn_task,
+           "The task as the framework sees it (fw_config_learn_task): learn_task_t fields by name.")
+      .def("learn_settings", &ControllerTask::learn_settings,
+           "The framework's settings (fw_config_learn_settings, seeds included): learn_config_t fields by "
+           "name.")
+      .def("seeds", &ControllerTask::seeds,
+           "The derived seeds (fw_config_derive_seeds): pose, explore, learner, driver.")
+      .def("env_spec", &ControllerTask::env_spec,
+           "The task's specification as B21rEnv spec= (fw_config_task; without its own evaluation poses).")
+      .def("env_limits", &ControllerTask::env_limits, "The command limits as B21rEnv limits=.")
+      .def("eval_starts", &ControllerTask::eval_starts,
+           "The evaluation poses (x m, y m, theta rad; task frame): eval_poses, or the task's 10.")
+      .def("training_start", &ControllerTask::training_start,
+           "The next training start pose (x m, y m, theta rad), drawn from the controller's pose stream: "
+           "call once per training run, in order.")
+      .def("begin_driver", &ControllerTask::begin_driver, "driver"_a, "run_id"_a, "eval"_a, "phase"_a,
+           "Begins driver for run run_id as the controller's loop does: kind (example, the simulated person "
+           "of phase one, or the evaluated reference), the per-run seed, the gain (example_gain_range, "
+           "evaluate_example_gain).");
 }
