@@ -87,7 +87,8 @@ def text(w):
                          how, x["first_reward_h"], x["first_reward_ci95_h"], x["first_reward_median_h"],
                          x["attempts_mean"], x["session_training_h"], w["session_training_runs"], verdict))
     lines.append("  (the paper's Fig. 6 argument: the first reward alone outlasting the whole training; why its hours "
-                 "are minutes here: docs/RESULTS.md, \"Learning without examples: which assumptions\")")
+                 "are minutes here, and what the examples buy the learner besides: docs/RESULTS.md, \"Learning "
+                 "without examples: which assumptions\")")
     return lines
 
 
