@@ -10,8 +10,9 @@ Commands (default: all):
            skipped (run again to resume; --rerun to redo)
   figures  the paper-style figures (PNG, with captions) from the result files
   report   docs/RESULTS.md: our numbers next to the paper's claims, every yes/no from a test
-           (--section doorway or reference_learners: only that section and its figures, the
-           rest of the report kept, for when the other experiments' results are not at hand)
+           (--section doorway, reference_learners or explore_study: only that section and its
+           figures, the rest of the report kept, for when the other experiments' results are not
+           at hand)
   merge    one JSON per experiment with all its results (OUT/merged)
   all      run, merge, figures, report
 On first use it installs the sweep's Python packages (tools/requirements-experiments.txt: Ray,
@@ -21,9 +22,11 @@ cluster --address is given; it is shut down when the command ends.
 Examples:
   tools/b21r_experiments.py                                    # everything, 10 seeds each
   tools/b21r_experiments.py run fig4_corridor_examples --seeds 3
+  tools/b21r_experiments.py run 'explore_*'                   # every file the pattern matches
   tools/b21r_experiments.py figures report
   tools/b21r_experiments.py run report doorway --section doorway   # the doorway task, 10 seeds, its section
   tools/b21r_experiments.py run reference_learners --num-cpus 1   # SAC and PPO from scratch
+  tools/b21r_experiments.py run report 'explore_*' --section explore_study   # the sensitivity study, its section
 """
 import b21r_bootstrap  # noqa: E402 (first: runs the tool in the project's venv)
 
@@ -82,15 +85,19 @@ def ensure_runner(jobs, python_module=False):
 
 
 def config_paths(configs, names):
+    """The experiment files of the names given (all when none); a name may be a shell pattern
+    ('explore_*', quoted), which stands for every file it matches."""
     if not names:
         return sorted(glob.glob(str(configs / "*.conf")))
     paths = []
     for n in names:
-        p = configs / (n if n.endswith(".conf") else n + ".conf")
-        if not p.exists():
+        pattern = n if n.endswith(".conf") else n + ".conf"
+        found = sorted(glob.glob(str(configs / pattern))) if any(c in pattern for c in "*?[") else \
+            [str(configs / pattern)] if (configs / pattern).exists() else []
+        if not found:
             known = ", ".join(sorted(os.path.basename(x)[:-5] for x in glob.glob(str(configs / "*.conf"))))
             sys.exit("experiments: no experiment '%s' (%s has: %s)" % (n, configs, known))
-        paths.append(str(p))
+        paths += [p for p in found if p not in paths]
     return paths
 
 
@@ -108,7 +115,7 @@ def main():
     ap.add_argument("--configs", default=str(CONFIGS), help="folder of the experiment files (default tools/experiments)")
     ap.add_argument("--runner", help="use this b21r-experiment instead of building the host-release one")
     # report.SECTIONS (the report module needs the sweep's packages, installed after parsing)
-    ap.add_argument("--section", choices=("doorway", "reference_learners"),
+    ap.add_argument("--section", choices=("doorway", "reference_learners", "explore_study"),
                     help="figures, report: only this section of an existing report (and its figures)")
     args = ap.parse_args()
     commands = [w for w in args.words if w in ("run", "figures", "report", "merge", "all")]

@@ -12,7 +12,9 @@
 # 4. writes the learning curve (PNG), a summary (text and JSON: each of the paper's claims with
 #    yes/no and its numbers, paired over the poses, and who drove every run), the LCM logs, the
 #    checkpoint and an overhead picture of every run into the output folder it names at the end;
-# 5. draws what was learned (policy_map_corridor.png: value and policy over a slice of the state
+# 5. measures what phase one saved: random exploration without examples (kinematic model, this
+#    task and seed) until the first reward, against the session's training time (in the summary);
+# 6. draws what was learned (policy_map_corridor.png: value and policy over a slice of the state
 #    space beside the teacher and the optimal controller).
 # The controllers publish on LCM on this host only (udpm with ttl=0), so the run can be watched
 # with lcm-spy (tools/b21r-lcm-spy) or recorded with lcm-logger while it learns; without a
@@ -46,7 +48,7 @@ say "configuring and building the $preset preset (b21r-controller, b21r-sim, LCM
 if [[ ! -f "$build/build.ninja" ]]; then
   cmake --preset "$preset" >"$out/build.log" 2>&1 || { tail -30 "$out/build.log"; exit 1; }
 fi
-cmake --build --preset "$preset" -j "$jobs" --target b21r-controller b21r_sim_app b21r_msgs_python \
+cmake --build --preset "$preset" -j "$jobs" --target b21r-controller b21r_sim_app b21r_msgs_python b21r_experiment \
   >>"$out/build.log" 2>&1 || { tail -40 "$out/build.log"; say "error: build failed (log: $out/build.log)"; exit 1; }
 controller="$build/bin/b21r-controller"
 sim="$build/bin/b21r-sim"
@@ -140,6 +142,18 @@ say "writing the learning curve and the summary"
 "$python" "$repo/tools/b21r_learning_report.py" --log "$out/learning.lcmlog" \
   --optimal "$out/optimal.lcmlog" --example "$out/example.lcmlog" "${gain_args[@]}" --out "$out" \
   --title "Corridor following, emulated B21r ($base base, seed $seed)" >/dev/null
+
+# What phase one saved this session, measured: random exploration without examples on the kinematic
+# model (this task and seed, the product's assumptions: tools/experiments/explore_corridor_product.conf
+# with the base's acceleration limits) until the first reward, against this session's training time;
+# added to summary.txt and summary.json ("without_examples"). About a second.
+say "without examples: random exploration to the first reward (kinematic model, this task and seed)"
+"$build/bin/b21r-experiment" --config "$repo/tools/experiments/explore_corridor_product.conf" --seed "$seed" \
+  --set experiment.explore_model=kinematic --set experiment.explore_accel_limits=true \
+  --set experiment.explore_runs=200 --out "$out/without_examples.json" 2>"$out/without_examples.log" ||
+  { cat "$out/without_examples.log" >&2; say "error: the random-exploration measurement failed"; exit 1; }
+"$python" "$repo/tools/b21r_explore_saving.py" --explore "$out/without_examples.json" --summary-dir "$out" >/dev/null
+
 cat "$out/summary.txt"
 
 # Pictures of what was learned (a step of its own): the learned value and policy over a slice of

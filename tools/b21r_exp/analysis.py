@@ -11,6 +11,8 @@ from b21r_exp import results, stats
 PAPER_HOURS = 2.0  # "all of the training was accomplished in approximately two hours"
 PAPER_TABLE1 = {1.0: (46.2, 2.03), 2.0: (25.0, 6.24), 3.0: (18.7, 6.54)}
 PAPER_FIRST_OBSTACLE_SUCCESS = 15  # phase-one runs before the first evaluation success (Fig. 9)
+PAPER_FIRST_REWARD_H = 2.0  # Fig. 6: "the fastest ... was slightly over two hours"
+EXPLORE_PREFIX = "explore_"  # the sensitivity study's experiment files (tools/experiments/explore_*.conf)
 
 
 def fmt_ci(m, hw, digits=1):
@@ -418,3 +420,133 @@ def product_rows(data):
         else:
             missing.append((exp, var, label))
     return rows, missing
+
+
+# ---- learning without examples: the sensitivity study (experiments explore_*) ----------------
+
+def explore_variant(variant, rs):
+    """One variant of an exploration experiment, pooled over its seeds: runs, successes within the
+    time limit (Clopper-Pearson interval), the time to the first reward of the runs that reached it
+    (mean over seeds of each seed's mean, 95 % t interval), the median over all runs (a censored run
+    counts at the limit: when half or more are censored the median is only known to exceed the
+    limit), the fastest run, attempts per run, and the settings the runner recorded."""
+    seeds = [results.explore_seed(r) for r in rs]
+    times = [t for s in seeds for t in s["times_h"]]
+    succ = [ok for s in seeds for ok in s["success"]]
+    k, n = sum(succ), len(succ)
+    ok_times = sorted(t for t, ok in zip(times, succ) if ok)
+    ordered = sorted(t if ok else math.inf for t, ok in zip(times, succ))
+    median = ordered[(n - 1) // 2] if n else math.nan
+    return {"variant": variant, "value": results.variant_value(variant), "n_seeds": len(seeds), "runs": n,
+            "successes": k, "pooled": stats.binomial(k, n, 0.5, "two-sided"),
+            "hours": stats.mean_ci([s["mean_hours_succ"] for s in seeds]),
+            "hours_all": stats.mean_ci([sum(s["times_h"]) / len(s["times_h"]) for s in seeds]),
+            "seed_means": [sum(s["times_h"]) / len(s["times_h"]) for s in seeds],
+            "median_h": median, "min_h": ok_times[0] if ok_times else math.nan,
+            "attempts": stats.mean_ci([sum(s["episodes"]) / len(s["episodes"]) for s in seeds]),
+            "limit_h": seeds[0]["limit_h"], "settings": seeds[0]["settings"], "seeds": [s["seed"] for s in seeds],
+            "wall_s": sum(s["wall_s"] for s in seeds)}
+
+
+def explore_study(data):
+    """The exploration experiments of the sensitivity study: {name: {"title", "kind", "axis", "rows":
+    [explore_variant, ...] in the order of experiment.vary}} for every explore_* experiment of an
+    exploration kind (explore_corridor, explore_goal, or a new task's)."""
+    out = {}
+    for name, variants in data.items():
+        first = next(iter(variants.values()))[0]
+        if not name.startswith(EXPLORE_PREFIX) or not first["kind"].startswith("explore_"):
+            continue
+        rows = [explore_variant(v, rs) for v, rs in variants.items()]
+        axis = next(iter(variants)).split("=", 1)[0].replace("experiment.explore_", "") if rows else ""
+        out[name] = {"title": first.get("title") or name, "kind": first["kind"], "axis": axis, "rows": rows}
+    return out
+
+
+def paper_goal(distance_m):
+    """Table I's (fraction %, hours) at a start distance, or None."""
+    return PAPER_TABLE1.get(float(distance_m))
+
+
+# The exploration studies by kind (= task): the paper's own axis (its figure sweeps it; the
+# sensitivity study's combinations sweep it too), the paper's file, the words of the report's
+# headings, and the paper's (share %, hours) to hold a row against. A kind not listed here (a new
+# task's study) is reported without the paper's numbers.
+EXPLORE_KINDS = {
+    "explore_corridor": {"task": "The corridor (Fig. 6)", "paper_axis": "omega_max_radps",
+                         "paper_file": "fig6_explore_corridor", "single": " (rotation limit 1 rad/s)",
+                         "sweep": " (the rotation limit swept)",
+                         "paper_of_single": lambda r: (None, PAPER_FIRST_REWARD_H),
+                         "paper_of_sweep": lambda r: (None, PAPER_FIRST_REWARD_H)},
+    "explore_goal": {"task": "The goal task (Table I)", "paper_axis": "start_distance_m",
+                     "paper_file": "table1_explore_goal", "single": " (3 m; the paper: 18.7 %, 6.54 h)",
+                     "sweep": " (1, 2, 3 m)",
+                     "paper_of_single": lambda r: paper_goal(r["settings"].get("start_distance_m", 3.0)),
+                     "paper_of_sweep": lambda r: paper_goal(r["value"])},
+}
+
+
+# The sensitivity study's one-at-a-time experiments in reading order (by their axis); experiments of
+# other axes follow in name order.
+STUDY_ORDER = ("random", "hold_s", "rotation", "omega_clip_radps", "omega_variance", "collision", "attempt_steps",
+               "restart_s", "arena_walls", "v_wall_mps", "v_mps", "goal_size_m", "start", "accel_limits", "model")
+
+
+def study_groups(study, kind, sweeps):
+    """[(name, group)] of one task's experiments of the study (explore_study): the sweeps of the
+    paper's own axis (sweeps true) or the one-at-a-time ones, in reading order; the product's own
+    (name *_product) apart."""
+    axis = EXPLORE_KINDS.get(kind, {}).get("paper_axis")
+    gs = [(n, g) for n, g in study.items() if g["kind"] == kind and not n.endswith("_product") and
+          ((g["axis"] == axis) == sweeps)]
+    return sorted(gs, key=lambda ng: (STUDY_ORDER.index(ng[1]["axis"]) if ng[1]["axis"] in STUDY_ORDER
+                                      else len(STUDY_ORDER), ng[0]))
+
+
+def fastest_claim(name, rows):
+    """Fig. 6's "the fastest ... slightly over two hours" for a sweep of the rotation limit: the
+    smallest mean time over the limits, every run of it reaching the reward; holds when that mean's
+    95 % interval lies above 2 h."""
+    full = [r for r in rows if r["successes"] == r["runs"] and not math.isnan(r["hours"][0])]
+    if not full:
+        return claim("(%s) The fastest setting needs slightly over two hours to the first reward." % name,
+                     "no limit with every run reaching the reward", "-", None, 0)
+    best = min(full, key=lambda r: r["hours"][0])
+    m, hw, n = best["hours"]
+    return claim("(%s) The fastest setting needs slightly over two hours to the first reward." % name,
+                 "fastest: limit %s rad/s, %s h (fastest single run %.3g h)" % (best["value"], fmt_ci(m, hw, 3),
+                                                                              best["min_h"]),
+                 "mean with 95 % CI above 2 h?", None if math.isnan(hw) else m - hw > PAPER_FIRST_REWARD_H, n)
+
+
+def first_reward_of_session(r):
+    """A learn result's first training run that reached the goal: (run index from 1, driving hours
+    until it ended, reached). A session that never reached it gives (None, its whole training, False)."""
+    dt = r["dt_s"]
+    steps = 0
+    train = [x for x in r["learning"]["runs"] if x["kind"] == "train" and x["outcome"] != "aborted"]
+    for i, x in enumerate(train):
+        steps += x["steps"]
+        if x["outcome"] == "goal":
+            return i + 1, steps * dt / 3600.0, True
+    return None, steps * dt / 3600.0, False
+
+
+def learner_without_examples(variants):
+    """Per variant of a learn experiment without phase one: the first training run that reached the
+    goal, the driving until then, the final block, the training driving."""
+    rows = []
+    for v, rs in variants.items():
+        firsts = [first_reward_of_session(r) for r in rs]
+        seeds = [results.learn_seed(r) for r in rs]
+        rows.append({"variant": v, "n": len(rs), "reached": sum(1 for f in firsts if f[2]),
+                     "first_run": stats.mean_ci([f[0] for f in firsts if f[2]]),
+                     "first_hours": stats.mean_ci([f[1] for f in firsts if f[2]]),
+                     "final_all": stats.mean_ci([s["final"]["mean_all"] for s in seeds]),
+                     "final_succ": stats.mean_ci([s["final"]["successes"] for s in seeds]),
+                     "final_by_seed": {s["seed"]: s["final"]["mean_all"] for s in seeds},
+                     "all10_blocks": stats.mean_ci([sum(1 for b in s["blocks"] if b["successes"] == b["n"])
+                                                    for s in seeds]),
+                     "training_hours": stats.mean_ci([s["training_hours"] for s in seeds]),
+                     "step_limit": seeds[0]["step_limit"], "runs": seeds[0]["phase_two_runs"]})
+    return rows

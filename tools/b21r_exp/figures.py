@@ -219,6 +219,136 @@ def reference_figure(rows, title, path, command):
     return cap
 
 
+STUDY_COMMAND = "tools/b21r_experiments.py run 'explore_*' figures"
+
+
+def _label(name, row):
+    return "%s: %s" % (name[len(analysis.EXPLORE_PREFIX):], row["value"])
+
+
+def _err(values):
+    return [0 if math.isnan(v) else v for v in values]
+
+
+def study_rows_figure(groups, path, title, paper_h, paper_label, fraction=False):
+    """One dot per variant (rows grouped by experiment): the time to the first reward of the runs
+    that reached it (log scale, 95 % CI) and, with fraction, the share of runs that reached it."""
+    rows = [(name, r) for name, g in groups for r in g["rows"]]
+    if not rows:
+        return None
+    ncols = 2 if fraction else 1
+    fig, axes = plt.subplots(1, ncols, figsize=(9.5 if fraction else 8, 0.24 * len(rows) + 1.9), sharey=True,
+                             squeeze=False)
+    y = list(range(len(rows)))[::-1]
+    ax = axes[0][ncols - 1]
+    hours = [r["hours"] for _, r in rows]
+    ok = [i for i, h in enumerate(hours) if not math.isnan(h[0])]
+    ax.errorbar([hours[i][0] for i in ok], [y[i] for i in ok], xerr=_err([hours[i][1] for i in ok]), fmt="o",
+                color="black", capsize=2, markersize=3)
+    if paper_h:
+        ax.axvline(paper_h, color="#d62728", linestyle="--", label=paper_label)
+    ax.set_xscale("log")
+    ax.set_xlabel("time to the first reward [h] (runs that reached it)")
+    ax.grid(alpha=0.3, which="both", axis="x")
+    if paper_h:
+        ax.legend(fontsize=7, loc="lower right")
+    if fraction:
+        af = axes[0][0]
+        fr = [100 * r["pooled"]["fraction"] for _, r in rows]
+        lo = [100 * r["pooled"]["lo"] for _, r in rows]
+        hi = [100 * r["pooled"]["hi"] for _, r in rows]
+        af.errorbar(fr, y, xerr=[[f - a for f, a in zip(fr, lo)], [b - f for f, b in zip(fr, hi)]], fmt="s",
+                    color="black", capsize=2, markersize=3)
+        if paper_h:
+            af.axvline(analysis.PAPER_TABLE1[3.0][0], color="#d62728", linestyle="--", label="paper (3 m): 18.7 %")
+            af.legend(fontsize=7, loc="lower right")
+        af.set_xlim(-2, 102)
+        af.set_xlabel("runs that reached the goal within the limit [%]")
+        af.grid(alpha=0.3, axis="x")
+    axes[0][0].set_yticks(y)
+    axes[0][0].set_yticklabels([_label(n, r) for n, r in rows], fontsize=7)
+    fig.suptitle(title, fontsize=10)
+    cap = ("%s. Each row changes one assumption of the paper's study as the paper's figure reads it (mean over "
+           "the seeds of each seed's mean, 95 %% CI; shares pooled over seeds with Clopper-Pearson 95 %% intervals; "
+           "a row without a dot: no run reached the reward within the limit). Made by: %s" % (title, STUDY_COMMAND))
+    fig.tight_layout(rect=(0, 0.07, 1, 0.97))
+    _caption(fig, cap)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return cap
+
+
+def study_sweep_figure(groups, path, title, axis_label, paper, log_x, fraction=False):
+    """Each combination's sweep of the paper's own axis (rotation limit, start distance) as one line,
+    with the paper's numbers: the time to the first reward, or the share that reached it."""
+    if not groups:
+        return None
+    fig, ax = plt.subplots(figsize=(8, 4.8))
+    for i, (name, g) in enumerate(groups):
+        xs = [float(r["value"]) for r in g["rows"]]
+        if fraction:
+            ys = [100 * r["pooled"]["fraction"] for r in g["rows"]]
+            lo = [100 * r["pooled"]["lo"] for r in g["rows"]]
+            hi = [100 * r["pooled"]["hi"] for r in g["rows"]]
+            err = [[a - b for a, b in zip(ys, lo)], [b - a for a, b in zip(ys, hi)]]
+        else:
+            ys = [r["hours"][0] for r in g["rows"]]
+            err = _err([r["hours"][1] for r in g["rows"]])
+        ax.errorbar([x * (1 + 0.03 * i) for x in xs], ys, yerr=err, marker="o", capsize=2, label=g["title"])
+    if fraction:
+        ax.plot(sorted(paper), [paper[d][0] for d in sorted(paper)], "D--", color="#d62728", label="paper (Table I)")
+        ax.set_ylabel("runs that reached the goal within the limit [%]")
+        ax.set_ylim(-2, 102)
+    else:
+        ax.axhline(paper, color="#d62728", linestyle="--", label="paper: fastest slightly over 2 h")
+        ax.set_yscale("log")
+        ax.set_ylabel("time to the first reward [h] (runs that reached it)")
+    if log_x:
+        ax.set_xscale("log")
+    ax.set_xlabel(axis_label)
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=6.5)
+    cap = ("%s: mean over seeds with 95 %% CI%s. Made by: %s" % (
+        title, " (shares pooled over seeds, Clopper-Pearson)" if fraction else "", STUDY_COMMAND))
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
+    _caption(fig, cap)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return cap
+
+
+def explore_study_figures(data, fig_dir):
+    """The sensitivity study's figures, per task (the experiment's kind): the one-at-a-time rows
+    (<kind>_sensitivity.png) and the sweeps of the paper's own axis under combinations
+    (<kind>_combinations.png). Returns [(path, caption)]."""
+    study = analysis.explore_study(data)
+    out = []
+    for kind in sorted({g["kind"] for g in study.values()}):
+        info = analysis.EXPLORE_KINDS.get(kind, {"task": kind, "paper_axis": None})
+        single = analysis.study_groups(study, kind, False)
+        sweeps = analysis.study_groups(study, kind, True)
+        groups = single + sweeps
+        p = os.path.join(fig_dir, "%s_sensitivity.png" % kind)
+        q = os.path.join(fig_dir, "%s_combinations.png" % kind)
+        title = "%s without examples: one assumption at a time" % info["task"]
+        if kind == "explore_corridor":
+            c = study_rows_figure(single, p, title + " (limit 1 rad/s)", analysis.PAPER_FIRST_REWARD_H,
+                                  "paper: fastest slightly over 2 h")
+            d = study_sweep_figure(sweeps, q, "Fig. 6 under combinations of assumptions", "rotation velocity limit [rad/s]",
+                                   analysis.PAPER_FIRST_REWARD_H, True)
+        elif kind == "explore_goal":
+            c = study_rows_figure(single, p, title + " (3 m)", analysis.PAPER_TABLE1[3.0][1], "paper (3 m): 6.54 h",
+                                  fraction=True)
+            d = study_sweep_figure(sweeps, q, "Table I under combinations of assumptions", "start distance [m]",
+                                   analysis.PAPER_TABLE1, False, fraction=True)
+        else:
+            c = study_rows_figure(groups, p, title, None, None, fraction=True)
+            d = None
+        out += [(x, y) for x, y in ((p, c), (q, d)) if y is not None]
+    return out
+
+
 def command_for(name):
     return "tools/b21r_experiments.py run figures %s" % name
 
@@ -237,7 +367,7 @@ def make_all(out, fig_dir, configs_dir, captions=None, only=None):
         title = first[0].get("title") or name
         kind = first[0]["kind"]
         cmd = command_for(name)
-        if kind == "learn" and name.startswith("ablation_"):
+        if kind == "learn" and name.startswith(("ablation_", analysis.EXPLORE_PREFIX)):
             p = os.path.join(fig_dir, name + ".png")
             caps[os.path.basename(p)] = ablation_figure(name, variants, title, p, cmd)
             made.append(p)
@@ -258,8 +388,12 @@ def make_all(out, fig_dir, configs_dir, captions=None, only=None):
             p = os.path.join(fig_dir, name + ".png")
             caps[os.path.basename(p)] = reference_figure(rows, title, p, cmd)
             made.append(p)
-        elif kind == "explore_corridor":
+        elif kind == "explore_corridor" and name == "fig6_explore_corridor":
             p = os.path.join(fig_dir, "fig6_explore_corridor.png")
             caps[os.path.basename(p)] = explore_corridor_figure(analysis.explore_corridor_summary(variants), p, cmd)
             made.append(p)
+    study_data = data if only is None else {n: v for n, v in data.items() if n in only}
+    for p, c in explore_study_figures(study_data, fig_dir):
+        caps[os.path.basename(p)] = c
+        made.append(p)
     return made

@@ -92,6 +92,7 @@ def curve_table(doc, S):
 SECTION_RE = re.compile(r"<!-- section:([a-z0-9_]+) -->\n.*?<!-- /section:\1 -->\n+", re.S)
 DOORWAY = "doorway"
 DOORWAY_HEADING = "Doorway passing (a third task, not in the paper)"
+EXPLORE_STUDY = "explore_study"
 
 
 def doorway_section(doc, data, rel, caps):
@@ -252,11 +253,15 @@ def reference_section(doc, data, configs_dir, rel, caps):
 
 
 # The sections that can be regenerated alone: the experiments whose figures they show, and the
-# heading a whole report has after them (where a report without the section gets it).
+# heading a whole report has after them (where a report without the section gets it; with several,
+# the first the report has).
 SECTIONS = {
     DOORWAY: {"figures": lambda configs_dir: (DOORWAY,), "before": "\n## Learning without examples"},
     REFERENCE_SECTION: {"figures": lambda configs_dir: tuple(reference_configs(configs_dir)),
                         "before": "\n## Ablations\n"},
+    EXPLORE_STUDY: {"figures": lambda configs_dir: tuple(sorted(
+        n[:-5] for n in os.listdir(configs_dir) if n.startswith(analysis.EXPLORE_PREFIX) and n.endswith(".conf"))),
+                    "before": ("\n<!-- section:%s -->" % REFERENCE_SECTION, "\n## Ablations\n")},
 }
 
 
@@ -277,6 +282,8 @@ def write_section(out, fig_dir, path, configs_dir, section=DOORWAY):
     rel = os.path.relpath(fig_dir, os.path.dirname(os.path.abspath(path)))
     if section == DOORWAY:
         doorway_section(doc, data, rel, caps)
+    elif section == EXPLORE_STUDY:
+        explore_study_section(doc, data, rel, caps)
     else:
         reference_section(doc, data, configs_dir, rel, caps)
     repo = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -290,13 +297,179 @@ def write_section(out, fig_dir, path, configs_dir, section=DOORWAY):
     if m:
         text = text[: m[0].start()] + new + text[m[0].end():]
     else:
-        at = text.find(SECTIONS[section]["before"])
+        before = SECTIONS[section]["before"]  # a heading, or headings to try in turn
+        at = next((text.find(b) for b in ((before,) if isinstance(before, str) else before) if b in text), -1)
         text = text[: at + 1] + new + text[at + 1:] if at >= 0 else text.rstrip("\n") + "\n\n" + new
     tmp = path + ".tmp"
     with open(tmp, "w") as f:
         f.write(text)
     os.replace(tmp, path)
     return path
+
+
+def _reached(r):
+    p = r["pooled"]
+    return "%d/%d = %.0f %% (%.0f-%.0f %%)" % (p["k"], p["n"], 100 * p["fraction"], 100 * p["lo"], 100 * p["hi"])
+
+
+def _median(r):
+    return "> %.0f" % r["limit_h"] if math.isinf(r["median_h"]) else "%.3g" % r["median_h"]
+
+
+def _ratio(r, paper_h):
+    m, hw, _ = r["hours"]
+    if math.isnan(m) or not paper_h:
+        return "n/a"
+    return "%.2g" % (m / paper_h) if math.isnan(hw) else "%.2g (%.2g-%.2g)" % (m / paper_h, max(m - hw, 0) / paper_h,
+                                                                        (m + hw) / paper_h)
+
+
+def _rows_table(doc, groups, paper_of):
+    """One row per variant. paper_of(row) gives the paper's (share %, hours) to compare with, or
+    None; with a share, the runs that reached the reward are tested against it."""
+    shares = any(paper_of(r) and paper_of(r)[0] is not None for _, g in groups for r in g["rows"])
+    doc.add("| experiment | variant | reached | %stime [h] | median [h] | fastest [h] | attempts | × paper |" % (
+        "test against the paper's share | " if shares else ""), "|---|---|---|%s---|---|---|---|---|" % (
+        "---|" if shares else ""))
+    for n, g in groups:
+        for i, r in enumerate(g["rows"]):
+            paper = paper_of(r)
+            test = ""
+            if shares:
+                if paper and paper[0] is not None:
+                    t = stats.binomial(r["successes"], r["runs"], paper[0] / 100.0, "two-sided")
+                    test = "%.1f %%: %s | " % (paper[0], fmt_p(t["p"]))
+                else:
+                    test = "n/a | "
+            doc.add("| %s | %s | %s | %s%s | %s | %.3g | %s | %s |" % (
+                "`%s`" % n if i == 0 else "", r["variant"].replace("experiment.explore_", "") or "-", _reached(r),
+                test, fmt_ci(*r["hours"][:2], 3), _median(r), r["min_h"], fmt_ci(*r["attempts"][:2], 1),
+                _ratio(r, paper[1] if paper else None)))
+    doc.add("")
+
+
+def explore_study_section(doc, data, rel, caps):
+    """The sensitivity study of learning without examples (experiments explore_*): which modelling
+    assumptions move the time to the first reward and the success fractions toward the paper's.
+    Per task (the experiment's kind): the one-at-a-time experiments, then the sweeps of the
+    paper's own axis under combinations (with the paper's own file first when it was run)."""
+    study = analysis.explore_study(data)
+    doc.add("<!-- section:%s -->" % EXPLORE_STUDY, "## Learning without examples: which assumptions (sensitivity study)", "")
+    if not study:
+        doc.add("_Not run yet: `tools/b21r_experiments.py run report 'explore_*' --section %s`._" % EXPLORE_STUDY, "")
+        doc.prose("explore_study")
+        doc.add("<!-- /section:%s -->" % EXPLORE_STUDY, "")
+        return
+    names = sorted(study)
+    seeds = sorted({s for g in study.values() for r in g["rows"] for s in r["seeds"]})
+    cpu = sum(r["wall_s"] for g in study.values() for r in g["rows"])
+    doc.add("Made by: `tools/b21r_experiments.py run 'explore_*'` (%d experiment files `tools/experiments/explore_*.conf`, "
+            "seeds %d-%d each, %.0f runner seconds; each file's header says what it fixes and varies; "
+            "[`docs/experiments.md`](experiments.md) lists the keys)." % (len(names) + ("explore_product_learner" in data),
+                                                                          seeds[0], seeds[-1], cpu), "",
+            "Each row changes the paper's study as Fig. 6 and Table I read it (the first row of each group, "
+            "unless the group says otherwise) in one assumption. _reached_: runs that found the reward within the "
+            "time limit (one simulated week unless stated), pooled over seeds with the Clopper-Pearson 95 % "
+            "interval. _time_: time to the first reward of the runs that found it (robot time: driving plus "
+            "the cost of restarts), mean over the seeds of each seed's mean with the 95 % t interval. _median_: "
+            "over all runs, a run that never found it counting as never ('> limit' when half or more did "
+            "not). _attempts_: attempts per run (a collision or the attempt's step limit ends one). _× paper_: "
+            "time over the paper's (Fig. 6: the fastest, 2 h; Table I: its time at the same distance), with the "
+            "interval's ends.", "")
+    kinds = sorted({g["kind"] for g in study.values()},
+                   key=lambda k: (list(analysis.EXPLORE_KINDS).index(k) if k in analysis.EXPLORE_KINDS else 99, k))
+    for kind in kinds:
+        info = analysis.EXPLORE_KINDS.get(kind, {"task": kind, "single": "", "sweep": "", "paper_file": None,
+                                                 "paper_of_single": lambda r: None, "paper_of_sweep": lambda r: None})
+        single = analysis.study_groups(study, kind, False)
+        sweeps = analysis.study_groups(study, kind, True)
+        paper_file = info.get("paper_file")
+        if paper_file in data:
+            sweeps = [(paper_file, {"title": "the paper's study as we read it", "kind": kind, "axis": info["paper_axis"],
+                                    "rows": [analysis.explore_variant(v, rs) for v, rs in data[paper_file].items()]})
+                      ] + sweeps
+        if single:
+            doc.add("### %s, one assumption at a time%s" % (info["task"], info["single"]), "")
+            fig = "%s_sensitivity.png" % kind
+            doc.figure(os.path.join(rel, fig), fig[:-4], caps.get(fig, ""))
+            _rows_table(doc, single, info["paper_of_single"])
+        if sweeps:
+            doc.add("### %s under combinations of assumptions%s" % (info["task"], info["sweep"]), "")
+            fig = "%s_combinations.png" % kind
+            doc.figure(os.path.join(rel, fig), fig[:-4], caps.get(fig, ""))
+            for n, g in sweeps:
+                doc.add("- `%s`: %s." % (n, g["title"]))
+            doc.add("")
+            _rows_table(doc, sweeps, info["paper_of_sweep"])
+            if kind == "explore_corridor":
+                doc.claims([analysis.fastest_claim(n, g["rows"]) for n, g in sweeps])
+    product_section(doc, study, data, rel, caps)
+    doc.prose("explore_study")
+    doc.add("<!-- /section:%s -->" % EXPLORE_STUDY, "")
+
+
+def product_section(doc, study, data, rel, caps):
+    """What phase one saves a user of this product: random exploration under the product's own
+    assumptions against the Fig. 4 session's training, and the product's learner without examples."""
+    prod = study.get("explore_corridor_product")
+    learner = data.get("explore_product_learner")
+    if prod is None and learner is None:
+        return
+    doc.add("### What phase one saves a user of this product", "")
+    train = []
+    if "fig4_corridor_examples" in data:
+        fig4 = next(iter(data["fig4_corridor_examples"].values()))
+        train = [(results.learn_seed(r)["training_hours"], results.learn_seed(r)["phase_one_runs"] +
+                  results.learn_seed(r)["phase_two_runs"]) for r in fig4]
+    if prod is not None:
+        doc.add("Random exploration under the product's assumptions (`explore_corridor_product`: %s) against the Fig. 4 "
+                "session's training on the same terms (its training driving plus, per training run, the same "
+                "restart cost: on the robot an operator puts it back after every run). _saving_: random "
+                "exploration's time to the first reward minus the session's training (Welch 95 %% interval over "
+                "seeds); positive: the examples finish training before random exploration finds its first "
+                "reward." % (
+                    prod["title"]), "",
+                "| restart cost | reached | random exploration: first reward [h] | attempts | Fig. 4 session: "
+                "training [h] | saving [h] |", "|---|---|---|---|---|---|")
+        for r in prod["rows"]:
+            restart_h = float(r["settings"].get("restart_s", 0.0)) / 3600.0
+            if train:
+                sess = [h + n * restart_h for h, n in train]
+                w = stats.welch(r["seed_means"], sess, "two-sided")
+                sess_txt = fmt_ci(*stats.mean_ci(sess)[:2], 3)
+                save = "%s (%s)" % (fmt_ci(w["mean_diff"], w["ci"], 3), fmt_p(w["p"]))
+            else:
+                sess_txt = save = "Fig. 4 not run (`tools/b21r_experiments.py run fig4_corridor_examples`)"
+            doc.add("| %.0f s | %s | %s | %s | %s | %s |" % (restart_h * 3600.0, _reached(r), fmt_ci(*r["hours_all"][:2], 3),
+                                                        fmt_ci(*r["attempts"][:2], 0), sess_txt, save))
+        doc.add("")
+    if learner is not None:
+        rows = analysis.learner_without_examples(learner)
+        fig4_final = {}
+        if "fig4_corridor_examples" in data:
+            fig4_final = {s["seed"]: s["final"]["mean_all"] for s in
+                          (results.learn_seed(r) for r in next(iter(data["fig4_corridor_examples"].values())))}
+        doc.figure(os.path.join(rel, "explore_product_learner.png"), "explore_product_learner",
+                   caps.get("explore_product_learner.png", ""))
+        doc.add("The product's learner without examples (`explore_product_learner`: no phase one, no advisor, %s "
+                "training runs; evaluation blocks of 10 fixed poses every 5 runs, failures at the step limit %d):" % (
+                    " or ".join(str(r["runs"]) for r in rows), rows[0]["step_limit"]), "",
+                "| variant | sessions with a training run at the goal | first such run | driving until then [h] | "
+                "blocks with all 10 poses reached | final block: steps | final successes / 10 | training [h] | final "
+                "minus Fig. 4's (paired by seed) |", "|---|---|---|---|---|---|---|---|---|")
+        for r in rows:
+            common = sorted(set(r["final_by_seed"]) & set(fig4_final))
+            if common:
+                d = stats.paired([r["final_by_seed"][s] for s in common], [fig4_final[s] for s in common], "two-sided")
+                diff = fmt_paired(d)
+            else:
+                diff = "Fig. 4 not run"
+            doc.add("| %s | %d of %d | %s | %s | %s of %d | %s | %s | %s | %s |" % (
+                r["variant"] or "default", r["reached"], r["n"], fmt_ci(*r["first_run"][:2]),
+                fmt_ci(*r["first_hours"][:2], 3),
+                fmt_ci(*r["all10_blocks"][:2]), r["runs"] // 5, fmt_ci(*r["final_all"][:2]),
+                fmt_ci(*r["final_succ"][:2]), fmt_ci(*r["training_hours"][:2], 2), diff))
+        doc.add("")
 
 
 def write(out, fig_dir, path, configs_dir):
@@ -437,6 +610,8 @@ def write(out, fig_dir, path, configs_dir):
     else:
         doc.add("_Not run yet: `tools/b21r_experiments.py run table1_explore_goal`._", "")
     doc.prose("table1")
+
+    explore_study_section(doc, data, rel, caps)
 
     reference_section(doc, data, configs_dir, rel, caps)
 

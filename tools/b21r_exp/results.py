@@ -142,11 +142,16 @@ def learn_seed(r):
 
 
 def explore_seed(r):
+    """Per-seed summary of an exploration result: its runs' times (to the first reward, or the
+    limit when censored), successes, attempts, and the settings the runner recorded."""
     runs = r["explore"]["runs"]
     ok = [x["time_s"] for x in runs if x["success"]]
     return {"seed": r["seed"], "runs": len(runs), "successes": len(ok), "fraction": len(ok) / len(runs),
             "mean_hours_succ": (sum(ok) / len(ok) / 3600.0) if ok else math.nan,
             "times_h": [x["time_s"] / 3600.0 for x in runs], "success": [x["success"] for x in runs],
+            "episodes": [x["episodes"] for x in runs],
+            "driving_h": [x.get("driving_s", x["time_s"]) / 3600.0 for x in runs],
+            "settings": {k: v for k, v in r["explore"].items() if k not in ("runs", "wall_time_s")},
             "wall_s": r["explore"]["wall_time_s"], "limit_h": r["explore"]["time_limit_s"] / 3600.0}
 
 

@@ -49,14 +49,18 @@ def paired(a, b, alternative):
 
 
 def welch(a, b, alternative):
-    """Welch's t-test of independent samples a and b. Same fields as paired()."""
+    """Welch's t-test of independent samples a and b. Same fields as paired(); ci is the half-width
+    of the two-sided 95 % interval of the difference."""
     a = [x for x in a if x is not None and not math.isnan(x)]
     b = [x for x in b if x is not None and not math.isnan(x)]
-    out = {"n": (len(a), len(b)), "test": "Welch t-test (%s)" % alternative, "mean_diff": math.nan, "p": math.nan,
-           "significant": False}
+    out = {"n": (len(a), len(b)), "test": "Welch t-test (%s)" % alternative, "mean_diff": math.nan, "ci": math.nan,
+           "p": math.nan, "significant": False}
     if len(a) < 2 or len(b) < 2:
         return out
     out["mean_diff"] = float(np.mean(a) - np.mean(b))
+    # Half-width of the two-sided 95 % Welch interval of the difference, whatever the alternative.
+    ci = sps.ttest_ind(a, b, equal_var=False).confidence_interval(confidence_level=LEVEL)
+    out["ci"] = float(ci.high - ci.low) / 2.0
     p = float(sps.ttest_ind(a, b, equal_var=False, alternative=alternative).pvalue)
     out["p"] = p
     out["significant"] = p < ALPHA

@@ -16,6 +16,9 @@
 ///   random rotation in [-limit, limit] from the corridor's start until the first reward.
 /// - explore_goal: the paper's Table I study: the obstacle-free goal task, rotation ~ N(0, var),
 ///   from a start distance, pointing at the goal, up to a time limit (explore.c).
+///   Both take the explore_* keys of the sensitivity study: what is random and how, how long a
+///   draw is held, what a collision does and costs, the speeds, the goal's size, the starts, and
+///   the back-end (the kinematic model or the ODE emulator).
 ///
 /// One invocation = one (experiment, variant, seed) = one result file (JSON, written atomically:
 /// temporary file, fsync, rename), so a sweep can skip finished tasks and merge results.
@@ -60,12 +63,52 @@ typedef struct exp_settings {
   // Exploration studies (kinds explore_*).
   int32_t explore_runs;            ///< runs per seed
   double explore_time_limit_s;     ///< simulated time limit of one run (one week: 604800)
-  double explore_omega_max_radps;  ///< explore_corridor: rotation drawn uniformly in [-max, max]
-  double explore_omega_variance;   ///< explore_goal: rotation ~ N(0, variance) [rad^2/s^2]
+  double explore_omega_max_radps;  ///< a uniform random rotation is drawn in [-max, max] [rad/s]
+  double explore_omega_variance;   ///< a normal random rotation is N(0, variance) [rad^2/s^2]
   double explore_start_distance_m; ///< explore_goal: start distance from the goal [m]
   double explore_start_x_m;        ///< explore_corridor: start distance from the start wall [m]
   bool explore_accel_limits;       ///< use the B21r's acceleration limits (false: idealised model)
+  // The assumptions the sensitivity study varies (settings.c documents each key).
+  int32_t explore_model;           ///< exp_explore_model_t
+  int32_t explore_random;          ///< exp_explore_random_t: what is random
+  int32_t explore_rotation;        ///< exp_explore_rotation_t: a random rotation's distribution
+  double explore_omega_clip_radps; ///< |normal rotation| clip [rad/s], 0 = none
+  int32_t explore_translation;     ///< exp_explore_translation_t: a random translation's distribution
+  double explore_v_max_mps;        ///< uniform translation: [-max, max] [m/s]
+  double explore_v_variance;       ///< normal translation: N(0, variance) [m^2/s^2]
+  double explore_v_clip_mps;       ///< |normal translation| clip [m/s], 0 = none
+  double explore_hold_s;           ///< a random draw is held this long [s]; 0 = one control period
+  int32_t explore_collision;       ///< exp_explore_collision_t
+  double explore_restart_s;        ///< robot time charged per restart [s]
+  int32_t explore_attempt_steps;   ///< steps that end an attempt; -1 = the study's default, 0 = none
+  double explore_v_wall_mps;       ///< corridor speed policy at the wall [m/s]; < 0 = the task's
+  double explore_v_mps;            ///< corridor centre-line speed / goal task speed [m/s]; < 0 = the task's
+  double explore_goal_size_m;      ///< corridor goal distance / goal radius [m]; < 0 = the task's
+  int32_t explore_start;           ///< exp_explore_start_t
+  bool explore_arena_walls;        ///< explore_goal: the arena's walls are there
 } exp_settings_t;
+
+/// Back-end of the exploration studies.
+typedef enum exp_explore_model { EXP_MODEL_KINEMATIC = 0, EXP_MODEL_ODE = 1 } exp_explore_model_t;
+/// What is random: the rotation (the translation is the task's own), the translation (no
+/// rotation), or both.
+typedef enum exp_explore_random {
+  EXP_RANDOM_ROTATION = 0,
+  EXP_RANDOM_TRANSLATION = 1,
+  EXP_RANDOM_BOTH = 2
+} exp_explore_random_t;
+/// A random rotation's distribution (AUTO: uniform for explore_corridor, normal for explore_goal).
+typedef enum exp_explore_rotation { EXP_ROT_AUTO = 0, EXP_ROT_UNIFORM = 1, EXP_ROT_NORMAL = 2 } exp_explore_rotation_t;
+/// A random translation's distribution.
+typedef enum exp_explore_translation { EXP_TRANS_NORMAL = 0, EXP_TRANS_UNIFORM = 1 } exp_explore_translation_t;
+/// What a collision does.
+typedef enum exp_explore_collision { EXP_COLLISION_RESTART = 0, EXP_COLLISION_STAY = 1 } exp_explore_collision_t;
+/// Where attempts start.
+typedef enum exp_explore_start {
+  EXP_START_PAPER = 0,
+  EXP_START_ANY_HEADING = 1,
+  EXP_START_TRAINING = 2
+} exp_explore_start_t;
 
 /// Defaults of every experiment key. O(keys).
 void exp_settings_defaults(exp_settings_t* s);

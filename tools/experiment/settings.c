@@ -13,7 +13,7 @@
 #include <string.h>
 #include <unistd.h>
 
-typedef enum xkind { X_STRING, X_KIND, X_INT, X_DOUBLE, X_BOOL, X_REFS, X_VARY, X_REQUIRES } xkind_t;
+typedef enum xkind { X_STRING, X_CHOICE, X_INT, X_DOUBLE, X_BOOL, X_REFS, X_VARY, X_REQUIRES } xkind_t;
 
 typedef struct xkey {
   const char* name;
@@ -23,54 +23,121 @@ typedef struct xkey {
   double max;
   const char* def;
   const char* doc;
+  const char* const* choices;  ///< X_CHOICE: the values, NULL-terminated; the field holds the index
 } xkey_t;
+
+static const char* const k_kind_names[] = {"learn", "explore_corridor", "explore_goal", NULL};
+static const char* const k_model_names[] = {"kinematic", "ode", NULL};
+static const char* const k_random_names[] = {"rotation", "translation", "both", NULL};
+static const char* const k_rotation_names[] = {"auto", "uniform", "normal", NULL};
+static const char* const k_translation_names[] = {"normal", "uniform", NULL};
+static const char* const k_collision_names[] = {"restart", "stay", NULL};
+static const char* const k_start_names[] = {"paper", "any_heading", "training", NULL};
 
 #define XOFF(f) offsetof(exp_settings_t, f)
 
 // clang-format off
 static const xkey_t k_xkeys[] = {
   {"experiment.name", X_STRING, XOFF(name), 0, 0, "",
-   "identifier of the experiment (result folder); \"\" = the file's name without .conf"},
+   "identifier of the experiment (result folder); \"\" = the file's name without .conf", NULL},
   {"experiment.title", X_STRING, XOFF(title), 0, 0, "",
-   "one line describing the experiment, for figures and the report"},
-  {"experiment.kind", X_KIND, XOFF(kind), 0, 0, "learn",
+   "one line describing the experiment, for figures and the report", NULL},
+  {"experiment.kind", X_CHOICE, XOFF(kind), 0, 0, "learn",
    "learn: the controller's two-phase schedule in the ODE emulator (in-process); explore_corridor: "
    "random rotation until the first reward in the corridor (paper Fig. 6); explore_goal: the "
-   "obstacle-free goal task with Gaussian rotation (paper Table I); both on the kinematic model"},
+   "obstacle-free goal task with Gaussian rotation (paper Table I); both on the kinematic model unless "
+   "experiment.explore_model says otherwise", k_kind_names},
   {"experiment.seeds", X_INT, XOFF(seeds), 1, 1000, "10",
-   "seeds of a sweep (every reported result: at least 10)"},
+   "seeds of a sweep (every reported result: at least 10)", NULL},
   {"experiment.first_seed", X_INT, XOFF(first_seed), 1, 1000000, "1",
-   "first seed; the sweep runs first_seed .. first_seed + seeds - 1"},
+   "first seed; the sweep runs first_seed .. first_seed + seeds - 1", NULL},
   {"experiment.world", X_STRING, XOFF(world), 0, 0, "",
    "emulator world file, relative to this file's folder (\"\" = built from the task's specification, "
-   "corridor_length_m included)"},
+   "corridor_length_m included)", NULL},
   {"experiment.references", X_REFS, 0, 0, 0, "optimal,example",
    "reference controllers evaluated from the same evaluation poses with the same emulator seed "
    "(controller mode = evaluate, evaluate_policy = each of these; example@GAIN = the example policy at GAIN "
-   "1/s, evaluate_example_gain; \"\" = none)"},
+   "1/s, evaluate_example_gain; \"\" = none)", NULL},
   {"experiment.vary", X_VARY, 0, 0, 0, "",
    "one sweep axis, KEY=V1|V2|...: each value of a controller or experiment key is a variant with its "
-   "own result files (\"\" = no variants)"},
+   "own result files (\"\" = no variants)", NULL},
   {"experiment.requires", X_REQUIRES, 0, 0, 0, "",
    "comma-separated controller keys the experiment needs (e.g. a learner variant of a newer "
    "controller); when one is missing the runner refuses the experiment and the sweep skips it, saying "
-   "why. Put it before the lines that use those keys"},
+   "why. Put it before the lines that use those keys", NULL},
   {"experiment.explore_runs", X_INT, XOFF(explore_runs), 1, 100000, "20",
-   "explore_*: independent runs per seed"},
+   "explore_*: independent runs per seed", NULL},
   {"experiment.explore_time_limit_s", X_DOUBLE, XOFF(explore_time_limit_s), 1, 1e8, "604800",
-   "explore_*: simulated time limit of one run [s] (the paper: one week = 604800)"},
+   "explore_*: simulated time limit of one run [s] (the paper: one week = 604800)", NULL},
   {"experiment.explore_omega_max_radps", X_DOUBLE, XOFF(explore_omega_max_radps), 0.001, 10, "1",
-   "explore_corridor: rotation drawn uniformly from [-max, max] every step [rad/s]"},
+   "explore_*: bound of a uniform random rotation, drawn from [-max, max] [rad/s] (explore_corridor: the paper's "
+   "rotation limit, its Fig. 6 sweeps it)", NULL},
   {"experiment.explore_omega_variance", X_DOUBLE, XOFF(explore_omega_variance), 0, 10, "0.05",
-   "explore_goal: rotation drawn from N(0, variance) every step [rad^2/s^2] (the paper: 0.05)"},
+   "explore_*: variance of a normal random rotation N(0, variance) [rad^2/s^2] (explore_goal: the paper's 0.05)", NULL},
   {"experiment.explore_start_distance_m", X_DOUBLE, XOFF(explore_start_distance_m), 0.1, 100, "3",
-   "explore_goal: start distance from the goal, pointing straight at it [m]"},
+   "explore_goal: start distance from the goal, pointing straight at it [m]", NULL},
   {"experiment.explore_start_x_m", X_DOUBLE, XOFF(explore_start_x_m), 0.3, 100, "1",
    "explore_corridor: start on the centre line this far from the start wall [m]; heading uniform in "
-   "the half-circle towards the goal"},
+   "the half-circle towards the goal", NULL},
   {"experiment.explore_accel_limits", X_BOOL, XOFF(explore_accel_limits), 0, 0, "false",
    "explore_*: apply the B21r's acceleration limits (false: the paper's idealised model, commands take "
-   "effect at once)"},
+   "effect at once)", NULL},
+  // The assumptions of the exploration studies (docs/experiments.md, the sensitivity study).
+  {"experiment.explore_model", X_CHOICE, XOFF(explore_model), 0, 0, "kinematic",
+   "explore_*: kinematic (the idealised model, exact state, collision test of the world's geometry) or ode "
+   "(the emulated B21r of sim/env.h: the controller's command clamp with its acceleration limits, contacts, the "
+   "corridor's goal declared from the laser's features; hundreds of times slower: keep its horizons short). ode "
+   "supports explore_random = rotation and explore_collision = restart only", k_model_names},
+  {"experiment.explore_random", X_CHOICE, XOFF(explore_random), 0, 0, "rotation",
+   "explore_*: what is random: rotation (the paper's text: the rotation is random, the translation the "
+   "task's own: the corridor's speed policy, the goal task's constant speed), translation (the paper's goal "
+   "task writes its random variable as v_t, its symbol for the translation speed: a random translation, no "
+   "rotation) or both", k_random_names},
+  {"experiment.explore_rotation", X_CHOICE, XOFF(explore_rotation), 0, 0, "auto",
+   "explore_*: distribution of a random rotation: uniform in [-explore_omega_max_radps, "
+   "explore_omega_max_radps], or normal N(0, explore_omega_variance) clipped to explore_omega_clip_radps; "
+   "auto = the paper's: uniform for explore_corridor, normal for explore_goal", k_rotation_names},
+  {"experiment.explore_omega_clip_radps", X_DOUBLE, XOFF(explore_omega_clip_radps), 0, 10, "0",
+   "explore_*: a normal rotation is clipped to [-clip, clip] [rad/s]; 0 = not clipped (the paper)", NULL},
+  {"experiment.explore_translation", X_CHOICE, XOFF(explore_translation), 0, 0, "normal",
+   "explore_*: distribution of a random translation speed: normal N(0, explore_v_variance) clipped to "
+   "explore_v_clip_mps, or uniform in [-explore_v_max_mps, explore_v_max_mps]", k_translation_names},
+  {"experiment.explore_v_max_mps", X_DOUBLE, XOFF(explore_v_max_mps), 0.001, 10, "0.6",
+   "explore_*: bound of a uniform random translation speed [m/s]", NULL},
+  {"experiment.explore_v_variance", X_DOUBLE, XOFF(explore_v_variance), 0, 10, "0.05",
+   "explore_*: variance of a normal random translation speed [m^2/s^2] (the paper's 0.05)", NULL},
+  {"experiment.explore_v_clip_mps", X_DOUBLE, XOFF(explore_v_clip_mps), 0, 10, "0",
+   "explore_*: a normal translation speed is clipped to [-clip, clip] [m/s]; 0 = not clipped", NULL},
+  {"experiment.explore_hold_s", X_DOUBLE, XOFF(explore_hold_s), 0, 1000, "0",
+   "explore_*: each random draw is held this long [s] (rounded to control periods); 0 = one period, a new "
+   "draw every 0.1 s (the paper's reading of a 10 Hz learner)", NULL},
+  {"experiment.explore_collision", X_CHOICE, XOFF(explore_collision), 0, 0, "restart",
+   "explore_*: what a collision does: restart (the attempt ends, the robot is put back at a start pose after "
+   "explore_restart_s, the clock runs on) or stay (the robot stops against the wall, the move into it is "
+   "refused, and it must turn away by its own random actions)", k_collision_names},
+  {"experiment.explore_restart_s", X_DOUBLE, XOFF(explore_restart_s), 0, 1e6, "0",
+   "explore_*: robot time a restart costs [s] (an attempt ended by a collision or the step limit): 0 = the "
+   "simulation's instant reset; a stall until an operator puts the robot back costs the operator's time", NULL},
+  {"experiment.explore_attempt_steps", X_INT, XOFF(explore_attempt_steps), -1, 1e9, "-1",
+   "explore_*: steps after which an attempt ends without a collision and the robot is put back (a "
+   "restart); -1 = the task's step limit for explore_corridor (max_steps_per_run, default 1000), none for "
+   "explore_goal; 0 = none", NULL},
+  {"experiment.explore_v_wall_mps", X_DOUBLE, XOFF(explore_v_wall_mps), -1, 10, "-1",
+   "explore_corridor: the speed policy's speed where the robot touches a wall [m/s]; -1 = the task's (0.2)", NULL},
+  {"experiment.explore_v_mps", X_DOUBLE, XOFF(explore_v_mps), -1, 10, "-1",
+   "explore_*: the task's speed: the corridor's speed on the centre line, the goal task's constant speed "
+   "[m/s]; -1 = the task's (0.6, 0.3)", NULL},
+  {"experiment.explore_goal_size_m", X_DOUBLE, XOFF(explore_goal_size_m), -1, 100, "-1",
+   "explore_*: size of the rewarding region [m]: the corridor's goal distance from the end wall, the goal "
+   "task's goal radius; -1 = the task's (1.0, 0.3)", NULL},
+  {"experiment.explore_start", X_CHOICE, XOFF(explore_start), 0, 0, "paper",
+   "explore_*: where attempts start: paper (corridor: on the centre line at explore_start_x_m, heading "
+   "uniform in the half-circle towards the goal; goal task: explore_start_distance_m from the goal pointing "
+   "straight at it), any_heading (the same place, heading uniform in the full circle), training (the "
+   "task's training starts, as the controller's runs)", k_start_names},
+  {"experiment.explore_arena_walls", X_BOOL, XOFF(explore_arena_walls), 0, 0, "false",
+   "explore_goal: the obstacle task's arena walls are there (a collision with them is handled by "
+   "explore_collision); false = the paper's open plane (no obstacles, no walls)", NULL},
 };
 // clang-format on
 
@@ -84,8 +151,6 @@ static const xkey_t* find_xkey(const char* name) {
   }
   return NULL;
 }
-
-static const char* const k_kind_names[] = {"learn", "explore_corridor", "explore_goal"};
 
 static bool parse_num(const char* v, double* out) {
   char* end = NULL;
@@ -252,9 +317,13 @@ static void describe(const xkey_t* k, char* out, size_t cap) {
     case X_STRING:
       snprintf(out, cap, "text of at most %u characters", EXP_STR_MAX - 1U);
       break;
-    case X_KIND:
-      snprintf(out, cap, "one of learn, explore_corridor, explore_goal");
+    case X_CHOICE: {
+      int n = snprintf(out, cap, "one of");
+      for (int32_t i = 0; k->choices[i] != NULL && n >= 0 && (size_t)n < cap; ++i) {
+        n += snprintf(out + n, cap - (size_t)n, "%s %s", i == 0 ? "" : ",", k->choices[i]);
+      }
       break;
+    }
     case X_INT:
       snprintf(out, cap, "an integer in [%.0f, %.0f]", k->min, k->max);
       break;
@@ -288,9 +357,9 @@ static int set_xkey(exp_settings_t* s, fw_config_t* cfg, const xkey_t* k, const 
         ok = true;
       }
       break;
-    case X_KIND:
-      for (int32_t i = 0; i < 3; ++i) {
-        if (strcmp(value, k_kind_names[i]) == 0) {
+    case X_CHOICE:
+      for (int32_t i = 0; k->choices[i] != NULL; ++i) {
+        if (strcmp(value, k->choices[i]) == 0) {
           memcpy(field, &i, sizeof i);
           ok = true;
         }
@@ -435,6 +504,13 @@ int exp_validate(const exp_settings_t* s, const fw_config_t* cfg, char* err, siz
   }
   if (s->kind == EXP_EXPLORE_GOAL && strcmp(fw_task_name(cfg->task), "obstacles") != 0) {
     fw_errfmt(err, err_cap, "experiment.kind = explore_goal needs task = obstacles (the goal task, without obstacles)");
+    return -1;
+  }
+  if (s->kind != EXP_LEARN && s->explore_model == EXP_MODEL_ODE &&
+      (s->explore_collision != EXP_COLLISION_RESTART || s->explore_random != EXP_RANDOM_ROTATION)) {
+    fw_errfmt(err, err_cap,
+        "experiment.explore_model = ode supports explore_collision = restart and explore_random = rotation only "
+        "(the emulator's runs end at a contact and drive at the task's speed); use explore_model = kinematic");
     return -1;
   }
   return 0;

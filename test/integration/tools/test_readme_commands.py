@@ -15,9 +15,10 @@ repository's top folder, as an operator would type it after tools/setup.sh and a
   the key in the plain environment's home, for a controller session this test announces: the
   command must arrive with a valid mac), creating and identifying an operator key, reading a log,
   drawing its trajectories, offline training from it, converting it to MCAP, drawing what the
-  trained checkpoint learned; the installed programs of docs/robot.md as their sources in this
-  checkout (b21r-teleop: tools/b21r_teleop.py, ...), the controller on the package's
-  /etc/b21r/b21r-controller.conf as this build makes it.
+  trained checkpoint learned; one seed of an exploration experiment (docs/experiments.md); the
+  installed programs of docs/robot.md as their sources in this checkout (b21r-teleop:
+  tools/b21r_teleop.py, ...), the controller on the package's /etc/b21r/b21r-controller.conf as
+  this build makes it.
 - The lcm-spy command is started for real under Xvfb (with PROBE_JAR, the accessibility probe
   of the lcm-spy tests): it must open its window and show a B21R_STATUS message sent to the URL
   the command names, decoded.
@@ -66,6 +67,11 @@ REAL = [
     ("b21r-controller --config /etc/b21r/b21r-controller.conf --print-config",
      {"b21r-controller --config": "{build}/bin/b21r-controller --config",
       "/etc/b21r/b21r-controller.conf": "{build}/package/b21r-controller.conf"}),
+    # docs/experiments.md: one seed of one variant of the sensitivity study, shortened.
+    ("build/host-release/bin/b21r-experiment --config tools/experiments/explore_goal_random.conf --seed 1 "
+     "--variant experiment.explore_random=both --set experiment.explore_runs=2 "
+     "--set experiment.explore_time_limit_s=3600 --out /tmp/explore.json",
+     {"build/host-release": "{build}", "/tmp/explore.json": "{tmp}/explore.json"}),
 ]
 SPY_COMMAND = "LCM_DEFAULT_URL='udpm://239.255.76.67:7667?ttl=0' build/host-release/bin/b21r-lcm-spy"
 PRESET_KINDS = {"cmake": "configurePresets", "cmake --build": "buildPresets", "cmake --workflow": "workflowPresets",
