@@ -267,7 +267,7 @@ hedger_config_t hedger_config_default(void) HEDGER_NOEXCEPT {
   c.ivh_mode = static_cast<uint32_t>(HEDGER_IVH_UNWEIGHTED);
   c.merge_radius = 0.02;
   c.evict_candidates = 8;
-  c.fresh_capacity = 512;
+  c.fresh_capacity = 4096;
   c.rebuild_work_per_update = 0;
   c.run_capacity = 0;
   c.replay = 0;
@@ -306,7 +306,6 @@ hedger_status_t hedger_init(hedger_t** out, void* storage, size_t storage_size, 
   h->r2max = h->h2 * std::log(1.0 / cfg->weight_epsilon);
   h->merge_r2 = cfg->merge_radius * cfg->merge_radius;
   h->fresh_cap = cfg->fresh_capacity;
-  h->fresh_start = cfg->fresh_capacity / 4;
   if (cfg->rebuild_work_per_update > 0) {
     h->rebuild_budget = cfg->rebuild_work_per_update;
   } else {
@@ -341,6 +340,7 @@ hedger_status_t hedger_init(hedger_t** out, void* storage, size_t storage_size, 
   h->rng = cfg->seed ^ 0x9E3779B97F4A7C15ull;
   if (h->rng == 0) h->rng = 0x9E3779B97F4A7C15ull;
   reset_learned_state(h);
+  h->fresh_start = hg::fresh_trigger(*h);
   refresh_gauges(h);
   h->magic = hg::kMagic;
   *out = h;

@@ -125,7 +125,7 @@ KnnResult bench_knn(const hedger_t* h, uint32_t n_queries, int reps) {
     for (uint32_t b0 = 0; b0 + kBlock <= n_queries; b0 += kBlock) {
       auto t0 = Clock::now();
       for (uint32_t i = b0; i < b0 + kBlock; ++i) {
-        hg::Neighbour a[kK];
+        hg::Neighbour a[kK] = {};
         hg::KnnSet s(a, kK, INFINITY);
         hg::kd_query<D>(tree, &q[i * D], s, [](uint32_t) { return true; });
         sum += a[0].d2;
@@ -141,7 +141,7 @@ KnnResult bench_knn(const hedger_t* h, uint32_t n_queries, int reps) {
       best.nano_ns = std::min(best.nano_ns, ns_since(t0) / kBlock);
       t0 = Clock::now();
       for (uint32_t i = b0; i < b0 + kBlock; ++i) {
-        hg::Neighbour a[kK];
+        hg::Neighbour a[kK] = {};
         hg::KnnSet s(a, kK, INFINITY);
         hg::query_store<D>(*h, &q[i * D], s);
         sum += a[0].d2;
@@ -151,7 +151,7 @@ KnnResult bench_knn(const hedger_t* h, uint32_t n_queries, int reps) {
     const uint32_t nb = 50;  // brute force is slow: one small block per round
     const auto t0 = Clock::now();
     for (uint32_t i = 0; i < nb; ++i) {
-      hg::Neighbour a[kK];
+      hg::Neighbour a[kK] = {};
       hg::KnnSet s(a, kK, INFINITY);
       hg::brute_query<D>(cloud.pts.data(), n, &q[i * D], s);
       sum += a[0].d2;

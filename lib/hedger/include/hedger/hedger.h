@@ -112,6 +112,9 @@
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are
 ///   ordered by (distance, slot), so results never depend on the tree's shape or the timing.
+///   A search for the k nearest is bounded from the start by the previous search of its kind
+///   (its k neighbours, re-measured from the new query: the k nearest lie within the farthest of
+///   them), so it visits far fewer nodes and finds the same points.
 /// - Replay cache (cfg.replay_cache): the backward replay's later passes reuse each record's
 ///   geometry (see hedger_end_run()).
 ///
@@ -291,13 +294,19 @@ typedef struct hedger_config {
                          ///< merged into it instead of stored, >= 0. Default 0.02.
   uint32_t evict_candidates; ///< candidates examined per eviction, 1..HEDGER_MAX_EVICT_CANDIDATES. Default 8.
   uint32_t fresh_capacity;   ///< fresh-point buffer (points not yet in the kd-tree, scanned linearly),
-                             ///< 8..HEDGER_MAX_FRESH. Larger = smaller rebuild slices but longer
-                             ///< scans. Measured tick p50 at 20k / 50k points: 128 → 213 / 449 us,
-                             ///< 256 → 137 / 270, 512 → 107 / 186, 1024 → 100 / 147 (but 1k points:
-                             ///< 44 → 52 us). Default 512.
+                             ///< 8..HEDGER_MAX_FRESH. A rebuild of the tree starts when about
+                             ///< sqrt(its work units) points wait there (280 at 1k stored points,
+                             ///< 1,700 at 20k, 4,200 at 100k: rebuilding less often as it costs
+                             ///< more, against the longer scan of every query), kept within
+                             ///< [fresh_capacity/16, fresh_capacity/2]. Larger = rarer rebuilds and
+                             ///< smaller rebuild slices, longer scans. Measured (callgrind, b21r-train
+                             ///< on a corridor session, 9k points at its end): 512 with rebuilds at
+                             ///< 128 points spent 566 M instructions rebuilding, 4096 with the
+                             ///< trigger 156 M, and its longer scans about 240 M more. Default 4096.
   uint32_t rebuild_work_per_update; ///< kd-tree rebuild work units per update (1 unit ≈ one point
-                             ///< visited in one pass); 0 = automatic (a rebuild of a full store
-                             ///< finishes within fresh_capacity/2 updates). Default 0.
+                             ///< visited in one pass, about 50 instructions); 0 = automatic (a
+                             ///< rebuild of a full store finishes within fresh_capacity/2 updates,
+                             ///< before the fresh buffer can fill). Default 0.
   uint32_t run_capacity; ///< run buffer length (experiences) for backward replay, 0..HEDGER_MAX_RUN.
                          ///< 0 disables the buffer. Default 0.
   uint32_t replay;       ///< 1: hedger_end_run() replays the recorded run backwards (newest first)
