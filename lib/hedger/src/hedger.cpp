@@ -90,6 +90,7 @@ Layout make_layout(const hedger_config_t& c) {
   l.fresh_pos = take(cap * sizeof(uint32_t));
   l.fresh_slot = take(static_cast<size_t>(c.fresh_capacity) * sizeof(uint32_t));
   l.fresh_pts = take(static_cast<size_t>(c.fresh_capacity) * d * sizeof(double));
+  l.fresh_box = take((c.fresh_capacity + hg::kFreshBlock - 1) / hg::kFreshBlock * 2u * d * sizeof(double));
   for (int t = 0; t < 2; ++t) {
     l.tpts[t] = take(cap * d * sizeof(double));
     l.tids[t] = take(cap * sizeof(uint32_t));
@@ -325,6 +326,7 @@ hedger_status_t hedger_init(hedger_t** out, void* storage, size_t storage_size, 
   std::memset(h->fresh_pos, 0xFF, static_cast<size_t>(cfg->capacity) * sizeof(uint32_t));  // kNone
   h->fresh_slot = reinterpret_cast<uint32_t*>(base + l.fresh_slot);
   h->fresh_pts = reinterpret_cast<double*>(base + l.fresh_pts);
+  h->fresh_box = reinterpret_cast<double*>(base + l.fresh_box);
   for (int t = 0; t < 2; ++t) {
     hg::kd_bind(h->tree[t], reinterpret_cast<double*>(base + l.tpts[t]), reinterpret_cast<uint32_t*>(base + l.tids[t]),
                     reinterpret_cast<hg::Node*>(base + l.tnodes[t]), cfg->capacity);

@@ -294,15 +294,16 @@ typedef struct hedger_config {
                          ///< merged into it instead of stored, >= 0. Default 0.02.
   uint32_t evict_candidates; ///< candidates examined per eviction, 1..HEDGER_MAX_EVICT_CANDIDATES. Default 8.
   uint32_t fresh_capacity;   ///< fresh-point buffer (points not yet in the kd-tree, scanned linearly),
-                             ///< 8..HEDGER_MAX_FRESH. A rebuild of the tree starts when about
-                             ///< sqrt(its work units) points wait there (280 at 1k stored points,
-                             ///< 1,700 at 20k, 4,200 at 100k: rebuilding less often as it costs
-                             ///< more, against the longer scan of every query), kept within
-                             ///< [fresh_capacity/16, fresh_capacity/2]. Larger = rarer rebuilds and
-                             ///< smaller rebuild slices, longer scans. Measured (callgrind, b21r-train
-                             ///< on a corridor session, 9k points at its end): 512 with rebuilds at
-                             ///< 128 points spent 566 M instructions rebuilding, 4096 with the
-                             ///< trigger 156 M, and its longer scans about 240 M more. Default 4096.
+                             ///< 8..HEDGER_MAX_FRESH. A rebuild of the tree starts when about twice
+                             ///< the square root of its work units wait there (350 at 1k stored
+                             ///< points, 2,000 at 20k: rebuilding less often as it costs more,
+                             ///< against the longer scan of every query), kept within
+                             ///< [fresh_capacity/16, fresh_capacity/2]. Queries skip blocks of 32
+                             ///< fresh points whose bounding box lies beyond their bound. Larger =
+                             ///< rarer rebuilds and smaller rebuild slices, longer scans. Measured
+                             ///< (callgrind, b21r-train on a corridor session, 9k points at its
+                             ///< end): 512 with rebuilds at 128 points spent 566 M instructions
+                             ///< rebuilding, 4096 with the trigger 85 M. Default 4096.
   uint32_t rebuild_work_per_update; ///< kd-tree rebuild work units per update (1 unit ≈ one point
                              ///< visited in one pass, about 50 instructions); 0 = automatic (a
                              ///< rebuild of a full store finishes within fresh_capacity/2 updates,
