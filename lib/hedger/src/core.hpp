@@ -1438,8 +1438,14 @@ inline uint32_t replay_begin(hedger& h) noexcept {
 /// costs about a fifteenth of one that forms both; counted as an eighth (2 units of 16), so that
 /// a slice never costs more than the same number of updates without the cache did, and without
 /// it every update counts whole.
+/// In a full store every replayed update's store step evicts or merges, and an eviction searches
+/// the neighbourhoods of evict_candidates points whether or not the geometry is reused: measured
+/// (callgrind, hedger.update_instructions: the firmware's corridor learner, 20k and 100k points,
+/// store full) a reused update then costs about a quarter of one that forms its geometry, so it
+/// counts kReplayUnitsFull more.
 constexpr uint64_t kReplayUnitsPerUpdate = 16;
 constexpr uint64_t kReplayUnitsSaved = 7;
+constexpr uint64_t kReplayUnitsFull = 4;
 
 /// Advances the pending replay by updates worth at most max_updates full updates (see
 /// kReplayUnitsPerUpdate; at least one update when max_updates >= 1); returns the updates done.
@@ -1471,7 +1477,9 @@ uint32_t replay_step(hedger& h, uint32_t max_updates) noexcept {
     const bool search = !terminal && (h.replay_k == 0 || lambda < 1.0);
     const bool reuse_greedy = search && rc != nullptr && rc->greedy.gen == h.geom_gen;
     const bool reuse_fit = rc != nullptr && rc->fit.gen == h.geom_gen;
-    const uint64_t cost = kReplayUnitsPerUpdate - kReplayUnitsSaved * ((reuse_greedy ? 1u : 0u) + (reuse_fit ? 1u : 0u));
+    const uint32_t reuses = (reuse_greedy ? 1u : 0u) + (reuse_fit ? 1u : 0u);
+    const uint64_t cost = kReplayUnitsPerUpdate - kReplayUnitsSaved * reuses +
+                          (reuses > 0 && h.fill >= h.cfg.capacity ? kReplayUnitsFull : 0u);
     if (spent + cost > budget) break;
     spent += cost;
     hedger_update_info_t info;

@@ -49,6 +49,8 @@ uint64_t instr_end(void) {
     }
   }
   fclose(f);
-  remove(path);
+  if (getenv("B21R_CALLGRIND_KEEP") == NULL) {
+    remove(path);
+  }
   return ir;
 }

@@ -36,7 +36,8 @@ void instr_start(void);
 void instr_begin(void);
 
 /// Instructions executed since instr_begin(), or 0 when inactive. Writes, reads and deletes one
-/// dump file (about a millisecond under callgrind); its own instructions are not in the count.
+/// dump file (about a millisecond under callgrind; kept when B21R_CALLGRIND_KEEP is set, for
+/// callgrind_annotate's per-function profile); its own instructions are not in the count.
 /// Returns UINT64_MAX if the dump cannot be read (a misconfigured run: the caller fails).
 uint64_t instr_end(void);
 

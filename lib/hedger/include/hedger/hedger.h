@@ -517,9 +517,11 @@ hedger_status_t hedger_end_run(hedger_t* self, uint32_t* replayed) HEDGER_NOEXCE
 /// hedger_end_run_step() call performs updates worth at most max_updates full updates (at least
 /// one when max_updates >= 1) and returns how many updates remain in *remaining (may be NULL).
 /// An update whose searches reuse their record's geometry (cfg.replay_cache) counts an eighth of
-/// one that forms it (measured: about a fifteenth of its instructions), so a step never costs
+/// one that forms it (measured: about a fifteenth of its instructions), and three eighths in a
+/// full store, where its store step evicts (measured: about a quarter), so a step never costs
 /// more than max_updates updates without the cache, and the passes after the first go about
-/// eight times faster. The results are bit-identical to hedger_end_run(), however the work is
+/// eight times faster (in a full store, where every eviction moves a point, most updates form
+/// their geometry again). The results are bit-identical to hedger_end_run(), however the work is
 /// sliced. Until the replay is finished the run buffer records nothing new; a hedger_update()
 /// meanwhile first finishes the replay (unbounded), so state is never torn.
 /// Cost of a step: at most max_updates full updates. O(1) for begin.
