@@ -48,6 +48,9 @@ if(B21R_BUILD_BENCHMARKS)
     add_library(b21r::nanoflann INTERFACE IMPORTED)
     set_target_properties(b21r::nanoflann PROPERTIES INTERFACE_INCLUDE_DIRECTORIES "${NANOFLANN_INCLUDE_DIR}")
   endif()
+  # valgrind's callgrind counts the instructions of the benchmarks' budgets (test/bench/support).
+  find_program(VALGRIND_EXECUTABLE valgrind REQUIRED)
+  find_path(VALGRIND_INCLUDE_DIR valgrind/callgrind.h REQUIRED)
 endif()
 
 find_package(Threads REQUIRED)

@@ -69,3 +69,30 @@ function(b21r_add_benchmark name)
   add_test(NAME ${name} COMMAND ${ARG_TARGET} ${ARG_ARGS})
   set_tests_properties(${name} PROPERTIES LABELS "bench" TIMEOUT ${ARG_TIMEOUT} RUN_SERIAL TRUE)
 endfunction()
+
+# b21r_add_instruction_budget(<module>.<area> TARGET <exe> [ARGS ...] [WITHIN <function>
+#                             [EXCLUDE <function>...]] [TIMEOUT <s>])
+#   Runs a benchmark under valgrind's callgrind (labels "bench" and "instructions"), which counts
+#   instructions: the benchmark checks its budgets in instructions (test/bench/support/instr.h),
+#   and a count does not change with the machine's load. Instrumentation starts where the
+#   benchmark calls instr_start() (set-up before it runs uncounted, several times faster).
+#   WITHIN counts only inside calls of that function, EXCLUDE leaves out calls of functions
+#   inside it (a test double's work, say); both must not be inlined (callgrind's
+#   --toggle-collect flips counting on at a call's entry and off at its exit).
+function(b21r_add_instruction_budget name)
+  cmake_parse_arguments(ARG "" "TARGET;TIMEOUT;WITHIN" "ARGS;EXCLUDE" ${ARGN})
+  if(NOT ARG_TIMEOUT)
+    set(ARG_TIMEOUT 1800)
+  endif()
+  set(out "${CMAKE_CURRENT_BINARY_DIR}/${name}.callgrind")
+  set(toggles)
+  if(ARG_WITHIN)
+    foreach(fn IN LISTS ARG_WITHIN ARG_EXCLUDE)
+      list(APPEND toggles "--toggle-collect=${fn}")
+    endforeach()
+  endif()
+  add_test(NAME ${name} COMMAND ${VALGRIND_EXECUTABLE} --tool=callgrind --instr-atstart=no --dump-instr=no
+    --dump-line=no --callgrind-out-file=${out} ${toggles} $<TARGET_FILE:${ARG_TARGET}> ${ARG_ARGS})
+  set_tests_properties(${name} PROPERTIES LABELS "bench;instructions" TIMEOUT ${ARG_TIMEOUT} RUN_SERIAL TRUE
+    ENVIRONMENT "B21R_CALLGRIND_OUT=${out}")
+endfunction()

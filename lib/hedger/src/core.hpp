@@ -39,6 +39,10 @@
 namespace hg {
 
 constexpr uint32_t kMagic = 0x48444752u;  // "HDGR": a live instance
+/// Entries of the fresh buffer per block with a bounding box (query_store() skips a block whose
+/// box lies beyond the search's bound). Entries arrive in time order, so a block holds a piece
+/// of a trajectory and its box is tight.
+constexpr uint32_t kFreshBlock = 32;
 /// Smallest ratio min|d_i| / max|d_i| of the pivots of the (pivoted) LDLT factorisation accepted
 /// for the IVH and the LWR normal equations; below it (or with a non-positive pivot) the
 /// neighbourhood is treated as singular (LWA). For these small SPD matrices the pivot ratio is a
@@ -141,7 +145,7 @@ bool spans_inputs(const Eigen::Matrix<double, D + 1, 1>* rows, uint32_t n) noexc
 /// Offsets of every array in the storage block (bytes from its start).
 struct Layout {
   size_t total;
-  size_t pts, val, seq, flags, run_tag, anchor_w, fresh_pos, fresh_slot, fresh_pts, run;
+  size_t pts, val, seq, flags, run_tag, anchor_w, fresh_pos, fresh_slot, fresh_pts, fresh_box, run, replay_cache;
   size_t tpts[2], tids[2], tnodes[2];
   uint32_t max_nodes;
   uint32_t run_stride;  ///< doubles per run record: s, a, r, s', terminal
@@ -156,13 +160,16 @@ struct hedger {
   uint32_t owned;  ///< storage allocated by hedger_create()
   uint32_t replay_pending;  ///< a finished run's replay is under way (replay_step)
   uint64_t generation;      ///< counts calls that may change the learned state (sliced saves check it)
+  /// Changes whenever a stored point's coordinates, anchor weight or recency may have changed, and
+  /// at every replay's start: a replay record's cached geometry is valid while equal to its own.
+  uint64_t geom_gen;
   hedger_config_t cfg;
   // Derived constants.
   double h2;        ///< bandwidth²
   double r2max;     ///< squared radius where the kernel weight drops below weight_epsilon
   double merge_r2;  ///< merge_radius²
   uint64_t rebuild_budget;
-  uint32_t fresh_start;  ///< fresh entries that start a rebuild
+  uint32_t fresh_start;  ///< fresh entries that start a rebuild (fresh_trigger())
   // Store.
   uint32_t cap;
   uint32_t fill;
@@ -180,6 +187,7 @@ struct hedger {
   uint32_t* fresh_pos;   ///< [cap] entry of each slot, or kNone
   uint32_t* fresh_slot;  ///< [fresh_cap]
   double* fresh_pts;     ///< [fresh_cap × D]
+  double* fresh_box;     ///< [blocks of kFreshBlock entries × 2 D]: each block's bounding box (lo, hi)
   uint32_t n_fresh;
   uint32_t fresh_cap;
   // Trees.
@@ -196,6 +204,13 @@ struct hedger {
   uint32_t replay_pass;        ///< pass of the pending replay
   uint32_t replay_k;           ///< records of this pass done (from the newest)
   double replay_next_return;   ///< λ-return target of the record after the current one
+  void* replay_cache;          ///< [run_cap] ReplayRecord<D> (cfg.replay_cache), or null
+  // Seeds of the next k-NN searches (query_store): the neighbours of the last prediction and of
+  // the last state model's query. Any stored slots will do; these are close to the next query.
+  uint32_t seed_fit[HEDGER_MAX_K];
+  uint32_t seed_state[HEDGER_MAX_K];
+  uint32_t n_seed_fit;
+  uint32_t n_seed_state;
   // Eviction generator (xorshift64*) and rewards seen.
   uint64_t rng;
   double r_min;
@@ -239,10 +254,26 @@ void scale_input(const hedger& h, const double* state, double action, double* x)
 /// the first DQ coordinates (DQ = D: (state, action); DQ = D - 1: the state alone).
 template <int D, int DQ = D, class Set>
 void query_store(const hedger& h, const double* x, Set& rs) noexcept {
-  const double* fp = h.fresh_pts;
-  for (uint32_t i = 0; i < h.n_fresh; ++i, fp += D) {
-    const double d = dist2<DQ>(x, fp);
-    if (d <= rs.worst()) rs.add(d, h.fresh_slot[i]);
+  // The fresh buffer block by block. A block is skipped when the distance to its box exceeds the
+  // bound: every entry's distance is at least that (each term is rounded monotonically and the
+  // terms are summed in the same order as dist2), so no entry of it could be added. The margin of
+  // 1e-9 keeps that true where the compiler fuses one sum's multiply-adds and not the other's.
+  for (uint32_t b0 = 0; b0 < h.n_fresh; b0 += kFreshBlock) {
+    const double* box = h.fresh_box + static_cast<size_t>(b0 / kFreshBlock) * 2u * static_cast<size_t>(D);
+    double lb = 0.0;
+    for (int j = 0; j < DQ; ++j) {
+      double g = 0.0;
+      if (x[j] < box[j]) g = box[j] - x[j];
+      if (x[j] > box[D + j]) g = x[j] - box[D + j];
+      lb += g * g;
+    }
+    if (lb > rs.worst() * (1.0 + 1e-9)) continue;
+    const uint32_t end = b0 + kFreshBlock < h.n_fresh ? b0 + kFreshBlock : h.n_fresh;
+    const double* fp = h.fresh_pts + static_cast<size_t>(b0) * static_cast<size_t>(D);
+    for (uint32_t i = b0; i < end; ++i, fp += D) {
+      const double d = dist2<DQ>(x, fp);
+      if (d <= rs.worst()) rs.add(d, h.fresh_slot[i]);
+    }
   }
   const uint64_t* seq = h.seq;
   const KdTree& t = h.tree[h.active];
@@ -250,111 +281,194 @@ void query_store(const hedger& h, const double* x, Set& rs) noexcept {
   kd_query<D, DQ>(t, x, rs, [seq, snap](uint32_t id) { return seq[id] <= snap; });
 }
 
-/// Step 1 of a prediction: up to k_max nearest points with kernel weight >= weight_epsilon.
-template <int D>
-void find_neighbours(const hedger& h, const double* x, Neigh& out) noexcept {
-  KnnSet rs(out.nb, h.cfg.k_max, h.r2max);
-  query_store<D>(h, x, rs);
-  out.n = rs.size();
-  for (uint32_t i = 0; i < out.n; ++i) out.w[i] = std::exp(-out.nb[i].d2 / h.h2);
+/// The radius of a search for the k nearest points within r2max (squared, DQ coordinates),
+/// tightened by seeds: store slots near the query, typically the neighbours of a nearby earlier
+/// query. When k of them lie within r2max, the k nearest of all lie within the farthest of those
+/// k, and a search bounded by it visits far fewer nodes and finds the same points. O(n_seeds D).
+template <int D, int DQ>
+double seeded_r2(const hedger& h, const double* x, double r2max, uint32_t k, const uint32_t* seeds,
+                 uint32_t n_seeds) noexcept {
+  if (n_seeds < k) return r2max;
+  uint32_t inside = 0;
+  double far = 0.0;
+  for (uint32_t i = 0; i < n_seeds; ++i) {
+    const uint32_t s = seeds[i];
+    if (s >= h.fill) continue;
+    const double d = dist2<DQ>(x, h.pts + static_cast<size_t>(s) * static_cast<size_t>(D));
+    if (d > r2max) continue;
+    ++inside;
+    far = d > far ? d : far;
+  }
+  // Seed lists hold at most k slots, so with k inside, `far` is the k-th of them.
+  return inside >= k && n_seeds == k ? far : r2max;
 }
 
-/// Steps 2–7 of a prediction on a known neighbourhood (x scaled). Counts it.
+/// Step 1 of a prediction: up to k_max nearest points with kernel weight >= weight_epsilon.
+/// The search is bounded by the previous prediction's neighbours (seeded_r2(), hedger::seed_fit),
+/// which it replaces.
 template <int D>
-void predict_from(hedger& h, const double* x, const Neigh& nb, hedger_prediction_t& p) noexcept {
+void find_neighbours(hedger& h, const double* x, Neigh& out) noexcept {
+  const uint32_t k = h.cfg.k_max;
+  KnnSet rs(out.nb, k, seeded_r2<D, D>(h, x, h.r2max, k, h.seed_fit, h.n_seed_fit));
+  query_store<D>(h, x, rs);
+  out.n = rs.size();
+  for (uint32_t i = 0; i < out.n; ++i) {
+    out.w[i] = std::exp(-out.nb[i].d2 / h.h2);
+    h.seed_fit[i] = out.nb[i].id;
+  }
+  h.n_seed_fit = out.n;
+}
+
+/// The parts of a prediction's local model (hedger.md steps 4 and 5) that depend only on the
+/// neighbours' coordinates and kernel weights: the rank and hull tests, the factorisation of the
+/// ridge normal equations and the weights of the standard error. A prediction is fit_geometry()
+/// then fit_value(); the backward replay keeps one per replayed record and, while no stored
+/// point has moved (hedger::geom_gen), repeats only fit_value() (ReplayRecord).
+template <int D>
+struct FitGeom {
+  using Vec = Eigen::Matrix<double, D + 1, 1>;
+  enum Status : uint8_t { kUnknown, kAverage, kHull, kSingular, kRegression };
+  Status status;
+  double sw;       ///< Σ w_i
+  double var_sum;  ///< Σ (w_i r_i·c)², kRegression
+  Vec c;           ///< A⁻¹ e (the intercept's row of A⁻¹), kRegression
+  SymFactor ldlt;  ///< A = XᵀWX + λ diag(1…1, 0), kRegression
+};
+
+/// Row r_i = [x_i − x, 1] of neighbour slot s: centred at the query, so the prediction is the
+/// intercept and the query's row is e = [0, …, 0, 1] (leverages are invariant under this affine
+/// change).
+template <int D>
+void fit_row(const hedger& h, const double* x, uint32_t s, Eigen::Matrix<double, D + 1, 1>& r) noexcept {
+  const double* xi = h.pts + static_cast<size_t>(s) * static_cast<size_t>(D);
+  for (int j = 0; j < D; ++j) r[j] = xi[j] - x[j];
+  r[D] = 1.0;
+}
+
+/// The geometry stage of a prediction at x (scaled) from n neighbours (slots ids, kernel weights
+/// w). O(n D² + D³), no allocation.
+template <int D>
+void fit_geometry(const hedger& h, const double* x, const uint32_t* ids, const double* w, uint32_t n,
+                  FitGeom<D>& g) noexcept {
   using Vec = Eigen::Matrix<double, D + 1, 1>;
   using Mat = Eigen::Matrix<double, D + 1, D + 1>;
-  p.n_neighbours = nb.n;
+  if (n == 0 || n < h.cfg.k_min) {
+    g.status = FitGeom<D>::kUnknown;
+    return;
+  }
+  Vec rows[HEDGER_MAX_K];
+  Mat xtwx = Mat::Zero();
+  Mat xtx = Mat::Zero();
+  double sw = 0.0;
+  const bool unweighted_ivh = (h.cfg.ivh_mode == static_cast<uint32_t>(HEDGER_IVH_UNWEIGHTED));
+  for (uint32_t i = 0; i < n; ++i) {
+    Vec& r = rows[i];
+    fit_row<D>(h, x, ids[i], r);
+    sw += w[i];
+    xtwx.noalias() += (w[i] * r) * r.transpose();
+    if (unweighted_ivh) xtx.noalias() += r * r.transpose();
+  }
+  g.sw = sw;
+  if (h.cfg.local_model == static_cast<uint32_t>(HEDGER_LOCAL_LWA)) {
+    g.status = FitGeom<D>::kAverage;
+    return;
+  }
+  {
+    // Independent-variable hull: inside iff e^T V^-1 e <= max_i h_ii.
+    const Mat& v = unweighted_ivh ? xtx : xtwx;
+    SymFactor ldlt;
+    if (!spans_inputs<D>(rows, n) || !factor_spd(ldlt, v)) {
+      g.status = FitGeom<D>::kSingular;
+      return;
+    }
+    const Mat vinv = ldlt.inverse_as<Mat>();
+    const double lq = vinv(D, D);
+    double hmax = 0.0;
+    for (uint32_t i = 0; i < n; ++i) {
+      double hi = rows[i].dot(vinv * rows[i]);
+      if (!unweighted_ivh) hi *= w[i];
+      if (hi > hmax) hmax = hi;
+    }
+    if (!(lq <= hmax * (1.0 + kIvhTol))) {
+      g.status = FitGeom<D>::kHull;
+      return;
+    }
+  }
+  // Ridge LWR: (X^T W X + λ diag(1…1, 0)) β = X^T W q; the intercept is not shrunk.
+  Mat a = xtwx;
+  for (int j = 0; j < D; ++j) a(j, j) += h.cfg.ridge;
+  if (!factor_spd(g.ldlt, a)) {
+    g.status = FitGeom<D>::kSingular;
+    return;
+  }
+  Vec e = Vec::Zero();
+  e[D] = 1.0;
+  g.c = g.ldlt.solve(e);
+  double var_sum = 0.0;
+  for (uint32_t i = 0; i < n; ++i) {
+    const double rc = w[i] * rows[i].dot(g.c);
+    var_sum += rc * rc;
+  }
+  g.var_sum = var_sum;
+  g.status = FitGeom<D>::kRegression;
+}
+
+/// The value stage of a prediction (hedger.md steps 2–7 on the geometry g of the same x, ids, w):
+/// the regression's value, or the average where the geometry or the value rule it out. Counts
+/// the prediction. O(n D + D²), no allocation.
+template <int D>
+void fit_value(hedger& h, const double* x, const uint32_t* ids, const double* w, uint32_t n, const FitGeom<D>& g,
+               hedger_prediction_t& p) noexcept {
+  using Vec = Eigen::Matrix<double, D + 1, 1>;
+  p.n_neighbours = n;
   p.fallback = HEDGER_FALLBACK_NONE;
   p.std_error = 0.0;
-  if (nb.n == 0 || nb.n < h.cfg.k_min) {
+  if (g.status == FitGeom<D>::kUnknown) {
     p.kind = HEDGER_KIND_UNKNOWN;
     p.value = h.cfg.default_value;
     ++h.counters.predictions_unknown;
     return;
   }
-  // Rows r_i = [x_i − x, 1]: centred at the query, so the prediction is the intercept and the
-  // query's row is e = [0, …, 0, 1] (leverages are invariant under this affine change).
   Vec rows[HEDGER_MAX_K];
-  Mat xtwx = Mat::Zero();
-  Mat xtx = Mat::Zero();
   Vec xtwq = Vec::Zero();
-  double sw = 0.0, swq = 0.0;
-  const bool unweighted_ivh = (h.cfg.ivh_mode == static_cast<uint32_t>(HEDGER_IVH_UNWEIGHTED));
-  for (uint32_t i = 0; i < nb.n; ++i) {
-    const uint32_t s = nb.nb[i].id;
-    const double* xi = h.pts + static_cast<size_t>(s) * static_cast<size_t>(D);
+  double swq = 0.0;
+  for (uint32_t i = 0; i < n; ++i) {
     Vec& r = rows[i];
-    for (int j = 0; j < D; ++j) r[j] = xi[j] - x[j];
-    r[D] = 1.0;
-    const double w = nb.w[i];
-    const double q = h.val[s];
-    sw += w;
-    swq += w * q;
-    xtwx.noalias() += (w * r) * r.transpose();
-    xtwq.noalias() += (w * q) * r;
-    if (unweighted_ivh) xtx.noalias() += r * r.transpose();
+    fit_row<D>(h, x, ids[i], r);
+    const double q = h.val[ids[i]];
+    swq += w[i] * q;
+    xtwq.noalias() += (w[i] * q) * r;
   }
-  const double lwa = swq / sw;
-  if (h.cfg.local_model == static_cast<uint32_t>(HEDGER_LOCAL_LWA)) {
+  const double lwa = swq / g.sw;
+  if (g.status == FitGeom<D>::kAverage) {
     p.kind = HEDGER_KIND_LWA;
     p.value = lwa;
     ++h.counters.predictions_lwa;
     return;
   }
-
-  hedger_fallback_t fb = HEDGER_FALLBACK_NONE;
+  hedger_fallback_t fb = g.status == FitGeom<D>::kHull       ? HEDGER_FALLBACK_HULL
+                         : g.status == FitGeom<D>::kSingular ? HEDGER_FALLBACK_SINGULAR
+                                                             : HEDGER_FALLBACK_NONE;
   double lwr = 0.0;
-  {
-    // Independent-variable hull: inside iff e^T V^-1 e <= max_i h_ii.
-    const Mat& v = unweighted_ivh ? xtx : xtwx;
-    SymFactor ldlt;
-    if (!spans_inputs<D>(rows, nb.n) || !factor_spd(ldlt, v)) {
-      fb = HEDGER_FALLBACK_SINGULAR;
-    } else {
-      const Mat vinv = ldlt.inverse_as<Mat>();
-      const double lq = vinv(D, D);
-      double hmax = 0.0;
-      for (uint32_t i = 0; i < nb.n; ++i) {
-        double hi = rows[i].dot(vinv * rows[i]);
-        if (!unweighted_ivh) hi *= nb.w[i];
-        if (hi > hmax) hmax = hi;
-      }
-      if (!(lq <= hmax * (1.0 + kIvhTol))) fb = HEDGER_FALLBACK_HULL;
-    }
-  }
   if (fb == HEDGER_FALLBACK_NONE) {
-    // Ridge LWR: (X^T W X + λ diag(1…1, 0)) β = X^T W q; the intercept is not shrunk.
-    Mat a = xtwx;
-    for (int j = 0; j < D; ++j) a(j, j) += h.cfg.ridge;
-    SymFactor ldlt;
-    if (!factor_spd(ldlt, a)) {
+    const Vec beta = g.ldlt.solve(xtwq);
+    lwr = beta[D];
+    if (!std::isfinite(lwr)) {
       fb = HEDGER_FALLBACK_SINGULAR;
+    } else if (lwr < q_min(h) || lwr > q_max(h)) {
+      fb = HEDGER_FALLBACK_IMPLAUSIBLE;
     } else {
-      const Vec beta = ldlt.solve(xtwq);
-      lwr = beta[D];
-      if (!std::isfinite(lwr)) {
-        fb = HEDGER_FALLBACK_SINGULAR;
-      } else if (lwr < q_min(h) || lwr > q_max(h)) {
-        fb = HEDGER_FALLBACK_IMPLAUSIBLE;
-      } else {
-        // Standard error of the intercept: Var = s^2 c^T (X^T W^2 X) c with c = A^-1 e, and s^2
-        // the weighted residual variance with n - (D + 1) degrees of freedom (the fit is
-        // unbiased only in expectation; this ranks candidate actions, it is no exact interval).
-        Vec e = Vec::Zero();
-        e[D] = 1.0;
-        const Vec c = ldlt.solve(e);
-        double rss = 0.0, var_sum = 0.0;
-        for (uint32_t i = 0; i < nb.n; ++i) {
-          const double res = h.val[nb.nb[i].id] - rows[i].dot(beta);
-          rss += nb.w[i] * res * res;
-          const double rc = nb.w[i] * rows[i].dot(c);
-          var_sum += rc * rc;
-        }
-        const double dof = static_cast<double>(nb.n) - static_cast<double>(D + 1);
-        const double s2 = dof > 0.0 ? (rss / sw) * static_cast<double>(nb.n) / dof : 0.0;
-        p.std_error = std::sqrt(s2 * var_sum);
+      // Standard error of the intercept: Var = s^2 c^T (X^T W^2 X) c with c = A^-1 e, and s^2
+      // the weighted residual variance with n - (D + 1) degrees of freedom (the fit is
+      // unbiased only in expectation; this ranks candidate actions, it is no exact interval).
+      double rss = 0.0;
+      for (uint32_t i = 0; i < n; ++i) {
+        const double res = h.val[ids[i]] - rows[i].dot(beta);
+        rss += w[i] * res * res;
       }
+      const double dof = static_cast<double>(n) - static_cast<double>(D + 1);
+      const double s2 = dof > 0.0 ? (rss / g.sw) * static_cast<double>(n) / dof : 0.0;
+      p.std_error = std::sqrt(s2 * g.var_sum);
     }
   }
   p.fallback = fb;
@@ -380,10 +494,19 @@ void predict_from(hedger& h, const double* x, const Neigh& nb, hedger_prediction
   ++h.counters.predictions_lwa;
 }
 
+/// A neighbourhood's slots, contiguous (the form fit_geometry() and fit_value() take).
+inline void neigh_ids(const Neigh& nb, uint32_t* ids) noexcept {
+  for (uint32_t i = 0; i < nb.n; ++i) ids[i] = nb.nb[i].id;
+}
+
 template <int D>
 void predict_x(hedger& h, const double* x, Neigh& nb, hedger_prediction_t& p) noexcept {
   find_neighbours<D>(h, x, nb);
-  predict_from<D>(h, x, nb, p);
+  uint32_t ids[HEDGER_MAX_K];
+  neigh_ids(nb, ids);
+  FitGeom<D> g;
+  fit_geometry<D>(h, x, ids, nb.w, nb.n, g);
+  fit_value<D>(h, x, ids, nb.w, nb.n, g, p);
 }
 
 struct GreedyResult {
@@ -507,83 +630,114 @@ GreedyResult greedy_per_action(hedger& h, double* x) noexcept {
 /// - Value of the chosen action: the model's, when (state, action) lies inside the model's
 ///   independent-variable hull and the value within [Q_min, Q_max] (kind LWR); otherwise the
 ///   weighted average of the neighbours' values (kind LWA), which never extrapolates.
-/// Returns false when the model cannot be formed (fewer than max(k_min, D + 3) neighbours, or a
-/// singular fit): the caller falls back to the per-action search. Cost: one k-NN query, two
-/// (D+2)² factorisations, O(D²) per candidate; no allocation.
+/// The model fails (the caller falls back to the per-action search) with fewer than
+/// max(k_min, D + 3) neighbours or a singular fit. It is formed in two stages, as a prediction
+/// (fit_geometry): model_geometry() from the neighbours' coordinates and weights alone (every
+/// matrix and factorisation but the right-hand side), then model_value() from their values
+/// (the fit, its residuals, the action search). The replay keeps the first per record.
 template <int D>
-bool greedy_state_model(hedger& h, const double* x, double reach, GreedyResult& out) noexcept {
-  constexpr int P = D + 2;  // Δs (D − 1), u, u², 1
+struct ModelGeom {
+  static constexpr int P = D + 2;  // Δs (D − 1), u, u², 1
+  using Mat = Eigen::Matrix<double, P, P>;
+  enum Status : uint8_t { kFailed, kFormed };
+  enum Alt : uint8_t { kAltNone, kAltFormed, kAltSingular };
+  Status status;        ///< kFailed: too few neighbours, or A singular
+  uint8_t anchor_ok;    ///< the anchor's regression could be factorised (else the model fails)
+  uint8_t anchor_unweighted;  ///< every neighbour's anchor weight was (nearly) 0
+  Alt alt;              ///< the fit without the u² column (af_alt, cov_alt), formed on demand
+  uint8_t v_ok;         ///< reach <= 1 and the IVH matrix factorised: vinv, hmax valid
+  uint32_t n;
+  double sw;            ///< Σ w_i
+  double abar;          ///< the neighbours' mean action (scaled)
+  double u_anchor, umin, umax, tol;  ///< the neighbours' policy and the action's hull
+  double hmax;          ///< the largest leverage of the IVH test
+  uint32_t ids[HEDGER_MAX_K];
+  double w[HEDGER_MAX_K];
+  Mat a, b;             ///< XᵀWX + ridge and XᵀW²X, kept for the fit without u²
+  Mat cov, cov_alt;     ///< A⁻¹ B A⁻¹: Var(e·β) = s² eᵀ cov e
+  Mat vinv;             ///< the IVH matrix's inverse (v_ok)
+  SymFactor af, af_alt;
+};
+
+/// The design row e = [0…0, u, u², 1] of action act (raw) and the pessimism's direction
+/// d = e − e(anchor) = [0…0, u − u_a, u² − u_a², 0] (model_value()).
+template <int D>
+void model_design(const hedger& h, double abar, double u_anchor, double act, Eigen::Matrix<double, D + 2, 1>& e,
+                  Eigen::Matrix<double, D + 2, 1>& d) noexcept {
+  const double u = act / h.cfg.input_scale[D - 1] - abar;
+  e.setZero();
+  e[D - 1] = u;
+  e[D] = u * u;
+  e[D + 1] = 1.0;
+  d.setZero();
+  d[D - 1] = e[D - 1] - u_anchor;
+  d[D] = e[D] - u_anchor * u_anchor;
+}
+
+template <int D>
+void model_row(const hedger& h, const double* x, uint32_t s, double abar, Eigen::Matrix<double, D + 2, 1>& r) noexcept {
+  const double* xi = h.pts + static_cast<size_t>(s) * static_cast<size_t>(D);
+  for (int j = 0; j < D - 1; ++j) r[j] = xi[j] - x[j];
+  const double u = xi[D - 1] - abar;
+  r[D - 1] = u;
+  r[D] = u * u;
+  r[D + 1] = 1.0;
+}
+
+/// The geometry stage of the state model at x (scaled state) with the kernel widened by reach.
+/// Queries the store. Cost: one k-NN query, three (D+2)² factorisations, O(n D²); no allocation.
+template <int D>
+void model_geometry(hedger& h, const double* x, double reach, ModelGeom<D>& g) noexcept {
+  constexpr int P = D + 2;
   using Vec = Eigen::Matrix<double, P, 1>;
   using Mat = Eigen::Matrix<double, P, P>;
+  g.status = ModelGeom<D>::kFailed;
+  g.alt = ModelGeom<D>::kAltNone;
+  g.anchor_ok = 0;
+  g.anchor_unweighted = 0;
+  g.v_ok = 0;
   const double h2 = h.h2 * reach * reach;
   Neighbour nbuf[HEDGER_MAX_K];
-  KnnSet rs(nbuf, h.cfg.k_max, h.r2max * reach * reach);
+  const uint32_t k = h.cfg.k_max;
+  KnnSet rs(nbuf, k, seeded_r2<D, D - 1>(h, x, h.r2max * reach * reach, k, h.seed_state, h.n_seed_state));
   query_store<D, D - 1>(h, x, rs);
   const uint32_t n = rs.size();
-  if (n < h.cfg.k_min || n < static_cast<uint32_t>(P + 1)) return false;
-  double w[HEDGER_MAX_K];
-  double sw = 0.0, swa = 0.0, swq = 0.0;
+  g.n = n;
+  for (uint32_t i = 0; i < n; ++i) h.seed_state[i] = nbuf[i].id;
+  h.n_seed_state = n;
+  if (n < h.cfg.k_min || n < static_cast<uint32_t>(P + 1)) return;
+  double* w = g.w;
+  double sw = 0.0, swa = 0.0;
   for (uint32_t i = 0; i < n; ++i) {
+    g.ids[i] = nbuf[i].id;
     w[i] = std::exp(-nbuf[i].d2 / h2);
     sw += w[i];
     swa += w[i] * h.pts[static_cast<size_t>(nbuf[i].id) * static_cast<size_t>(D) + (D - 1)];
-    swq += w[i] * h.val[nbuf[i].id];
   }
+  g.sw = sw;
   const double abar = swa / sw;
+  g.abar = abar;
   Vec rows[HEDGER_MAX_K];
-  Mat a = Mat::Zero(), v = Mat::Zero(), b = Mat::Zero();
-  Vec xtwq = Vec::Zero();
+  Mat& a = g.a;
+  Mat& b = g.b;
+  Mat v = Mat::Zero();
+  a.setZero();
+  b.setZero();
   const bool unweighted_ivh = (h.cfg.ivh_mode == static_cast<uint32_t>(HEDGER_IVH_UNWEIGHTED));
   for (uint32_t i = 0; i < n; ++i) {
-    const double* xi = h.pts + static_cast<size_t>(nbuf[i].id) * static_cast<size_t>(D);
     Vec& r = rows[i];
-    for (int j = 0; j < D - 1; ++j) r[j] = xi[j] - x[j];
-    const double u = xi[D - 1] - abar;
-    r[D - 1] = u;
-    r[D] = u * u;
-    r[D + 1] = 1.0;
+    model_row<D>(h, x, g.ids[i], abar, r);
     a.noalias() += (w[i] * r) * r.transpose();
     b.noalias() += (w[i] * w[i] * r) * r.transpose();
-    xtwq.noalias() += (w[i] * h.val[nbuf[i].id]) * r;
     if (unweighted_ivh) v.noalias() += r * r.transpose();
   }
   if (!unweighted_ivh) v = a;
   for (int j = 0; j < P - 1; ++j) a(j, j) += h.cfg.ridge;
-  SymFactor af;
-  if (!factor_spd(af, a)) return false;
-  Vec beta = af.solve(xtwq);
-  if (beta[D] > 0.0) {
-    // Concave in the action, or linear: a value convex in the action has its maximum on an edge
-    // of the data, and which edge wins is decided by the noise in the curvature (measured on the
-    // corridor: the robot took the wrong edge and drove into a wall). The least-squares fit
-    // under β_uu <= 0 with the constraint active is the fit without the u² column.
-    a.row(D).setZero();
-    a.col(D).setZero();
-    a(D, D) = 1.0;
-    b.row(D).setZero();
-    b.col(D).setZero();
-    xtwq[D] = 0.0;
-    if (!factor_spd(af, a)) return false;
-    beta = af.solve(xtwq);
+  if (!factor_spd(g.af, a)) return;
+  {
+    const Mat ainv = g.af.template inverse_as<Mat>();
+    g.cov = ainv * b * ainv;
   }
-  const Mat ainv = af.inverse_as<Mat>();
-  double rss = 0.0;
-  for (uint32_t i = 0; i < n; ++i) {
-    const double res = h.val[nbuf[i].id] - rows[i].dot(beta);
-    rss += w[i] * res * res;
-  }
-  const double s2 = (rss / sw) * static_cast<double>(n) / static_cast<double>(static_cast<int>(n) - P);
-  const Mat cov = ainv * b * ainv;  // Var(e·β) = s² eᵀ cov e
-  const double sa = h.cfg.input_scale[D - 1];
-  const double kappa = h.cfg.greedy_pessimism;
-  auto design = [&](double act) {
-    const double u = act / sa - abar;
-    Vec e = Vec::Zero();
-    e[D - 1] = u;
-    e[D] = u * u;
-    e[D + 1] = 1.0;
-    return e;
-  };
   // The neighbours' policy at the query state: a locally linear regression of their actions on
   // the state, u_i ≈ α0 + α·Δs_i. Its intercept anchors the pessimism, and its residuals give
   // the range of actions the data holds at this state: the action's hull, tilted with the state.
@@ -602,7 +756,7 @@ bool greedy_state_model(hedger& h, const double* x, double reach, GreedyResult& 
   double wa[HEDGER_MAX_K];
   double wmax = 0.0, wa_max = 0.0;
   for (uint32_t i = 0; i < n; ++i) {
-    const uint32_t id = nbuf[i].id;
+    const uint32_t id = g.ids[i];
     wa[i] = w[i] * static_cast<double>(h.anchor_w[id]);
     if (recency > 0.0) wa[i] *= std::exp(-static_cast<double>(h.cur_tag - h.run_tag[id]) / recency);
     wmax = w[i] > wmax ? w[i] : wmax;
@@ -619,7 +773,7 @@ bool greedy_state_model(hedger& h, const double* x, double reach, GreedyResult& 
     for (uint32_t i = 0; i < n; ++i) wa[i] *= f;
     wz = wa;
   } else {
-    ++h.counters.anchor_unweighted;
+    g.anchor_unweighted = 1;
   }
   for (uint32_t i = 0; i < n; ++i) {
     SVec z;
@@ -630,7 +784,9 @@ bool greedy_state_model(hedger& h, const double* x, double reach, GreedyResult& 
   }
   for (int j = 0; j < D - 1; ++j) sa_m(j, j) += h.cfg.ridge;
   SymFactor sa_f;
-  if (!factor_spd(sa_f, sa_m)) return false;
+  g.status = ModelGeom<D>::kFormed;
+  if (!factor_spd(sa_f, sa_m)) return;
+  g.anchor_ok = 1;
   const SVec alpha = sa_f.solve(sa_t);
   const double u_anchor = alpha[D - 1];
   double rmin = std::numeric_limits<double>::infinity(), rmax = -rmin;
@@ -641,11 +797,94 @@ bool greedy_state_model(hedger& h, const double* x, double reach, GreedyResult& 
     rmin = res < rmin ? res : rmin;
     rmax = res > rmax ? res : rmax;
   }
-  const double umin = u_anchor + rmin;
-  const double umax = u_anchor + rmax;
-  const double tol = 1e-12 * (1.0 + umax - umin);
-  GreedyResult g = greedy_search(h, [&](double act, double* value, hedger_kind_t* kind) {
-    const Vec e = design(act);
+  g.u_anchor = u_anchor;
+  g.umin = u_anchor + rmin;
+  g.umax = u_anchor + rmax;
+  g.tol = 1e-12 * (1.0 + g.umax - g.umin);
+  // The IVH test of the chosen action's value (model_value): a widened kernel's model only
+  // ranks the actions, its value is the average.
+  SymFactor vf;
+  if (reach <= 1.0 && factor_spd(vf, v)) {
+    g.vinv = vf.inverse_as<Mat>();
+    double hmax = 0.0;
+    for (uint32_t i = 0; i < n; ++i) {
+      double hi = rows[i].dot(g.vinv * rows[i]);
+      if (!unweighted_ivh) hi *= w[i];
+      if (hi > hmax) hmax = hi;
+    }
+    g.hmax = hmax;
+    g.v_ok = 1;
+  }
+}
+
+/// The fit without the u² column (the least-squares fit under β_uu <= 0 with the constraint
+/// active): formed once per geometry, on the first value that needs it.
+template <int D>
+void model_alt(ModelGeom<D>& g) noexcept {
+  constexpr int D1 = D;
+  using Mat = typename ModelGeom<D>::Mat;
+  Mat a = g.a, b = g.b;
+  a.row(D1).setZero();
+  a.col(D1).setZero();
+  a(D1, D1) = 1.0;
+  b.row(D1).setZero();
+  b.col(D1).setZero();
+  if (!factor_spd(g.af_alt, a)) {
+    g.alt = ModelGeom<D>::kAltSingular;
+    return;
+  }
+  const Mat ainv = g.af_alt.template inverse_as<Mat>();
+  g.cov_alt = ainv * b * ainv;
+  g.alt = ModelGeom<D>::kAltFormed;
+}
+
+/// The value stage of the state model on the geometry g of the same x: fit, residual variance,
+/// action search, value of the chosen action. False when the model fails. O(n D + D² per
+/// candidate), no allocation (forms g's fit without u² once if the values ask for it).
+template <int D>
+bool model_value(hedger& h, const double* x, ModelGeom<D>& g, GreedyResult& out) noexcept {
+  constexpr int P = D + 2;
+  using Vec = Eigen::Matrix<double, P, 1>;
+  using Mat = Eigen::Matrix<double, P, P>;
+  if (g.status != ModelGeom<D>::kFormed) return false;
+  const uint32_t n = g.n;
+  const double* w = g.w;
+  Vec rows[HEDGER_MAX_K];
+  Vec xtwq = Vec::Zero();
+  double swq = 0.0;
+  for (uint32_t i = 0; i < n; ++i) {
+    Vec& r = rows[i];
+    model_row<D>(h, x, g.ids[i], g.abar, r);
+    const double q = h.val[g.ids[i]];
+    swq += w[i] * q;
+    xtwq.noalias() += (w[i] * q) * r;
+  }
+  Vec beta = g.af.solve(xtwq);
+  const Mat* cov = &g.cov;
+  if (beta[D] > 0.0) {
+    // Concave in the action, or linear: a value convex in the action has its maximum on an edge
+    // of the data, and which edge wins is decided by the noise in the curvature (measured on the
+    // corridor: the robot took the wrong edge and drove into a wall). The least-squares fit
+    // under β_uu <= 0 with the constraint active is the fit without the u² column.
+    if (g.alt == ModelGeom<D>::kAltNone) model_alt<D>(g);
+    if (g.alt != ModelGeom<D>::kAltFormed) return false;
+    xtwq[D] = 0.0;
+    beta = g.af_alt.solve(xtwq);
+    cov = &g.cov_alt;
+  }
+  double rss = 0.0;
+  for (uint32_t i = 0; i < n; ++i) {
+    const double res = h.val[g.ids[i]] - rows[i].dot(beta);
+    rss += w[i] * res * res;
+  }
+  const double s2 = (rss / g.sw) * static_cast<double>(n) / static_cast<double>(static_cast<int>(n) - P);
+  if (g.anchor_unweighted) ++h.counters.anchor_unweighted;
+  if (!g.anchor_ok) return false;
+  const double kappa = h.cfg.greedy_pessimism;
+  const double u_anchor = g.u_anchor, umin = g.umin, umax = g.umax, tol = g.tol;
+  GreedyResult res = greedy_search(h, [&](double act, double* value, hedger_kind_t* kind) {
+    Vec e, d;
+    model_design<D>(h, g.abar, u_anchor, act, e, d);
     *kind = HEDGER_KIND_UNKNOWN;
     *value = h.cfg.default_value;
     if (e[D - 1] < umin - tol || e[D - 1] > umax + tol) return GreedyRank{0, 0.0};
@@ -656,57 +895,106 @@ bool greedy_state_model(hedger& h, const double* x, double reach, GreedyResult& 
     // Pessimism on the action's effect relative to the neighbourhood's mean action (u = 0):
     // the state part and the intercept are common to every candidate, so only the uncertainty
     // of β_u u + β_uu u² matters for the choice.
-    Vec d = Vec::Zero();
-    d[D - 1] = e[D - 1] - u_anchor;
-    d[D] = e[D] - u_anchor * u_anchor;
-    return GreedyRank{2, q - kappa * std::sqrt(s2 * d.dot(cov * d))};
+    // dᵀ cov d with d's two non-zero entries only: the other terms are exact zeros (cov is
+    // finite), so the sums are the ones the full product rounds, and a candidate costs a few
+    // instructions instead of a 7 × 7 product (measured: 4 % of b21r-train's).
+    const Mat& c = *cov;
+    const double d1 = d[D - 1], d2 = d[D];
+    const double quad = d1 * (c(D - 1, D - 1) * d1 + c(D - 1, D) * d2) + d2 * (c(D, D - 1) * d1 + c(D, D) * d2);
+    return GreedyRank{2, q - kappa * std::sqrt(s2 * quad)};
   });
-  if (g.status != HEDGER_OK) return false;
+  if (res.status != HEDGER_OK) return false;
   // The value of the chosen action: the regression where it interpolates, else the average.
   bool lwr = false;
-  SymFactor vf;
-  if (reach <= 1.0 && factor_spd(vf, v) && g.value >= q_min(h) && g.value <= q_max(h)) {
-    const Mat vinv = vf.inverse_as<Mat>();
-    double hmax = 0.0;
-    for (uint32_t i = 0; i < n; ++i) {
-      double hi = rows[i].dot(vinv * rows[i]);
-      if (!unweighted_ivh) hi *= w[i];
-      if (hi > hmax) hmax = hi;
-    }
-    const Vec e = design(g.action);
-    lwr = e.dot(vinv * e) <= hmax * (1.0 + kIvhTol);
+  if (g.v_ok && res.value >= q_min(h) && res.value <= q_max(h)) {
+    Vec e, d;
+    model_design<D>(h, g.abar, u_anchor, res.action, e, d);
+    lwr = e.dot(g.vinv * e) <= g.hmax * (1.0 + kIvhTol);
   }
   if (!lwr) {
-    g.value = swq / sw;
-    g.kind = HEDGER_KIND_LWA;
+    res.value = swq / g.sw;
+    res.kind = HEDGER_KIND_LWA;
   }
-  out = g;
+  out = res;
   return true;
 }
 
-/// Greedy search at a raw state (see hedger_greedy()).
+/// The greedy search's geometry kept per replayed record: the state model of the attempt that
+/// answers (which), valid while hedger::geom_gen == gen.
 template <int D>
-GreedyResult greedy_at(hedger& h, const double* state) noexcept {
-  double x[static_cast<size_t>(D)];
-  for (int i = 0; i < D - 1; ++i) x[i] = state[i] / h.cfg.input_scale[i];
-  x[D - 1] = 0.0;
+struct GreedyGeom {
+  enum Which : uint8_t { kPerAction, kReach1, kReachWide };
+  uint64_t gen;
+  Which which;  ///< kReach1: m is the model at reach 1; kReachWide: reach 1 failed, m is the wide one
+  ModelGeom<D> m;
+};
+
+/// Greedy search at a scaled state x (x[D-1] is overwritten). With a cache (the replay's record),
+/// the state model's geometry is taken from it while it is valid, else formed into it.
+template <int D>
+GreedyResult greedy_x(hedger& h, double* x, GreedyGeom<D>* cache) noexcept {
   ++h.counters.greedy_calls;
   GreedyResult g;
   if (h.cfg.greedy_method == static_cast<uint32_t>(HEDGER_GREEDY_STATE_MODEL) &&
       h.cfg.local_model == static_cast<uint32_t>(HEDGER_LOCAL_LWR)) {
-    if (greedy_state_model<D>(h, x, 1.0, g)) {
-      ++h.counters.greedy_state_model;
-      return g;
+    const double reach = h.cfg.greedy_reach;
+    ModelGeom<D> local;
+    bool tried_wide = false;
+    if (cache != nullptr && cache->gen == h.geom_gen) ++h.counters.replay_reused;
+    if (cache != nullptr && cache->gen != h.geom_gen) {
+      // Form the geometry of the attempt that can answer: the wide one only where the first
+      // fails on the neighbours' coordinates alone (model_value may still fail on the values).
+      cache->gen = h.geom_gen;
+      model_geometry<D>(h, x, 1.0, cache->m);
+      cache->which = GreedyGeom<D>::kReach1;
+      if (cache->m.status != ModelGeom<D>::kFormed) {
+        cache->which = GreedyGeom<D>::kPerAction;
+        if (reach > 1.0) {
+          model_geometry<D>(h, x, reach, cache->m);
+          if (cache->m.status == ModelGeom<D>::kFormed) cache->which = GreedyGeom<D>::kReachWide;
+        }
+      }
     }
-    if (h.cfg.greedy_reach > 1.0 && greedy_state_model<D>(h, x, h.cfg.greedy_reach, g)) {
-      ++h.counters.greedy_state_model;
-      ++h.counters.greedy_reached;
-      return g;
+    if (cache == nullptr) {
+      model_geometry<D>(h, x, 1.0, local);
+      if (model_value<D>(h, x, local, g)) {
+        ++h.counters.greedy_state_model;
+        return g;
+      }
+    } else if (cache->which == GreedyGeom<D>::kReach1) {
+      if (model_value<D>(h, x, cache->m, g)) {
+        ++h.counters.greedy_state_model;
+        return g;
+      }
+    } else {
+      tried_wide = true;
+      if (cache->which == GreedyGeom<D>::kReachWide && model_value<D>(h, x, cache->m, g)) {
+        ++h.counters.greedy_state_model;
+        ++h.counters.greedy_reached;
+        return g;
+      }
+    }
+    if (!tried_wide && reach > 1.0) {
+      model_geometry<D>(h, x, reach, local);
+      if (model_value<D>(h, x, local, g)) {
+        ++h.counters.greedy_state_model;
+        ++h.counters.greedy_reached;
+        return g;
+      }
     }
   }
   g = greedy_per_action<D>(h, x);
   if (g.status != HEDGER_OK) ++h.counters.greedy_all_unknown;
   return g;
+}
+
+/// Greedy search at a raw state (see hedger_greedy()).
+template <int D>
+GreedyResult greedy_at(hedger& h, const double* state, GreedyGeom<D>* cache = nullptr) noexcept {
+  double x[static_cast<size_t>(D)];
+  for (int i = 0; i < D - 1; ++i) x[i] = state[i] / h.cfg.input_scale[i];
+  x[D - 1] = 0.0;
+  return greedy_x<D>(h, x, cache);
 }
 
 // ---- Store maintenance ---------------------------------------------------------------------
@@ -724,6 +1012,33 @@ void start_build(hedger& h) noexcept {
   KdTree& t = h.tree[1 - h.active];
   kd_begin_build(t, h.pts, h.seq, h.fill, h.seq_counter);
   h.building = 1;
+}
+
+/// Takes fresh entry pos into its block's box; `first` starts the box at it (the block's first
+/// entry, newly appended). An entry rewritten in place only widens the box (still a bound).
+template <int D>
+void fresh_box_add(hedger& h, uint32_t pos, bool first) noexcept {
+  const double* f = h.fresh_pts + static_cast<size_t>(pos) * static_cast<size_t>(D);
+  double* box = h.fresh_box + static_cast<size_t>(pos / kFreshBlock) * 2u * static_cast<size_t>(D);
+  for (int j = 0; j < D; ++j) {
+    if (first || f[j] < box[j]) box[j] = f[j];
+    if (first || f[j] > box[D + j]) box[D + j] = f[j];
+  }
+}
+
+/// Fresh entries at which the next rebuild starts, for the store's current fill. A rebuild costs
+/// about kd_build_work_estimate(fill) work units (about 50 instructions each), spread over the
+/// updates until the next one, and every query scans the fresh buffer (block by block, skipping
+/// blocks beyond its bound): twice the square root of the units balances the two (measured with
+/// callgrind on b21r-train's corridor session: once or four times the units give the same total,
+/// and four means rarer rebuilds): about 350 entries at 1,000 points, 2,000 at 20,000. Kept within
+/// [fresh_capacity/16, fresh_capacity/2], so the automatic rebuild budget (fresh_capacity/2
+/// updates per rebuild) always finishes before the buffer is full. O(log fill).
+inline uint32_t fresh_trigger(const hedger& h) noexcept {
+  const double f = std::sqrt(4.0 * static_cast<double>(kd_build_work_estimate(h.fill)));
+  const uint32_t lo = h.fresh_cap / 16 > 0 ? h.fresh_cap / 16 : 1;
+  const uint32_t hi = h.fresh_cap / 2 > lo ? h.fresh_cap / 2 : lo;
+  return f <= static_cast<double>(lo) ? lo : (f >= static_cast<double>(hi) ? hi : static_cast<uint32_t>(f));
 }
 
 /// Swaps the finished shadow tree in and drops the fresh entries it covers.
@@ -750,6 +1065,8 @@ uint64_t swap_trees(hedger& h) noexcept {
   }
   const uint64_t work = h.n_fresh;
   h.n_fresh = n;
+  for (uint32_t i = 0; i < n; ++i) fresh_box_add<D>(h, i, i % kFreshBlock == 0);
+  h.fresh_start = fresh_trigger(h);
   return work;
 }
 
@@ -777,6 +1094,7 @@ void add_fresh(hedger& h, uint32_t slot) noexcept {
   const double* p = h.pts + static_cast<size_t>(slot) * static_cast<size_t>(D);
   double* f = h.fresh_pts + static_cast<size_t>(pos) * static_cast<size_t>(D);
   for (int j = 0; j < D; ++j) f[j] = p[j];
+  fresh_box_add<D>(h, pos, pos % kFreshBlock == 0 && pos + 1 == h.n_fresh);
 }
 
 /// Per-update rebuild work: start a rebuild when enough fresh points wait, then advance it by
@@ -798,6 +1116,7 @@ void write_slot(hedger& h, uint32_t slot, const double* x, double q, uint8_t fl)
   for (int j = 0; j < D; ++j) p[j] = x[j];
   h.val[slot] = q;
   h.seq[slot] = ++h.seq_counter;
+  ++h.geom_gen;
   h.run_tag[slot] = h.cur_tag;
   h.anchor_w[slot] = 1.0f;
   h.flags[slot] = fl;
@@ -836,12 +1155,14 @@ struct NewPoint {
 };
 
 /// Redundancy of stored point c: squared distance to its k-th nearest other stored point
-/// (k = k_min; +inf if it has fewer than k others). Small = many points close by.
+/// (k = k_min; +inf if it has fewer than k others). Small = many points close by. Only an exact
+/// value up to cap is asked for (the search stays within it): a redundancy above cap comes back
+/// as +inf.
 template <int D>
-double redundancy_d2(const hedger& h, uint32_t c) noexcept {
+double redundancy_d2(const hedger& h, uint32_t c, double cap) noexcept {
   Neighbour buf[HEDGER_MAX_K + 1];
   const uint32_t k = h.cfg.k_min;
-  KnnSet rs(buf, k + 1, std::numeric_limits<double>::infinity());
+  KnnSet rs(buf, k + 1, cap);
   query_store<D>(h, h.pts + static_cast<size_t>(c) * static_cast<size_t>(D), rs);
   uint32_t others = 0;
   for (uint32_t i = 0; i < rs.size(); ++i) {
@@ -893,10 +1214,15 @@ hedger_store_op_t store_point(hedger& h, const double* x, const NewPoint& np, ui
   }
   const uint32_t* pool = (nc > 0) ? cand : prot;
   const uint32_t npool = (nc > 0) ? nc : npr;
+  // Only redundancies up to the new point's own matter exactly (above it, the new point is the
+  // most redundant and merges, whichever candidate is least redundant), and up to the best
+  // candidate's so far: each search is bounded by both (inclusive, for the tie rule), which
+  // gives the same victim and decision as exact values everywhere.
+  const double cap = np.have_near ? np.red_d2 : std::numeric_limits<double>::infinity();
   uint32_t victim = pool[0];
-  double vd2 = redundancy_d2<D>(h, victim);
+  double vd2 = redundancy_d2<D>(h, victim, cap);
   for (uint32_t i = 1; i < npool; ++i) {
-    const double d2 = redundancy_d2<D>(h, pool[i]);
+    const double d2 = redundancy_d2<D>(h, pool[i], vd2 < cap ? vd2 : cap);
     if (d2 < vd2 || (!(vd2 < d2) && pool[i] < victim)) {
       vd2 = d2;
       victim = pool[i];
@@ -946,17 +1272,57 @@ inline void record_run(hedger& h, const double* s, double a, double r, const dou
   }
 }
 
+/// The geometry of the prediction at a replayed record's (s, a), valid while hedger::geom_gen ==
+/// gen: the neighbourhood (with the two distances the store rule needs) and its FitGeom.
+template <int D>
+struct FitCache {
+  uint64_t gen;
+  uint32_t n;
+  double near_d2;  ///< squared distance to the nearest neighbour (n > 0)
+  double red_d2;   ///< to the k_min-th (+inf if fewer): the new point's redundancy
+  uint32_t ids[HEDGER_MAX_K];
+  double w[HEDGER_MAX_K];
+  FitGeom<D> g;
+};
+
+/// A generation no instance reaches: a record constructed with it is invalid.
+constexpr uint64_t kNeverGen = ~0ull;
+
+/// What the backward replay keeps per record of the run (see replay_step()).
+template <int D>
+struct ReplayRecord {
+  GreedyGeom<D> greedy;  ///< of the greedy search at s'
+  FitCache<D> fit;       ///< of the prediction at (s, a)
+};
+
 /// Steps 2–6 of the training update for (s, a) with a given target r + γ q' (info.target set by
 /// the caller): q = Q(s, a), q_new = q + α (target − q), store (s, a) with q_new, pull the
-/// neighbours, track r.
+/// neighbours, track r. With a cache (the replay's record) the neighbourhood and the geometry
+/// of the prediction are taken from it while valid, else found and kept in it.
 template <int D>
-void learn_target(hedger& h, const double* s, double a, double r, int terminal, hedger_update_info_t& info) noexcept {
+void learn_target(hedger& h, const double* s, double a, double r, int terminal, hedger_update_info_t& info,
+                  FitCache<D>* cache = nullptr) noexcept {
   // 2. q = Q(s, a) with its neighbourhood.
   double x[static_cast<size_t>(D)];
   scale_input<D>(h, s, a, x);
-  Neigh nb;
+  FitCache<D> local;
+  FitCache<D>& fc = cache != nullptr ? *cache : local;
+  if (cache != nullptr && cache->gen == h.geom_gen) ++h.counters.replay_reused;
+  if (cache == nullptr || cache->gen != h.geom_gen) {
+    Neigh nb;
+    find_neighbours<D>(h, x, nb);
+    const uint32_t km = h.cfg.k_min;
+    fc.gen = h.geom_gen;
+    fc.n = nb.n;
+    fc.near_d2 = nb.n > 0 ? nb.nb[0].d2 : 0.0;
+    fc.red_d2 = nb.n >= km ? nb.nb[km - 1].d2 : std::numeric_limits<double>::infinity();
+    neigh_ids(nb, fc.ids);
+    for (uint32_t i = 0; i < nb.n; ++i) fc.w[i] = nb.w[i];
+    fit_geometry<D>(h, x, fc.ids, fc.w, fc.n, fc.g);
+  }
+  const uint32_t n = fc.n;
   hedger_prediction_t p;
-  predict_x<D>(h, x, nb, p);
+  fit_value<D>(h, x, fc.ids, fc.w, n, fc.g, p);
   info.q_old = p.value;
   info.kind = p.kind;
   // 3. New value.
@@ -965,20 +1331,18 @@ void learn_target(hedger& h, const double* s, double a, double r, int terminal, 
   // 4. Store (s, a). Remember the neighbours' sequence numbers: a neighbour evicted by the
   //    store step is not pulled (its slot now holds the new point).
   uint64_t nseq[HEDGER_MAX_K];
-  for (uint32_t i = 0; i < nb.n; ++i) nseq[i] = h.seq[nb.nb[i].id];
+  for (uint32_t i = 0; i < n; ++i) nseq[i] = h.seq[fc.ids[i]];
   const uint8_t fl = (terminal || !(r >= 0.0 && r <= 0.0)) ? HEDGER_POINT_PROTECTED : 0;
-  const uint32_t km = h.cfg.k_min;
-  const bool have = nb.n > 0;
-  const NewPoint np{q_new, fl, true, info.target, have, have ? nb.nb[0].id : 0, have ? nb.nb[0].d2 : 0.0,
-                    nb.n >= km ? nb.nb[km - 1].d2 : std::numeric_limits<double>::infinity()};
+  const bool have = n > 0;
+  const NewPoint np{q_new, fl, true, info.target, have, have ? fc.ids[0] : 0, fc.near_d2, fc.red_d2};
   uint32_t merged;
   info.store_op = store_point<D>(h, x, np, &merged);
   // 5. Pull each neighbour toward q_new by α κ_i (a merged point had its update already).
   uint32_t pulled = 0;
-  for (uint32_t i = 0; i < nb.n; ++i) {
-    const uint32_t sl = nb.nb[i].id;
+  for (uint32_t i = 0; i < n; ++i) {
+    const uint32_t sl = fc.ids[i];
     if (h.seq[sl] != nseq[i] || sl == merged) continue;
-    h.val[sl] += h.cfg.alpha * nb.w[i] * (q_new - h.val[sl]);
+    h.val[sl] += h.cfg.alpha * fc.w[i] * (q_new - h.val[sl]);
     ++pulled;
   }
   info.n_pulled = pulled;
@@ -990,7 +1354,8 @@ void learn_target(hedger& h, const double* s, double a, double r, int terminal, 
 
 /// The greedy result at s' as the update's q' (q' = 0 for a terminal transition).
 template <int D>
-void next_greedy(hedger& h, const double* sn, int terminal, hedger_update_info_t& info) noexcept {
+void next_greedy(hedger& h, const double* sn, int terminal, hedger_update_info_t& info,
+                 GreedyGeom<D>* cache = nullptr) noexcept {
   if (terminal) {
     info.next_status = HEDGER_NO_KNOWN_ACTION;
     info.next_action = 0.5 * (h.cfg.action_min + h.cfg.action_max);
@@ -999,7 +1364,7 @@ void next_greedy(hedger& h, const double* sn, int terminal, hedger_update_info_t
     info.q_next = 0.0;
     return;
   }
-  const GreedyResult g = greedy_at<D>(h, sn);
+  const GreedyResult g = greedy_at<D>(h, sn, cache);
   info.next_status = g.status;
   info.next_action = g.action;
   info.next_value = g.value;
@@ -1065,23 +1430,47 @@ inline uint32_t replay_begin(hedger& h) noexcept {
     return 0;
   }
   h.replay_pending = 1;
+  ++h.geom_gen;  // the records are new: nothing cached belongs to them
   h.replay_pass = 0;
   h.replay_k = 0;
   h.replay_next_return = 0.0;
   return h.run_count * h.cfg.replay_passes;
 }
 
-/// Advances the pending replay by at most max_updates updates; returns the updates done. When the
-/// last pass ends the run buffer is cleared. Each pass goes newest first with the λ-return target
+/// Work units of a slice of the replay (hedger_end_run_step()): a replayed update costs
+/// kReplayUnitsPerUpdate, less kReplayUnitsSaved for each of its two searches (the greedy one at
+/// s', the prediction at (s, a)) that takes its geometry from the record (cfg.replay_cache).
+/// Measured with callgrind on the corridor at the firmware's defaults: an update that reuses both
+/// costs about a fifteenth of one that forms both; counted as an eighth (2 units of 16), so that
+/// a slice never costs more than the same number of updates without the cache did, and without
+/// it every update counts whole.
+/// In a full store every replayed update's store step evicts or merges, and an eviction searches
+/// the neighbourhoods of evict_candidates points whether or not the geometry is reused: measured
+/// (callgrind, hedger.update_instructions: the firmware's corridor learner, 20k and 100k points,
+/// store full) a reused update then costs about a quarter of one that forms its geometry, so it
+/// counts kReplayUnitsFull more.
+constexpr uint64_t kReplayUnitsPerUpdate = 16;
+constexpr uint64_t kReplayUnitsSaved = 7;
+constexpr uint64_t kReplayUnitsFull = 4;
+
+/// Advances the pending replay by updates worth at most max_updates full updates (see
+/// kReplayUnitsPerUpdate; at least one update when max_updates >= 1); returns the updates done.
+/// When the last pass ends the run buffer is cleared. Each pass goes newest first with the
+/// λ-return target
 ///   T_t = r_t + γ ((1 − λ) V(s_{t+1}) + λ T_{t+1}),   T of the newest = r (terminal) or r + γ V(s'),
 /// V = the greedy value (HEDGER_GREEDY_* at s'): λ = 0 is the Q-learning target, λ = 1 the
 /// return of the run as driven, bootstrapped only where the run was cut short.
+/// With the record cache, each record keeps the geometry of its two searches (ReplayRecord):
+/// the first pass forms it, and later passes, as long as no stored point has moved
+/// (hedger::geom_gen), repeat only what depends on the values; the results are bit-identical.
 template <int D>
 uint32_t replay_step(hedger& h, uint32_t max_updates) noexcept {
   const uint32_t sd = h.cfg.state_dim;
   const double lambda = h.cfg.replay_lambda;
+  const uint64_t budget = static_cast<uint64_t>(max_updates) * kReplayUnitsPerUpdate;
+  uint64_t spent = 0;
   uint32_t done = 0;
-  while (h.replay_pending && done < max_updates) {
+  while (h.replay_pending) {
     // Record k of the pass counts back from the newest.
     uint32_t idx = (h.run_head + h.run_cap - 1u - h.replay_k % h.run_cap) % h.run_cap;
     const double* rec = h.run + static_cast<size_t>(idx) * h.run_stride;
@@ -1090,10 +1479,19 @@ uint32_t replay_step(hedger& h, uint32_t max_updates) noexcept {
     const double r = rec[sd + 1];
     const double* sn = rec + sd + 2;
     const int terminal = rec[2 * sd + 2] > 0.5 ? 1 : 0;
+    ReplayRecord<D>* rc = h.replay_cache != nullptr ? static_cast<ReplayRecord<D>*>(h.replay_cache) + idx : nullptr;
+    const bool search = !terminal && (h.replay_k == 0 || lambda < 1.0);
+    const bool reuse_greedy = search && rc != nullptr && rc->greedy.gen == h.geom_gen;
+    const bool reuse_fit = rc != nullptr && rc->fit.gen == h.geom_gen;
+    const uint32_t reuses = (reuse_greedy ? 1u : 0u) + (reuse_fit ? 1u : 0u);
+    const uint64_t cost = kReplayUnitsPerUpdate - kReplayUnitsSaved * reuses +
+                          (reuses > 0 && h.fill >= h.cfg.capacity ? kReplayUnitsFull : 0u);
+    if (spent + cost > budget) break;
+    spent += cost;
     hedger_update_info_t info;
     h.call_work = 0;
     if (h.replay_k == 0 || lambda < 1.0) {
-      next_greedy<D>(h, sn, terminal, info);
+      next_greedy<D>(h, sn, terminal, info, rc != nullptr ? &rc->greedy : nullptr);
     } else {
       info = hedger_update_info_t{};
       info.next_status = HEDGER_NO_KNOWN_ACTION;
@@ -1103,7 +1501,7 @@ uint32_t replay_step(hedger& h, uint32_t max_updates) noexcept {
     info.target = (h.replay_k == 0) ? r + h.cfg.gamma * boot
                                     : r + h.cfg.gamma * ((1.0 - lambda) * boot + lambda * h.replay_next_return);
     if (terminal) info.target = r;
-    learn_target<D>(h, s, a, r, terminal, info);
+    learn_target<D>(h, s, a, r, terminal, info, rc != nullptr ? &rc->fit : nullptr);
     ++h.counters.replayed_updates;
     h.replay_next_return = info.target;
     ++done;
@@ -1128,6 +1526,7 @@ void rebuild_now(hedger& h) noexcept {
   kd_bind(h.tree[1], h.tree[1].pts, h.tree[1].ids, h.tree[1].nodes, h.tree[1].cap);
   for (uint32_t i = 0; i < h.n_fresh; ++i) h.fresh_pos[h.fresh_slot[i]] = kNone;
   h.n_fresh = 0;
+  h.fresh_start = fresh_trigger(h);
 }
 
 }  // namespace hg

@@ -8,6 +8,7 @@
 #ifndef HEDGER_DIMS_HPP
 #define HEDGER_DIMS_HPP
 
+#include <cstddef>
 #include <cstdint>
 
 #include "hedger/hedger.h"
@@ -37,6 +38,10 @@ struct DimOps {
   hedger_store_op_t (*insert)(hedger_t& h, const double* s, double a, double q, uint8_t flags) noexcept;
   /// hg::rebuild_now.
   void (*rebuild)(hedger_t& h) noexcept;
+  /// Bytes of one replay record (hg::ReplayRecord<D>, cfg.replay_cache), a multiple of its alignment.
+  size_t replay_record_bytes;
+  /// Constructs n replay records at mem (aligned to HEDGER_STORAGE_ALIGN), none valid. O(n).
+  void (*replay_cache_init)(void* mem, uint32_t n) noexcept;
 };
 
 /// The table of input dimension d (2..9; anything else gets 9's, as the store was laid out).

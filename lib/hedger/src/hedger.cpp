@@ -50,6 +50,7 @@ bool valid_config(const hedger_config_t* c) {
   if (c->replay > 1 || (c->replay == 1 && c->run_capacity == 0)) return false;
   if (c->replay_passes < 1 || c->replay_passes > HEDGER_MAX_REPLAY_PASSES) return false;
   if (!(c->replay_lambda >= 0.0 && c->replay_lambda <= 1.0)) return false;
+  if (c->replay_cache > 1) return false;
   if (c->greedy_method != static_cast<uint32_t>(HEDGER_GREEDY_PER_ACTION) &&
       c->greedy_method != static_cast<uint32_t>(HEDGER_GREEDY_STATE_MODEL)) {
     return false;
@@ -63,8 +64,11 @@ bool valid_config(const hedger_config_t* c) {
   return true;
 }
 
+/// Whether the replay keeps its records' geometry (cfg.replay_cache with a replay to keep it for).
+bool replay_cached(const hedger_config_t& c) { return c.replay != 0 && c.replay_cache != 0 && c.run_capacity > 0; }
+
 /// The storage block: [hedger | store arrays | fresh (pos per slot, slots, points) | 2 × (tree
-/// points, ids, nodes) | run].
+/// points, ids, nodes) | run | replay records].
 Layout make_layout(const hedger_config_t& c) {
   Layout l{};
   const size_t d = c.state_dim + 1u;
@@ -86,12 +90,14 @@ Layout make_layout(const hedger_config_t& c) {
   l.fresh_pos = take(cap * sizeof(uint32_t));
   l.fresh_slot = take(static_cast<size_t>(c.fresh_capacity) * sizeof(uint32_t));
   l.fresh_pts = take(static_cast<size_t>(c.fresh_capacity) * d * sizeof(double));
+  l.fresh_box = take((c.fresh_capacity + hg::kFreshBlock - 1) / hg::kFreshBlock * 2u * d * sizeof(double));
   for (int t = 0; t < 2; ++t) {
     l.tpts[t] = take(cap * d * sizeof(double));
     l.tids[t] = take(cap * sizeof(uint32_t));
     l.tnodes[t] = take(static_cast<size_t>(l.max_nodes) * sizeof(hg::Node));
   }
   l.run = take(static_cast<size_t>(c.run_capacity) * l.run_stride * sizeof(double));
+  l.replay_cache = take(replay_cached(c) ? static_cast<size_t>(c.run_capacity) * hg::dim_ops(static_cast<uint32_t>(d)).replay_record_bytes : 0);
   l.total = off;
   return l;
 }
@@ -262,12 +268,13 @@ hedger_config_t hedger_config_default(void) HEDGER_NOEXCEPT {
   c.ivh_mode = static_cast<uint32_t>(HEDGER_IVH_UNWEIGHTED);
   c.merge_radius = 0.02;
   c.evict_candidates = 8;
-  c.fresh_capacity = 512;
+  c.fresh_capacity = 4096;
   c.rebuild_work_per_update = 0;
   c.run_capacity = 0;
   c.replay = 0;
   c.replay_passes = 1;
   c.replay_lambda = 0.0;
+  c.replay_cache = 1;
   c.greedy_method = static_cast<uint32_t>(HEDGER_GREEDY_PER_ACTION);
   c.greedy_pessimism = 0.0;
   c.greedy_reach = 1.0;
@@ -300,7 +307,6 @@ hedger_status_t hedger_init(hedger_t** out, void* storage, size_t storage_size, 
   h->r2max = h->h2 * std::log(1.0 / cfg->weight_epsilon);
   h->merge_r2 = cfg->merge_radius * cfg->merge_radius;
   h->fresh_cap = cfg->fresh_capacity;
-  h->fresh_start = cfg->fresh_capacity / 4;
   if (cfg->rebuild_work_per_update > 0) {
     h->rebuild_budget = cfg->rebuild_work_per_update;
   } else {
@@ -320,16 +326,23 @@ hedger_status_t hedger_init(hedger_t** out, void* storage, size_t storage_size, 
   std::memset(h->fresh_pos, 0xFF, static_cast<size_t>(cfg->capacity) * sizeof(uint32_t));  // kNone
   h->fresh_slot = reinterpret_cast<uint32_t*>(base + l.fresh_slot);
   h->fresh_pts = reinterpret_cast<double*>(base + l.fresh_pts);
+  h->fresh_box = reinterpret_cast<double*>(base + l.fresh_box);
   for (int t = 0; t < 2; ++t) {
     hg::kd_bind(h->tree[t], reinterpret_cast<double*>(base + l.tpts[t]), reinterpret_cast<uint32_t*>(base + l.tids[t]),
                     reinterpret_cast<hg::Node*>(base + l.tnodes[t]), cfg->capacity);
   }
   h->run = reinterpret_cast<double*>(base + l.run);
+  h->replay_cache = nullptr;
+  if (replay_cached(*cfg)) {
+    h->replay_cache = base + l.replay_cache;
+    hg::dim_ops(h->dim).replay_cache_init(h->replay_cache, cfg->run_capacity);
+  }
   h->run_cap = cfg->run_capacity;
   h->run_stride = l.run_stride;
   h->rng = cfg->seed ^ 0x9E3779B97F4A7C15ull;
   if (h->rng == 0) h->rng = 0x9E3779B97F4A7C15ull;
   reset_learned_state(h);
+  h->fresh_start = hg::fresh_trigger(*h);
   refresh_gauges(h);
   h->magic = hg::kMagic;
   *out = h;
@@ -487,6 +500,7 @@ uint32_t hedger_run_tag(const hedger_t* self) HEDGER_NOEXCEPT { return live(self
 
 hedger_status_t hedger_set_run_tag(hedger_t* self, uint32_t tag) HEDGER_NOEXCEPT {
   if (!live(self) || tag < self->cur_tag) return HEDGER_ERR_INVALID_ARG;
+  if (tag != self->cur_tag) ++self->geom_gen;  // the anchor's recency has moved
   self->cur_tag = tag;
   refresh_gauges(self);  // the anchor's recency has moved: a sliced save must start again
   return HEDGER_OK;
@@ -502,6 +516,7 @@ hedger_status_t hedger_weight_run(hedger_t* self, uint32_t tag, double weight, u
     ++n;
   }
   if (points != nullptr) *points = n;
+  ++self->geom_gen;  // anchor weights have changed
   refresh_gauges(self);
   return HEDGER_OK;
 }

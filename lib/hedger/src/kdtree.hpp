@@ -26,6 +26,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 
 namespace hg {
@@ -82,20 +83,24 @@ class KnnSet {
   /// Current acceptance bound: r2max until full, then the k-th distance (kept in a member, so
   /// reading it never indexes the buffer).
   double worst() const { return bound_; }
+  /// Adds (d2, id) if it is among the k smallest so far: a binary search for its place, then
+  /// one block move (HEDGER's k is up to 64; a linear scan and shift were most of a search).
   void add(double d2, uint32_t id) {
     if (k_ == 0 || d2 > r2max_) return;
-    uint32_t pos;
-    if (n_ < k_) {
-      pos = n_++;
-    } else {
-      if (!nb_less(d2, id, buf_[k_ - 1].d2, buf_[k_ - 1].id)) return;
-      pos = k_ - 1;
+    if (n_ == k_ && !nb_less(d2, id, buf_[k_ - 1].d2, buf_[k_ - 1].id)) return;
+    uint32_t lo = 0, hi = n_;  // first entry greater than (d2, id)
+    while (lo < hi) {
+      const uint32_t mid = (lo + hi) / 2;
+      if (nb_less(d2, id, buf_[mid].d2, buf_[mid].id)) {
+        hi = mid;
+      } else {
+        lo = mid + 1;
+      }
     }
-    while (pos > 0 && nb_less(d2, id, buf_[pos - 1].d2, buf_[pos - 1].id)) {
-      buf_[pos] = buf_[pos - 1];
-      --pos;
-    }
-    buf_[pos] = Neighbour{d2, id};
+    const uint32_t end = n_ < k_ ? n_ : k_ - 1;  // entries [lo, end) move up by one
+    if (end > lo) std::memmove(buf_ + lo + 1, buf_ + lo, (end - lo) * sizeof(Neighbour));
+    buf_[lo] = Neighbour{d2, id};
+    if (n_ < k_) ++n_;
     if (n_ == k_) bound_ = buf_[k_ - 1].d2;
   }
   uint32_t size() const { return n_; }

@@ -94,6 +94,59 @@ static void test_determinism_two_instances_bit_identical(void** state) {
   hedger_destroy(b);
 }
 
+// A k-NN search is bounded by the neighbours of the previous search of its kind (hedger.h,
+// "kd-tree"): along a path of close queries the bound is tight from the start. Two instances with
+// the same store answer the same queries bit for bit, whether or not each query follows a close
+// one (the other instance asks about a far state in between, so its bounds start wide open), with
+// the state model's query (greedy, k_max 64 of a dense store) and the prediction's.
+static void test_determinism_results_independent_of_search_history(void** state) {
+  (void)state;
+  hedger_config_t c = hedger_config_default();
+  c.state_dim = 3;
+  c.capacity = 6000;
+  c.k_min = 6;
+  c.k_max = 64;
+  c.bandwidth = 0.3;
+  c.greedy_method = HEDGER_GREEDY_STATE_MODEL;
+  c.greedy_pessimism = 4.0;
+  c.greedy_reach = 3.0;
+  hedger_t* h[2] = {ht_create(&c), ht_create(&c)};
+  uint64_t rs = 31;
+  for (int i = 0; i < 5000; ++i) {
+    double x[3];
+    for (int d = 0; d < 3; ++d) x[d] = ht_uniform(&rs, -1.0, 1.0);
+    const double a = ht_uniform(&rs, -1.0, 1.0);
+    const double q = x[0] + 0.5 * x[1] * a - 0.3 * a * a;
+    for (int k = 0; k < 2; ++k) assert_int_equal(hedger_insert(h[k], x, a, q, 0, NULL), HEDGER_OK);
+  }
+  for (int k = 0; k < 2; ++k) assert_int_equal(hedger_observe_reward(h[k], 1.0), HEDGER_OK);
+  double s[3] = {-0.8, -0.5, 0.1};
+  double a = 0.0;
+  for (int t = 0; t < 400; ++t) {
+    const double far[3] = {ht_uniform(&rs, -3.0, 3.0), 2.5, -2.5};
+    assert_int_equal(hedger_greedy(h[1], far, NULL, NULL, NULL), HEDGER_NO_KNOWN_ACTION);
+    hedger_prediction_t pf;
+    assert_int_equal(hedger_predict(h[1], far, 0.0, &pf), HEDGER_OK);
+    double ga[2], gv[2];
+    hedger_prediction_t p[2];
+    uint32_t slots[2][64];
+    for (int k = 0; k < 2; ++k) {
+      assert_int_equal(hedger_greedy(h[k], s, &ga[k], &gv[k], NULL), HEDGER_OK);
+      assert_int_equal(hedger_predict_ex(h[k], s, a, &p[k], slots[k], NULL, 64), HEDGER_OK);
+    }
+    assert_true(memcmp(&ga[0], &ga[1], 8) == 0 && memcmp(&gv[0], &gv[1], 8) == 0);
+    assert_true(memcmp(&p[0].value, &p[1].value, 8) == 0);
+    assert_int_equal(p[0].n_neighbours, 64);
+    assert_memory_equal(slots[0], slots[1], sizeof slots[0]);
+    a = ga[0];
+    s[0] += 0.004;
+    s[1] += 0.0025 * sin(0.05 * t);
+    s[2] += 0.01 * a;
+  }
+  hedger_destroy(h[0]);
+  hedger_destroy(h[1]);
+}
+
 // predict, greedy, update, insert, end_run (replay), save and load allocate nothing, over
 // thousands of calls with a full store, evictions and rebuilds.
 static void test_determinism_no_allocation_after_init(void** state) {
@@ -146,6 +199,7 @@ static void test_determinism_init_into_static_storage(void** state) {
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_determinism_two_instances_bit_identical),
+      cmocka_unit_test(test_determinism_results_independent_of_search_history),
       cmocka_unit_test(test_determinism_no_allocation_after_init),
       cmocka_unit_test(test_determinism_init_into_static_storage),
   };

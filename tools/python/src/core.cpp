@@ -185,6 +185,7 @@ const Field<hedger_config_t> kHedgerFields[] = {
     B21R_U32(hedger_config_t, replay),
     B21R_U32(hedger_config_t, replay_passes),
     B21R_F64(hedger_config_t, replay_lambda),
+    B21R_U32(hedger_config_t, replay_cache),
     B21R_U32(hedger_config_t, greedy_method),
     B21R_F64(hedger_config_t, greedy_pessimism),
     B21R_F64(hedger_config_t, greedy_reach),
@@ -634,6 +635,7 @@ class Hedger {
     B21R_C(greedy_reached);
     B21R_C(updates);
     B21R_C(replayed_updates);
+    B21R_C(replay_reused);
     B21R_C(run_overflows);
     B21R_C(inserts);
     B21R_C(merges);

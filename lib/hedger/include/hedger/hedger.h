@@ -18,8 +18,12 @@
 ///   per stored point  (24 D + 45) bytes + about 64 / 16 · 2 bytes of tree nodes
 ///                     (store: coordinates 8D, value 8, sequence 8, flags 1, fresh index 4,
 ///                      run tag 4, anchor weight 4; two kd-trees: coordinates 8D + id 4 each)
-///   per fresh entry   8 D + 4 bytes;  per run record (2 state_dim + 3) · 8 bytes;  + ~1 KiB.
-/// D = 4 (3-D state + action): 147 bytes per stored point measured at 20k points.
+///   per fresh entry   8 D + 4 bytes;  per run record (2 state_dim + 3) · 8 bytes, and with
+///                     replay_cache the geometry its replay keeps: 6,656 bytes at D = 4, 7,184 at
+///                     D = 5, 10,096 at D = 9 (two searches' neighbours, factorisations, inverses);
+///                     + ~1 KiB.
+/// D = 4 (3-D state + action): 147 bytes per stored point measured at 20k points. The firmware's
+/// corridor learner (D = 5, run_capacity 1,008) keeps 7.2 MB of replay records.
 ///
 /// Choices (hedger.md leaves them open; measured on the mountain-car test and the benchmark):
 /// - Bandwidth: fixed h in scaled units, not tied to the neighbourhood, so "unknown" means
@@ -108,6 +112,11 @@
 ///   small linearly scanned fresh buffer; a shadow tree is rebuilt in fixed work slices across
 ///   updates and swapped in (see hedger_counters_t::max_rebuild_work). Neighbour sets are
 ///   ordered by (distance, slot), so results never depend on the tree's shape or the timing.
+///   A search for the k nearest is bounded from the start by the previous search of its kind
+///   (its k neighbours, re-measured from the new query: the k nearest lie within the farthest of
+///   them), so it visits far fewer nodes and finds the same points.
+/// - Replay cache (cfg.replay_cache): the backward replay's later passes reuse each record's
+///   geometry (see hedger_end_run()).
 ///
 /// Determinism. Results are a pure function of (config, call sequence): no clocks, no global
 /// state, an explicitly seeded generator, and neighbour sets ordered by (distance, slot) so that
@@ -285,13 +294,20 @@ typedef struct hedger_config {
                          ///< merged into it instead of stored, >= 0. Default 0.02.
   uint32_t evict_candidates; ///< candidates examined per eviction, 1..HEDGER_MAX_EVICT_CANDIDATES. Default 8.
   uint32_t fresh_capacity;   ///< fresh-point buffer (points not yet in the kd-tree, scanned linearly),
-                             ///< 8..HEDGER_MAX_FRESH. Larger = smaller rebuild slices but longer
-                             ///< scans. Measured tick p50 at 20k / 50k points: 128 → 213 / 449 us,
-                             ///< 256 → 137 / 270, 512 → 107 / 186, 1024 → 100 / 147 (but 1k points:
-                             ///< 44 → 52 us). Default 512.
+                             ///< 8..HEDGER_MAX_FRESH. A rebuild of the tree starts when about twice
+                             ///< the square root of its work units wait there (350 at 1k stored
+                             ///< points, 2,000 at 20k: rebuilding less often as it costs more,
+                             ///< against the longer scan of every query), kept within
+                             ///< [fresh_capacity/16, fresh_capacity/2]. Queries skip blocks of 32
+                             ///< fresh points whose bounding box lies beyond their bound. Larger =
+                             ///< rarer rebuilds and smaller rebuild slices, longer scans. Measured
+                             ///< (callgrind, b21r-train on a corridor session, 9k points at its
+                             ///< end): 512 with rebuilds at 128 points spent 566 M instructions
+                             ///< rebuilding, 4096 with the trigger 85 M. Default 4096.
   uint32_t rebuild_work_per_update; ///< kd-tree rebuild work units per update (1 unit ≈ one point
-                             ///< visited in one pass); 0 = automatic (a rebuild of a full store
-                             ///< finishes within fresh_capacity/2 updates). Default 0.
+                             ///< visited in one pass, about 50 instructions); 0 = automatic (a
+                             ///< rebuild of a full store finishes within fresh_capacity/2 updates,
+                             ///< before the fresh buffer can fill). Default 0.
   uint32_t run_capacity; ///< run buffer length (experiences) for backward replay, 0..HEDGER_MAX_RUN.
                          ///< 0 disables the buffer. Default 0.
   uint32_t replay;       ///< 1: hedger_end_run() replays the recorded run backwards (newest first)
@@ -301,6 +317,12 @@ typedef struct hedger_config {
   double replay_lambda;  ///< target of the replay, [0, 1]: the λ-return
                          ///< T_t = r_t + γ ((1 − λ) max_a Q(s_{t+1}, a) + λ T_{t+1}); 0 = the
                          ///< Q-learning target, 1 = the return of the run as driven. Default 0.
+  uint32_t replay_cache; ///< 1: the replay keeps, per record of the run, the geometry of its two
+                         ///< local models (the neighbours found, the factorised normal equations,
+                         ///< the hull tests) and, while no stored point has moved, repeats only
+                         ///< what depends on the values (see hedger_end_run()); the results are
+                         ///< bit-identical to 0, which recomputes everything. Memory: run_capacity ×
+                         ///< hedger_replay_record_bytes(). Ignored without replay. Default 1.
   uint32_t greedy_method;///< a hedger_greedy_method_t value. Default HEDGER_GREEDY_PER_ACTION.
   double greedy_pessimism; ///< κ >= 0: the greedy search ranks known actions by value − κ ·
                          ///< standard error of the regression. Default 0.
@@ -363,6 +385,9 @@ typedef struct hedger_counters_s {
   uint64_t anchor_unweighted;
   uint64_t updates;             ///< successful training updates (including replayed ones)
   uint64_t replayed_updates;    ///< updates performed by backward replay
+  /// searches (greedy and prediction) of replayed updates that took their geometry from the
+  /// replay's record (cfg.replay_cache): neither the neighbours nor the factorisations recomputed
+  uint64_t replay_reused;
   uint64_t run_overflows;       ///< experiences dropped from a full run buffer (the oldest go first)
   uint64_t inserts;             ///< points stored into a free slot
   uint64_t merges;              ///< points folded into a close neighbour
@@ -478,16 +503,28 @@ hedger_status_t hedger_learn(hedger_t* self, const double* state, double action,
 /// cfg.replay_lambda (propagates a sparse final reward back along the whole run at once); then
 /// clears the run buffer. *replayed (may be NULL) receives the number of replayed updates.
 /// Cost: replay_passes × run_fill updates, no allocation: between runs, never inside a tick (use
-/// hedger_end_run_begin / hedger_end_run_step to spread it over ticks).
+/// hedger_end_run_begin / hedger_end_run_step to spread it over ticks). With cfg.replay_cache
+/// (the default) each record keeps the geometry of its two searches (the neighbours, the
+/// factorised normal equations, the hull tests): the first pass forms it, and the later passes,
+/// while no stored point has moved (no insertion or eviction, run tag or anchor weight changed
+/// meanwhile), repeat only the parts that depend on the values, with bit-identical results
+/// (b21r-train on a corridor session at the firmware's defaults, 20 passes: 5.6 times fewer
+/// instructions per learned experience).
 hedger_status_t hedger_end_run(hedger_t* self, uint32_t* replayed) HEDGER_NOEXCEPT;
 
 /// Sliced hedger_end_run(): begin freezes the recorded run and returns (in *pending, may be
 /// NULL) the updates its replay takes (0 without replay: the run buffer is simply cleared); each
-/// hedger_end_run_step() call performs at most max_updates of them and returns how many remain
-/// in *remaining (may be NULL). The results are bit-identical to hedger_end_run(), however the
-/// work is sliced. Until the replay is finished the run buffer records nothing new; a
-/// hedger_update() meanwhile first finishes the replay (unbounded), so state is never torn.
-/// Cost of a step: at most max_updates updates. O(1) for begin.
+/// hedger_end_run_step() call performs updates worth at most max_updates full updates (at least
+/// one when max_updates >= 1) and returns how many updates remain in *remaining (may be NULL).
+/// An update whose searches reuse their record's geometry (cfg.replay_cache) counts an eighth of
+/// one that forms it (measured: about a fifteenth of its instructions), and three eighths in a
+/// full store, where its store step evicts (measured: about a quarter), so a step never costs
+/// more than max_updates updates without the cache, and the passes after the first go about
+/// eight times faster (in a full store, where every eviction moves a point, most updates form
+/// their geometry again). The results are bit-identical to hedger_end_run(), however the work is
+/// sliced. Until the replay is finished the run buffer records nothing new; a hedger_update()
+/// meanwhile first finishes the replay (unbounded), so state is never torn.
+/// Cost of a step: at most max_updates full updates. O(1) for begin.
 hedger_status_t hedger_end_run_begin(hedger_t* self, uint32_t* pending) HEDGER_NOEXCEPT;
 hedger_status_t hedger_end_run_step(hedger_t* self, uint32_t max_updates, uint32_t* remaining) HEDGER_NOEXCEPT;
 
