@@ -34,7 +34,7 @@ using SysVec = Eigen::Matrix<double, Eigen::Dynamic, 1, Eigen::ColMajor, kMaxSys
 class SymFactor {
  public:
   /// Factorises m (its lower triangle is read). True when Eigen reports success; the pivots then
-  /// tell how definite m is (see factor_spd() in core.hpp). O(n³).
+  /// tell how definite m is (see factor_spd() below). O(n³).
   bool compute(const SysMat& m) noexcept;
   /// Order n of the last factorised matrix.
   int size() const noexcept;

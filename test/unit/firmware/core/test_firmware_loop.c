@@ -5,6 +5,7 @@
 #include "loop_harness.h"
 
 #include "fw/progress.h"
+#include <learn/learn.h>
 #include "fw/safety.h"
 
 #include <b21r_test/alloc_counter.h>
@@ -304,45 +305,80 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
   assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), 1);
   harness_close(&g_h);
 
-  // A file of revision 1 (an older controller's 96-byte section, which added a policy shift
-  // learned from ranked pairs) resumes with its values and progress; where its shift had moved the
-  // operator is told that it is no longer used, and an evaluation of the learned policy drives
-  // exactly as from the same state in today's format.
-  uint64_t eval_hash[3];
-  for (int variant = 0; variant < 3; ++variant) {  // today's section; revision 1 without, with a shift
-    uint8_t old[FW_PROGRESS_READ_MAX];
-    memset(old, 0, sizeof old);
-    memcpy(old, meta, ms);
-    size_t old_n = ms;
-    if (variant > 0) {
-      memcpy(old, "FWMETA01", 8);
-      old_n = 96;
-      const double a = variant == 2 ? 0.75 : 0.0;
-      memcpy(old + 56, &a, sizeof a);  // little-endian host (the tests run on x86-64 and arm64)
+  // Files without an actor (today's section with the greedy policy; revision 2; revision 1, an
+  // older controller's 96-byte section, which added a policy shift learned from ranked pairs, without
+  // and with a shift that had moved) hold HEDGER's values alone. They resume with their values and
+  // progress. With policy = actor the actor starts as the policy of the values' stored points (a note
+  // says so, and where a revision-1 shift had moved, that it is no longer used): an evaluation drives
+  // alike from each of them, and otherwise than from today's file with its learned actor. With
+  // policy = greedy every file, today's with its actor too (a note: the next checkpoint drops it),
+  // drives as the values' greedy action, alike.
+  fw_progress_t good;
+  assert_int_equal(fw_progress_decode(meta, ms, &good, NULL, 0), 0);
+  assert_int_equal(good.policy, LEARN_POLICY_ACTOR);
+  assert_true(good.actor_bytes > 0 && good.actor_bytes < ps);
+  const size_t values_n = ps - (size_t)good.actor_bytes;
+  uint64_t eval_hash[2][5];
+  for (int policy = 0; policy < 2; ++policy) {
+    for (int variant = 0; variant < 5; ++variant) {
+      uint8_t old[FW_PROGRESS_READ_MAX];
+      memset(old, 0, sizeof old);
+      size_t old_n = ms;
+      if (variant == 0) {
+        memcpy(old, meta, ms);
+      } else {
+        fw_progress_t values_only = good;
+        values_only.policy = LEARN_POLICY_GREEDY;
+        values_only.actor_bytes = 0;
+        old_n = fw_progress_encode(&values_only, old);
+      }
+      if (variant == 2) {
+        memcpy(old, "FWMETA02", 8);
+        old_n = FW_PROGRESS_BYTES_2;
+      } else if (variant >= 3) {
+        memcpy(old, "FWMETA01", 8);
+        memset(old + 56, 0, sizeof old - 56);
+        old_n = 96;
+        const double a = variant == 4 ? 0.75 : 0.0;
+        memcpy(old + 56, &a, sizeof a);  // little-endian host (the tests run on x86-64 and arm64)
+      }
+      assert_int_equal(
+          fw_checkpoint_write(c.checkpoint_file, old, old_n, payload, variant == 0 ? ps : values_n, err, sizeof err), 0);
+      fw_config_t ce = c;
+      ce.mode = FW_MODE_EVALUATE;
+      ce.evaluate_policy = FW_EVAL_LEARNED;
+      ce.eval_starts = 2;
+      ce.policy = policy == 0 ? FW_POLICY_ACTOR : FW_POLICY_GREEDY;
+      assert_int_equal(harness_open(&g_h, &ce, false, 3), 0);
+      assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), 1);
+      if (variant == 4) {
+        assert_non_null(strstr(err, "note: checkpoint"));
+        assert_non_null(strstr(err, "ranked pairs"));
+      }
+      if (policy == 0 && variant > 0) {
+        assert_non_null(strstr(err, "holds no actor"));
+      } else if (policy == 1 && variant == 0) {
+        assert_non_null(strstr(err, "also holds an actor"));
+      } else if (variant != 4) {
+        assert_string_equal(err, "");
+      }
+      fw_loop_get_stats(g_h.loop, &st);
+      assert_true(st.store_fill > 0);
+      harness_run(&g_h, 100000);
+      fw_loop_get_stats(g_h.loop, &st);
+      assert_true(st.done);
+      assert_int_equal(g_h.runs, 2);
+      eval_hash[policy][variant] = g_h.exp_hash;
+      harness_close(&g_h);
     }
-    assert_int_equal(fw_checkpoint_write(c.checkpoint_file, old, old_n, payload, ps, err, sizeof err), 0);
-    fw_config_t ce = c;
-    ce.mode = FW_MODE_EVALUATE;
-    ce.evaluate_policy = FW_EVAL_LEARNED;
-    ce.eval_starts = 2;
-    assert_int_equal(harness_open(&g_h, &ce, false, 3), 0);
-    assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), 1);
-    if (variant == 2) {
-      assert_non_null(strstr(err, "note: checkpoint"));
-      assert_non_null(strstr(err, "ranked pairs"));
-    } else {
-      assert_string_equal(err, "");
-    }
-    fw_loop_get_stats(g_h.loop, &st);
-    assert_true(st.store_fill > 0);
-    harness_run(&g_h, 100000);
-    fw_loop_get_stats(g_h.loop, &st);
-    assert_true(st.done);
-    assert_int_equal(g_h.runs, 2);
-    eval_hash[variant] = g_h.exp_hash;
-    harness_close(&g_h);
   }
-  assert_true(eval_hash[0] == eval_hash[1] && eval_hash[1] == eval_hash[2]);
+  for (int variant = 2; variant < 5; ++variant) {
+    assert_true(eval_hash[0][variant] == eval_hash[0][1]);
+  }
+  assert_true(eval_hash[0][0] != eval_hash[0][1]);
+  for (int variant = 1; variant < 5; ++variant) {
+    assert_true(eval_hash[1][variant] == eval_hash[1][0]);
+  }
   assert_int_equal(fw_checkpoint_write(c.checkpoint_file, meta, ms, payload, ps, err, sizeof err), 0);
   free(payload);
 
