@@ -240,9 +240,10 @@ static const key_desc_t k_keys[] = {
    "policy = actor: Adam steps of the behaviour cloning after the first training run"},
   {NULL, "actor_learning_rate", KIND_DOUBLE, OFF(actor_learning_rate), 0, 1, true, false, NULL, "0.003",
    "policy = actor: Adam's learning rate"},
-  {NULL, "actor_work_per_tick", KIND_INT, OFF(actor_work_per_tick), 1, 100000000, false, false, NULL, "2000",
-   "between runs (the robot stands): the actor's learning per tick in work units of about 1000 "
-   "instructions (a slice may pass it by one query's 160); bounds the tick's time"},
+  {NULL, "actor_work_per_tick", KIND_INT, OFF(actor_work_per_tick), 1, 100000000, false, false, NULL, "1500",
+   "between runs (the robot stands): the actor's learning per tick in work units of at most 2000 "
+   "instructions (a slice may pass it by one query's 200 units); the default costs about what "
+   "learn_updates_per_tick's 4 replay updates cost; bounds the tick's time"},
   {NULL, "learner", KIND_ENUM, OFF(learner), 0, 0, false, false, k_learner, "hedger",
    "value function: hedger (the paper's); lwa = HEDGER with locally weighted averaging only; tabular = "
    "Q-learning on a table of tabular_bins per state dimension x tabular_actions (no checkpoints)"},

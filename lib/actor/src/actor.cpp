@@ -107,7 +107,8 @@ struct actor {
   uint32_t run_len;  // entries of the run under way
   uint64_t runs;     // runs ended with entries; the run under way has this id
   int trained;
-  // The network: theta = [W1 (hidden × sd, row per unit), b1 (hidden), w2 (hidden), b2].
+  // The network: theta = [W1 (sd × hidden, a row per input, so that the loops over the hidden
+  // units are contiguous), b1 (hidden), w2 (hidden), b2].
   double* theta;
   double* m;
   double* v;
@@ -243,22 +244,48 @@ struct Pass {
   double out;  // the action
 };
 
+// tanh as a rational function: Eigen's fast tanh of floats (generic_fast_tanh_float, a 13/6
+// Pade-type approximation on [-7.9, 7.9], clamped outside), evaluated in double and clamped to
+// [-1, 1]. Error below 2e-7 (float accuracy is plenty for a network's activation), about 20
+// instructions without a branch, so the loop over the hidden units vectorises: the network's
+// training costs half what std::tanh's 78 instructions made it (callgrind). Pure arithmetic:
+// the same on every machine, unlike libm's. NaN stays NaN.
+inline double tanh_fast(double a) {
+  const double c = 7.90531110763549805;
+  const double x = a > c ? c : (a < -c ? -c : a);
+  const double x2 = x * x;
+  double p = x2 * -2.76076847742355e-16 + 2.00018790482477e-13;
+  p = x2 * p + -8.60467152213735e-11;
+  p = x2 * p + 5.12229709037114e-08;
+  p = x2 * p + 1.48572235717979e-05;
+  p = x2 * p + 6.37261928875436e-04;
+  p = x2 * p + 4.89352455891786e-03;
+  p = x * p;
+  double q = x2 * 1.19825839466702e-06 + 1.18534705686654e-04;
+  q = x2 * q + 2.26843463243900e-03;
+  q = x2 * q + 4.89352518554385e-03;
+  const double y = p / q;
+  return y > 1.0 ? 1.0 : (y < -1.0 ? -1.0 : y);
+}
+
 void forward(const actor_t& A, const double* theta, const double* s, Pass& p) {
   const uint32_t sd = A.sd;
   const uint32_t H = A.cfg.hidden;
   for (uint32_t i = 0; i < sd; ++i) p.x[i] = (s[i] - A.in_c[i]) * A.in_k[i];
-  const double* W1 = theta;
   const double* b1 = theta + H * sd;
   const double* w2 = b1 + H;
-  double z2 = w2[H];  // b2
-  for (uint32_t j = 0; j < H; ++j) {
-    double z = b1[j];
-    const double* w = W1 + static_cast<size_t>(j) * sd;
-    for (uint32_t i = 0; i < sd; ++i) z += w[i] * p.x[i];
-    p.h[j] = std::tanh(z);
-    z2 += w2[j] * p.h[j];
+  double z[ACTOR_MAX_HIDDEN];
+  for (uint32_t j = 0; j < H; ++j) z[j] = b1[j];
+  // Each unit's sum runs over the inputs in order; the loop over the units vectorises.
+  for (uint32_t i = 0; i < sd; ++i) {
+    const double xi = p.x[i];
+    const double* w = theta + static_cast<size_t>(i) * H;
+    for (uint32_t j = 0; j < H; ++j) z[j] += w[j] * xi;
   }
-  p.y = std::tanh(z2);
+  for (uint32_t j = 0; j < H; ++j) p.h[j] = tanh_fast(z[j]);
+  double z2 = w2[H];  // b2
+  for (uint32_t j = 0; j < H; ++j) z2 += w2[j] * p.h[j];
+  p.y = tanh_fast(z2);
   p.out = A.out_c + A.out_r * p.y;
 }
 
@@ -268,17 +295,20 @@ double backward(actor_t& A, const Pass& p, double target, double coef) {
   const uint32_t H = A.cfg.hidden;
   const double err = p.out - target;
   const double dz2 = 2.0 * coef * err * A.out_r * (1.0 - p.y * p.y);
-  double* gW1 = A.grad;
   double* gb1 = A.grad + H * sd;
   double* gw2 = gb1 + H;
   const double* w2 = A.theta + H * sd + H;
   gw2[H] += dz2;
+  double dz1[ACTOR_MAX_HIDDEN];
   for (uint32_t j = 0; j < H; ++j) {
     gw2[j] += dz2 * p.h[j];
-    const double dz1 = dz2 * w2[j] * (1.0 - p.h[j] * p.h[j]);
-    gb1[j] += dz1;
-    double* gw = gW1 + static_cast<size_t>(j) * sd;
-    for (uint32_t i = 0; i < sd; ++i) gw[i] += dz1 * p.x[i];
+    dz1[j] = dz2 * w2[j] * (1.0 - p.h[j] * p.h[j]);
+    gb1[j] += dz1[j];
+  }
+  for (uint32_t i = 0; i < sd; ++i) {
+    const double xi = p.x[i];
+    double* g = A.grad + static_cast<size_t>(i) * H;
+    for (uint32_t j = 0; j < H; ++j) g[j] += dz1[j] * xi;
   }
   return err * err;
 }

@@ -80,7 +80,7 @@ learn_config_t learn_config_default(void) {
   c.schedule.auto_ratio = 1.0;
   c.policy = LEARN_POLICY_ACTOR;
   c.actor = actor_config_default();
-  c.actor_work_per_slice = 2000U;
+  c.actor_work_per_slice = 1500U;
   c.learner = LEARN_LEARNER_HEDGER;
   c.alpha = 0.2;
   c.gamma = 0.0;

@@ -43,18 +43,23 @@
 ///   one query's two local regressions (steps 4-6)                          ACTOR_WORK_QUERY units
 ///   ACTOR_ITEMS_PER_UNIT items of a linear pass (returns, pools, copies,
 ///   and the kd-trees' build work units)                                    1 unit
-/// One unit is about ACTOR_INSTRUCTIONS_PER_UNIT instructions on x86-64 (callgrind, the default
-/// configuration at 20,000 transitions; test actor.slice_instructions keeps every slice below
-/// budget × that + the largest operation). A slice therefore costs at most (budget +
-/// ACTOR_WORK_QUERY) units. The whole work after a run of the corridor (about 1,500 queries):
-/// about 420,000 units, a fraction of a second of CPU. The result does not depend on how the
-/// work is sliced: every sum runs in one fixed order.
+/// A unit costs at most ACTOR_INSTRUCTIONS_PER_UNIT instructions (x86-64, callgrind; test
+/// actor.slice_instructions: a ring of 20,000 corridor transitions, state dimension 4, a run of
+/// 147 steps, 1,477 queries: a sample 1,850 instructions, a query 100,000 to 360,000 depending on
+/// the neighbourhoods, a build unit 1,800), so a slice of budget B costs at most
+/// (B + ACTOR_WORK_QUERY) × ACTOR_INSTRUCTIONS_PER_UNIT instructions (measured at B = 1,500: at
+/// most 2.95 million, median 2.78 million; bound 3.4 million). The whole work after that run:
+/// 0.94 billion instructions (about 0.3 s of CPU, 409 slices of 1,500 units), three fifths of it
+/// the fit. The result does not depend on how the work is sliced: every sum runs in one fixed order.
+/// Per tick: actor_act about 1,300 instructions (state dimension 4, 16 hidden units);
+/// actor_record a copy of 2 state_dim + 3 values.
 ///
 /// Memory. Everything lives in the caller's storage (actor_storage_size, exact): per transition
 /// 8 (2 state_dim + 3) + 5 bytes of ring and 2 × (8 · 9 + 4) + 8 bytes of models (two kd-trees of
-/// padded 9-D points, their ids and row maps), per query 8 · 4 + 5 bytes, per parameter 8 · 6
-/// bytes ((state_dim + 2) hidden + 1 parameters), plus the trees' nodes (about capacity / 8 ×
-/// 32 bytes each) and about 20 KiB. Default configuration at state dimension 4: about 5.4 MB.
+/// padded 9-D points, their ids, a row map) and 4 of the query pool; per query 8 · 4 + 5 bytes;
+/// per parameter 8 · 7 bytes ((state_dim + 2) hidden + 1 parameters: weights, Adam's two moments,
+/// a gradient, and the copies a diverged fit is undone from), plus the trees' nodes (about
+/// capacity / 8 × 32 bytes each). The default configuration at state dimension 4: 5,484,992 bytes.
 /// No allocation after actor_init().
 ///
 /// Determinism. Results are a pure function of the configuration and the sequence of calls: the
@@ -90,11 +95,11 @@ extern "C" {
 /// Alignment of the storage given to actor_init().
 #define ACTOR_STORAGE_ALIGN 64U
 /// Work units of one query's two local regressions (the slice accounting above).
-#define ACTOR_WORK_QUERY 160U
+#define ACTOR_WORK_QUERY 200U
 /// Items of a linear pass, or kd-tree build units, per work unit.
-#define ACTOR_ITEMS_PER_UNIT 16U
+#define ACTOR_ITEMS_PER_UNIT 24U
 /// Instructions per work unit, about (x86-64, callgrind; see the file comment).
-#define ACTOR_INSTRUCTIONS_PER_UNIT 1000U
+#define ACTOR_INSTRUCTIONS_PER_UNIT 2000U
 /// Version of the byte format of actor_save(); actor_load() reads this version only.
 #define ACTOR_FORMAT_VERSION 1U
 
