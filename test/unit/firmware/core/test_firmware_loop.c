@@ -4,9 +4,14 @@
 #define _POSIX_C_SOURCE 200809L
 #include "loop_harness.h"
 
+#include "fw/checkpoint.h"
+#include "fw/config_task.h"
 #include "fw/progress.h"
 #include <learn/learn.h>
 #include "fw/safety.h"
+
+#include <hedger/hedger.h>
+#include <tasks/decl.h>
 
 #include <b21r_test/alloc_counter.h>
 
@@ -421,6 +426,72 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
   assert_int_equal(system(cmd), 0);
 }
 
+// A checkpoint of the obstacle task written before its state remembered the obstacle (four
+// features, plus the executed rotation: a state of 5 and input scales 1,1,1,1,1 then 0.5 for the
+// action) is refused with either state_rotation setting, naming the file and the way out, and
+// nothing is loaded: with the rotation the state dimensions differ (6 against 5); without it
+// they agree, and the learned state's input scales (the age's 3 s against the rotation's 1 rad/s)
+// refuse it.
+static void test_loop_old_obstacle_checkpoint_refused(void** state) {
+  (void)state;
+  char dir[] = "/tmp/b21r-loopobst-XXXXXX";
+  assert_non_null(mkdtemp(dir));
+  fw_config_t c;
+  harness_config(&c);
+  c.task = (int32_t)tasks_obstacles_decl.id;
+  snprintf(c.checkpoint_file, sizeof c.checkpoint_file, "%s/hedger.ckpt", dir);
+  assert_int_equal(tasks_obstacles_decl.state_dim, 5);
+  // The old learned state: one stored sample in the old layout.
+  hedger_config_t hc;
+  fw_config_hedger(&c, &hc);
+  assert_int_equal(hc.state_dim, 6);  // today: 5 features and the executed rotation
+  hc.state_dim = 5;
+  const double old_scale[6] = {1.0, 1.0, 1.0, 1.0, 1.0, 0.5};
+  memcpy(hc.input_scale, old_scale, sizeof old_scale);
+  hedger_t* old = NULL;
+  assert_int_equal(hedger_create(&old, &hc), HEDGER_OK);
+  const double s_old[5] = {0.1, 2.5, -0.3, 1.2, 0.0};
+  assert_int_equal(hedger_observe_reward(old, 1.0), HEDGER_OK);
+  assert_int_equal(hedger_observe_reward(old, -1.0), HEDGER_OK);
+  assert_int_equal(hedger_insert(old, s_old, 0.2, 0.5, 0U, NULL), HEDGER_OK);
+  const size_t ps = hedger_serialized_size(old);
+  uint8_t* payload = malloc(ps);
+  assert_non_null(payload);
+  size_t written = 0;
+  assert_int_equal(hedger_save(old, payload, ps, &written), HEDGER_OK);
+  hedger_destroy(old);
+  fw_progress_t g;
+  memset(&g, 0, sizeof g);
+  g.task = c.task;
+  g.state_dim = 5U;
+  g.schedule.phase = 1;
+  g.schedule.training_runs = 3;
+  g.schedule.phase_one_runs = 3;
+  g.run_id = 2;
+  uint8_t meta[FW_PROGRESS_BYTES];
+  const size_t ms = fw_progress_encode(&g, meta);
+  char err[FW_LOOP_ERR_MAX];
+  assert_int_equal(fw_checkpoint_write(c.checkpoint_file, meta, ms, payload, written, err, sizeof err), 0);
+  free(payload);
+  for (int rotation = 1; rotation >= 0; --rotation) {
+    fw_config_t cr = c;
+    cr.state_rotation = rotation != 0;
+    assert_int_equal(harness_open(&g_h, &cr, false, 3), 0);
+    assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), -1);
+    print_message("state_rotation %d: %s\n", rotation, err);
+    assert_non_null(strstr(err, c.checkpoint_file));
+    assert_non_null(strstr(err, "move the file away"));
+    fw_loop_stats_t st;
+    fw_loop_get_stats(g_h.loop, &st);
+    assert_int_equal(st.store_fill, 0);
+    assert_int_equal(st.training_runs, 0);
+    harness_close(&g_h);
+  }
+  char cmd[128];
+  snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+  assert_int_equal(system(cmd), 0);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_loop_learns_corridor_reaches_goal_from_all_poses),
@@ -429,6 +500,7 @@ int main(void) {
       cmocka_unit_test(test_loop_canopen_stream_independent_of_answer_lag),
       cmocka_unit_test(test_loop_tick_allocates_nothing),
       cmocka_unit_test(test_loop_checkpoint_restart_resumes),
+      cmocka_unit_test(test_loop_old_obstacle_checkpoint_refused),
   };
   return cmocka_run_group_tests_name("firmware.loop", tests, NULL, NULL);
 }
