@@ -78,7 +78,7 @@ learn_config_t learn_config_default(void) {
   c.schedule.switch_mode = LEARN_SWITCH_RUNS;
   c.schedule.auto_min_runs = 10;
   c.schedule.auto_ratio = 1.0;
-  c.policy = LEARN_POLICY_ACTOR;
+  c.policy = LEARN_POLICY_GREEDY;
   c.actor = actor_config_default();
   c.actor_work_per_slice = 1500U;
   c.learner = LEARN_LEARNER_HEDGER;

@@ -34,6 +34,7 @@ static fw_config_t obstacle_config(void) {
   fw_config_defaults(&c);
   char err[FW_CONFIG_ERR_MAX];
   assert_int_equal(fw_config_set(&c, "task", "obstacles", "test", err, sizeof err), 0);
+  assert_int_equal(fw_config_set(&c, "policy", "actor", "test", err, sizeof err), 0);
   return c;
 }
 

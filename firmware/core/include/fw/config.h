@@ -92,7 +92,7 @@ typedef enum fw_learner_kind {
 /// Who acts where the learned policy acts (the values of learn_policy_t).
 typedef enum fw_policy {
   FW_POLICY_ACTOR = 0,   ///< the actor learned from the rewards between runs (lib/actor)
-  FW_POLICY_GREEDY = 1,  ///< HEDGER's greedy action (the paper's; kept for ablations)
+  FW_POLICY_GREEDY = 1,  ///< HEDGER's greedy action (the paper's; the default)
 } fw_policy_t;
 /// Policy evaluated in FW_MODE_EVALUATE.
 typedef enum fw_eval_policy {

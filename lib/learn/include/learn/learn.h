@@ -80,7 +80,7 @@ typedef enum learn_source {
 /// Who acts where the learned policy acts (learn_config_t::policy).
 typedef enum learn_policy {
   LEARN_POLICY_ACTOR = 0,   ///< the actor of lib/actor, learned between runs from the rewards
-  LEARN_POLICY_GREEDY = 1,  ///< the value function's greedy action (the paper's; for ablations)
+  LEARN_POLICY_GREEDY = 1,  ///< the value function's greedy action (the paper's; the default)
 } learn_policy_t;
 
 /// Who drives phase one's training runs.
@@ -118,7 +118,7 @@ typedef struct learn_config {
   int32_t phase_one_driver;     ///< learn_phase_one_driver_t
   learn_schedule_config_t schedule;  ///< evaluate_only is set from mode by learn_init
   // The policy.
-  int32_t policy;               ///< learn_policy_t (default LEARN_POLICY_ACTOR)
+  int32_t policy;               ///< learn_policy_t (default LEARN_POLICY_GREEDY)
   /// The actor's settings (policy = actor). Its task fields (state dimension, ranges, scales,
   /// action bounds, discount) are derived from the task by learn_actor_config(); the rest are the
   /// method's (actor_config_default()) unless set.

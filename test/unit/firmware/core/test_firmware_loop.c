@@ -212,6 +212,7 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
   c.phase_two_runs = 2;
   c.eval_every_runs = 10;
   c.eval_starts = 1;
+  c.policy = FW_POLICY_ACTOR;  // the checkpoint holds the actor too
   snprintf(c.checkpoint_file, sizeof c.checkpoint_file, "%s/hedger.ckpt", dir);
   assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
   size_t meta_cap = 0;
