@@ -20,6 +20,7 @@
 
 #include <hedger/hedger.h>
 #include <rng/rng.h>
+#include <tasks/decl.h>
 
 #include <math.h>
 #include <stdio.h>
@@ -213,7 +214,7 @@ int main(int argc, char** argv) {
     perror(argv[6]);
     return 1;
   }
-  const int dim = task == 0 ? 3 : 4;
+  const int dim = (int)tasks_by_id(task)->state_dim;  // the task's features (without the executed rotation)
   fprintf(f, "{\"task\": \"%s\", \"seed\": %llu, \"max_steps_per_run\": %d, \"collided\": %s,\n", argv[2],
           (unsigned long long)seed, max_steps, collided ? "true" : "false");
   fprintf(f, "\"checkpoint\": \"%s\", \"store_fill\": %u,\n\"runs\": [", c.checkpoint_file, hedger_size(h));

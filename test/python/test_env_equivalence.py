@@ -79,11 +79,15 @@ class EnvironmentEqualsController(unittest.TestCase):
 
     def check_checkpoint(self, trace, task):
         # The controller's checkpoint payload in the Python Hedger: same predictions as the C side.
-        _, payload = b21r_learn.read_checkpoint(trace["checkpoint"])
+        # The payload is HEDGER's bytes, then the actor's section (its size in the progress section).
+        meta, payload = b21r_learn.read_checkpoint(trace["checkpoint"])
+        progress = b21r_learn.read_checkpoint_progress(meta)
+        values = payload[:len(payload) - progress["actor_bytes"]]
+        self.assertEqual(progress["policy"] == "actor", progress["actor_bytes"] > 0)
         h = b21r_learn.Hedger(**b21r_learn.controller_learner_config(task))
         h.load(payload)
         self.assertEqual(len(h), trace["store_fill"])
-        self.assertEqual(h.save(), payload, "save() writes the controller's payload bytes again")
+        self.assertEqual(h.save(), values, "save() writes the controller's HEDGER bytes again")
         rotation = h.config["state_dim"] > len(trace["runs"][0]["steps"][0]["s"])  # state_rotation
         for run in trace["runs"]:
             executed = 0.0  # the learner's state ends with the last command sent, 0 at a run's start

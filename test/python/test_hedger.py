@@ -271,7 +271,7 @@ class BindingContract(unittest.TestCase):
         self.assertEqual(c3["state_dim"], 3)
         self.assertEqual(c3["input_scale"][:4], [1.0, 0.5, 0.125, 0.25])
         o = b21r_learn.controller_learner_config("obstacles", {"hedger_capacity": 5000})
-        self.assertEqual((o["state_dim"], o["capacity"], o["gamma"], o["greedy_reach"]), (5, 5000, 0.9, 3.0))
+        self.assertEqual((o["state_dim"], o["capacity"], o["gamma"], o["greedy_reach"]), (6, 5000, 0.9, 3.0))
         self.assertEqual(b21r_learn.controller_learner_config("corridor", {"hedger_greedy_reach": 2})["greedy_reach"], 2.0)
         with self.assertRaises(ValueError):
             b21r_learn.controller_learner_config("corridor", {"hedger_capacity": -3})

@@ -163,6 +163,16 @@ int main(int argc, char** argv) {
               "from ranked pairs of runs; its learned values are trained on, and the output holds no shift\n",
               init);
     }
+    if (s.init_actor_cloned > 0) {
+      fprintf(stderr,
+              "b21r-train: note: %s holds no actor (policy = greedy or an older controller): the actor started as "
+              "the policy of its %u stored points (behaviour cloning), then learned from the logs\n",
+              init, s.init_actor_cloned);
+    }
+    if (s.init_actor_dropped) {
+      fprintf(stderr, "b21r-train: note: %s holds an actor that policy = greedy does not use: the output holds none\n",
+              init);
+    }
     if (s.seq_gaps > 0 || s.refused > 0 || s.undecodable > 0) {
       fprintf(stderr,
               "b21r-train: warning: %llu gaps in the experiences' seq (the recording lost messages), %llu experiences "

@@ -117,6 +117,31 @@ hedger_t* trainer_hedger(trainer_t* t) { return t->hedger; }
 
 train_stats_t trainer_stats(const trainer_t* t) { return t->stats; }
 
+// The actor's section of an --init checkpoint (after HEDGER's values loaded): loaded; or, where
+// the file has none, the actor cloned from the values' stored points (as the controller does);
+// or, with policy = greedy, left unused. Returns 0 or -1 with a message.
+static int load_actor(trainer_t* t, const char* path, const fw_progress_t* g, const uint8_t* bytes, char* err,
+                      size_t err_cap) {
+  actor_t* actor = learn_get_actor(t->agent);
+  if (actor == NULL) {
+    t->stats.init_actor_dropped = g->policy == LEARN_POLICY_ACTOR;
+    return 0;
+  }
+  if (g->policy != LEARN_POLICY_ACTOR) {
+    t->stats.init_actor_cloned = learn_actor_from_values(t->agent);
+    return 0;
+  }
+  const actor_status_t as = actor_load(actor, bytes, (size_t)g->actor_bytes);
+  if (as != ACTOR_OK) {
+    fw_errfmt(err, err_cap,
+        "%s: the actor's learned state does not fit these settings (%s): train with the configuration it was "
+        "learned with (task, actor_hidden, actor_capacity, max_rotation_radps, gamma, hedger_input_scale)",
+        path, actor_status_str(as));
+    return -1;
+  }
+  return 0;
+}
+
 int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t err_cap) {
   size_t meta_size = 0;
   size_t payload_size = 0;
@@ -144,9 +169,12 @@ int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t er
     } else if (g.task != t->cfg.task) {
       const char* task = fw_task_name(g.task);
       fw_errfmt(err, err_cap, "%s was learned for another task (%s): train with task = %s", path, task, task);
-    } else if ((hs = hedger_load(t->hedger, payload, payload_size)) == HEDGER_OK) {
+    } else if (g.actor_bytes > payload_size) {
+      fw_errfmt(err, err_cap, "%s is corrupt (an actor section of %llu bytes in a payload of %zu)", path,
+                (unsigned long long)g.actor_bytes, payload_size);
+    } else if ((hs = hedger_load(t->hedger, payload, payload_size - (size_t)g.actor_bytes)) == HEDGER_OK) {
+      rc = load_actor(t, path, &g, (const uint8_t*)payload + (payload_size - (size_t)g.actor_bytes), err, err_cap);
       t->stats.init_legacy_shift = g.legacy_shift;
-      rc = 0;
     } else {
       fw_errfmt(err, err_cap,
           "%s: the learned state does not fit these settings (%s): train with the configuration it was "
@@ -286,22 +314,29 @@ int trainer_write_checkpoint(trainer_t* t, const char* path, bool overwrite, cha
     fw_errfmt(err, err_cap, "%s exists; give --force to replace it (or another output file)", path);
     return -1;
   }
+  const actor_t* actor = learn_get_actor_const(t->agent);
+  const size_t actor_cap = actor != NULL ? actor_serialized_size(actor) : 0U;
   const fw_progress_t g = {.task = t->cfg.task,
                            .state_dim = t->state_dim,
                            .schedule = learn_schedule(t->agent)->p,
-                           .run_id = -1};
+                           .run_id = -1,
+                           .policy = actor != NULL ? LEARN_POLICY_ACTOR : LEARN_POLICY_GREEDY,
+                           .actor_bytes = actor_cap};
   uint8_t meta[FW_PROGRESS_BYTES];
   const size_t meta_size = fw_progress_encode(&g, meta);
-  const size_t cap = hedger_serialized_size(t->hedger);
-  void* payload = malloc(cap);
+  const size_t hedger_cap = hedger_serialized_size(t->hedger);
+  const size_t cap = hedger_cap + actor_cap;
+  uint8_t* payload = malloc(cap);
   size_t written = 0;
+  size_t actor_written = 0;
   int rc = -1;
   if (payload == NULL) {
     fw_errfmt(err, err_cap, "out of memory (%zu bytes)", cap);
-  } else if (hedger_save(t->hedger, payload, cap, &written) != HEDGER_OK) {
+  } else if (hedger_save(t->hedger, payload, hedger_cap, &written) != HEDGER_OK ||
+             (actor != NULL && actor_save(actor, payload + written, actor_cap, &actor_written) != ACTOR_OK)) {
     fw_errfmt(err, err_cap, "%s: the learned state could not be serialised", path);
   } else {
-    rc = fw_checkpoint_write(path, meta, meta_size, payload, written, err, err_cap);
+    rc = fw_checkpoint_write(path, meta, meta_size, payload, written + actor_written, err, err_cap);
   }
   free(payload);
   return rc;

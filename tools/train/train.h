@@ -3,14 +3,16 @@
 /// learning framework (lib/learn) set up exactly as the controller sets it up from the same
 /// configuration (fw/config_task.h), never through the controller's loop.
 ///
-/// Q-learning is off-policy: every logged transition (s, a, r, s', terminal), whoever chose the
-/// action (example policy, joystick, learned policy, exploration), is a valid training sample.
-/// The trainer feeds the logs' B21R_EXPERIENCE messages, in file order, through the framework's
-/// offline calls, which are the online ones (learn_offline_transition per experience: the update
-/// with q' the greedy value at s'; learn_offline_end_run after each run: the backward replay of
-/// hedger_replay). Training from the log of a session therefore
-/// gives the learned state that session ended with, bit for bit; training from several logs gives
-/// the state of one controller that had lived through them all in order.
+/// Q-learning is off-policy, and the actor learns from the returns of whatever was recorded: every
+/// logged transition (s, a, r, s', terminal), whoever chose the action (example policy, joystick,
+/// learned policy, exploration), is a valid training sample. The trainer feeds the logs'
+/// B21R_EXPERIENCE messages, in file order, through the framework's offline calls, which are the
+/// online ones (learn_offline_transition per experience: the update with q' the greedy value at s'
+/// and the actor's record; learn_offline_end_run after each run: the backward replay of
+/// hedger_replay, then the actor's learning). Training from the log of a session therefore gives
+/// the learned state that session ended with (HEDGER's values and, with policy = actor, the actor
+/// with its recorded transitions), bit for bit; training from several logs gives the state of one
+/// controller that had lived through them all in order.
 ///
 /// By default only the experiences the controller learned from are used (training runs; not
 /// evaluation runs, where learning is off); train_options_t.include_eval adds those too.
@@ -57,6 +59,11 @@ typedef struct train_stats {
   /// --init's file was written by an older controller whose policy added a shift learned from
   /// ranked pairs of runs (fw_progress_t.legacy_shift): its values are trained on, the shift is gone
   bool init_legacy_shift;
+  /// --init's file holds no actor (policy = greedy or an older controller): the actor was cloned
+  /// from this many of its stored points (0: none, or the file had an actor)
+  uint32_t init_actor_cloned;
+  /// --init's file holds an actor that policy = greedy does not use: the output holds none
+  bool init_actor_dropped;
   double seconds;             ///< wall time spent reading and training
 } train_stats_t;
 
@@ -82,7 +89,8 @@ int trainer_add_log(trainer_t* t, const char* path, char* err, size_t err_cap);
 /// log. O(run length) updates when hedger_replay is on.
 void trainer_finish(trainer_t* t);
 
-/// Writes the learned state as a controller checkpoint at path, atomically (fw/checkpoint.h):
+/// Writes the learned state as a controller checkpoint at path, atomically (fw/checkpoint.h;
+/// HEDGER's values and, with policy = actor, the actor: fw/progress.h):
 /// the controller started with this file (and the same configuration) resumes in phase two, the
 /// learned policy driving. Refuses to replace an existing file unless overwrite. Returns 0 or -1.
 int trainer_write_checkpoint(trainer_t* t, const char* path, bool overwrite, char* err, size_t err_cap);

@@ -79,6 +79,7 @@ static const choice_t k_rt_scheduler[] = {
 static const choice_t k_learner[] = {
     {"hedger", FW_LEARNER_HEDGER}, {"lwa", FW_LEARNER_LWA}, {"tabular", FW_LEARNER_TABULAR}, {NULL, 0}};
 static const choice_t k_lcm_scope[] = {{"host", FW_LCM_SCOPE_HOST}, {"network", FW_LCM_SCOPE_NETWORK}, {NULL, 0}};
+static const choice_t k_policy[] = {{"actor", FW_POLICY_ACTOR}, {"greedy", FW_POLICY_GREEDY}, {NULL, 0}};
 static const choice_t k_switch[] = {
     {"runs", FW_SWITCH_RUNS}, {"operator", FW_SWITCH_OPERATOR}, {"auto", FW_SWITCH_AUTO}, {NULL, 0}};
 
@@ -93,8 +94,8 @@ static const key_desc_t k_keys[] = {
   {NULL, "mode", KIND_ENUM, OFF(mode), 0, 0, false, false, k_mode, "learn",
    "learn: the two-phase schedule; evaluate: one evaluation block of evaluate_policy, then exit"},
   {NULL, "evaluate_policy", KIND_ENUM, OFF(evaluate_policy), 0, 0, false, false, k_eval_policy, "learned",
-   "policy evaluated when mode = evaluate (optimal = the hand-tuned reference controller; human = the "
-   "simulated human driver)"},
+   "policy evaluated when mode = evaluate (learned = the configured policy with the checkpoint's learned "
+   "state; optimal = the hand-tuned reference controller; human = the simulated human driver)"},
   {NULL, "evaluate_example_gain", KIND_DOUBLE, OFF(evaluate_example_gain), 0, 100, false, false, NULL, "0",
    "evaluate_policy = example: the example policy's gain [1/s] (0 = the middle of its training range)"},
   {NULL, "example_gain_range", KIND_DLIST, OFF(example_gain_range), 0, 100, true, false, NULL, "",
@@ -216,6 +217,34 @@ static const key_desc_t k_keys[] = {
   {NULL, "gamma", KIND_DOUBLE, OFF(gamma), 0, 1, false, true, NULL, "0",
    "discount factor; 0 = the task's (b21r-controller --print-task-params; the paper: corridor 0.99, "
    "obstacles 0.9)"},
+  {NULL, "policy", KIND_ENUM, OFF(policy), 0, 0, false, false, k_policy, "greedy",
+   "who acts where the learned policy acts: greedy = HEDGER's greedy action (the paper's, which imitates "
+   "its teachers); actor = a policy learned between runs from the rewards of every training run (the "
+   "slope of the return in the action, through local models of the dynamics and of the state value; "
+   "docs/LEARNING.md; not the default: some Fig. 4 seeds lose every pose after phase one, and its "
+   "between-run work costs about 0.94 billion instructions a run). HEDGER learns either way"},
+  {NULL, "actor_capacity", KIND_INT, OFF(actor_capacity), 16, 4194304, false, false, NULL, "20000",
+   "policy = actor: recorded transitions it keeps (fixed memory, about 270 bytes each with its models)"},
+  {NULL, "actor_hidden", KIND_INT, OFF(actor_hidden), 1, 64, false, false, NULL, "16",
+   "policy = actor: tanh units of its one hidden layer"},
+  {NULL, "actor_runs", KIND_INT, OFF(actor_runs), 1, 100000, false, false, NULL, "10",
+   "policy = actor: the recent runs whose returns give the state value and whose states it is improved at"},
+  {NULL, "actor_queries", KIND_INT, OFF(actor_queries), 1, 4194304, false, false, NULL, "4000",
+   "policy = actor: largest set of recent states it is improved at after a run (at most actor_capacity)"},
+  {NULL, "actor_step_gain", KIND_DOUBLE, OFF(actor_step_gain), 0, 100, false, false, NULL, "0.3",
+   "policy = actor: target step [rad/s] per tick of discounting that one rad/s gains"},
+  {NULL, "actor_step_max", KIND_DOUBLE, OFF(actor_step_max), 0, 4, false, false, NULL, "0.1",
+   "policy = actor: largest change of its target action after one run [rad/s]"},
+  {NULL, "actor_fit_steps", KIND_INT, OFF(actor_fit_steps), 0, 100000, false, false, NULL, "200",
+   "policy = actor: Adam steps of each fit to its targets"},
+  {NULL, "actor_clone_steps", KIND_INT, OFF(actor_clone_steps), 0, 100000, false, false, NULL, "300",
+   "policy = actor: Adam steps of the behaviour cloning after the first training run"},
+  {NULL, "actor_learning_rate", KIND_DOUBLE, OFF(actor_learning_rate), 0, 1, true, false, NULL, "0.003",
+   "policy = actor: Adam's learning rate"},
+  {NULL, "actor_work_per_tick", KIND_INT, OFF(actor_work_per_tick), 1, 100000000, false, false, NULL, "1500",
+   "between runs (the robot stands): the actor's learning per tick in work units of at most 2000 "
+   "instructions (a slice may pass it by one query's 200 units); the default costs about what "
+   "learn_updates_per_tick's 4 replay updates cost; bounds the tick's time"},
   {NULL, "learner", KIND_ENUM, OFF(learner), 0, 0, false, false, k_learner, "hedger",
    "value function: hedger (the paper's); lwa = HEDGER with locally weighted averaging only; tabular = "
    "Q-learning on a table of tabular_bins per state dimension x tabular_actions (no checkpoints)"},
@@ -294,7 +323,8 @@ static const key_desc_t k_keys[] = {
    "duration of an exploration segment, and of a phase-one dither segment: one offset held this long (0 = "
    "one step)"},
   {NULL, "advisor", KIND_BOOL, OFF(advisor), 0, 0, false, false, NULL, "true",
-   "phase two training: the example policy acts where HEDGER knows no action at all"},
+   "phase two training: the example policy acts where the learned policy knows no action at all (greedy: "
+   "HEDGER knows none at the state; actor: nothing learned yet)"},
   {NULL, "example_noise_radps", KIND_DOUBLE, OFF(example_noise_radps), 0, 4, false, false, NULL, "0.3",
    "phase one, example driver: standard deviation of the Gaussian offset a dither segment adds to the "
    "example's action [rad/s]; segments start with explore_probability per step and last explore_hold_s "
@@ -1276,6 +1306,12 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
         "%s: learner = tabular cannot checkpoint (checkpoint_file set at %s); set checkpoint_file = \"\" or use "
         "learner = hedger",
         origin_of(cfg, "learner").text, origin_of(cfg, "checkpoint_file").text);
+    return -1;
+  }
+  if (cfg->policy == FW_POLICY_ACTOR && cfg->actor_queries > cfg->actor_capacity) {
+    fw_errfmt(err, err_cap, "%s: actor_queries = %d exceeds actor_capacity = %d (set at %s); the query set is drawn "
+        "from the recorded transitions", origin_of(cfg, "actor_queries").text, (int)cfg->actor_queries,
+        (int)cfg->actor_capacity, origin_of(cfg, "actor_capacity").text);
     return -1;
   }
   if (cfg->base_protocol == FW_BASE_CANOPEN) {

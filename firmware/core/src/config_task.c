@@ -12,6 +12,8 @@
 _Static_assert((int)FW_SWITCH_RUNS == (int)LEARN_SWITCH_RUNS && (int)FW_SWITCH_OPERATOR == (int)LEARN_SWITCH_OPERATOR &&
                    (int)FW_SWITCH_AUTO == (int)LEARN_SWITCH_AUTO,
                "the phase_switch key's values are the framework's");
+_Static_assert((int)FW_POLICY_ACTOR == (int)LEARN_POLICY_ACTOR && (int)FW_POLICY_GREEDY == (int)LEARN_POLICY_GREEDY,
+               "the policy key's values are the framework's");
 _Static_assert((int)FW_LEARNER_HEDGER == (int)LEARN_LEARNER_HEDGER && (int)FW_LEARNER_LWA == (int)LEARN_LEARNER_LWA &&
                    (int)FW_LEARNER_TABULAR == (int)LEARN_LEARNER_TABULAR,
                "the learner key's values are the framework's");
@@ -29,6 +31,7 @@ fw_config_seeds_t fw_config_derive_seeds(uint64_t root) {
   s.explore = rng_splitmix64(&st);
   s.learner = rng_splitmix64(&st);
   s.driver = rng_splitmix64(&st);
+  s.actor = rng_splitmix64(&st);
   return s;
 }
 
@@ -132,6 +135,18 @@ void fw_config_learn_settings(const fw_config_t* cfg, learn_config_t* c) {
                                           .auto_min_runs = cfg->auto_switch_min_runs,
                                           .auto_ratio = cfg->auto_switch_ratio,
                                           .evaluate_only = cfg->mode == FW_MODE_EVALUATE};
+  c->policy = cfg->policy;
+  c->actor.seed = seeds.actor;
+  c->actor.capacity = (uint32_t)cfg->actor_capacity;
+  c->actor.hidden = (uint32_t)cfg->actor_hidden;
+  c->actor.recent_runs = (uint32_t)cfg->actor_runs;
+  c->actor.max_queries = (uint32_t)cfg->actor_queries;
+  c->actor.step_gain = cfg->actor_step_gain;
+  c->actor.step_max = cfg->actor_step_max;
+  c->actor.fit_steps = (uint32_t)cfg->actor_fit_steps;
+  c->actor.clone_steps = (uint32_t)cfg->actor_clone_steps;
+  c->actor.learning_rate = cfg->actor_learning_rate;
+  c->actor_work_per_slice = (uint32_t)cfg->actor_work_per_tick;
   c->learner = cfg->learner;
   c->alpha = cfg->alpha;
   c->gamma = cfg->gamma;

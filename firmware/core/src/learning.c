@@ -49,7 +49,11 @@ int fw_learning_init(fw_loop_t* L, char* err, size_t err_cap) {
     return -1;
   }
   const hedger_t* h = learn_get_learner(L->agent)->hedger;
+  const actor_t* actor = learn_get_actor_const(L->agent);
   L->save_max = h != NULL ? hedger_serialized_max_size(hedger_get_config(h)) : 0U;
+  if (h != NULL && actor != NULL) {
+    L->save_max += actor_serialized_max_size(actor_get_config(actor));
+  }
   return 0;
 }
 
@@ -61,15 +65,23 @@ void fw_learning_free(fw_loop_t* L) {
 }
 
 // ---- checkpoints --------------------------------------------------------------------------
+//
+// The payload is HEDGER's save followed, with the actor policy, by the actor's (fw/progress.h).
 
 // HEDGER's instance (NULL for the tabular learner, which keeps no checkpoints).
 static hedger_t* hedger_of(const fw_loop_t* L) { return learn_get_learner(L->agent)->hedger; }
 
+// The actor (NULL with the greedy policy).
+static actor_t* actor_of(const fw_loop_t* L) { return learn_get_actor(L->agent); }
+
 static size_t encode_meta(const fw_loop_t* L, uint8_t* p) {
+  const actor_t* actor = actor_of(L);
   const fw_progress_t g = {.task = L->cfg.task,
                            .state_dim = learn_agent_state_dim(L->agent),
                            .schedule = learn_schedule(L->agent)->p,
-                           .run_id = learn_run_id(L->agent)};
+                           .run_id = learn_run_id(L->agent),
+                           .policy = actor != NULL ? LEARN_POLICY_ACTOR : LEARN_POLICY_GREEDY,
+                           .actor_bytes = actor != NULL ? actor_serialized_size(actor) : 0U};
   return fw_progress_encode(&g, p);
 }
 
@@ -102,16 +114,27 @@ void fw_learning_checkpoint_now(fw_loop_t* L) {
   if (L->out.checkpoints == NULL || hedger_of(L) == NULL) {
     return;
   }
+  if (learn_between_runs_busy(L->agent)) {
+    // The actor cannot be saved half-learned (fw_learning_finish_now completes it first).
+    L->checkpoints_skipped++;
+    return;
+  }
   void* payload = NULL;
   size_t payload_cap = 0;
   if (!checkpoint_acquire(L, &payload, &payload_cap)) {
     return;
   }
+  // Never fails: the buffer is sized by the largest saves, and nothing is under way.
   size_t written = 0;
   if (hedger_save(hedger_of(L), payload, payload_cap, &written) != HEDGER_OK) {
-    written = 0;  // never happens: the buffer is sized by hedger_serialized_max_size
+    written = 0;
   }
-  checkpoint_submit(L, written);
+  size_t actor_written = 0;
+  if (actor_of(L) != NULL &&
+      actor_save(actor_of(L), (uint8_t*)payload + written, payload_cap - written, &actor_written) != ACTOR_OK) {
+    actor_written = 0;
+  }
+  checkpoint_submit(L, written + actor_written);
 }
 
 void fw_loop_checkpoint_capacity(const fw_loop_t* L, size_t* meta_bytes, size_t* payload_bytes) {
@@ -176,23 +199,60 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
              path, fw_task_name(g.task), path, path);
     return -1;
   }
-  const hedger_status_t hs = hedger_load(hedger_of(L), payload, payload_size);
-  free(payload);
+  if (g.actor_bytes > payload_size) {
+    free(payload);
+    snprintf(err, err_cap, "checkpoint %s is corrupt (an actor section of %llu bytes in a payload of %zu); "
+             FW_CHECKPOINT_FRESH_HINT, path, (unsigned long long)g.actor_bytes, payload_size, path, path);
+    return -1;
+  }
+  // On a refusal from here on the learner is not used: the caller stops (the controller exits).
+  const size_t hedger_bytes = payload_size - (size_t)g.actor_bytes;
+  const hedger_status_t hs = hedger_load(hedger_of(L), payload, hedger_bytes);
   if (hs != HEDGER_OK) {
+    free(payload);
     snprintf(err, err_cap,
              "checkpoint %s: the learned state was refused (%s; hedger_capacity, the task or the action limits may "
              "differ from when it was written); to start fresh, move the file away (e.g. mv '%s' '%s.bad')",
              path, hedger_status_str(hs), path, path);
     return -1;
   }
+  actor_t* actor = actor_of(L);
+  char note[FW_CHECKPOINT_ERR_MAX] = "";
+  if (actor != NULL && g.policy == LEARN_POLICY_ACTOR) {
+    const actor_status_t as = actor_load(actor, (const uint8_t*)payload + hedger_bytes, (size_t)g.actor_bytes);
+    if (as != ACTOR_OK) {
+      free(payload);
+      snprintf(err, err_cap,
+               "checkpoint %s: the actor's learned state was refused (%s; actor_hidden, actor_capacity, the task, "
+               "hedger_input_scale or the action limits may differ from when it was written); set them as they "
+               "were, or move the file away to start fresh (e.g. mv '%s' '%s.bad')",
+               path, actor_status_str(as), path, path);
+      return -1;
+    }
+  } else if (actor != NULL) {
+    const uint32_t cloned = learn_actor_from_values(L->agent);
+    snprintf(note, sizeof note,
+             "note: checkpoint %s holds no actor (written with policy = greedy or by an older controller): its "
+             "values are kept and the actor starts as the policy of their %u stored points (behaviour cloning); "
+             "it learns from the rewards from the next run on",
+             path, cloned);
+  } else if (g.policy == LEARN_POLICY_ACTOR) {
+    snprintf(note, sizeof note,
+             "note: checkpoint %s also holds an actor (policy = actor); with policy = greedy the values' greedy "
+             "action drives and the next checkpoint no longer holds the actor (keep a copy of the file to go back)",
+             path);
+  }
+  free(payload);
   learn_resume(L->agent, &g.schedule, g.run_id);
   err[0] = '\0';
   if (g.legacy_shift) {
     snprintf(err, err_cap,
              "note: checkpoint %s was written by an older controller whose learned policy added a shift learned "
              "from ranked pairs of runs; this controller drives with the learned values alone, and its next "
-             "checkpoint no longer holds the shift",
-             path);
+             "checkpoint no longer holds the shift%s%s",
+             path, note[0] != '\0' ? "; " : "", note[0] != '\0' ? note + 6 : "");
+  } else if (note[0] != '\0') {
+    snprintf(err, err_cap, "%s", note);
   }
   return 1;
 }
@@ -218,32 +278,75 @@ static bool learn_pending(fw_loop_t* L) {
   return true;
 }
 
-// The save of a checkpoint in slices. Without a writer (or with both of its buffers busy) the
-// same slices pass without writing, so that a lockstep run spends the same ticks between runs
-// with and without checkpoints (its experience stream does not depend on them).
+// Starts (or restarts) the sliced save into the acquired buffer: HEDGER's first.
+static void save_begin(fw_loop_t* L) {
+  L->save_actor_started = false;
+  if (hedger_save_begin(hedger_of(L), L->save_payload, L->save_payload_cap, &L->save_cursor) != HEDGER_OK) {
+    L->save_handle = -1;  // never happens: the buffer is sized by the largest saves
+  }
+}
+
+// One slice of the save: at most `items` of HEDGER's points, then of the actor's entries.
+// Returns false when the learned state changed since the save began (it then starts over).
+static bool save_step(fw_loop_t* L, uint32_t items) {
+  if (!L->save_cursor.done) {
+    const uint32_t before = L->save_cursor.next_point;
+    if (hedger_save_step(hedger_of(L), &L->save_cursor, items, NULL) != HEDGER_OK) {
+      return false;
+    }
+    items -= L->save_cursor.next_point - before;
+    if (!L->save_cursor.done) {
+      return true;
+    }
+  }
+  actor_t* actor = actor_of(L);
+  if (actor == NULL) {
+    checkpoint_submit(L, L->save_cursor.size);
+    return true;
+  }
+  if (!L->save_actor_started) {
+    if (actor_save_begin(actor, (uint8_t*)L->save_payload + L->save_cursor.size,
+                         L->save_payload_cap - L->save_cursor.size, &L->save_actor_cursor) != ACTOR_OK) {
+      return false;
+    }
+    L->save_actor_started = true;
+  }
+  if (actor_save_step(actor, &L->save_actor_cursor, items, NULL) != ACTOR_OK) {
+    return false;
+  }
+  if (L->save_actor_cursor.done) {
+    checkpoint_submit(L, L->save_cursor.size + L->save_actor_cursor.size);
+  }
+  return true;
+}
+
+// Items of the save: HEDGER's stored points, then the actor's recorded transitions.
+static uint32_t save_items(const fw_loop_t* L) {
+  const actor_t* actor = learn_get_actor_const(L->agent);
+  return learn_learner_stats(learn_get_learner(L->agent)).fill +
+         (actor != NULL ? actor_counters(actor)->fill : 0U);
+}
+
+// The save of a checkpoint in slices of checkpoint_points_per_tick items. Without a writer (or with
+// both of its buffers busy) the same slices pass without writing, so that a lockstep run spends
+// the same ticks between runs with and without checkpoints (its experience stream does not depend
+// on them).
 static void save_slice(fw_loop_t* L) {
-  const uint32_t fill = learn_learner_stats(learn_get_learner(L->agent)).fill;
+  const uint32_t items = save_items(L);
   const uint32_t per_tick = (uint32_t)L->cfg.checkpoint_points_per_tick;
   if (L->save_handle < 0 && L->save_points_done == 0 && L->out.checkpoints != NULL && hedger_of(L) != NULL) {
-    if (checkpoint_acquire(L, &L->save_payload, &L->save_payload_cap) &&
-        hedger_save_begin(hedger_of(L), L->save_payload, L->save_payload_cap, &L->save_cursor) != HEDGER_OK) {
-      L->save_handle = -1;  // never happens: the buffer is sized by hedger_serialized_max_size
+    if (checkpoint_acquire(L, &L->save_payload, &L->save_payload_cap)) {
+      save_begin(L);
     }
   }
-  if (L->save_handle >= 0) {
-    size_t written = 0;
-    if (hedger_save_step(hedger_of(L), &L->save_cursor, per_tick, &written) != HEDGER_OK) {
-      // Nothing changes the learner between runs; should it happen, the save starts over.
-      (void)hedger_save_begin(hedger_of(L), L->save_payload, L->save_payload_cap, &L->save_cursor);
-      L->save_points_done = 0;
-      return;
-    }
-    if (L->save_cursor.done) {
-      checkpoint_submit(L, written);
-    }
+  if (L->save_handle >= 0 && !save_step(L, per_tick)) {
+    // Nothing changes the learner between runs; should it happen, the save starts over.
+    save_begin(L);
+    L->save_points_done = 0;
+    return;
   }
-  L->save_points_done = fill - L->save_points_done > per_tick ? L->save_points_done + per_tick : fill;
-  if (L->save_points_done >= fill) {
+  L->save_points_done = items - L->save_points_done > per_tick ? L->save_points_done + per_tick : items;
+  if (L->save_points_done >= items) {
     L->save_points_done = 0;
     L->learn_stage = FW_LEARN_IDLE;
   }
@@ -252,7 +355,7 @@ static void save_slice(fw_loop_t* L) {
 // One slice of the between-run work: at most learn_updates_per_tick replay updates (the
 // framework's), then at most checkpoint_points_per_tick points of the save.
 static void between_runs_slice(fw_loop_t* L) {
-  if (learn_replay_due(L->agent)) {
+  if (learn_between_runs_due(L->agent)) {
     L->learn_stage = FW_LEARN_REPLAY;
     L->save_points_done = 0;
     L->save_handle = -1;
@@ -262,7 +365,7 @@ static void between_runs_slice(fw_loop_t* L) {
   }
   L->learn_ticks++;
   if (L->learn_stage == FW_LEARN_REPLAY) {
-    if (learn_replay_slice(L->agent, (uint32_t)L->cfg.learn_updates_per_tick) > 0) {
+    if (learn_between_runs_slice(L->agent, (uint32_t)L->cfg.learn_updates_per_tick) > 0) {
       return;
     }
     L->learn_stage = FW_LEARN_SAVE;
@@ -271,7 +374,7 @@ static void between_runs_slice(fw_loop_t* L) {
 }
 
 void fw_learning_after_command(fw_loop_t* L) {
-  if (learn_pending(L) && !learn_replay_due(L->agent)) {
+  if (learn_pending(L) && !learn_between_runs_due(L->agent)) {
     return;
   }
   between_runs_slice(L);
@@ -284,10 +387,7 @@ void fw_learning_finish_now(fw_loop_t* L) {
   }
   if (L->learn_stage == FW_LEARN_SAVE && L->save_handle >= 0) {
     // A slice-wise save was under way: finish it at once.
-    size_t written = 0;
-    if (hedger_save_step(hedger_of(L), &L->save_cursor, UINT32_MAX, &written) == HEDGER_OK && L->save_cursor.done) {
-      checkpoint_submit(L, written);
-    }
+    (void)save_step(L, UINT32_MAX);
   }
   L->save_points_done = 0;
   L->learn_stage = FW_LEARN_IDLE;

@@ -293,9 +293,11 @@ static fw_safety_event_t supervise(fw_loop_t* L, const sensed_t* in, int64_t now
   si.base_fault = L->base_fault;
   si.base_fault_detail = L->base_fault_detail;
   si.bumper_mask = L->bumper_mask;
-  si.non_finite = !in->odo_finite ||
-                  (L->scan_new && (in->running || in->run_starting) && !in->state_finite);
-  si.non_finite_where = !in->odo_finite ? "odometry" : "task state";
+  si.non_finite = !in->odo_finite || (L->scan_new && (in->running || in->run_starting) && !in->state_finite) ||
+                  L->policy_fault;
+  si.non_finite_where =
+      !in->odo_finite ? "odometry" : (L->policy_fault && in->state_finite ? "the learned policy's action" : "task state");
+  L->policy_fault = false;  // an event of the last tick: reported once
   // The joystick must hold the deadman while it drives, and already in the tick its run starts.
   si.deadman_required = fw_run_joystick_drives(L) ||
                         (in->run_starting && L->cfg.mode == FW_MODE_LEARN && L->cfg.phase_driver == FW_DRIVER_JOYSTICK &&
@@ -361,11 +363,11 @@ static void decide(fw_loop_t* L, fw_safety_event_t ev, const sensed_t* in, comma
     fw_run_begin_repositioning(L);
   }
   if (L->mode == B21R_STATUS_T_MODE_REPOSITIONING) {
-    cmd->stopping = !fw_run_reposition(L, in->state_ok, &cmd->v_mps, &cmd->w_radps);
+    cmd->stopping = !fw_run_reposition(L, in->state_ok, &cmd->v_mps, &cmd->w_radps) || L->policy_fault;
   } else if (fw_run_running(L)) {
     if (L->scan_new && in->state_ok) {
       fw_run_step(L, 0, &cmd->v_mps, &cmd->w_radps);
-      cmd->stopping = !fw_run_running(L);
+      cmd->stopping = !fw_run_running(L) || L->policy_fault;
     } else {
       // No new scan (or features unusable) this tick: hold the command, learn nothing.
       L->held_ticks++;

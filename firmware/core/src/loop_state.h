@@ -66,7 +66,7 @@ typedef struct fw_bump_node {
 /// The learner's work after a step or between runs (learning.c).
 typedef enum fw_learn_stage {
   FW_LEARN_IDLE = 0,     ///< nothing to do between runs
-  FW_LEARN_REPLAY = 1,   ///< the framework's backward replay of the finished training run, in slices
+  FW_LEARN_REPLAY = 1,   ///< the framework's between-run work (backward replay, the actor's learning), in slices
   FW_LEARN_SAVE = 2,     ///< serialising the learned state into the checkpoint writer, in slices
 } fw_learn_stage_t;
 
@@ -93,6 +93,8 @@ struct fw_loop {
   size_t save_max;             // the learner's largest checkpoint payload (0: no checkpoints)
   fw_learn_stage_t learn_stage;
   hedger_save_cursor_t save_cursor;
+  actor_save_cursor_t save_actor_cursor;  // the actor's section, after HEDGER's
+  bool save_actor_started;
   int save_handle;             // checkpoint writer buffer being filled (-1: none)
   void* save_payload;          // its payload section
   uint32_t save_points_done;   // points of the save (or of its writer-less stand-in) done
@@ -224,6 +226,7 @@ struct fw_loop {
   learn_eval_block_t last_block;
   int64_t checkpoints_submitted;
   int64_t checkpoints_skipped;
+  bool policy_fault;           // this tick's learned policy gave a non-finite action (stop, report)
   // A finished training run's progress line (and the lines after it) wait until its checkpoint
   // is on disk: a line on the screen means the run survives a kill.
   char held_lines[FW_HELD_LINES][FW_TEXT_MAX];

@@ -6,6 +6,7 @@
 #include "fw/errfmt.h"
 
 #include <hedger/hedger.h>
+#include <learn/learn.h>
 #include <tasks/decl.h>
 
 #include <math.h>
@@ -13,13 +14,16 @@
 #include <stdio.h>
 #include <string.h>
 
-#define MAGIC "FWMETA02"
+#define MAGIC "FWMETA03"
+#define MAGIC_2 "FWMETA02"
 #define MAGIC_1 "FWMETA01"
 // Revision 1's sizes: without and with the hold past the obstacle.
 #define BYTES_1 96U
 #define BYTES_1_HOLD 104U
 
-_Static_assert(FW_PROGRESS_BYTES == 56U, "fw_progress_encode fills bytes 0-55");
+_Static_assert(FW_PROGRESS_BYTES == 72U, "fw_progress_encode fills bytes 0-71");
+// The largest actor section a decoder accepts (the payload's own size is checked by the loader).
+#define ACTOR_BYTES_MAX ((uint64_t)1 << 40)
 _Static_assert(FW_PROGRESS_READ_MAX >= BYTES_1_HOLD, "the largest section read fits the buffer");
 
 size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]) {
@@ -37,6 +41,9 @@ size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]
   fw_put_f64(out + 40, g->example_steps_sum);
   fw_put_u32(out + 48, (uint32_t)g->best_example_steps);
   fw_put_u32(out + 52, (uint32_t)p->run_id + 1U);
+  fw_put_u32(out + 56, (uint32_t)p->policy);
+  fw_put_u32(out + 60, 0U);
+  fw_put_u64(out + 64, p->actor_bytes);
   return FW_PROGRESS_BYTES;
 }
 
@@ -54,11 +61,13 @@ static bool counter(const uint8_t* b, size_t off, const char* name, int32_t* v, 
 }
 
 int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why, size_t cap) {
-  const bool rev2 = n == FW_PROGRESS_BYTES && memcmp(b, MAGIC, 8) == 0;
+  const bool rev3 = n == FW_PROGRESS_BYTES && memcmp(b, MAGIC, 8) == 0;
+  const bool rev2 = n == FW_PROGRESS_BYTES_2 && memcmp(b, MAGIC_2, 8) == 0;
   const bool rev1 = (n == BYTES_1 || n == BYTES_1_HOLD) && memcmp(b, MAGIC_1, 8) == 0;
-  if (!rev2 && !rev1) {
-    fw_errfmt(why, cap, "unknown format (%zu bytes, expected %u starting with " MAGIC " or %u or %u starting with "
-              MAGIC_1 ")", n, FW_PROGRESS_BYTES, BYTES_1, BYTES_1_HOLD);
+  if (!rev3 && !rev2 && !rev1) {
+    fw_errfmt(why, cap, "unknown format (%zu bytes, expected %u starting with " MAGIC ", %u starting with " MAGIC_2
+              " or %u or %u starting with " MAGIC_1 ")", n, FW_PROGRESS_BYTES, FW_PROGRESS_BYTES_2, BYTES_1,
+              BYTES_1_HOLD);
     return -1;
   }
   fw_progress_t p;
@@ -122,6 +131,27 @@ int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why
     return -1;
   }
   p.run_id = run_id_plus_1 - 1;
+  p.revision = rev3 ? 3U : (rev2 ? 2U : 1U);
+  p.policy = LEARN_POLICY_GREEDY;  // revisions 1 and 2: HEDGER's values alone
+  if (rev3) {
+    const uint32_t policy = fw_get_u32(b + 56);
+    const uint64_t actor_bytes = fw_get_u64(b + 64);
+    if (policy != (uint32_t)LEARN_POLICY_ACTOR && policy != (uint32_t)LEARN_POLICY_GREEDY) {
+      fw_errfmt(why, cap, "policy %u, expected 0 (actor) or 1 (greedy)", (unsigned)policy);
+      return -1;
+    }
+    if (fw_get_u32(b + 60) != 0U) {
+      fw_errfmt(why, cap, "reserved field %u, expected 0", (unsigned)fw_get_u32(b + 60));
+      return -1;
+    }
+    if ((policy == (uint32_t)LEARN_POLICY_GREEDY) != (actor_bytes == 0U) || actor_bytes > ACTOR_BYTES_MAX) {
+      fw_errfmt(why, cap, "actor section of %llu bytes with the %s policy", (unsigned long long)actor_bytes,
+                policy == (uint32_t)LEARN_POLICY_GREEDY ? "greedy" : "actor");
+      return -1;
+    }
+    p.policy = (int32_t)policy;
+    p.actor_bytes = actor_bytes;
+  }
   // Revision 1's policy shift (its a, b and imitation weight as doubles at 56, 64 and 80): not
   // used any more; the operator is told when it had moved.
   p.legacy_shift = rev1 && !(is_zero(fw_get_f64(b + 56)) && is_zero(fw_get_f64(b + 64)) && is_zero(fw_get_f64(b + 80)));

@@ -308,6 +308,9 @@ void fw_run_step(fw_loop_t* L, uint8_t contact, double* v_cmd, double* w_cmd) {
   double a = 0.0;
   int8_t source = LEARN_SOURCE_EXAMPLE;
   learn_act(L->agent, advice, L->teleop_rot_radps, &a, &source);
+  // A non-finite action of the learned policy (its action is then 0): the tick commands a stop and
+  // the supervisor reports it as a non-finite value on the next tick (loop.c).
+  L->policy_fault = learn_policy_fault(L->agent);
   *w_cmd = a;
   *v_cmd = tasks_episode_speed_mps(&L->ep);
 }

@@ -18,13 +18,16 @@ void features_obstacles_config_default(features_obstacles_config_t* cfg) {
   cfg->standout_m = 0.3;
   cfg->min_cluster_points = 3U;
   cfg->no_obstacle_distance_m = 8.0;
+  cfg->memory_max_age = 30U;
+  cfg->memory_margin_m = 0.1;
 }
 
 static int config_ok(const features_obstacles_config_t* cfg) {
   return features_scan_config_ok(&cfg->scan) && isfinite(cfg->cluster_gap_m) &&
          cfg->cluster_gap_m > 0.0 && isfinite(cfg->max_obstacle_width_m) &&
          cfg->max_obstacle_width_m > 0.0 && isfinite(cfg->standout_m) && cfg->standout_m >= 0.0 &&
-         isfinite(cfg->no_obstacle_distance_m) && cfg->no_obstacle_distance_m > 0.0;
+         isfinite(cfg->no_obstacle_distance_m) && cfg->no_obstacle_distance_m > 0.0 &&
+         isfinite(cfg->memory_margin_m) && cfg->memory_margin_m >= 0.0;
 }
 
 static void slot_empty(double no_obstacle_distance_m, features_obstacle_t* o) {
@@ -54,6 +57,19 @@ static void set_empty(const features_obstacles_config_t* cfg, features_obstacles
   out->n_wall_clusters = 0U;
   out->nearest_any_m = far_m;
   out->nearest_any_bearing_rad = FEAT_PI;
+  slot_empty(far_m, &out->known);
+  out->known_age = cfg != NULL ? cfg->memory_max_age : 0U;
+}
+
+// The known obstacle without memory: the nearest one seen, if any.
+static void set_known_seen(const features_obstacles_config_t* cfg, features_obstacles_t* out) {
+  if (out->obstacle[0].visible != 0U) {
+    out->known = out->obstacle[0];
+    out->known_age = 0U;
+  } else {
+    slot_empty(cfg->no_obstacle_distance_m, &out->known);
+    out->known_age = cfg->memory_max_age;
+  }
 }
 
 // Inserts a candidate into the nearest-first slots (insertion into a sorted array of 2).
@@ -149,6 +165,7 @@ features_status_t features_obstacles_compute(const features_obstacles_config_t* 
   out->n_points = features_scan_points(&cfg->scan, scan, pts);
   out->scan_valid = (uint8_t)(out->n_points > 0U ? 1U : 0U);
   if (out->n_points == 0U) {
+    set_known_seen(cfg, out);
     return FEATURES_OK;
   }
   const int n = (int)scan->n_beams;
@@ -180,6 +197,7 @@ features_status_t features_obstacles_compute(const features_obstacles_config_t* 
     last = i;
   }
   judge_cluster(cfg, pts, first, last, before, -1, out);
+  set_known_seen(cfg, out);
   return FEATURES_OK;
 }
 
@@ -245,7 +263,92 @@ features_status_t features_obstacles_from_pose(const features_obstacles_config_t
     }
     keep_nearest(out, &o);
   }
+  set_known_seen(cfg, out);
   return FEATURES_OK;
+}
+
+void features_obstacle_memory_reset(features_obstacle_memory_t* mem) {
+  mem->x_m = 0.0;
+  mem->y_m = 0.0;
+  mem->radius_m = 0.0;
+  mem->age = 0U;
+  mem->n_points = 0U;
+  mem->held = 0U;
+}
+
+features_status_t features_obstacles_remember(const features_obstacles_config_t* cfg,
+                                              features_obstacle_memory_t* mem, features_pose_t pose,
+                                              features_obstacles_t* f) {
+  if (cfg == NULL || mem == NULL || f == NULL || !config_ok(cfg) || !isfinite(pose.x_m) ||
+      !isfinite(pose.y_m) || !isfinite(pose.theta_rad)) {
+    return FEATURES_ERR_INVALID_ARG;
+  }
+  const double c = cos(pose.theta_rad);
+  const double s = sin(pose.theta_rad);
+  // 1. The remembered obstacle one observation older, seen from the current pose.
+  double dx = 0.0, dy = 0.0, dist = 0.0;
+  if (mem->held != 0U) {
+    mem->age = mem->age < UINT32_MAX ? mem->age + 1U : UINT32_MAX;
+    dx = mem->x_m - pose.x_m;
+    dy = mem->y_m - pose.y_m;
+    dist = fmax(hypot(dx, dy) - mem->radius_m, 0.0);
+    if (mem->age > cfg->memory_max_age || !(dist < cfg->no_obstacle_distance_m) || !isfinite(mem->x_m) ||
+        !isfinite(mem->y_m)) {
+      mem->held = 0U;
+    }
+  }
+  // 2. The obstacle seen now: the remembered one seen again, or another one, which replaces it
+  //    unless the remembered one is clearly nearer.
+  const features_obstacle_t* seen = &f->obstacle[0];
+  const double a = pose.theta_rad + seen->bearing_rad;
+  const double ux = cos(a), uy = sin(a);
+  const double px = pose.x_m + seen->distance_m * ux;  // its nearest return
+  const double py = pose.y_m + seen->distance_m * uy;
+  const int same = seen->visible != 0U && mem->held != 0U &&
+                   hypot(px - mem->x_m, py - mem->y_m) <= mem->radius_m + cfg->cluster_gap_m;
+  if (seen->visible != 0U && (mem->held == 0U || same || seen->distance_m <= dist + cfg->memory_margin_m)) {
+    if (!same || seen->n_points >= mem->n_points) {
+      const double r = fmin(fmax(0.5 * seen->width_m, 0.0), 0.5 * cfg->max_obstacle_width_m);
+      mem->x_m = px + r * ux;
+      mem->y_m = py + r * uy;
+      mem->radius_m = r;
+      mem->n_points = seen->n_points;
+    }  // else: the same obstacle, seen less well than before: its disc stays
+    mem->age = 0U;
+    mem->held = 1U;
+    f->known = *seen;
+    f->known_age = 0U;
+    return FEATURES_OK;
+  }
+  // 3. The remembered one, or none.
+  if (mem->held == 0U) {
+    slot_empty(cfg->no_obstacle_distance_m, &f->known);
+    f->known_age = cfg->memory_max_age;
+    return FEATURES_OK;
+  }
+  f->known.bearing_rad = features_angle_wrap(atan2(dy, dx) - pose.theta_rad);
+  f->known.distance_m = dist;
+  f->known.width_m = 2.0 * mem->radius_m;
+  f->known.centre_x_m = c * dx + s * dy;
+  f->known.centre_y_m = -s * dx + c * dy;
+  f->known.n_points = 0U;
+  f->known.visible = 0U;
+  f->known_age = mem->age;
+  return FEATURES_OK;
+}
+
+size_t features_obstacles_memory_state(const features_obstacles_t* f, double period_s, double* state,
+                                       size_t capacity) {
+  if (f == NULL || state == NULL || capacity < FEATURES_OBSTACLES_MEMORY_STATE_DIM || !isfinite(period_s) ||
+      !(period_s > 0.0)) {
+    return 0U;
+  }
+  state[0] = f->goal_bearing_rad;
+  state[1] = f->goal_distance_m;
+  state[2] = f->known.bearing_rad;
+  state[3] = f->known.distance_m;
+  state[4] = (double)f->known_age * period_s;
+  return FEATURES_OBSTACLES_MEMORY_STATE_DIM;
 }
 
 size_t features_obstacles_state(const features_obstacles_t* f, uint32_t n_obstacles, double* state,

@@ -43,25 +43,6 @@ constexpr uint32_t kMagic = 0x48444752u;  // "HDGR": a live instance
 /// box lies beyond the search's bound). Entries arrive in time order, so a block holds a piece
 /// of a trajectory and its box is tight.
 constexpr uint32_t kFreshBlock = 32;
-/// Smallest ratio min|d_i| / max|d_i| of the pivots of the (pivoted) LDLT factorisation accepted
-/// for the IVH and the LWR normal equations; below it (or with a non-positive pivot) the
-/// neighbourhood is treated as singular (LWA). For these small SPD matrices the pivot ratio is a
-/// cheap proxy of 1/cond; exact collinearity (e.g. every neighbour with the same action) gives a
-/// ratio near 1e-17.
-constexpr double kPivotRatioMin = 1e-12;
-
-/// Factorises a symmetric matrix; false if it is not numerically positive definite.
-template <class Mat>
-bool factor_spd(SymFactor& ldlt, const Eigen::MatrixBase<Mat>& m) noexcept {
-  if (!ldlt.compute_from(m)) return false;
-  double dmin = ldlt.pivot(0), dmax = dmin;
-  for (int i = 1; i < ldlt.size(); ++i) {
-    const double d = ldlt.pivot(i);
-    if (d < dmin) dmin = d;
-    if (d > dmax) dmax = d;
-  }
-  return dmin > 0.0 && dmin > kPivotRatioMin * dmax;
-}
 /// Relative tolerance of the IVH comparison, so that a query exactly at the point of largest
 /// leverage is inside despite rounding.
 constexpr double kIvhTol = 1e-9;

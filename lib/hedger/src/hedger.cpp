@@ -7,23 +7,29 @@
 #include <cstring>
 #include <new>
 
+#include "bytes.hpp"
 #include "core.hpp"
 #include "dims.hpp"
 
 namespace {
 
 using hg::Layout;
+using hg::bits_f32;
+using hg::crc32;
+using hg::crc32_update;
+using hg::f32_bits;
+using hg::finite_all;
+using hg::get_f64;
+using hg::get_u32;
+using hg::get_u64;
+using hg::put_f64;
+using hg::put_u32;
+using hg::put_u64;
+using hg::same_bits;
 
 constexpr size_t kAlign = HEDGER_STORAGE_ALIGN;
 
 size_t align_up(size_t n) { return (n + kAlign - 1) / kAlign * kAlign; }
-
-bool finite_all(const double* v, uint32_t n) {
-  for (uint32_t i = 0; i < n; ++i) {
-    if (!std::isfinite(v[i])) return false;
-  }
-  return true;
-}
 
 bool valid_config(const hedger_config_t* c) {
   if (c == nullptr) return false;
@@ -157,66 +163,6 @@ size_t format_size(uint32_t d, uint32_t count, uint32_t version = HEDGER_FORMAT_
          4u;
 }
 
-uint32_t f32_bits(float f) {
-  uint32_t u;
-  std::memcpy(&u, &f, sizeof u);
-  return u;
-}
-
-float bits_f32(uint32_t u) {
-  float f;
-  std::memcpy(&f, &u, sizeof f);
-  return f;
-}
-
-struct Crc32Table {
-  uint32_t t[256];
-  constexpr Crc32Table() : t() {
-    for (uint32_t i = 0; i < 256; ++i) {
-      uint32_t c = i;
-      for (int k = 0; k < 8; ++k) c = (c & 1u) ? (0xEDB88320u ^ (c >> 1)) : (c >> 1);
-      t[i] = c;
-    }
-  }
-};
-constexpr Crc32Table kCrc;
-
-/// CRC-32 register after n more bytes (start with 0xFFFFFFFF; the CRC is the register ^ 0xFFFFFFFF).
-uint32_t crc32_update(uint32_t c, const uint8_t* p, size_t n) {
-  for (size_t i = 0; i < n; ++i) c = kCrc.t[(c ^ p[i]) & 0xFFu] ^ (c >> 8);
-  return c;
-}
-
-uint32_t crc32(const uint8_t* p, size_t n) { return crc32_update(0xFFFFFFFFu, p, n) ^ 0xFFFFFFFFu; }
-
-void put_u32(uint8_t* p, uint32_t v) {
-  for (int i = 0; i < 4; ++i) p[i] = static_cast<uint8_t>(v >> (8 * i));
-}
-void put_u64(uint8_t* p, uint64_t v) {
-  for (int i = 0; i < 8; ++i) p[i] = static_cast<uint8_t>(v >> (8 * i));
-}
-void put_f64(uint8_t* p, double v) {
-  uint64_t u;
-  std::memcpy(&u, &v, sizeof u);
-  put_u64(p, u);
-}
-uint32_t get_u32(const uint8_t* p) {
-  uint32_t v = 0;
-  for (int i = 0; i < 4; ++i) v |= static_cast<uint32_t>(p[i]) << (8 * i);
-  return v;
-}
-uint64_t get_u64(const uint8_t* p) {
-  uint64_t v = 0;
-  for (int i = 0; i < 8; ++i) v |= static_cast<uint64_t>(p[i]) << (8 * i);
-  return v;
-}
-double get_f64(const uint8_t* p) {
-  const uint64_t u = get_u64(p);
-  double v;
-  std::memcpy(&v, &u, sizeof v);
-  return v;
-}
-bool same_bits(double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; }
 
 // ---- Entry points (noexcept: nothing inside throws; the library builds with -fno-exceptions) --
 

@@ -34,7 +34,7 @@ using SysVec = Eigen::Matrix<double, Eigen::Dynamic, 1, Eigen::ColMajor, kMaxSys
 class SymFactor {
  public:
   /// Factorises m (its lower triangle is read). True when Eigen reports success; the pivots then
-  /// tell how definite m is (see factor_spd() in core.hpp). O(n³).
+  /// tell how definite m is (see factor_spd() below). O(n³).
   bool compute(const SysMat& m) noexcept;
   /// Order n of the last factorised matrix.
   int size() const noexcept;
@@ -72,6 +72,25 @@ class SymFactor {
 /// Smallest and largest eigenvalue of the symmetric matrix m (Eigen::SelfAdjointEigenSolver,
 /// eigenvalues only). False when the solver does not converge. O(n³), no allocation.
 bool sym_eigen_extremes(const SysMat& m, double* lo, double* hi) noexcept;
+/// Smallest ratio min|d_i| / max|d_i| of the pivots of the (pivoted) LDLT factorisation accepted
+/// for the IVH and the LWR normal equations; below it (or with a non-positive pivot) the
+/// neighbourhood is treated as singular (LWA). For these small SPD matrices the pivot ratio is a
+/// cheap proxy of 1/cond; exact collinearity (e.g. every neighbour with the same action) gives a
+/// ratio near 1e-17.
+constexpr double kPivotRatioMin = 1e-12;
+
+/// Factorises a symmetric matrix; false if it is not numerically positive definite.
+template <class Mat>
+bool factor_spd(SymFactor& ldlt, const Eigen::MatrixBase<Mat>& m) noexcept {
+  if (!ldlt.compute_from(m)) return false;
+  double dmin = ldlt.pivot(0), dmax = dmin;
+  for (int i = 1; i < ldlt.size(); ++i) {
+    const double d = ldlt.pivot(i);
+    if (d < dmin) dmin = d;
+    if (d > dmax) dmax = d;
+  }
+  return dmin > 0.0 && dmin > kPivotRatioMin * dmax;
+}
 
 }  // namespace hg
 

@@ -8,10 +8,11 @@
 // learned policy's action choice computes anyway: the search runs once.
 //
 // Why slices between runs: the replay of a finished run costs replay_passes × its length updates,
-// tens of milliseconds at 20k points on a PC and seconds on a small onboard computer. The caller
-// does one slice per control period while the robot stands, and the next run starts when the
-// work is done. The work is counted in updates, never in time, so a lockstep run stays a function
-// of its inputs however loaded the machine is.
+// tens of milliseconds at 20k points on a PC and seconds on a small onboard computer, and the
+// actor's learning a few hundred million instructions. The caller does one slice per control
+// period while the robot stands, and the next run starts when the work is done. The work is
+// counted in updates and work units, never in time, so a lockstep run stays a function of its
+// inputs however loaded the machine is.
 #include "learn/learn.h"
 
 #include <math.h>
@@ -32,6 +33,7 @@ struct learn {
   learn_config_t cfg;
   uint32_t state_dim;  // the learner's
   learn_learner_t learner;
+  actor_t* actor;      // policy = actor (in the storage after the learner's), else NULL
   learn_schedule_t sched;
   learn_plan_t plan;
   rng_t explore_rng;
@@ -54,6 +56,9 @@ struct learn {
   pending_t pending;
   bool replay_pending;         // a training run ended: its replay begins with the next slice
   bool replaying;
+  bool actor_due;              // the actor's learning follows the replay
+  bool policy_fault;           // the last learn_act's learned policy gave a non-finite action
+  uint64_t policy_faults;
   int64_t steps;
 };
 
@@ -73,6 +78,9 @@ learn_config_t learn_config_default(void) {
   c.schedule.switch_mode = LEARN_SWITCH_RUNS;
   c.schedule.auto_min_runs = 10;
   c.schedule.auto_ratio = 1.0;
+  c.policy = LEARN_POLICY_GREEDY;
+  c.actor = actor_config_default();
+  c.actor_work_per_slice = 1500U;
   c.learner = LEARN_LEARNER_HEDGER;
   c.alpha = 0.2;
   c.gamma = 0.0;
@@ -179,8 +187,47 @@ void learn_learner_config(const learn_task_t* task, const learn_config_t* cfg, l
   tc->replay_lambda = hc->replay_lambda;
 }
 
-static size_t agent_bytes(void) {
-  return (sizeof(learn_t) + LEARN_STORAGE_ALIGN - 1U) & ~(size_t)(LEARN_STORAGE_ALIGN - 1U);
+void learn_actor_config(const learn_task_t* task, const learn_config_t* cfg, actor_config_t* out) {
+  *out = cfg->actor;
+  learn_learner_config_t lc;
+  learn_learner_config(task, cfg, &lc);
+  const uint32_t dim = learn_state_dim(task, cfg);
+  out->state_dim = dim;
+  // The network's inputs by the declared ranges; the local models' neighbourhoods by the value
+  // learner's input scales (the task's declared scales and the last action's), so that both
+  // learners judge nearness alike.
+  for (uint32_t i = 0; i < task->state_dim && i < ACTOR_MAX_STATE_DIM; ++i) {
+    out->state_min[i] = task->state_min[i];
+    out->state_max[i] = task->state_max[i];
+  }
+  if (cfg->state_last_action && task->state_dim < ACTOR_MAX_STATE_DIM) {
+    out->state_min[task->state_dim] = task->action_min;
+    out->state_max[task->state_dim] = task->action_max;
+  }
+  for (uint32_t i = 0; i < dim && i < ACTOR_MAX_STATE_DIM; ++i) {
+    out->state_scale[i] = lc.hedger.input_scale[i];
+  }
+  out->action_min = task->action_min;
+  out->action_max = task->action_max;
+  out->action_scale = lc.hedger.input_scale[dim];
+  out->gamma = discount(task, cfg);
+}
+
+static size_t align_storage(size_t n) {
+  return (n + LEARN_STORAGE_ALIGN - 1U) & ~(size_t)(LEARN_STORAGE_ALIGN - 1U);
+}
+
+static size_t agent_bytes(void) { return align_storage(sizeof(learn_t)); }
+
+// The actor's storage (0 with the greedy policy; SIZE_MAX when its configuration is invalid).
+static size_t actor_bytes(const learn_task_t* task, const learn_config_t* cfg) {
+  if (cfg->policy != LEARN_POLICY_ACTOR) {
+    return 0;
+  }
+  actor_config_t ac;
+  learn_actor_config(task, cfg, &ac);
+  const size_t n = actor_storage_size(&ac);
+  return n == 0 ? SIZE_MAX : align_storage(n);
 }
 
 static bool task_valid(const learn_task_t* t) {
@@ -201,10 +248,14 @@ size_t learn_storage_size(const learn_task_t* task, const learn_config_t* cfg) {
   if (!task_valid(task)) {
     return 0;
   }
+  if (cfg->policy != LEARN_POLICY_ACTOR && cfg->policy != LEARN_POLICY_GREEDY) {
+    return 0;
+  }
   learn_learner_config_t lc;
   learn_learner_config(task, cfg, &lc);
   const size_t learner = learn_learner_storage_size(&lc);
-  return learner == 0 ? 0 : agent_bytes() + learner;
+  const size_t actor = actor_bytes(task, cfg);
+  return learner == 0 || actor == SIZE_MAX ? 0 : agent_bytes() + learner + actor;
 }
 
 learn_t* learn_init(void* storage, size_t storage_size, const learn_task_t* task, const learn_config_t* cfg,
@@ -216,6 +267,16 @@ learn_t* learn_init(void* storage, size_t storage_size, const learn_task_t* task
   }
   if (storage == NULL || ((uintptr_t)storage % LEARN_STORAGE_ALIGN) != 0U) {
     snprintf(err, err_cap, "the learner's storage is missing or not aligned to %u bytes", LEARN_STORAGE_ALIGN);
+    return NULL;
+  }
+  if (cfg->policy != LEARN_POLICY_ACTOR && cfg->policy != LEARN_POLICY_GREEDY) {
+    snprintf(err, err_cap, "unknown policy %d (actor or greedy)", (int)cfg->policy);
+    return NULL;
+  }
+  if (actor_bytes(task, cfg) == SIZE_MAX) {
+    snprintf(err, err_cap, "the actor's settings are invalid (check the actor_* keys: hidden 1..%u, runs >= 1, "
+             "queries 1..actor capacity, capacity 16..%u, positive learning rate)", ACTOR_MAX_HIDDEN,
+             ACTOR_MAX_CAPACITY);
     return NULL;
   }
   const size_t need = learn_storage_size(task, cfg);
@@ -241,9 +302,19 @@ learn_t* learn_init(void* storage, size_t storage_size, const learn_task_t* task
   a->state_dim = learn_state_dim(task, cfg);
   learn_learner_config_t lc;
   learn_learner_config(task, cfg, &lc);
-  if (learn_learner_init(&a->learner, (uint8_t*)storage + agent_bytes(), storage_size - agent_bytes(), &lc, err,
-                         err_cap) != 0) {
+  const size_t learner_bytes = learn_learner_storage_size(&lc);
+  if (learn_learner_init(&a->learner, (uint8_t*)storage + agent_bytes(), learner_bytes, &lc, err, err_cap) != 0) {
     return NULL;
+  }
+  if (cfg->policy == LEARN_POLICY_ACTOR) {
+    actor_config_t ac;
+    learn_actor_config(task, cfg, &ac);
+    const size_t at = agent_bytes() + learner_bytes;
+    const actor_status_t st = actor_init(&a->actor, (uint8_t*)storage + at, storage_size - at, &ac);
+    if (st != ACTOR_OK) {
+      snprintf(err, err_cap, "cannot set up the actor (%s)", actor_status_str(st));
+      return NULL;
+    }
   }
   learn_schedule_config_t sc = cfg->schedule;
   sc.evaluate_only = cfg->mode != LEARN_MODE_LEARN;
@@ -391,14 +462,35 @@ static bool explore_offset(learn_t* a, double sigma, double* offset) {
   return true;
 }
 
+// The actor's action at s into *act; false where it knows none (nothing learned yet). A
+// non-finite output is a fault: the action is 0 and the caller is told (learn_policy_fault).
+static bool actor_action(learn_t* a, double* act) {
+  const actor_status_t st = actor_act(a->actor, a->s, act);
+  if (st == ACTOR_ERR_NON_FINITE) {
+    a->policy_fault = true;
+    a->policy_faults++;
+    *act = 0.0;
+    return true;
+  }
+  if (st != ACTOR_OK) {
+    return false;
+  }
+  *act = clamp_action(a, *act);
+  return true;
+}
+
 void learn_act(learn_t* a, double advice, double joystick, double* action, int8_t* source) {
   const bool eval = evaluating(a);
   const bool policy = learn_policy_acts(a);
-  // The greedy search at s chooses the learned policy's action; its value is also the q' of the
-  // transition into s (learned after the command), so it runs once.
+  a->policy_fault = false;
+  // The greedy search at s chooses the greedy policy's action; its value is also the q' of the
+  // transition into s (learned after the command), so it runs once. The actor's action needs no
+  // search: the update finds q' itself.
   bool greedy_known = false;
   double greedy_action = 0.0;
-  if (policy) {
+  if (policy && a->actor != NULL) {
+    greedy_known = actor_action(a, &greedy_action);
+  } else if (policy) {
     double value = 0.0;
     greedy_known = learn_learner_greedy(&a->learner, a->s, &greedy_action, &value);
     if (greedy_known) {
@@ -425,7 +517,7 @@ void learn_act(learn_t* a, double advice, double joystick, double* action, int8_
   } else if (greedy_known) {
     act = greedy_action;
     src = LEARN_SOURCE_GREEDY;
-    if (!eval && explore_offset(a, a->cfg.explore_sigma, &offset)) {
+    if (!eval && !a->policy_fault && explore_offset(a, a->cfg.explore_sigma, &offset)) {
       act += offset;
       src = LEARN_SOURCE_EXPLORATION;
     }
@@ -479,6 +571,9 @@ static bool update_pending(learn_t* a, learn_experience_t* exp) {
       q = 0.0;
       kind = HEDGER_KIND_UNKNOWN;
     }
+    if (a->actor != NULL) {
+      (void)actor_record(a->actor, e->s, e->a, e->reward, e->s_next, e->terminal ? 1 : 0);
+    }
   } else if (!learn_learner_predict(&a->learner, e->s, e->a, &q, &kind)) {
     q = 0.0;
     kind = HEDGER_KIND_UNKNOWN;
@@ -492,42 +587,70 @@ static bool update_pending(learn_t* a, learn_experience_t* exp) {
 
 bool learn_update(learn_t* a, learn_experience_t* exp) { return update_pending(a, exp); }
 
-uint32_t learn_replay_slice(learn_t* a, uint32_t max_updates) {
+// A training run ended: its replay begins, and the actor's learning is due after it.
+static void begin_between_runs(learn_t* a) {
+  a->replay_pending = false;
+  learn_learner_end_run_begin(&a->learner);
+  a->replaying = true;
+  a->actor_due = a->actor != NULL;
+}
+
+// One slice of the actor's learning (it begins with the first); true while work is left.
+static bool actor_slice(learn_t* a, uint32_t max_work) {
+  if (a->actor == NULL) {
+    return false;
+  }
+  if (a->actor_due) {
+    a->actor_due = false;
+    (void)actor_end_run_begin(a->actor, NULL);  // nothing is due when the run recorded nothing
+  }
+  int remaining = 0;
+  (void)actor_end_run_step(a->actor, max_work, &remaining);
+  return remaining != 0;
+}
+
+uint32_t learn_between_runs_slice(learn_t* a, uint32_t max_updates) {
   if (a->replay_pending) {
-    a->replay_pending = false;
-    learn_learner_end_run_begin(&a->learner);
-    a->replaying = true;
+    begin_between_runs(a);
   }
-  if (!a->replaying) {
-    return 0;
+  if (a->replaying) {
+    const uint32_t left = learn_learner_end_run_step(&a->learner, max_updates);
+    a->replaying = left > 0;
+    return left + (a->actor_due ? 1U : 0U);
   }
-  const uint32_t left = learn_learner_end_run_step(&a->learner, max_updates);
-  a->replaying = left > 0;
-  return left;
+  return actor_slice(a, a->cfg.actor_work_per_slice) ? 1U : 0U;
 }
 
 bool learn_after_command(learn_t* a, learn_experience_t* exp) {
   const bool had = update_pending(a, exp);
-  if (!had || a->replay_pending || a->replaying) {
-    (void)learn_replay_slice(a, a->cfg.replay_updates_per_slice);
+  if (!had || learn_between_runs_busy(a)) {
+    (void)learn_between_runs_slice(a, a->cfg.replay_updates_per_slice);
   }
   return had;
 }
 
-bool learn_idle(const learn_t* a) { return !a->pending.active && !a->replay_pending && !a->replaying; }
+bool learn_idle(const learn_t* a) { return !a->pending.active && !learn_between_runs_busy(a); }
 
-bool learn_replay_due(const learn_t* a) { return a->replay_pending; }
+bool learn_between_runs_due(const learn_t* a) { return a->replay_pending; }
 
-bool learn_replaying(const learn_t* a) { return a->replay_pending || a->replaying; }
+bool learn_between_runs_busy(const learn_t* a) {
+  return a->replay_pending || a->replaying || a->actor_due || (a->actor != NULL && actor_working(a->actor));
+}
 
-bool learn_finish_now(learn_t* a, learn_experience_t* exp) {
-  const bool had = update_pending(a, exp);
+// The whole between-run work at once: the replay, then the actor's learning.
+static void between_runs_now(learn_t* a) {
   if (a->replay_pending) {
-    a->replay_pending = false;
-    learn_learner_end_run_begin(&a->learner);
+    begin_between_runs(a);
   }
   (void)learn_learner_end_run_step(&a->learner, UINT32_MAX);
   a->replaying = false;
+  while (actor_slice(a, UINT32_MAX)) {
+  }
+}
+
+bool learn_finish_now(learn_t* a, learn_experience_t* exp) {
+  const bool had = update_pending(a, exp);
+  between_runs_now(a);
   return had;
 }
 
@@ -541,6 +664,9 @@ bool learn_offline_transition(learn_t* a, const double* s, double action, double
   hedger_kind_t kind = HEDGER_KIND_UNKNOWN;
   if (!learn_learner_learn(&a->learner, s, action, reward, s_next, terminal, q_next, &q, &kind)) {
     return false;
+  }
+  if (a->actor != NULL) {
+    (void)actor_record(a->actor, s, action, reward, s_next, terminal ? 1 : 0);
   }
   a->steps++;
   if (exp != NULL) {
@@ -558,8 +684,8 @@ bool learn_offline_transition(learn_t* a, const double* s, double action, double
 
 uint64_t learn_offline_end_run(learn_t* a) {
   const uint64_t before = learn_learner_stats(&a->learner).replayed_updates;
-  learn_learner_end_run_begin(&a->learner);
-  (void)learn_learner_end_run_step(&a->learner, UINT32_MAX);
+  a->replay_pending = true;
+  between_runs_now(a);
   return learn_learner_stats(&a->learner).replayed_updates - before;
 }
 
@@ -577,6 +703,37 @@ void learn_resume(learn_t* a, const learn_schedule_progress_t* progress, int32_t
 }
 
 learn_learner_t* learn_get_learner(learn_t* a) { return &a->learner; }
+
+actor_t* learn_get_actor(learn_t* a) { return a->actor; }
+
+const actor_t* learn_get_actor_const(const learn_t* a) { return a->actor; }
+
+bool learn_policy_fault(const learn_t* a) { return a->policy_fault; }
+
+uint64_t learn_policy_faults(const learn_t* a) { return a->policy_faults; }
+
+// The stored points of HEDGER as cloning samples (state, action).
+static int stored_point(void* user, uint32_t index, double* state, double* action) {
+  const learn_t* a = (const learn_t*)user;
+  hedger_point_t pt;
+  if (hedger_get_point(a->learner.hedger, index, &pt) != HEDGER_OK) {
+    return 1;
+  }
+  memcpy(state, pt.state, a->state_dim * sizeof(double));
+  *action = pt.action;
+  return 0;
+}
+
+uint32_t learn_actor_from_values(learn_t* a) {
+  if (a->actor == NULL || a->learner.hedger == NULL) {
+    return 0;
+  }
+  const uint32_t n = hedger_size(a->learner.hedger);
+  if (n == 0 || actor_clone(a->actor, n, stored_point, a) != ACTOR_OK) {
+    return 0;
+  }
+  return n;
+}
 
 const learn_learner_t* learn_get_learner_const(const learn_t* a) { return &a->learner; }
 

@@ -74,6 +74,9 @@ uint32_t tasks_episode_n_eval_starts(const tasks_episode_t* ep) {
 void tasks_episode_begin(tasks_episode_t* ep, features_pose_t start_in_task, features_pose_t odom_at_start) {
   ep->start_in_task = start_in_task;
   ep->odom_at_start = odom_at_start;
+  if (ep->decl->run_begin != NULL) {
+    ep->decl->run_begin(ep);
+  }
 }
 
 features_pose_t tasks_episode_pose_in_task(const tasks_episode_t* ep, features_pose_t odom_now) {

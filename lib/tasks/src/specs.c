@@ -221,12 +221,14 @@ void tasks_obstacles_spec_default(tasks_obstacles_spec_t* spec) {
   spec->train_jitter_x_m = 0.3;
   spec->train_jitter_y_m = 0.3;
   spec->train_jitter_theta_rad = 0.3;
+  spec->memory_s = 3.0;
 }
 
 void tasks_obstacles_features_config(const tasks_obstacles_spec_t* spec,
                                      features_obstacles_config_t* cfg) {
-  (void)spec;
   features_obstacles_config_default(cfg);
+  const double periods = spec->dt_s > 0.0 && spec->memory_s > 0.0 ? floor(spec->memory_s / spec->dt_s + 0.5) : 0.0;
+  cfg->memory_max_age = periods < 1e6 ? (uint32_t)periods : 1000000U;
 }
 
 features_pose_t tasks_obstacles_eval_start(const tasks_obstacles_spec_t* spec, uint32_t index) {

@@ -429,6 +429,458 @@ static void test_obstacles_from_pose_agrees_with_scan(void** state) {
   assert_int_equal(features_obstacles_from_pose(NULL, pose(0, 0, 0), 0, 0, two, 2U, PI, &f), FEATURES_ERR_INVALID_ARG);
 }
 
+// ---- The memory of the nearest obstacle seen (features_obstacles_remember) -------------------
+
+// The test's own record of the last sighting of the single obstacle of a scene: the disc it makes
+// of it in the world and its age, advanced by the documented rule.
+typedef struct sighting {
+  int held;
+  double x_m, y_m, r_m;
+  uint32_t age, n_points;
+} sighting_t;
+
+static int slot_equal(const features_obstacle_t* a, const features_obstacle_t* b) {
+  return a->bearing_rad == b->bearing_rad && a->distance_m == b->distance_m && a->width_m == b->width_m &&
+         a->visible == b->visible && a->n_points == b->n_points;
+}
+
+static void assert_known_empty(const features_obstacles_config_t* cfg, const features_obstacles_t* f) {
+  assert_int_equal(f->known.visible, 0);
+  assert_true(f->known.bearing_rad == PI);
+  assert_true(f->known.distance_m == cfg->no_obstacle_distance_m);
+  assert_int_equal(f->known_age, cfg->memory_max_age);
+}
+
+// Checks f->known after features_obstacles_remember at pose p against the record (one obstacle
+// in the scene, so a seen one always replaces the remembered one), then advances the record.
+// Returns 1 when the known obstacle is a remembered one, 0 when seen or none.
+static int check_known(const features_obstacles_config_t* cfg, sighting_t* s, features_pose_t p,
+                       const features_obstacles_t* f) {
+  double d = 0.0;
+  if (s->held) {
+    ++s->age;
+    d = fmax(hypot(s->x_m - p.x_m, s->y_m - p.y_m) - s->r_m, 0.0);
+    if (s->age > cfg->memory_max_age || d >= cfg->no_obstacle_distance_m) s->held = 0;
+  }
+  if (f->obstacle[0].visible) {
+    assert_int_equal(f->known_age, 0);
+    assert_true(slot_equal(&f->known, &f->obstacle[0]));
+    const double ux = cos(p.theta_rad + f->obstacle[0].bearing_rad), uy = sin(p.theta_rad + f->obstacle[0].bearing_rad);
+    const double px = p.x_m + f->obstacle[0].distance_m * ux, py = p.y_m + f->obstacle[0].distance_m * uy;
+    const int same = s->held && hypot(px - s->x_m, py - s->y_m) <= s->r_m + cfg->cluster_gap_m;
+    if (!same || f->obstacle[0].n_points >= s->n_points) {
+      const double r = 0.5 * f->obstacle[0].width_m;
+      s->x_m = px + r * ux;
+      s->y_m = py + r * uy;
+      s->r_m = r;
+      s->n_points = f->obstacle[0].n_points;
+    }
+    s->held = 1;
+    s->age = 0U;
+    return 0;
+  }
+  if (!s->held) {
+    assert_known_empty(cfg, f);
+    return 0;
+  }
+  assert_int_equal(f->known.visible, 0);
+  assert_int_equal(f->known_age, s->age);
+  assert_true(fabs(f->known.distance_m - d) < 1e-12);
+  const double b = atan2(s->y_m - p.y_m, s->x_m - p.x_m) - p.theta_rad;
+  assert_true(fabs(features_angle_wrap(f->known.bearing_rad - b)) < 1e-12);
+  assert_true(f->known.width_m == 2.0 * s->r_m);
+  return 1;
+}
+
+// The centre of the known obstacle in the world, from the pose and its bearing, distance and
+// width (its centre is half its width beyond its nearest point, along the bearing).
+static void known_centre(features_pose_t p, const features_obstacles_t* f, double* x, double* y) {
+  const double d = f->known.distance_m + 0.5 * f->known.width_m;
+  *x = p.x_m + d * cos(p.theta_rad + f->known.bearing_rad);
+  *y = p.y_m + d * sin(p.theta_rad + f->known.bearing_rad);
+}
+
+static void arena_with(synth_world_t* w, double cx, double cy, double r) {
+  synth_world_init(w);
+  assert_int_equal(synth_world_add_box(w, ARENA_MIN_X, ARENA_MIN_Y, ARENA_MAX_X, ARENA_MAX_Y), 0);
+  assert_int_equal(synth_world_add_circle(w, cx, cy, r), 0);
+}
+
+// Passing an obstacle on the left in synthetic scans: while it is seen the known obstacle is the
+// seen one; when it has left the 180° view it is remembered where it was last seen, carried by the
+// pose: beside and then behind the robot (bearing beyond 90°), its centre within 0.08 m of the
+// true one and its distance within 0.05 m of the true surface distance (from the best view of
+// it: a chord of a near disc is a little narrower than its diameter), its bearing turning with the robot's rotation and its distance
+// unchanged by it; the age counts the observations; after memory_max_age the state says "no
+// obstacle". Without memory (limit 0) the known obstacle is only ever the seen one.
+static void test_obstacles_memory_keeps_passed_obstacle(void** state) {
+  (void)state;
+  const double cx = -1.5, cy = 0.55, rad = 0.25;  // the robot's skirt passes 0.04 m clear
+  synth_world_t w;
+  arena_with(&w, cx, cy, rad);
+  static features_scan_t scan;
+  for (int with_memory = 1; with_memory >= 0; --with_memory) {
+    features_obstacles_config_t cfg;
+    features_obstacles_config_default(&cfg);
+    assert_int_equal(cfg.memory_max_age, 30);
+    if (!with_memory) cfg.memory_max_age = 0U;
+    features_obstacle_memory_t mem;
+    memset(&mem, 0x5a, sizeof mem);
+    features_obstacle_memory_reset(&mem);
+    sighting_t rec = {0, 0.0, 0.0, 0.0, 0U, 0U};
+    features_pose_t p = pose(-3.5, 0.0, 0.0);
+    int seen = 0, unseen_steps = 0, remembered = 0, behind = 0, turned = 0, expired = 0;
+    double prev_b = 0.0, prev_d = 0.0, worst_centre = 0.0, worst_distance = 0.0;
+    int prev_remembered = 0;
+    for (int k = 0; k < 200; ++k) {
+      // Straight on until the obstacle has been out of view for 12 steps, then turn right (away
+      // from it) in place by 0.05 rad a step for 10 steps, then straight on at 0.03 m a step.
+      const int turning = unseen_steps >= 12 && unseen_steps < 22;
+      if (k > 0) {
+        if (turning) {
+          p.theta_rad -= 0.05;
+        } else {
+          p.x_m += 0.03 * cos(p.theta_rad);
+          p.y_m += 0.03 * sin(p.theta_rad);
+        }
+      }
+      scan_of(&scan, &w, p);
+      features_obstacles_t f;
+      assert_int_equal(features_obstacles_compute(&cfg, &scan, &p, 0.0, 0.0, &f), FEATURES_OK);
+      assert_int_equal(features_obstacles_remember(&cfg, &mem, p, &f), FEATURES_OK);
+      assert_true(all_finite(&f) && isfinite(f.known.bearing_rad) && isfinite(f.known.distance_m));
+      if (f.obstacle[0].visible) {
+        ++seen;
+        assert_int_equal(unseen_steps, 0);  // it never comes back into view on this path
+      } else if (seen > 0) {
+        ++unseen_steps;
+      }
+      const int is_remembered = check_known(&cfg, &rec, p, &f);
+      if (is_remembered) {
+        ++remembered;
+        assert_true(with_memory);
+        // The remembered disc is the obstacle, on the robot's left, about as near as it is.
+        double kx, ky;
+        known_centre(p, &f, &kx, &ky);
+        const double surface = hypot(p.x_m - cx, p.y_m - cy) - rad;
+        worst_centre = fmax(worst_centre, hypot(kx - cx, ky - cy));
+        worst_distance = fmax(worst_distance, fabs(f.known.distance_m - surface));
+        assert_true(hypot(kx - cx, ky - cy) < 0.08);
+        assert_true(fabs(f.known.distance_m - surface) < 0.05);
+        assert_true(f.known.bearing_rad > 0.0);
+        if (unseen_steps == 1) {
+          assert_true(surface < 0.45);  // it just left the view beside the robot
+          assert_true(f.known.bearing_rad > 1.0);
+        }
+        if (f.known.bearing_rad > 0.5 * PI) ++behind;
+        if (turning && prev_remembered) {
+          // A rotation in place turns the bearing by the rotation and keeps the distance.
+          ++turned;
+          assert_true(fabs(features_angle_wrap(f.known.bearing_rad - prev_b - 0.05)) < 1e-9);
+          assert_true(fabs(f.known.distance_m - prev_d) < 1e-9);
+        }
+        prev_b = f.known.bearing_rad;
+        prev_d = f.known.distance_m;
+      } else if (!f.obstacle[0].visible && seen > 0) {
+        if (with_memory) assert_int_equal(unseen_steps, 31);  // forgotten when older than 30
+        ++expired;
+        break;
+      }
+      prev_remembered = is_remembered;
+    }
+    print_message("memory %u: seen %d, remembered %d (behind %d, turning %d), expired %d; remembered within %.3f m "
+                  "of the centre, %.3f m of the surface distance\n", cfg.memory_max_age, seen, remembered, behind, turned,
+                  expired, worst_centre, worst_distance);
+    assert_true(seen > 20);
+    assert_int_equal(expired, 1);
+    if (with_memory) {
+      assert_int_equal(remembered, 30);
+      assert_true(behind >= 10);
+      assert_int_equal(turned, 10);
+    } else {
+      assert_int_equal(remembered, 0);
+    }
+  }
+}
+
+// A remembered obstacle is forgotten when it is as far as no_obstacle_distance_m (beyond the
+// state's sensing), whatever its age.
+static void test_obstacles_memory_expires_beyond_range(void** state) {
+  (void)state;
+  synth_world_t w;
+  arena_with(&w, -1.5, 0.55, 0.25);
+  static features_scan_t scan;
+  features_obstacles_config_t cfg;
+  features_obstacles_config_default(&cfg);
+  cfg.memory_max_age = 1000U;
+  cfg.no_obstacle_distance_m = 1.0;
+  features_obstacle_memory_t mem;
+  features_obstacle_memory_reset(&mem);
+  sighting_t rec = {0, 0.0, 0.0, 0.0, 0U, 0U};
+  int remembered = 0, expired = 0;
+  for (int k = 0; k < 150 && !expired; ++k) {
+    const features_pose_t p = pose(-3.5 + 0.03 * k, 0.0, 0.0);
+    scan_of(&scan, &w, p);
+    features_obstacles_t f;
+    assert_int_equal(features_obstacles_compute(&cfg, &scan, &p, 0.0, 0.0, &f), FEATURES_OK);
+    assert_int_equal(features_obstacles_remember(&cfg, &mem, p, &f), FEATURES_OK);
+    const int was = remembered;
+    if (check_known(&cfg, &rec, p, &f)) {
+      ++remembered;
+      assert_true(f.known.distance_m < 1.0);
+    } else if (was > 0) {
+      assert_known_empty(&cfg, &f);
+      assert_true(mem.age < 1000U);
+      expired = 1;
+    }
+  }
+  print_message("remembered for %d steps within 1 m\n", remembered);
+  assert_true(remembered > 10);
+  assert_int_equal(expired, 1);
+}
+
+// A newly seen obstacle replaces the remembered one when it is not farther than it by more than
+// memory_margin_m: a person steps in ahead of a robot that has just passed an obstacle. One seen
+// farther ahead does not: the obstacle beside the robot stays the known one until the seen one is
+// as near (within the margin), then the seen one takes over for good.
+static void test_obstacles_memory_replaced_by_new_obstacle(void** state) {
+  (void)state;
+  static features_scan_t scan;
+  features_obstacles_config_t cfg;
+  features_obstacles_config_default(&cfg);
+  // 1. Someone steps in: nearer than the remembered obstacle, or about as near.
+  {
+    synth_world_t w;
+    arena_with(&w, -1.5, 0.55, 0.25);
+    features_obstacle_memory_t mem;
+    features_obstacle_memory_reset(&mem);
+    int unseen = 0, replaced = 0;
+    double remembered_d = 0.0;
+    for (int k = 0; k < 120 && !replaced; ++k) {
+      const features_pose_t p = pose(-3.5 + 0.03 * k, 0.0, 0.0);
+      if (unseen == 5) {
+        assert_int_equal(synth_world_add_circle(&w, p.x_m + 0.55, p.y_m - 0.05, 0.2), 0);  // 0.35 m ahead
+      }
+      scan_of(&scan, &w, p);
+      features_obstacles_t f;
+      assert_int_equal(features_obstacles_compute(&cfg, &scan, &p, 0.0, 0.0, &f), FEATURES_OK);
+      assert_int_equal(features_obstacles_remember(&cfg, &mem, p, &f), FEATURES_OK);
+      if (unseen < 5) {
+        if (!f.obstacle[0].visible && k > 0) {
+          ++unseen;
+          assert_int_equal(f.known_age, unseen);
+          remembered_d = f.known.distance_m;
+        }
+        continue;
+      }
+      // The newcomer, seen now, is the known obstacle.
+      assert_true(f.obstacle[0].visible);
+      assert_true(f.obstacle[0].distance_m <= remembered_d + 0.03 + cfg.memory_margin_m);
+      assert_int_equal(f.known_age, 0);
+      assert_true(slot_equal(&f.known, &f.obstacle[0]));
+      assert_true(fabs(f.known.bearing_rad) < 0.3);
+      replaced = 1;
+    }
+    assert_int_equal(replaced, 1);
+  }
+  // 2. Another obstacle in view farther ahead on the right.
+  {
+    synth_world_t w;
+    arena_with(&w, -1.5, 0.55, 0.25);
+    assert_int_equal(synth_world_add_circle(&w, 0.0, -1.0, 0.25), 0);
+    cfg.memory_max_age = 60U;  // the other one comes as near only after 3 s
+    features_obstacle_memory_t mem;
+    features_obstacle_memory_reset(&mem);
+    int phase = 0;  // 0: the first one seen, 1: remembered while the other one is seen, 2: the other one
+    int kept = 0;
+    sighting_t rec = {0, 0.0, 0.0, 0.0, 0U, 0U};  // of the first obstacle
+    for (int k = 0; k < 115; ++k) {
+      const features_pose_t p = pose(-3.5 + 0.03 * k, 0.0, 0.0);
+      scan_of(&scan, &w, p);
+      features_obstacles_t f;
+      assert_int_equal(features_obstacles_compute(&cfg, &scan, &p, 0.0, 0.0, &f), FEATURES_OK);
+      assert_int_equal(features_obstacles_remember(&cfg, &mem, p, &f), FEATURES_OK);
+      assert_true(f.obstacle[0].visible);  // one of the two is always in view
+      if (phase == 0) {
+        if (f.obstacle[0].bearing_rad > 0.0) {  // the first one, on the left
+          (void)check_known(&cfg, &rec, p, &f);
+          continue;
+        }
+        phase = 1;  // the first one has left the view: only the other one is seen
+      }
+      const double d_first = hypot(rec.x_m - p.x_m, rec.y_m - p.y_m) - rec.r_m;
+      if (phase == 1 && f.obstacle[0].distance_m > d_first + cfg.memory_margin_m) {
+        // The one beside the robot stays the known one, remembered.
+        assert_int_equal(f.known.visible, 0);
+        assert_true(f.known_age > 0U);
+        assert_true(fabs(f.known.distance_m - d_first) < 1e-12);
+        assert_true(f.known.bearing_rad > 0.0);
+        ++kept;
+        continue;
+      }
+      phase = 2;
+      assert_int_equal(f.known_age, 0);
+      assert_true(slot_equal(&f.known, &f.obstacle[0]));
+      assert_true(f.known.bearing_rad < 0.0);
+    }
+    print_message("remembered beside the robot while another was seen farther: %d steps\n", kept);
+    assert_true(kept >= 3 && kept <= 60);
+    assert_int_equal(phase, 2);
+  }
+}
+
+// The exact features of the kinematic model get the same memory from the same sequence of poses:
+// the same rule (checked against the record for both), and the same obstacle remembered: exactly
+// the disc from the exact features, within 0.08 m (centre) and 0.05 m (distance) of it from the
+// scans (the ideal laser of from_pose loses sight of it a little earlier than the scan).
+static void test_obstacles_memory_same_from_pose_and_scan(void** state) {
+  (void)state;
+  const double cx = -1.5, cy = 0.55, rad = 0.25;
+  synth_world_t w;
+  arena_with(&w, cx, cy, rad);
+  const features_disc_t disc = {cx, cy, rad};
+  static features_scan_t scan;
+  features_obstacles_config_t cfg;
+  features_obstacles_config_default(&cfg);
+  features_obstacle_memory_t m_scan, m_pose;
+  features_obstacle_memory_reset(&m_scan);
+  features_obstacle_memory_reset(&m_pose);
+  sighting_t r_scan = {0, 0.0, 0.0, 0.0, 0U, 0U}, r_pose = {0, 0.0, 0.0, 0.0, 0U, 0U};
+  int both = 0;
+  alloc_counter_begin();
+  for (int k = 0; k < 110; ++k) {
+    const features_pose_t p = pose(-3.5 + 0.03 * k, 0.02 * sin(0.1 * k), 0.05 * sin(0.07 * k));
+    scan_of(&scan, &w, p);
+    features_obstacles_t fs, fp;
+    assert_int_equal(features_obstacles_compute(&cfg, &scan, &p, 0.0, 0.0, &fs), FEATURES_OK);
+    assert_int_equal(features_obstacles_from_pose(&cfg, p, 0.0, 0.0, &disc, 1U, PI, &fp), FEATURES_OK);
+    assert_int_equal(features_obstacles_remember(&cfg, &m_scan, p, &fs), FEATURES_OK);
+    assert_int_equal(features_obstacles_remember(&cfg, &m_pose, p, &fp), FEATURES_OK);
+    const int rs = check_known(&cfg, &r_scan, p, &fs);
+    const int rp = check_known(&cfg, &r_pose, p, &fp);
+    if (rs && rp) {
+      ++both;
+      double xs, ys, xp, yp;
+      known_centre(p, &fs, &xs, &ys);
+      known_centre(p, &fp, &xp, &yp);
+      const double surface = hypot(p.x_m - cx, p.y_m - cy) - rad;
+      assert_true(hypot(xp - cx, yp - cy) < 1e-9 && fabs(fp.known.width_m - 2.0 * rad) < 1e-12);
+      assert_true(fabs(fp.known.distance_m - surface) < 1e-9);
+      assert_true(hypot(xs - cx, ys - cy) < 0.08 && fabs(fs.known.distance_m - surface) < 0.05);
+    }
+  }
+  assert_int_equal(alloc_counter_end(), 0);
+  print_message("both remembered for %d steps\n", both);
+  assert_true(both >= 15);
+}
+
+// The rule on given features; the state vector with the memory; reset; refused calls.
+static void test_obstacles_memory_rule_state_and_invalid(void** state) {
+  (void)state;
+  features_obstacles_config_t cfg;
+  features_obstacles_config_default(&cfg);
+  cfg.memory_max_age = 3U;
+  features_obstacles_t f;
+  const features_pose_t origin = pose(0.0, 0.0, 0.0);
+  // Seen at 1 m straight ahead of a robot at the origin facing +x.
+  const features_disc_t ahead = {1.3, 0.0, 0.3};
+  assert_int_equal(features_obstacles_from_pose(&cfg, origin, 5.0, 0.0, &ahead, 1U, PI, &f), FEATURES_OK);
+  assert_int_equal(f.known_age, 0);  // without memory: the seen one
+  features_obstacle_memory_t mem;
+  features_obstacle_memory_reset(&mem);
+  assert_int_equal(features_obstacles_remember(&cfg, &mem, origin, &f), FEATURES_OK);
+  assert_true(mem.held == 1U && fabs(mem.x_m - 1.3) < 1e-12 && fabs(mem.y_m) < 1e-12 && mem.radius_m == 0.3);
+  assert_int_equal(mem.age, 0);
+  double s[FEATURES_OBSTACLES_MEMORY_STATE_DIM];
+  assert_int_equal(features_obstacles_memory_state(&f, 0.1, s, 5U), 5U);
+  assert_true(s[0] == 0.0 && s[1] == 5.0 && s[2] == f.obstacle[0].bearing_rad && s[3] == 1.0 && s[4] == 0.0);
+  // Turned around (nothing in view): remembered 1 m behind (the disc's surface), age 1 = 0.1 s.
+  const features_pose_t back = pose(0.0, 0.0, PI);
+  assert_int_equal(features_obstacles_from_pose(&cfg, back, 5.0, 0.0, NULL, 0U, PI, &f), FEATURES_OK);
+  assert_known_empty(&cfg, &f);  // without memory: none
+  assert_int_equal(features_obstacles_remember(&cfg, &mem, back, &f), FEATURES_OK);
+  assert_true(fabs(fabs(f.known.bearing_rad) - PI) < 1e-12 && fabs(f.known.distance_m - 1.0) < 1e-12);
+  assert_int_equal(features_obstacles_memory_state(&f, 0.1, s, 5U), 5U);
+  assert_true(s[3] == f.known.distance_m && s[4] == 0.1);
+  // Farther than the remembered one by more than the margin: not taken; within it: taken.
+  const features_disc_t far_one = {-1.5, 0.0, 0.3};  // 1.2 m ahead of `back`
+  assert_int_equal(features_obstacles_from_pose(&cfg, back, 5.0, 0.0, &far_one, 1U, PI, &f), FEATURES_OK);
+  assert_int_equal(features_obstacles_remember(&cfg, &mem, back, &f), FEATURES_OK);
+  assert_true(f.known_age == 2U && f.known.visible == 0U && fabs(f.known.distance_m - 1.0) < 1e-12);
+  const features_disc_t near_one = {-1.35, 0.0, 0.3};  // 1.05 m: within 0.1 m of 1 m
+  assert_int_equal(features_obstacles_from_pose(&cfg, back, 5.0, 0.0, &near_one, 1U, PI, &f), FEATURES_OK);
+  assert_int_equal(features_obstacles_remember(&cfg, &mem, back, &f), FEATURES_OK);
+  assert_true(f.known_age == 0U && f.known.visible == 1U && fabs(f.known.distance_m - 1.05) < 1e-12);
+  assert_true(fabs(mem.x_m + 1.35) < 1e-12 && mem.radius_m == 0.3);
+  // Measured views (n_points > 0): the same obstacle seen with fewer returns than before keeps
+  // the disc of the better view; with as many or more it takes the new one; one seen elsewhere
+  // gets its own.
+  features_obstacles_t g = f;
+  g.obstacle[0].width_m = 0.5;
+  g.obstacle[0].distance_m = 1.0;
+  g.obstacle[0].bearing_rad = 0.0;
+  g.obstacle[0].n_points = 40U;
+  assert_int_equal(features_obstacles_remember(&cfg, &mem, back, &g), FEATURES_OK);
+  assert_true(mem.radius_m == 0.25 && fabs(mem.x_m + 1.25) < 1e-12 && mem.n_points == 40U);
+  g.obstacle[0].width_m = 0.2;
+  g.obstacle[0].bearing_rad = 0.1;  // its nearest return on the remembered disc's edge
+  g.obstacle[0].n_points = 12U;
+  assert_int_equal(features_obstacles_remember(&cfg, &mem, back, &g), FEATURES_OK);
+  assert_true(mem.radius_m == 0.25 && fabs(mem.x_m + 1.25) < 1e-12 && mem.n_points == 40U && mem.age == 0U);
+  assert_true(f.known_age == 0U);
+  g.obstacle[0].n_points = 40U;
+  assert_int_equal(features_obstacles_remember(&cfg, &mem, back, &g), FEATURES_OK);
+  assert_true(mem.radius_m == 0.1 && fabs(hypot(mem.x_m + 1.1 * cos(0.1), mem.y_m + 1.1 * sin(0.1))) < 1e-12);
+  g.obstacle[0].bearing_rad = 1.0;  // 1 m away on the left: another obstacle, seen less well
+  g.obstacle[0].n_points = 5U;
+  assert_int_equal(features_obstacles_remember(&cfg, &mem, back, &g), FEATURES_OK);
+  assert_true(mem.radius_m == 0.1 && mem.n_points == 5U && fabs(hypot(mem.x_m + 1.1 * cos(1.0), mem.y_m + 1.1 * sin(1.0))) < 1e-12);
+  g.obstacle[0].width_m = 5.0;  // wider than an obstacle can be: capped
+  g.obstacle[0].n_points = 50U;
+  assert_int_equal(features_obstacles_remember(&cfg, &mem, back, &g), FEATURES_OK);
+  assert_true(mem.radius_m == 0.5 * cfg.max_obstacle_width_m);
+  assert_int_equal(features_obstacles_from_pose(&cfg, back, 5.0, 0.0, &near_one, 1U, PI, &f), FEATURES_OK);
+  assert_int_equal(features_obstacles_remember(&cfg, &mem, back, &f), FEATURES_OK);
+  assert_true(fabs(mem.x_m + 1.35) < 1e-12 && mem.radius_m == 0.3);
+  // Nothing in view for 3 observations: remembered; the 4th: forgotten, age saturated at 3.
+  for (uint32_t k = 1U; k <= 4U; ++k) {
+    assert_int_equal(features_obstacles_from_pose(&cfg, origin, 5.0, 0.0, NULL, 0U, PI, &f), FEATURES_OK);
+    assert_int_equal(features_obstacles_remember(&cfg, &mem, origin, &f), FEATURES_OK);
+    if (k <= 3U) {
+      assert_true(f.known_age == k && fabs(fabs(f.known.bearing_rad) - PI) < 1e-12);
+    } else {
+      assert_known_empty(&cfg, &f);
+      assert_int_equal(mem.held, 0);
+    }
+  }
+  assert_int_equal(features_obstacles_memory_state(&f, 0.1, s, 5U), 5U);
+  assert_true(s[2] == PI && s[3] == cfg.no_obstacle_distance_m && fabs(s[4] - 0.3) < 1e-12);
+  // Refused: nothing changed.
+  assert_int_equal(features_obstacles_from_pose(&cfg, origin, 5.0, 0.0, &ahead, 1U, PI, &f), FEATURES_OK);
+  const features_obstacle_memory_t before = mem;
+  assert_int_equal(features_obstacles_remember(NULL, &mem, origin, &f), FEATURES_ERR_INVALID_ARG);
+  assert_int_equal(features_obstacles_remember(&cfg, NULL, origin, &f), FEATURES_ERR_INVALID_ARG);
+  assert_int_equal(features_obstacles_remember(&cfg, &mem, origin, NULL), FEATURES_ERR_INVALID_ARG);
+  assert_int_equal(features_obstacles_remember(&cfg, &mem, pose((double)NAN, 0.0, 0.0), &f), FEATURES_ERR_INVALID_ARG);
+  assert_int_equal(features_obstacles_remember(&cfg, &mem, pose(0.0, 0.0, (double)INFINITY), &f),
+                   FEATURES_ERR_INVALID_ARG);
+  features_obstacles_config_t bad = cfg;
+  bad.memory_margin_m = -0.1;
+  assert_int_equal(features_obstacles_remember(&bad, &mem, origin, &f), FEATURES_ERR_INVALID_ARG);
+  assert_int_equal(features_obstacles_from_pose(&bad, origin, 5.0, 0.0, &ahead, 1U, PI, &f), FEATURES_ERR_INVALID_ARG);
+  assert_memory_equal(&mem, &before, sizeof mem);
+  // The state vector: refused for a small capacity or a bad period; reset forgets.
+  assert_int_equal(features_obstacles_memory_state(&f, 0.1, s, 4U), 0U);
+  assert_int_equal(features_obstacles_memory_state(&f, 0.0, s, 5U), 0U);
+  assert_int_equal(features_obstacles_memory_state(&f, (double)NAN, s, 5U), 0U);
+  assert_int_equal(features_obstacles_memory_state(NULL, 0.1, s, 5U), 0U);
+  features_obstacle_memory_reset(&mem);
+  assert_int_equal(mem.held, 0);
+  assert_int_equal(features_obstacles_from_pose(&cfg, back, 5.0, 0.0, NULL, 0U, PI, &f), FEATURES_OK);
+  assert_int_equal(features_obstacles_remember(&cfg, &mem, back, &f), FEATURES_OK);
+  assert_known_empty(&cfg, &f);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_obstacles_random_poses_within_tolerance),
@@ -439,6 +891,11 @@ int main(void) {
       cmocka_unit_test(test_obstacles_invalid_input_rejected),
       cmocka_unit_test(test_obstacles_deterministic_and_allocation_free),
       cmocka_unit_test(test_obstacles_from_pose_agrees_with_scan),
+      cmocka_unit_test(test_obstacles_memory_keeps_passed_obstacle),
+      cmocka_unit_test(test_obstacles_memory_expires_beyond_range),
+      cmocka_unit_test(test_obstacles_memory_replaced_by_new_obstacle),
+      cmocka_unit_test(test_obstacles_memory_same_from_pose_and_scan),
+      cmocka_unit_test(test_obstacles_memory_rule_state_and_invalid),
   };
   return cmocka_run_group_tests_name("features.obstacles", tests, NULL, NULL);
 }

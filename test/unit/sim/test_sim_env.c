@@ -165,12 +165,60 @@ static void test_env_step_allocation_free(void** state) {
   }
 }
 
+// The obstacle task's state remembers the obstacle being passed on both back-ends (the ODE one
+// from noisy scans, the kinematic one from the exact pose): after it leaves the view the state
+// keeps a near obstacle beside and then behind the robot, its age growing by one period a step,
+// instead of "no obstacle"; a reset starts without the memory.
+static void test_env_obstacle_memory_on_both_backends(void** state) {
+  (void)state;
+  for (int be = 0; be < 2; ++be) {
+    sim_env_t* env = make(&tasks_obstacles_decl, (sim_env_backend_t)be);
+    double s[TASKS_MAX_STATE_DIM];
+    // Straight past the obstacle (centre (-1.5, 0), radius 0.25) on its left, 0.3 m clear; the
+    // second time only until it has been remembered for 5 steps.
+    const features_pose_t past = {-3.5, -0.81, 0.0};
+    for (int episode = 0; episode < 2; ++episode) {
+      assert_int_equal(sim_env_reset(env, SIM_ENV_START_POSE, 0, past, s), SIM_ENV_OK);
+      assert_true(s[3] < 2.5 && s[4] == 0.0);
+      sim_env_transition_t t;
+      int remembered = 0;
+      double prev_age = 0.0, worst = 0.0;
+      for (int i = 0; i < 120 && !(episode == 1 && remembered == 5); ++i) {
+        assert_int_equal(sim_env_step(env, 0.0, &t), SIM_ENV_OK);
+        assert_false(t.terminated);
+        if (t.state[4] > 0.0 && t.state[3] < 8.0) {
+          ++remembered;
+          assert_true(fabs(t.state[4] - prev_age - 0.1) < 1e-9);
+          assert_true(t.state[2] > 0.9);
+          // As far as the true obstacle: exactly on the kinematic model, within the scan's and
+          // odometry's errors on the emulator.
+          sim_env_truth_t truth;
+          sim_env_get_truth(env, &truth);
+          const double surface = hypot(truth.pose.x_m + 1.5, truth.pose.y_m) - 0.25;
+          worst = fmax(worst, fabs(t.state[3] - surface));
+          assert_true(fabs(t.state[3] - surface) < (be == SIM_ENV_KINEMATIC ? 1e-9 : 0.06));
+        }
+        prev_age = t.state[4];
+      }
+      print_message("%s: remembered for %d steps, distance within %.4f m of the truth\n",
+                    be == 0 ? "ode" : "kinematic", remembered, worst);
+      assert_int_equal(remembered, episode == 0 ? 30 : 5);
+    }
+    // Beside the obstacle, facing away from it: nothing seen, nothing remembered from before.
+    const features_pose_t beside = {-1.2, -0.81, 0.0};
+    assert_int_equal(sim_env_reset(env, SIM_ENV_START_POSE, 0, beside, s), SIM_ENV_OK);
+    assert_true(s[3] == 8.0 && fabs(s[4] - 3.0) < 1e-9);
+    sim_env_destroy(env);
+  }
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_env_deterministic_per_seed),
       cmocka_unit_test(test_env_clamp_and_bounds),
       cmocka_unit_test(test_env_errors),
       cmocka_unit_test(test_env_collision_terminates),
+      cmocka_unit_test(test_env_obstacle_memory_on_both_backends),
       cmocka_unit_test(test_env_step_allocation_free),
   };
   return cmocka_run_group_tests_name("sim.env", tests, NULL, NULL);

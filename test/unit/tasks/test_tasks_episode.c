@@ -137,7 +137,7 @@ static void test_episode_obstacles_pose_starts_drivers(void** state) {
   spec.obstacles[1].radius_m = 0.2;
   tasks_episode_t ep;
   tasks_episode_init(&ep, &tasks_obstacles_decl, &spec);
-  assert_int_equal(ep.state_dim, 4);
+  assert_int_equal(ep.state_dim, 5);
   assert_true(tasks_episode_gamma(&ep) == 0.9 && tasks_episode_step_limit(&ep) == 500U);
   const features_pose_t p = tasks_episode_eval_start(&ep, 3);
   assert_memory_equal(&p, &spec.eval_starts[3], sizeof p);
@@ -146,8 +146,9 @@ static void test_episode_obstacles_pose_starts_drivers(void** state) {
   const features_disc_t discs[2] = {{-1.5, 0.0, 0.25}, {-1.0, 1.0, 0.2}};
   features_obstacles_t f;
   assert_int_equal(features_obstacles_from_pose(tasks_obstacles_features(&ep), p, 0.0, 0.0, discs, 2U, PI, &f), FEATURES_OK);
+  assert_true(f.obstacle[0].visible);
   assert_true(s[0] == f.goal_bearing_rad && s[1] == f.goal_distance_m && s[2] == f.obstacle[0].bearing_rad &&
-              s[3] == f.obstacle[0].distance_m);
+              s[3] == f.obstacle[0].distance_m && s[4] == 0.0);
   assert_true(tasks_episode_speed_mps(&ep) == spec.v_mps);
   rng_t a, b;
   rng_seed(&a, 9);
@@ -177,12 +178,104 @@ static void test_episode_obstacles_pose_starts_drivers(void** state) {
   assert_int_equal(alloc_counter_end(), 0);
 }
 
+// The obstacle task's state remembers the obstacle it passes: measured (a scan at an odometry
+// pose) and exact (a pose) alike, the obstacle's entries stay the remembered one's after it left
+// the view, the fifth value counts the time since it was seen (one control period a step), the
+// memory ends after memory_s and every run starts without it (tasks_episode_begin). memory_s = 0
+// gives the state without memory. Every value stays inside the declared bounds.
+static void test_episode_obstacles_state_remembers_obstacle(void** state) {
+  (void)state;
+  tasks_obstacles_spec_t spec;
+  tasks_obstacles_spec_default(&spec);
+  assert_true(spec.memory_s == 3.0 && spec.dt_s == 0.1);
+  synth_world_t w;
+  synth_world_init(&w);
+  assert_int_equal(synth_world_add_box(&w, spec.arena_min_x_m, spec.arena_min_y_m, spec.arena_max_x_m,
+                                       spec.arena_max_y_m), 0);
+  assert_int_equal(synth_world_add_circle(&w, spec.obstacles[0].x_m, spec.obstacles[0].y_m,
+                                          spec.obstacles[0].radius_m), 0);
+  synth_lidar_config_t lidar;
+  assert_int_equal(synth_lidar_config_lms200(&lidar, 180, 1.0), 0);
+  lidar.noise_sigma_m = 0.0;
+  static features_scan_t scan;
+  for (int memory = 1; memory >= 0; --memory) {
+    for (int measured = 0; measured < 2; ++measured) {
+      tasks_obstacles_spec_t sp = spec;
+      if (!memory) sp.memory_s = 0.0;
+      tasks_episode_t ep;
+      tasks_episode_init(&ep, &tasks_obstacles_decl, &sp);
+      assert_int_equal(tasks_obstacles_features(&ep)->memory_max_age, memory ? 30U : 0U);
+      double lo[TASKS_MAX_STATE_DIM], hi[TASKS_MAX_STATE_DIM];
+      tasks_episode_state_bounds(&ep, lo, hi);
+      const double none_age = memory ? 3.0 : 0.0;
+      // The robot passes the obstacle (centre (-1.5, 0), radius 0.25) on its left, 0.3 m clear
+      // of the skirt; odometry reads another frame than the task's. The second run stops while
+      // the obstacle is remembered, and a third starts beside it, where it cannot be seen.
+      const features_pose_t odom0 = pose(1.0, 2.0, -0.5);
+      for (int run = 0; run < 3; ++run) {
+        const features_pose_t start = run < 2 ? pose(-3.5, -0.81, 0.0) : pose(-1.2, -0.81, 0.0);
+        tasks_episode_begin(&ep, start, odom0);
+        int seen = 0, remembered = 0, none = 0;
+        double s[TASKS_MAX_STATE_DIM];
+        for (int k = 0; k < 120; ++k) {
+          const features_pose_t truth = pose(start.x_m + 0.03 * k, start.y_m, 0.0);
+          const features_pose_t odom = features_pose_compose(odom0, features_pose_between(start, truth));
+          if (measured) {
+            scan.angle_min_rad = lidar.angle_min_rad;
+            scan.angle_increment_rad = lidar.angle_increment_rad;
+            scan.n_beams = lidar.n_beams;
+            assert_true(synth_lidar_scan(&w, &lidar, NULL, truth.x_m, truth.y_m, truth.theta_rad, scan.ranges_m,
+                                         scan.no_return, FEATURES_MAX_BEAMS) > 0);
+            assert_int_equal(tasks_episode_observe(&ep, &scan, odom, s), 1);
+          } else {
+            assert_int_equal(tasks_episode_observe_pose(&ep, truth, s), 1);
+          }
+          for (uint32_t i = 0; i < 5U; ++i) assert_true(s[i] >= lo[i] && s[i] <= hi[i]);
+          const features_obstacles_t* f = tasks_obstacles_state(&ep);
+          if (run == 2) {
+            // The previous run's memory is gone: nothing known.
+            assert_int_equal(f->obstacle[0].visible, 0);
+            assert_true(s[2] == PI && s[3] == 8.0 && fabs(s[4] - none_age) < 1e-9);
+            break;
+          }
+          if (f->obstacle[0].visible) {
+            ++seen;
+            assert_true(s[2] == f->obstacle[0].bearing_rad && s[3] == f->obstacle[0].distance_m && s[4] == 0.0);
+          } else if (s[3] < 8.0) {
+            ++remembered;
+            assert_true(memory);
+            assert_true(fabs(s[4] - 0.1 * remembered) < 1e-9);
+            assert_true(s[2] > 0.9);  // on the left, then behind
+            // The remembered obstacle is as far as the true one (exactly from the exact state).
+            const double surface = hypot(truth.x_m + 1.5, truth.y_m) - 0.25;
+            assert_true(fabs(s[3] - surface) < (measured ? 0.05 : 1e-9));
+            if (run == 1 && remembered == 5) break;
+          } else {
+            ++none;
+            assert_true(seen > 0);
+            assert_true(s[2] == PI && fabs(s[4] - none_age) < 1e-9);
+            if (run == 1) break;
+          }
+        }
+        if (run == 0) {
+          print_message("memory %d measured %d: seen %d, remembered %d, none %d\n", memory, measured, seen, remembered,
+                        none);
+          assert_true(seen > 20);
+          assert_int_equal(remembered, memory ? 30 : 0);
+          assert_true(none > 10);
+        }
+      }
+    }
+  }
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_episode_command_limits_defaults),
       cmocka_unit_test(test_episode_command_clamp_limits_and_non_finite),
       cmocka_unit_test(test_episode_corridor_observe_outcome_speed),
       cmocka_unit_test(test_episode_obstacles_pose_starts_drivers),
+      cmocka_unit_test(test_episode_obstacles_state_remembers_obstacle),
   };
   return cmocka_run_group_tests_name("tasks.episode", tests, NULL, NULL);
 }

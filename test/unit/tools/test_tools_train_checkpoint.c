@@ -1,9 +1,11 @@
 // SPDX-License-Identifier: MIT
 // tools.train_checkpoint: b21r-train's trainer (tools/train/train.h) and checkpoints. An --init of
-// today's format resumes silently; one of revision 1 (an older controller's section with a policy
-// shift learned from ranked pairs) resumes with its values and says so where its shift had moved
-// (init_legacy_shift); the checkpoint the trainer writes is of today's format either way, in
-// phase two, and holds the --init's learned values.
+// today's format with an actor resumes silently with it; one without an actor (the greedy policy,
+// revision 2, or revision 1: an older controller's section with a policy shift learned from
+// ranked pairs) resumes with its values, the actor cloned from their stored points
+// (init_actor_cloned), and says where its shift had moved (init_legacy_shift); with policy =
+// greedy an actor in the --init is dropped (init_actor_dropped). The checkpoint the trainer writes
+// is of today's format either way, in phase two, and holds the --init's learned values.
 #define _POSIX_C_SOURCE 200809L
 #include "train.h"
 
@@ -32,11 +34,13 @@ static fw_config_t obstacle_config(void) {
   fw_config_defaults(&c);
   char err[FW_CONFIG_ERR_MAX];
   assert_int_equal(fw_config_set(&c, "task", "obstacles", "test", err, sizeof err), 0);
+  assert_int_equal(fw_config_set(&c, "policy", "actor", "test", err, sizeof err), 0);
   return c;
 }
 
 // A checkpoint at path: a learned state of cfg's shape with one point under an obstacle controller
-// section in phase two, of revision 2 (legacy_a < 0) or of revision 1 with its shift's a = legacy_a.
+// section in phase two, without an actor: of revision 3 with the greedy policy (legacy_a < 0), of
+// revision 2 (legacy_a = -2) or of revision 1 with its shift's a = legacy_a.
 static void write_init(const fw_config_t* cfg, const char* path, double legacy_a) {
   hedger_config_t hc;
   fw_config_hedger(cfg, &hc);
@@ -57,10 +61,14 @@ static void write_init(const fw_config_t* cfg, const char* path, double legacy_a
   g.schedule.phase_one_runs = 30;
   g.schedule.phase_two_runs = 10;
   g.run_id = 50;
+  g.policy = LEARN_POLICY_GREEDY;
   uint8_t meta[FW_PROGRESS_READ_MAX];
   memset(meta, 0, sizeof meta);
   size_t meta_n = fw_progress_encode(&g, meta);
-  if (legacy_a >= 0.0) {
+  if (legacy_a < -1.5) {
+    memcpy(meta, "FWMETA02", 8);
+    meta_n = FW_PROGRESS_BYTES_2;
+  } else if (legacy_a >= 0.0) {
     memcpy(meta, "FWMETA01", 8);
     memcpy(meta + 56, &legacy_a, sizeof legacy_a);  // little-endian host
     meta_n = 96;
@@ -69,16 +77,24 @@ static void write_init(const fw_config_t* cfg, const char* path, double legacy_a
   assert_int_equal(fw_checkpoint_write(path, meta, meta_n, payload, ps, err, sizeof err), 0);
 }
 
-// The controller section of the checkpoint at path.
-static size_t read_section(const char* path, fw_progress_t* out) {
+// The controller section of the checkpoint at path; its payload into the static buffer (*payload_n).
+static uint8_t g_payload[1 << 23];
+static size_t read_section(const char* path, fw_progress_t* out, size_t* payload_n) {
   uint8_t meta[FW_PROGRESS_READ_MAX];
-  static uint8_t payload[1 << 20];
   size_t ms = 0;
-  size_t ps = 0;
   char err[FW_CHECKPOINT_ERR_MAX];
-  assert_int_equal(fw_checkpoint_read(path, meta, sizeof meta, &ms, payload, sizeof payload, &ps, err, sizeof err), 1);
+  assert_int_equal(
+      fw_checkpoint_read(path, meta, sizeof meta, &ms, g_payload, sizeof g_payload, payload_n, err, sizeof err), 1);
   assert_int_equal(fw_progress_decode(meta, ms, out, NULL, 0), 0);
   return ms;
+}
+
+// The actor section's size recorded in the checkpoint at path.
+static uint64_t actor_bytes_of(const char* path) {
+  fw_progress_t g;
+  size_t pn = 0;
+  (void)read_section(path, &g, &pn);
+  return g.actor_bytes;
 }
 
 static void test_train_checkpoint_revisions(void** state) {
@@ -87,8 +103,11 @@ static void test_train_checkpoint_revisions(void** state) {
   char out[128];
   snprintf(init, sizeof init, "%s/init.ckpt", g_dir);
   snprintf(out, sizeof out, "%s/out.ckpt", g_dir);
-  const double legacy_a[] = {-1.0, 0.0, 0.75};  // today's format; revision 1 without, with a shift
+  // today's format with the greedy policy, revision 2; revision 1 without, with a shift
+  const double legacy_a[] = {-1.0, -2.0, 0.0, 0.75};
   const train_options_t opt = {.progress = NULL, .progress_period_s = 1.0};
+  static uint8_t first_out[1 << 23];
+  size_t first_n = 0;
   for (size_t i = 0; i < sizeof legacy_a / sizeof legacy_a[0]; ++i) {
     const fw_config_t c = obstacle_config();
     write_init(&c, init, legacy_a[i]);
@@ -99,16 +118,57 @@ static void test_train_checkpoint_revisions(void** state) {
       fail_msg("case %zu: %s", i, err);
     }
     assert_int_equal(trainer_stats(t).init_legacy_shift, legacy_a[i] > 0.0);
+    assert_int_equal(trainer_stats(t).init_actor_cloned, 1);  // from the one stored point
     assert_int_equal(hedger_size(trainer_hedger(t)), 1);
     (void)unlink(out);
     assert_int_equal(trainer_write_checkpoint(t, out, false, err, sizeof err), 0);
     trainer_destroy(t);
     fw_progress_t g;
-    assert_int_equal(read_section(out, &g), FW_PROGRESS_BYTES);
+    size_t pn = 0;
+    assert_int_equal(read_section(out, &g, &pn), FW_PROGRESS_BYTES);
     assert_false(g.legacy_shift);
     assert_int_equal(g.schedule.phase, 2);
     assert_int_equal(g.task, (int32_t)tasks_obstacles_decl.id);
+    assert_int_equal(g.policy, LEARN_POLICY_ACTOR);
+    assert_true(g.actor_bytes > 0 && g.actor_bytes < pn);
+    if (i == 0) {
+      memcpy(first_out, g_payload, pn);
+      first_n = pn;
+    } else {
+      // The same values, the same cloning: the same learned state whatever the revision.
+      assert_int_equal(pn, first_n);
+      assert_memory_equal(g_payload, first_out, pn);
+    }
   }
+  // An --init with an actor: loaded as it is (nothing cloned), written back unchanged.
+  char again[128];
+  snprintf(again, sizeof again, "%s/again.ckpt", g_dir);
+  fw_config_t c = obstacle_config();
+  char err[TRAIN_ERR_MAX] = "";
+  trainer_t* t = trainer_create(&c, &opt, err, sizeof err);
+  assert_int_equal(trainer_load_checkpoint(t, out, err, sizeof err), 0);
+  assert_int_equal(trainer_stats(t).init_actor_cloned, 0);
+  (void)unlink(again);
+  assert_int_equal(trainer_write_checkpoint(t, again, false, err, sizeof err), 0);
+  trainer_destroy(t);
+  fw_progress_t g;
+  size_t pn = 0;
+  (void)read_section(again, &g, &pn);
+  assert_int_equal(pn, first_n);
+  assert_memory_equal(g_payload, first_out, pn);
+  // With policy = greedy the actor is dropped, and said so.
+  assert_int_equal(fw_config_set(&c, "policy", "greedy", "test", err, sizeof err), 0);
+  t = trainer_create(&c, &opt, err, sizeof err);
+  assert_int_equal(trainer_load_checkpoint(t, out, err, sizeof err), 0);
+  assert_true(trainer_stats(t).init_actor_dropped);
+  (void)unlink(again);
+  assert_int_equal(trainer_write_checkpoint(t, again, false, err, sizeof err), 0);
+  trainer_destroy(t);
+  (void)read_section(again, &g, &pn);
+  assert_int_equal(g.policy, LEARN_POLICY_GREEDY);
+  assert_int_equal(g.actor_bytes, 0);
+  assert_int_equal(pn, first_n - actor_bytes_of(out));
+  (void)unlink(again);
   (void)unlink(out);
   (void)unlink(init);
 }

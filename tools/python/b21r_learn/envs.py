@@ -21,7 +21,10 @@ class B21rEnv(gymnasium.Env):
 
     - Observation: the task's state vector exactly as the controller computes it (float64):
       corridor ``[end distance m, lateral fraction, target angle rad]``, obstacles
-      ``[goal bearing rad, goal distance m, obstacle bearing rad, obstacle distance m]``, doorway
+      ``[goal bearing rad, goal distance m, obstacle bearing rad, obstacle distance m, age s]``
+      (the nearest obstacle seen or, after it left the laser's 180° view, remembered where it was
+      last seen, carried along by odometry, for up to ``memory_s`` (3 s), and the time since it
+      was seen: pi, 8 m and the memory's span when no obstacle is known), doorway
       ``[wall distance m, offset from the door's line m, heading rad, nearer jamb's distance m]``
       (``b21r_learn._core.tasks()`` names every task's).
     - Action: rotation velocity [rad/s], shape (1,), within ``[-omega_max, omega_max]``

@@ -899,7 +899,7 @@ class Agent {
   bool after_command() { return learn_after_command(a_, &exp_); }
   bool finish_now() { return learn_finish_now(a_, &exp_); }
   bool idle() const { return learn_idle(a_); }
-  bool replaying() const { return learn_replaying(a_); }
+  bool replaying() const { return learn_between_runs_busy(a_); }
   void request_phase_two() { learn_request_phase_two(a_); }
 
   nb::dict experience() const {
@@ -1203,6 +1203,9 @@ nb::dict read_checkpoint_progress(const nb::bytes& meta) {
   d["eval_blocks"] = p.schedule.eval_blocks;
   d["run_id"] = p.run_id;
   d["legacy_shift"] = p.legacy_shift;
+  d["revision"] = p.revision;
+  d["policy"] = p.policy == LEARN_POLICY_ACTOR ? "actor" : "greedy";
+  d["actor_bytes"] = p.actor_bytes;
   return d;
 }
 
@@ -1310,8 +1313,10 @@ NB_MODULE(_core, m) {
   m.def("read_checkpoint", &read_checkpoint, "path"_a);
   m.def("read_checkpoint_progress", &read_checkpoint_progress, "meta"_a,
         "The controller's section of a checkpoint (the meta bytes of read_checkpoint) as a dict: task, "
-        "state dimension, phase, run counts, run id, and legacy_shift (an older controller's file whose "
-        "policy shift had moved; not used).");
+        "state dimension, phase, run counts, run id, legacy_shift (an older controller's file whose "
+        "policy shift had moved; not used), revision, policy ('actor' or 'greedy': the learned policy the "
+        "payload holds) and actor_bytes (the actor's section at the payload's end; HEDGER's bytes come "
+        "first and declare their own length).");
   m.def("mean_ci95", &mean_ci95, "values"_a,
         "(mean, 95 % half-width) with Student's t, as the controller's evaluation blocks report them.");
   m.def("corridor_steps_lower_bound", &corridor_steps_lower_bound, "length_m"_a = 10.0,

@@ -89,9 +89,14 @@ typedef enum fw_learner_kind {
   FW_LEARNER_LWA = 1,      ///< HEDGER with every prediction by locally weighted averaging
   FW_LEARNER_TABULAR = 2,  ///< tabular Q-learning on a discretised state and action (lib/tabq)
 } fw_learner_kind_t;
+/// Who acts where the learned policy acts (the values of learn_policy_t).
+typedef enum fw_policy {
+  FW_POLICY_ACTOR = 0,   ///< the actor learned from the rewards between runs (lib/actor)
+  FW_POLICY_GREEDY = 1,  ///< HEDGER's greedy action (the paper's; the default)
+} fw_policy_t;
 /// Policy evaluated in FW_MODE_EVALUATE.
 typedef enum fw_eval_policy {
-  FW_EVAL_LEARNED = 0,   ///< HEDGER greedy (from the checkpoint)
+  FW_EVAL_LEARNED = 0,   ///< the learned policy (the configured policy, from the checkpoint)
   FW_EVAL_EXAMPLE = 1,   ///< the example policy at its nominal gain
   FW_EVAL_OPTIMAL = 2,   ///< the hand-tuned reference controller (the paper's "optimal" line)
   FW_EVAL_HUMAN = 3,     ///< the simulated sloppy human driver (phase_one_driver = human's examples)
@@ -186,6 +191,17 @@ typedef struct fw_config {
   // Learning.
   double alpha;                    ///< learning rate (paper: 0.2)
   double gamma;                    ///< discount; 0 = the task's (paper: corridor 0.99, obstacles 0.9)
+  int32_t policy;                  ///< fw_policy_t
+  int32_t actor_capacity;          ///< actor: recorded transitions kept (fixed memory)
+  int32_t actor_hidden;            ///< actor: tanh units of its network
+  int32_t actor_runs;              ///< actor: recent runs whose returns fit V and whose states are queried
+  int32_t actor_queries;           ///< actor: largest query set per run
+  double actor_step_gain;          ///< actor: target step per tick of discounting of slope
+  double actor_step_max;           ///< actor: largest target step per run [rad/s]
+  int32_t actor_fit_steps;         ///< actor: Adam steps per fit
+  int32_t actor_clone_steps;       ///< actor: Adam steps of the first run's behaviour cloning
+  double actor_learning_rate;      ///< actor: Adam's learning rate
+  int32_t actor_work_per_tick;     ///< between runs: the actor's work units per tick (bounds the tick)
   int32_t learner;                 ///< fw_learner_kind_t
   int32_t tabular_bins;            ///< tabular: bins per state dimension over the task's state range
   int32_t tabular_actions;         ///< tabular: evenly spaced actions over [-omega_max, omega_max]
@@ -222,7 +238,7 @@ typedef struct fw_config {
   double explore_sigma_radps;      ///< phase two: std-dev of the exploration noise
   double explore_probability;      ///< probability per step of starting an exploration segment
   double explore_hold_s;           ///< duration of an exploration segment (one held offset)
-  bool advisor;                    ///< phase two: example policy acts where HEDGER knows nothing
+  bool advisor;                    ///< phase two: example policy acts where the learned policy knows nothing
   double example_noise_radps;      ///< phase one, example driver: std-dev of a dither segment's offset
   bool state_rotation;             ///< the state ends with the rotation the base executes [rad/s] (default)
 

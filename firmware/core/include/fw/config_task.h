@@ -47,9 +47,10 @@ void fw_config_learn_settings(const fw_config_t* cfg, learn_config_t* out);
 void fw_config_hedger(const fw_config_t* cfg, hedger_config_t* out);
 
 /// The seeds the controller derives from cfg->seed, in this order: the training start poses,
-/// exploration, HEDGER's eviction generator, the drivers' per-run streams.
+/// exploration, HEDGER's eviction generator, the drivers' per-run streams, the actor's initial
+/// weights and query draws (the last added: the others are what they were before it).
 typedef struct fw_config_seeds {
-  uint64_t pose, explore, learner, driver;
+  uint64_t pose, explore, learner, driver, actor;
 } fw_config_seeds_t;
 fw_config_seeds_t fw_config_derive_seeds(uint64_t root);
 

@@ -29,11 +29,29 @@
 /// the wall, and a corner. Known limit: an obstacle touching a wall with no range jump merges
 /// into the wall and is not reported.
 ///
+/// The obstacle task's state (tasks/src/task_obstacles.c) uses the memory below
+/// (features_obstacles_memory_state): goal bearing, goal distance, the known obstacle's bearing and
+/// distance, and the time since it was seen.
+///
 /// Convention when fewer obstacles are visible than slots: the empty slot has visible = 0,
 /// distance_m = no_obstacle_distance_m (default 8.0 m, the edge of sensing) and bearing_rad = pi
 /// ("behind": an obstacle that left the 180° field of view is most likely behind the robot). The
 /// value pi never occurs for a visible obstacle (the field of view is at most 180° forward), so
 /// the learner sees "no obstacle" as its own region of the state space.
+///
+/// Memory (features_obstacles_remember): an obstacle being passed leaves the 180° field of view
+/// while the robot is still beside it. The optional memory keeps the nearest obstacle seen after
+/// it left the view: where it was seen, as a disc in the frame of the poses (its centre behind
+/// its nearest return along the bearing, by half its width, from the best view of it), carried
+/// along with the pose (its bearing and distance recomputed from the stored disc and the
+/// current pose, i.e. through odometry) and its age (observations since it was last seen). The
+/// memory is run state owned by the caller (features_obstacle_memory_t, reset at each run's
+/// start); it is updated from the features of each observation, so the measured
+/// (features_obstacles_compute) and the exact (features_obstacles_from_pose) features get the same
+/// memory from the same rule. See features_obstacles_remember for the rule. Accuracy
+/// (test/unit/features, noise-free synthetic scans, an obstacle of radius 0.25 m passed 0.3 m
+/// from the robot's skirt, straight and turning): the remembered centre within 0.08 m of the true
+/// one, its distance within 0.05 m of the true surface distance; exact from the exact features.
 ///
 /// Cost: O(n_beams), no allocation, < 1 KB of stack. Pure and reentrant. Never NaN.
 #ifndef B21R_FEATURES_OBSTACLES_H
@@ -55,6 +73,10 @@ extern "C" {
 /// bearing, obstacle distance. With two obstacles it is 6 (features_obstacles_state).
 #define FEATURES_OBSTACLES_STATE_DIM 4
 
+/// State dimensions with the memory (features_obstacles_memory_state): goal bearing, goal
+/// distance, the known obstacle's bearing and distance, and the time since it was seen.
+#define FEATURES_OBSTACLES_MEMORY_STATE_DIM 5
+
 /// Configuration of the obstacle feature extractor.
 typedef struct features_obstacles_config {
   features_scan_config_t scan;    ///< beam filtering and laser mount
@@ -64,6 +86,13 @@ typedef struct features_obstacles_config {
                                   ///< [m], default 0.3
   uint16_t min_cluster_points;    ///< fewer points = noise, default 3
   double no_obstacle_distance_m;  ///< distance reported for an empty slot [m], default 8.0, > 0
+  /// Memory: observations an obstacle is remembered after it was last seen, default 30 (3 s at
+  /// 10 Hz); 0 = no memory (the known obstacle is the one seen, if any).
+  uint32_t memory_max_age;
+  /// Memory: a remembered obstacle gives way to a seen one unless it is nearer than the seen one
+  /// by more than this [m], default 0.1 (range noise and the error of a remembered disc stay
+  /// below it), >= 0.
+  double memory_margin_m;
 } features_obstacles_config_t;
 
 /// One obstacle slot.
@@ -91,7 +120,28 @@ typedef struct features_obstacles {
   double nearest_any_m;     ///< nearest valid return of any kind (walls too) from the robot centre
                             ///< [m]; no_obstacle_distance_m if none
   double nearest_any_bearing_rad;  ///< its bearing [rad]; pi if none
+  /// The nearest obstacle known: the one seen in this observation, or the remembered one
+  /// (features_obstacles_remember). compute and from_pose set it without memory: obstacle[0]
+  /// when visible (age 0), else the empty slot (age memory_max_age). A remembered obstacle has
+  /// visible = 0, bearing_rad = the direction of the remembered disc's centre, distance_m = the
+  /// distance to its surface (0 inside it), width_m = its diameter, centre_x/y_m = its centre in
+  /// the robot frame, n_points = 0.
+  features_obstacle_t known;
+  /// Observations since `known` was seen: 0 when seen in this one; memory_max_age when there is
+  /// none (saturating: the oldest a remembered obstacle can be).
+  uint32_t known_age;
 } features_obstacles_t;
+
+/// The memory of the nearest obstacle seen: run state, caller-owned plain data (copyable). Reset
+/// it (features_obstacle_memory_reset) at every run's start.
+typedef struct features_obstacle_memory {
+  double x_m;        ///< the remembered disc's centre, in the frame of the poses given [m]
+  double y_m;        ///< [m]
+  double radius_m;   ///< its radius [m]
+  uint32_t age;      ///< observations since it was seen (0: in the newest one)
+  uint16_t n_points; ///< returns of the view the disc comes from (0: exact features)
+  uint8_t held;      ///< 1 while an obstacle is remembered
+} features_obstacle_memory_t;
 
 /// Fills cfg with the defaults documented on each field. O(1). cfg must not be NULL.
 void features_obstacles_config_default(features_obstacles_config_t* cfg);
@@ -136,6 +186,45 @@ features_status_t features_obstacles_from_pose(const features_obstacles_config_t
                                                double goal_y_m, const features_disc_t* obstacles,
                                                uint32_t n_obstacles, double field_of_view_rad,
                                                features_obstacles_t* out);
+
+/// Empties the memory (no obstacle remembered). O(1). mem must not be NULL.
+void features_obstacle_memory_reset(features_obstacle_memory_t* mem);
+
+/// Updates the memory with the features f of the newest observation, made at `pose` (the pose
+/// given to features_obstacles_compute or features_obstacles_from_pose for f), and sets f->known
+/// and f->known_age. The rule, per observation:
+/// 1. A remembered obstacle ages by one observation; its bearing (to the disc's centre) and
+///    distance (to its surface) are recomputed from the remembered disc and `pose`. It is forgotten when its age exceeds
+///    cfg->memory_max_age or its distance reaches cfg->no_obstacle_distance_m (beyond sensing).
+/// 2. When an obstacle is seen (f->obstacle[0].visible) it is the known one (age 0): the
+///    remembered one when its nearest return lies within the remembered radius +
+///    cfg->cluster_gap_m of the remembered centre (the same obstacle), else another one, which
+///    replaces the remembered one unless that is nearer than it by more than
+///    cfg->memory_margin_m (an obstacle beside the robot that left the view while another one is
+///    seen farther ahead stays the known one until it is forgotten or farther). The disc
+///    remembered: radius r = half its width_m (at most max_obstacle_width_m / 2), centre r beyond
+///    its nearest return along its bearing; but when the same obstacle is seen in a view with
+///    fewer returns (n_points) than the one the remembered disc came from, the disc is kept:
+///    an obstacle being passed is seen less and less (its nearest return cut off at the edge of
+///    the view, its width shrinking), and the best view of it places it best (assuming obstacles
+///    that do not move). From features_obstacles_from_pose (n_points 0, width = the diameter,
+///    bearing = the centre's direction) the disc is always the exact one.
+/// 3. f->known = the seen obstacle exactly as obstacle[0] when it was just (re)placed, the
+///    remembered disc (as documented at `known`) otherwise, the empty slot (bearing pi,
+///    no_obstacle_distance_m) when none; f->known_age = its age, or memory_max_age when none.
+/// Returns FEATURES_OK, or FEATURES_ERR_INVALID_ARG (memory and f unchanged) for NULL arguments,
+/// a bad configuration or a non-finite pose. O(1), no allocation, deterministic.
+features_status_t features_obstacles_remember(const features_obstacles_config_t* cfg,
+                                              features_obstacle_memory_t* mem, features_pose_t pose,
+                                              features_obstacles_t* f);
+
+/// Writes the state vector with the memory: goal_bearing, goal_distance, known.bearing_rad,
+/// known.distance_m and known_age x period_s (the time since the known obstacle was seen [s]
+/// when one observation is made per period_s). Returns FEATURES_OBSTACLES_MEMORY_STATE_DIM, or 0
+/// (nothing written) for NULL pointers, a capacity below it or a period that is not finite and
+/// > 0. O(1).
+size_t features_obstacles_memory_state(const features_obstacles_t* f, double period_s, double* state,
+                                       size_t capacity);
 
 /// Writes the learner's state vector: goal_bearing, goal_distance, then (bearing, distance) of
 /// the first n_obstacles slots (1 = the paper's task, 4 values; 2 gives 6). Returns the number

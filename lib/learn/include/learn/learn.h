@@ -1,8 +1,16 @@
 // SPDX-License-Identifier: MIT
 /// learn/learn.h — The two-phase learning framework of Smart & Kaelbling (ICRA 2002) as a pure
 /// library: the schedule (phase one's driver, the switch, phase two, evaluation blocks), the
-/// learner's update of every step, the between-run work (backward replay) in bounded slices,
-/// exploration, and the advisor.
+/// learner's update of every step, the learned policy (the actor of lib/actor by default, or the
+/// value function's greedy action), the between-run work (backward replay, the actor's learning)
+/// in bounded slices, exploration, and the advisor.
+///
+/// The policy (cfg.policy). LEARN_POLICY_ACTOR: the actor (actor/actor.h) acts wherever the
+/// learned policy acts; it learns between runs from the transitions of every training run (phase
+/// one's examples and its own runs alike) and their rewards. The value function (HEDGER) still
+/// learns every step: the experience records carry its Q(s, a), and a checkpoint keeps its values
+/// for LEARN_POLICY_GREEDY; the actor does not use it. LEARN_POLICY_GREEDY: the value function's
+/// greedy action, as in the paper (measured: it imitates its teachers; docs/LEARNING.md).
 ///
 /// It sees a task only through learn_task_t: the state's dimension, declared scales and ranges,
 /// the action's bounds, the discount and the step limit. It never sees a task's name, its
@@ -26,8 +34,8 @@
 ///     learn_executed(agent, a_sent, v_sent);
 ///     learn_after_command(agent, &experience);           // the step's update, or a slice of replay
 /// @endcode
-/// Between runs, learn_after_command() does a slice of the backward replay per call until
-/// learn_idle(); the next run may start once it is idle.
+/// Between runs, learn_after_command() does a slice of the between-run work per call (the backward
+/// replay, then the actor's learning) until learn_idle(); the next run may start once it is idle.
 ///
 /// Determinism: results are a pure function of the configuration, the task, the seeds and the
 /// sequence of calls (the exploration draws from one seeded rng_t; the learner is deterministic).
@@ -39,6 +47,7 @@
 #include "learn/learner.h"
 #include "learn/schedule.h"
 
+#include <actor/actor.h>
 #include <rng/rng.h>
 
 #include <stdbool.h>
@@ -62,11 +71,17 @@ extern "C" {
 typedef enum learn_source {
   LEARN_SOURCE_EXAMPLE = 0,      ///< phase one: the task's example policy (code, or a simulated person)
   LEARN_SOURCE_JOYSTICK = 1,     ///< phase one: the operator's joystick
-  LEARN_SOURCE_GREEDY = 2,       ///< the learned policy's greedy action
-  LEARN_SOURCE_EXPLORATION = 3,  ///< the greedy action plus exploration noise
-  LEARN_SOURCE_ADVISOR = 4,      ///< the example policy where the learner knows no action
+  LEARN_SOURCE_GREEDY = 2,       ///< the learned policy's action (the actor's, or the greedy action)
+  LEARN_SOURCE_EXPLORATION = 3,  ///< the learned policy's action plus exploration noise
+  LEARN_SOURCE_ADVISOR = 4,      ///< the example policy where the learned policy knows no action
 } learn_source_t;
 #define LEARN_N_SOURCES 5
+
+/// Who acts where the learned policy acts (learn_config_t::policy).
+typedef enum learn_policy {
+  LEARN_POLICY_ACTOR = 0,   ///< the actor of lib/actor, learned between runs from the rewards
+  LEARN_POLICY_GREEDY = 1,  ///< the value function's greedy action (the paper's; the default)
+} learn_policy_t;
 
 /// Who drives phase one's training runs.
 typedef enum learn_phase_one_driver {
@@ -102,7 +117,14 @@ typedef struct learn_config {
   int32_t mode;                 ///< learn_mode_t
   int32_t phase_one_driver;     ///< learn_phase_one_driver_t
   learn_schedule_config_t schedule;  ///< evaluate_only is set from mode by learn_init
-  // The learner.
+  // The policy.
+  int32_t policy;               ///< learn_policy_t (default LEARN_POLICY_GREEDY)
+  /// The actor's settings (policy = actor). Its task fields (state dimension, ranges, scales,
+  /// action bounds, discount) are derived from the task by learn_actor_config(); the rest are the
+  /// method's (actor_config_default()) unless set.
+  actor_config_t actor;
+  uint32_t actor_work_per_slice; ///< the actor's between-run work per slice [actor work units, actor/actor.h]
+  // The value-function learner.
   int32_t learner;              ///< learn_learner_kind_t
   double alpha;                 ///< learning rate (0, 1]
   double gamma;                 ///< discount; 0 = the task's
@@ -129,7 +151,8 @@ typedef struct learn_config {
   double explore_probability;   ///< per training step: the chance an exploration (or dither) segment starts
   uint32_t explore_hold_steps;  ///< a segment's length in steps (>= 1)
   double example_dither_sigma;  ///< phase one, example driver: a dither segment's offset [action units]
-  bool advisor;                 ///< phase two: the advice acts where the learner knows no action
+  bool advisor;                 ///< phase two: the advice acts where the learned policy knows no action
+                                ///< (greedy: no known action at the state; actor: nothing learned yet)
   // Between runs.
   uint32_t replay_updates_per_slice;  ///< backward-replay updates per learn_after_command() between runs
   // Seeds.
@@ -147,6 +170,11 @@ void learn_learner_config(const learn_task_t* task, const learn_config_t* cfg, l
 
 /// The learner's state dimension under task and cfg: the features, plus one for the last action.
 uint32_t learn_state_dim(const learn_task_t* task, const learn_config_t* cfg);
+
+/// The actor's configuration under task and cfg: cfg->actor with the learner's state (dimension;
+/// the task's declared ranges, then the action bounds for the last action; the value learner's
+/// input scales), the action bounds and scale and the discount. Pure, O(state dimension).
+void learn_actor_config(const learn_task_t* task, const learn_config_t* cfg, actor_config_t* out);
 
 typedef struct learn learn_t;
 
@@ -219,10 +247,17 @@ bool learn_transition(learn_t* a, const learn_outcome_t* outcome, learn_run_end_
 bool learn_abort_run(learn_t* a, learn_run_end_t* end);
 
 /// The action of this step: phase one's driver (the advice with dither, or the joystick), or the
-/// learned policy (the greedy action, with exploration in training; the advice where the learner
-/// knows nothing and cfg.advisor; 0 in evaluations). *source says which. Cost: one greedy search
-/// where the learned policy acts (and its value is the q' of the queued transition).
+/// learned policy (the actor's action or the greedy action, with exploration in training; the
+/// advice where the learned policy knows nothing and cfg.advisor; 0 in evaluations). *source says
+/// which. Cost: where the learned policy acts, the actor's network (O(state_dim × hidden)) or one
+/// greedy search (whose value is then the q' of the queued transition). When the actor's output is
+/// not finite the action is 0 and learn_policy_fault() is true: the caller must stop the robot.
 void learn_act(learn_t* a, double advice, double joystick, double* action, int8_t* source);
+
+/// True when the last learn_act()'s learned policy gave a non-finite action (a fault; the action
+/// was 0); learn_policy_faults() counts them since init.
+bool learn_policy_fault(const learn_t* a);
+uint64_t learn_policy_faults(const learn_t* a);
 
 /// Whether the operator's joystick drives the run under way (phase one, joystick driver).
 bool learn_joystick_drives(const learn_t* a);
@@ -253,42 +288,48 @@ typedef struct learn_experience {
   hedger_kind_t q_kind;  ///< how q was obtained
 } learn_experience_t;
 
-/// After the command: the queued transition's update (a training run) or prediction (an
-/// evaluation), written into *exp (returns true), then, between runs (no transition was queued,
-/// or a training run just ended), a slice of at most cfg.replay_updates_per_slice backward-replay
-/// updates. Bounded: one update with its greedy search, plus the slice.
+/// After the command: the queued transition's update (a training run: the value learner's update
+/// and the actor's record) or prediction (an evaluation), written into *exp (returns true), then,
+/// between runs (no transition was queued, or a training run just ended), one slice of the
+/// between-run work (learn_between_runs_slice with cfg.replay_updates_per_slice). Bounded: one
+/// update with its greedy search, plus the slice.
 bool learn_after_command(learn_t* a, learn_experience_t* exp);
 
 /// The two halves of learn_after_command, for callers that interleave their own between-run work
-/// (the controller's checkpoint slices): the queued transition's update (false: none queued),
-/// and one replay slice of at most max_updates (a replay that is due begins with it), returning
-/// the updates left (0: the replay is done, or there was none).
+/// (the controller's checkpoint slices): the queued transition's update (false: none queued), and
+/// one slice of the between-run work due after a training run (it begins with the first slice):
+/// first the backward replay, at most max_updates updates per slice, then the actor's learning,
+/// at most cfg.actor_work_per_slice actor work units per slice (plus one query's; actor/actor.h).
+/// A slice does one or the other, never both. Returns nonzero while work is left (0: done, or
+/// none was due).
 bool learn_update(learn_t* a, learn_experience_t* exp);
-uint32_t learn_replay_slice(learn_t* a, uint32_t max_updates);
+uint32_t learn_between_runs_slice(learn_t* a, uint32_t max_updates);
 
 /// True when no between-run work is left (a run may start).
 bool learn_idle(const learn_t* a);
 
-/// True when a training run ended and its replay has not begun yet.
-bool learn_replay_due(const learn_t* a);
+/// True when a training run ended and its between-run work has not begun yet.
+bool learn_between_runs_due(const learn_t* a);
 
-/// True while a replay is due or under way.
-bool learn_replaying(const learn_t* a);
+/// True while between-run work is due or under way.
+bool learn_between_runs_busy(const learn_t* a);
 
-/// Finishes the queued update and the whole replay at once (shutdown; not for a tick):
-/// at most replay_passes × the run's length updates. *exp and the return as learn_after_command.
+/// Finishes the queued update and the whole between-run work at once (shutdown; not for a tick):
+/// the replay's replay_passes × the run's length updates and all of the actor's learning.
+/// *exp and the return as learn_after_command.
 bool learn_finish_now(learn_t* a, learn_experience_t* exp);
 
 /// Offline learning from logged transitions (b21r-train), through exactly the calls a run makes
 /// online: the update of (s, a, r, s', terminal) with q' the learner's greedy value at s' (0 when
-/// terminal), recorded for the run's backward replay. The schedule and the run bookkeeping are not
-/// touched; s and s_next have learn_agent_state_dim values. *exp (may be NULL) receives the
+/// terminal), recorded for the run's backward replay and by the actor. The schedule and the run
+/// bookkeeping are not touched; s and s_next have learn_agent_state_dim values. *exp (may be NULL) receives the
 /// update's record. Returns false when the learner refused the transition (a value not finite;
 /// nothing changed). Cost: one greedy search and one update.
 bool learn_offline_transition(learn_t* a, const double* s, double action, double reward, const double* s_next,
                               bool terminal, learn_experience_t* exp);
-/// The end of a logged run: its whole backward replay at once (not for a tick), as a training run
-/// ends online. Returns the replayed updates. O(replay_passes × the run's length) updates.
+/// The end of a logged run: its whole between-run work at once (not for a tick), as a training run
+/// ends online: the backward replay, then the actor's learning. Returns the replayed updates.
+/// O(replay_passes × the run's length) updates plus the actor's work (actor/actor.h).
 uint64_t learn_offline_end_run(learn_t* a);
 
 /// The operator's START_PHASE_TWO: phase two starts at the next run boundary. O(1).
@@ -306,6 +347,18 @@ void learn_resume(learn_t* a, const learn_schedule_progress_t* progress, int32_t
 /// The learner (for checkpoints, predictions and counters). Owned by the agent.
 learn_learner_t* learn_get_learner(learn_t* a);
 const learn_learner_t* learn_get_learner_const(const learn_t* a);
+
+/// The actor (policy = actor; NULL with the greedy policy), for checkpoints and counters. Owned
+/// by the agent.
+actor_t* learn_get_actor(learn_t* a);
+const actor_t* learn_get_actor_const(const learn_t* a);
+
+/// Starts the actor from the value learner's stored experience where no actor was saved (a
+/// checkpoint written with the greedy policy or by an older controller): behaviour cloning on the
+/// states and actions of HEDGER's stored points (actor_clone). The values are untouched. Returns
+/// the points cloned (0: no actor, no HEDGER, or nothing stored). Not for a tick: O(clone_steps ×
+/// stored points) network passes.
+uint32_t learn_actor_from_values(learn_t* a);
 
 /// Experiences produced (transitions queued) since init.
 int64_t learn_steps(const learn_t* a);

@@ -101,6 +101,9 @@ typedef struct tasks_decl {
   // A run (tasks/episode.h calls these on the episode's blobs).
   /// Derives the run data (feature configuration, neutral features) from the specification.
   void (*run_init)(struct tasks_episode* ep);
+  /// Clears the features' run state at a run's start (tasks_episode_begin calls it), e.g. the
+  /// obstacle task's memory of the obstacles seen; NULL when the features keep none.
+  void (*run_begin)(struct tasks_episode* ep);
   /// The state from a scan at a pose in the task frame (tasks_episode_observe's contract).
   int (*observe)(struct tasks_episode* ep, const features_scan_t* scan, features_pose_t pose, double* state);
   /// The exact state at a pose (the idealised model; tasks_episode_observe_pose's contract).

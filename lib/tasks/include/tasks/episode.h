@@ -11,8 +11,9 @@
 /// maps into the task frame by features_odom_to_task. The state vector is the declaration's
 /// (tasks_decl_t state_names), e.g.
 /// - corridor (3): end distance [m], lateral fraction [0, 1], target angle [rad];
-/// - obstacles (4): goal bearing [rad], goal distance [m], nearest obstacle's bearing [rad] and
-///   distance [m] (pi and no_obstacle_distance_m when none is visible).
+/// - obstacles (5): goal bearing [rad], goal distance [m], the nearest obstacle's bearing [rad]
+///   and distance [m], seen or remembered after it left the laser's view, and the time since it
+///   was seen [s] (pi, no_obstacle_distance_m and the memory's limit when none is known).
 ///
 /// Memory: tasks_episode_t is a plain caller-owned struct (about 2 KiB: the task's specification
 /// and run data as blobs), no allocation. Thread-safety: none per instance; distinct instances
@@ -92,7 +93,8 @@ void tasks_episode_set_eval_starts(tasks_episode_t* ep, const features_pose_t* p
 /// Number of evaluation poses in use (the configuration's, else TASKS_N_EVAL_STARTS).
 uint32_t tasks_episode_n_eval_starts(const tasks_episode_t* ep);
 
-/// Starts a run: the robot stands at start_in_task while odometry reads odom_at_start. O(1).
+/// Starts a run: the robot stands at start_in_task while odometry reads odom_at_start; the
+/// features' run state (decl->run_begin: a memory of what was seen) starts empty. O(1).
 void tasks_episode_begin(tasks_episode_t* ep, features_pose_t start_in_task, features_pose_t odom_at_start);
 
 /// The odometry pose odom_now in the task frame of the current run. O(1).

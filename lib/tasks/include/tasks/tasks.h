@@ -171,12 +171,17 @@ typedef struct tasks_obstacles_spec {
   double train_jitter_x_m;       ///< training-start jitter, as for the corridor [0.3]
   double train_jitter_y_m;       ///< [0.3]
   double train_jitter_theta_rad; ///< [0.3]
+  /// How long the state remembers the nearest obstacle after it left the laser's view [s]
+  /// (features_obstacles_remember; rounded to whole control periods; 0 = no memory) [3.0]: at
+  /// 0.3 m/s the robot has moved 0.9 m past it by then.
+  double memory_s;
 } tasks_obstacles_spec_t;
 
 /// Fills spec with the defaults documented on each field. O(1).
 void tasks_obstacles_spec_default(tasks_obstacles_spec_t* spec);
 
-/// The feature-extractor configuration matching spec (defaults otherwise). O(1).
+/// The feature-extractor configuration matching spec: defaults, with the memory's age limit
+/// memory_s / dt_s control periods (rounded; 0 when memory_s or dt_s is not positive). O(1).
 void tasks_obstacles_features_config(const tasks_obstacles_spec_t* spec,
                                      features_obstacles_config_t* cfg);
 

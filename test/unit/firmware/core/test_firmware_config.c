@@ -506,7 +506,7 @@ static void test_config_validate_errors_carry_file_and_line(void** state) {
       {"# robot\nalpha = 0.3\nhedger_k_min = 40\nhedger_k_max = 32\n", NULL, {"robot.conf:3: hedger_k_min (40)", "robot.conf:4)"}},
       {"hedger_k_max = 4\n", "hedger_k_min=5", {"--set: hedger_k_min (5)", "robot.conf:1)"}},
       {"\nlaser_resolution_deg = 0.25\n", NULL, {"robot.conf:2: laser_resolution_deg = 0.25", "(set at default;"}},
-      {"task = obstacles\nstate_rotation = false\n", "hedger_input_scale=1,2,3,4", {"--set: hedger_input_scale has 4 values", "robot.conf:1) needs 5"}},
+      {"task = obstacles\nstate_rotation = false\n", "hedger_input_scale=1,2,3,4", {"--set: hedger_input_scale has 4 values", "robot.conf:1) needs 6"}},
       {"alpha = 0.2\n", "hedger_input_scale=1,2,3,4", {"--set: hedger_input_scale has 4 values", "needs 5 (state dimensions, the last one the executed rotation"}},
       {"seed = 2\nreposition = emulator\n", NULL, {"robot.conf:2: reposition = emulator needs emulator_control", NULL}},
       {"queue_capacity = 1000\n", NULL, {"robot.conf:1: queue_capacity = 1000", NULL}},

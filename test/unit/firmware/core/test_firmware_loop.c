@@ -4,8 +4,14 @@
 #define _POSIX_C_SOURCE 200809L
 #include "loop_harness.h"
 
+#include "fw/checkpoint.h"
+#include "fw/config_task.h"
 #include "fw/progress.h"
+#include <learn/learn.h>
 #include "fw/safety.h"
+
+#include <hedger/hedger.h>
+#include <tasks/decl.h>
 
 #include <b21r_test/alloc_counter.h>
 
@@ -206,6 +212,7 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
   c.phase_two_runs = 2;
   c.eval_every_runs = 10;
   c.eval_starts = 1;
+  c.policy = FW_POLICY_ACTOR;  // the checkpoint holds the actor too
   snprintf(c.checkpoint_file, sizeof c.checkpoint_file, "%s/hedger.ckpt", dir);
   assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
   size_t meta_cap = 0;
@@ -304,45 +311,80 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
   assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), 1);
   harness_close(&g_h);
 
-  // A file of revision 1 (an older controller's 96-byte section, which added a policy shift
-  // learned from ranked pairs) resumes with its values and progress; where its shift had moved the
-  // operator is told that it is no longer used, and an evaluation of the learned policy drives
-  // exactly as from the same state in today's format.
-  uint64_t eval_hash[3];
-  for (int variant = 0; variant < 3; ++variant) {  // today's section; revision 1 without, with a shift
-    uint8_t old[FW_PROGRESS_READ_MAX];
-    memset(old, 0, sizeof old);
-    memcpy(old, meta, ms);
-    size_t old_n = ms;
-    if (variant > 0) {
-      memcpy(old, "FWMETA01", 8);
-      old_n = 96;
-      const double a = variant == 2 ? 0.75 : 0.0;
-      memcpy(old + 56, &a, sizeof a);  // little-endian host (the tests run on x86-64 and arm64)
+  // Files without an actor (today's section with the greedy policy; revision 2; revision 1, an
+  // older controller's 96-byte section, which added a policy shift learned from ranked pairs, without
+  // and with a shift that had moved) hold HEDGER's values alone. They resume with their values and
+  // progress. With policy = actor the actor starts as the policy of the values' stored points (a note
+  // says so, and where a revision-1 shift had moved, that it is no longer used): an evaluation drives
+  // alike from each of them, and otherwise than from today's file with its learned actor. With
+  // policy = greedy every file, today's with its actor too (a note: the next checkpoint drops it),
+  // drives as the values' greedy action, alike.
+  fw_progress_t good;
+  assert_int_equal(fw_progress_decode(meta, ms, &good, NULL, 0), 0);
+  assert_int_equal(good.policy, LEARN_POLICY_ACTOR);
+  assert_true(good.actor_bytes > 0 && good.actor_bytes < ps);
+  const size_t values_n = ps - (size_t)good.actor_bytes;
+  uint64_t eval_hash[2][5];
+  for (int policy = 0; policy < 2; ++policy) {
+    for (int variant = 0; variant < 5; ++variant) {
+      uint8_t old[FW_PROGRESS_READ_MAX];
+      memset(old, 0, sizeof old);
+      size_t old_n = ms;
+      if (variant == 0) {
+        memcpy(old, meta, ms);
+      } else {
+        fw_progress_t values_only = good;
+        values_only.policy = LEARN_POLICY_GREEDY;
+        values_only.actor_bytes = 0;
+        old_n = fw_progress_encode(&values_only, old);
+      }
+      if (variant == 2) {
+        memcpy(old, "FWMETA02", 8);
+        old_n = FW_PROGRESS_BYTES_2;
+      } else if (variant >= 3) {
+        memcpy(old, "FWMETA01", 8);
+        memset(old + 56, 0, sizeof old - 56);
+        old_n = 96;
+        const double a = variant == 4 ? 0.75 : 0.0;
+        memcpy(old + 56, &a, sizeof a);  // little-endian host (the tests run on x86-64 and arm64)
+      }
+      assert_int_equal(
+          fw_checkpoint_write(c.checkpoint_file, old, old_n, payload, variant == 0 ? ps : values_n, err, sizeof err), 0);
+      fw_config_t ce = c;
+      ce.mode = FW_MODE_EVALUATE;
+      ce.evaluate_policy = FW_EVAL_LEARNED;
+      ce.eval_starts = 2;
+      ce.policy = policy == 0 ? FW_POLICY_ACTOR : FW_POLICY_GREEDY;
+      assert_int_equal(harness_open(&g_h, &ce, false, 3), 0);
+      assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), 1);
+      if (variant == 4) {
+        assert_non_null(strstr(err, "note: checkpoint"));
+        assert_non_null(strstr(err, "ranked pairs"));
+      }
+      if (policy == 0 && variant > 0) {
+        assert_non_null(strstr(err, "holds no actor"));
+      } else if (policy == 1 && variant == 0) {
+        assert_non_null(strstr(err, "also holds an actor"));
+      } else if (variant != 4) {
+        assert_string_equal(err, "");
+      }
+      fw_loop_get_stats(g_h.loop, &st);
+      assert_true(st.store_fill > 0);
+      harness_run(&g_h, 100000);
+      fw_loop_get_stats(g_h.loop, &st);
+      assert_true(st.done);
+      assert_int_equal(g_h.runs, 2);
+      eval_hash[policy][variant] = g_h.exp_hash;
+      harness_close(&g_h);
     }
-    assert_int_equal(fw_checkpoint_write(c.checkpoint_file, old, old_n, payload, ps, err, sizeof err), 0);
-    fw_config_t ce = c;
-    ce.mode = FW_MODE_EVALUATE;
-    ce.evaluate_policy = FW_EVAL_LEARNED;
-    ce.eval_starts = 2;
-    assert_int_equal(harness_open(&g_h, &ce, false, 3), 0);
-    assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), 1);
-    if (variant == 2) {
-      assert_non_null(strstr(err, "note: checkpoint"));
-      assert_non_null(strstr(err, "ranked pairs"));
-    } else {
-      assert_string_equal(err, "");
-    }
-    fw_loop_get_stats(g_h.loop, &st);
-    assert_true(st.store_fill > 0);
-    harness_run(&g_h, 100000);
-    fw_loop_get_stats(g_h.loop, &st);
-    assert_true(st.done);
-    assert_int_equal(g_h.runs, 2);
-    eval_hash[variant] = g_h.exp_hash;
-    harness_close(&g_h);
   }
-  assert_true(eval_hash[0] == eval_hash[1] && eval_hash[1] == eval_hash[2]);
+  for (int variant = 2; variant < 5; ++variant) {
+    assert_true(eval_hash[0][variant] == eval_hash[0][1]);
+  }
+  assert_true(eval_hash[0][0] != eval_hash[0][1]);
+  for (int variant = 1; variant < 5; ++variant) {
+    assert_true(eval_hash[1][variant] == eval_hash[1][0]);
+  }
   assert_int_equal(fw_checkpoint_write(c.checkpoint_file, meta, ms, payload, ps, err, sizeof err), 0);
   free(payload);
 
@@ -385,6 +427,72 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
   assert_int_equal(system(cmd), 0);
 }
 
+// A checkpoint of the obstacle task written before its state remembered the obstacle (four
+// features, plus the executed rotation: a state of 5 and input scales 1,1,1,1,1 then 0.5 for the
+// action) is refused with either state_rotation setting, naming the file and the way out, and
+// nothing is loaded: with the rotation the state dimensions differ (6 against 5); without it
+// they agree, and the learned state's input scales (the age's 3 s against the rotation's 1 rad/s)
+// refuse it.
+static void test_loop_old_obstacle_checkpoint_refused(void** state) {
+  (void)state;
+  char dir[] = "/tmp/b21r-loopobst-XXXXXX";
+  assert_non_null(mkdtemp(dir));
+  fw_config_t c;
+  harness_config(&c);
+  c.task = (int32_t)tasks_obstacles_decl.id;
+  snprintf(c.checkpoint_file, sizeof c.checkpoint_file, "%s/hedger.ckpt", dir);
+  assert_int_equal(tasks_obstacles_decl.state_dim, 5);
+  // The old learned state: one stored sample in the old layout.
+  hedger_config_t hc;
+  fw_config_hedger(&c, &hc);
+  assert_int_equal(hc.state_dim, 6);  // today: 5 features and the executed rotation
+  hc.state_dim = 5;
+  const double old_scale[6] = {1.0, 1.0, 1.0, 1.0, 1.0, 0.5};
+  memcpy(hc.input_scale, old_scale, sizeof old_scale);
+  hedger_t* old = NULL;
+  assert_int_equal(hedger_create(&old, &hc), HEDGER_OK);
+  const double s_old[5] = {0.1, 2.5, -0.3, 1.2, 0.0};
+  assert_int_equal(hedger_observe_reward(old, 1.0), HEDGER_OK);
+  assert_int_equal(hedger_observe_reward(old, -1.0), HEDGER_OK);
+  assert_int_equal(hedger_insert(old, s_old, 0.2, 0.5, 0U, NULL), HEDGER_OK);
+  const size_t ps = hedger_serialized_size(old);
+  uint8_t* payload = malloc(ps);
+  assert_non_null(payload);
+  size_t written = 0;
+  assert_int_equal(hedger_save(old, payload, ps, &written), HEDGER_OK);
+  hedger_destroy(old);
+  fw_progress_t g;
+  memset(&g, 0, sizeof g);
+  g.task = c.task;
+  g.state_dim = 5U;
+  g.schedule.phase = 1;
+  g.schedule.training_runs = 3;
+  g.schedule.phase_one_runs = 3;
+  g.run_id = 2;
+  uint8_t meta[FW_PROGRESS_BYTES];
+  const size_t ms = fw_progress_encode(&g, meta);
+  char err[FW_LOOP_ERR_MAX];
+  assert_int_equal(fw_checkpoint_write(c.checkpoint_file, meta, ms, payload, written, err, sizeof err), 0);
+  free(payload);
+  for (int rotation = 1; rotation >= 0; --rotation) {
+    fw_config_t cr = c;
+    cr.state_rotation = rotation != 0;
+    assert_int_equal(harness_open(&g_h, &cr, false, 3), 0);
+    assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), -1);
+    print_message("state_rotation %d: %s\n", rotation, err);
+    assert_non_null(strstr(err, c.checkpoint_file));
+    assert_non_null(strstr(err, "move the file away"));
+    fw_loop_stats_t st;
+    fw_loop_get_stats(g_h.loop, &st);
+    assert_int_equal(st.store_fill, 0);
+    assert_int_equal(st.training_runs, 0);
+    harness_close(&g_h);
+  }
+  char cmd[128];
+  snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+  assert_int_equal(system(cmd), 0);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_loop_learns_corridor_reaches_goal_from_all_poses),
@@ -393,6 +501,7 @@ int main(void) {
       cmocka_unit_test(test_loop_canopen_stream_independent_of_answer_lag),
       cmocka_unit_test(test_loop_tick_allocates_nothing),
       cmocka_unit_test(test_loop_checkpoint_restart_resumes),
+      cmocka_unit_test(test_loop_old_obstacle_checkpoint_refused),
   };
   return cmocka_run_group_tests_name("firmware.loop", tests, NULL, NULL);
 }

@@ -1,7 +1,9 @@
 // SPDX-License-Identifier: MIT
-// The checkpoint's controller section: exact round trips, the byte layout of revision 2 (56
-// bytes), every field out of its documented range refused with the field named, and revision 1
-// (96 or 104 bytes, with the policy shift of older controllers) read with its shift reported.
+// The checkpoint's controller section: exact round trips, the byte layout of revision 3 (72
+// bytes), every field out of its documented range refused with the field named, revision 2 (56
+// bytes) read as the greedy policy without an actor, and revision 1 (96 or 104 bytes, with the
+// policy shift of older controllers) read with its shift reported.
+#include <learn/learn.h>
 #include <tasks/decl.h>
 #include "fw/config.h"
 #include "fw/progress.h"
@@ -29,6 +31,9 @@ static fw_progress_t sample(void) {
   p.schedule.example_steps_sum = 27.0 * 130.0 + 17.0;
   p.schedule.best_example_steps = 126;
   p.run_id = 130;
+  p.policy = LEARN_POLICY_ACTOR;
+  p.actor_bytes = 123456;
+  p.revision = 3;
   return p;
 }
 
@@ -52,7 +57,8 @@ static void put_f64(uint8_t* b, size_t off, double v) {
 
 static bool same(const fw_progress_t* a, const fw_progress_t* b) {
   return a->task == b->task && a->state_dim == b->state_dim && a->run_id == b->run_id &&
-         a->legacy_shift == b->legacy_shift && memcmp(&a->schedule, &b->schedule, sizeof a->schedule) == 0;
+         a->legacy_shift == b->legacy_shift && a->policy == b->policy && a->actor_bytes == b->actor_bytes &&
+         a->revision == b->revision && memcmp(&a->schedule, &b->schedule, sizeof a->schedule) == 0;
 }
 
 // p encoded, with the u32 at off replaced by v, is refused with `what` in the reason; the output
@@ -71,13 +77,17 @@ static void expect_refused(const fw_progress_t* p, size_t off, uint32_t v, const
   assert_int_equal(out.run_id, 77);
 }
 
-// Revision 2 round-trips exactly; the layout is the documented one.
+static uint64_t get_u64(const uint8_t* b, size_t off) {
+  return (uint64_t)get_u32(b, off) | (uint64_t)get_u32(b, off + 4) << 32;
+}
+
+// Revision 3 round-trips exactly; the layout is the documented one.
 static void test_progress_round_trip_and_layout(void** state) {
   (void)state;
   const fw_progress_t p = sample();
   uint8_t b[FW_PROGRESS_BYTES];
   assert_int_equal(fw_progress_encode(&p, b), FW_PROGRESS_BYTES);
-  assert_memory_equal(b, "FWMETA02", 8);
+  assert_memory_equal(b, "FWMETA03", 8);
   assert_int_equal(get_u32(b, 8), (int32_t)tasks_obstacles_decl.id);
   assert_int_equal(get_u32(b, 12), 4);
   assert_int_equal(get_u32(b, 16), 2);
@@ -95,6 +105,9 @@ static void test_progress_round_trip_and_layout(void** state) {
   assert_true(sum == 27.0 * 130.0 + 17.0);
   assert_int_equal(get_u32(b, 48), 126);
   assert_int_equal(get_u32(b, 52), 131);
+  assert_int_equal(get_u32(b, 56), LEARN_POLICY_ACTOR);
+  assert_int_equal(get_u32(b, 60), 0);
+  assert_int_equal(get_u64(b, 64), 123456);
   fw_progress_t q;
   memset(&q, 0xA5, sizeof q);
   assert_int_equal(fw_progress_decode(b, FW_PROGRESS_BYTES, &q, NULL, 0), 0);
@@ -106,6 +119,8 @@ static void test_progress_round_trip_and_layout(void** state) {
   fresh.state_dim = 4;
   fresh.schedule.phase = 1;
   fresh.run_id = -1;
+  fresh.policy = LEARN_POLICY_GREEDY;
+  fresh.revision = 3;
   assert_int_equal(fw_progress_encode(&fresh, b), FW_PROGRESS_BYTES);
   assert_int_equal(get_u32(b, 52), 0);
   assert_int_equal(fw_progress_decode(b, FW_PROGRESS_BYTES, &q, NULL, 0), 0);
@@ -128,6 +143,13 @@ static void test_progress_out_of_range_refused(void** state) {
   expect_refused(&p, 36, 31, "successful phase-one runs 31 > phase-one runs 30");
   expect_refused(&p, 48, 200, "phase-one statistics");  // shortest × runs > sum
   expect_refused(&p, 52, 41, "run id 40 below the 42 training runs");
+  expect_refused(&p, 56, 2, "policy 2");
+  expect_refused(&p, 60, 1, "reserved field 1");
+  expect_refused(&p, 68, 1U << 9, "actor section of");  // 2^41 bytes
+  fw_progress_t g = p;
+  g.policy = LEARN_POLICY_GREEDY;
+  expect_refused(&g, 64, 5, "actor section of 5 bytes with the greedy policy");
+  expect_refused(&p, 64, 0, "actor section of 0 bytes with the actor policy");
   fw_progress_t q = p;
   q.schedule.phase = 1;
   expect_refused(&q, 16, 1, "phase 1 with 12 phase-two runs");
@@ -150,12 +172,36 @@ static void test_progress_out_of_range_refused(void** state) {
   fw_progress_t out;
   char why[FW_PROGRESS_WHY_MAX];
   assert_int_equal(fw_progress_decode(b, bn - 1U, &out, why, sizeof why), -1);
-  assert_non_null(strstr(why, "unknown format (55 bytes"));
-  assert_int_equal(fw_progress_decode(b, 96, &out, why, sizeof why), -1);  // revision 2's magic, revision 1's size
+  assert_non_null(strstr(why, "unknown format (71 bytes"));
+  assert_int_equal(fw_progress_decode(b, 96, &out, why, sizeof why), -1);  // revision 3's magic, revision 1's size
   assert_non_null(strstr(why, "unknown format (96 bytes"));
-  b[7] = '3';
+  assert_int_equal(fw_progress_decode(b, FW_PROGRESS_BYTES_2, &out, why, sizeof why), -1);  // and revision 2's size
+  b[7] = '4';
   assert_int_equal(fw_progress_decode(b, bn, &out, why, sizeof why), -1);
-  assert_non_null(strstr(why, "FWMETA02"));
+  assert_non_null(strstr(why, "FWMETA03"));
+}
+
+// Revision 2 (56 bytes, bytes 0-55 as revision 3) is read as the greedy policy with no actor: its
+// payload is HEDGER's alone. Its magic with revision 3's size is refused.
+static void test_progress_revision_2_read(void** state) {
+  (void)state;
+  const fw_progress_t p = sample();
+  uint8_t b[FW_PROGRESS_BYTES];
+  (void)fw_progress_encode(&p, b);
+  memcpy(b, "FWMETA02", 8);
+  fw_progress_t q;
+  assert_int_equal(fw_progress_decode(b, FW_PROGRESS_BYTES_2, &q, NULL, 0), 0);
+  fw_progress_t want = p;
+  want.policy = LEARN_POLICY_GREEDY;
+  want.actor_bytes = 0;
+  want.revision = 2;
+  assert_true(same(&want, &q));
+  char why[FW_PROGRESS_WHY_MAX];
+  assert_int_equal(fw_progress_decode(b, FW_PROGRESS_BYTES, &q, why, sizeof why), -1);
+  assert_non_null(strstr(why, "unknown format (72 bytes"));
+  put_u32(b, 16, 7U);
+  assert_int_equal(fw_progress_decode(b, FW_PROGRESS_BYTES_2, &q, why, sizeof why), -1);
+  assert_non_null(strstr(why, "phase 7"));
 }
 
 // Revision 1 (96 bytes, or 104 with the hold past the obstacle) shares bytes 8-55: it is read with
@@ -170,6 +216,7 @@ static void test_progress_revision_1_read(void** state) {
     memset(b, 0, sizeof b);
     (void)fw_progress_encode(&p, b);
     memcpy(b, "FWMETA01", 8);
+    memset(b + 56, 0, sizeof b - 56);  // revision 3's fields from here on are revision 1's shift
     put_u32(b, 76, 1U);     // the shift's terms revision
     put_f64(b, 88, 0.4);    // a clearance
     if (sizes[k] == 104) {
@@ -177,7 +224,11 @@ static void test_progress_revision_1_read(void** state) {
     }
     fw_progress_t q;
     assert_int_equal(fw_progress_decode(b, sizes[k], &q, NULL, 0), 0);
-    assert_true(same(&p, &q));  // no shift: legacy_shift false, like p
+    fw_progress_t want = p;  // no shift: legacy_shift false, like p; no actor
+    want.policy = LEARN_POLICY_GREEDY;
+    want.actor_bytes = 0;
+    want.revision = 1;
+    assert_true(same(&want, &q));
     const size_t shift_at[] = {56, 64, 80};
     for (size_t i = 0; i < 3; ++i) {
       uint8_t c[FW_PROGRESS_READ_MAX];
@@ -187,7 +238,7 @@ static void test_progress_revision_1_read(void** state) {
       assert_true(q.legacy_shift);
       assert_int_equal(q.run_id, 130);
     }
-    // The common fields are checked as in revision 2.
+    // The common fields are checked as in revision 3.
     put_u32(b, 16, 7U);
     char why[FW_PROGRESS_WHY_MAX];
     assert_int_equal(fw_progress_decode(b, sizes[k], &q, why, sizeof why), -1);
@@ -202,6 +253,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_progress_round_trip_and_layout),
       cmocka_unit_test(test_progress_out_of_range_refused),
+      cmocka_unit_test(test_progress_revision_2_read),
       cmocka_unit_test(test_progress_revision_1_read),
   };
   return cmocka_run_group_tests_name("firmware.progress", tests, NULL, NULL);

@@ -1,0 +1,41 @@
+// SPDX-License-Identifier: MIT
+// A toy task for the actor's tests, and helpers to drive runs through it.
+//
+// The task: state (x, the last action), x in [0, 1] starts near 0.1; each step x += 0.02 (0.5 + a)
+// + 0.002 N(0, 1) for the action a in [-1, 1]; the run ends with reward 1 at x >= 1 (terminal),
+// or after 400 steps. gamma 0.99. Reaching the goal sooner is worth more, so the best action is
+// +1 everywhere; the teacher drives at about 0 (a gain on nothing), with dither: an actor that
+// only imitates it stays at 0, one that learns from the returns moves up.
+#ifndef ACTOR_TEST_UTIL_H
+#define ACTOR_TEST_UTIL_H
+
+#include <actor/actor.h>
+#include <rng/rng.h>
+
+#include <stdint.h>
+
+#define TOY_STEP_LIMIT 400
+
+/// The actor's configuration for the toy task (small ring, defaults otherwise).
+actor_config_t toy_config(void);
+
+/// Storage for cfg (aligned; free with free()) and the actor in it.
+actor_t* toy_actor(const actor_config_t* cfg, void** storage);
+
+/// Who drives a toy run.
+typedef enum toy_driver { TOY_TEACHER = 0, TOY_ACTOR = 1 } toy_driver_t;
+
+/// One run recorded into the actor (the teacher: a = 0 + 0.3 N(0,1) on 20 % of steps; the actor:
+/// its action + 0.1 N(0, 1) on 20 % of steps). Returns the steps taken.
+int toy_run(actor_t* a, toy_driver_t driver, rng_t* rng);
+
+/// Ends the run and does all its between-run work in slices of budget units; returns the slices.
+uint64_t toy_end_run(actor_t* a, uint32_t budget);
+
+/// The actor's mean action over x = 0.05 .. 0.95 (last action 0).
+double toy_mean_action(actor_t* a);
+
+/// The actor's saved bytes (malloc'ed; *n their count).
+uint8_t* toy_save(const actor_t* a, size_t* n);
+
+#endif  // ACTOR_TEST_UTIL_H
