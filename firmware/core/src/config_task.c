@@ -109,7 +109,7 @@ void fw_config_learn_task(const fw_config_t* cfg, const tasks_episode_t* ep, lea
 // state_rotation: the executed rotation's scale [rad/s per scaled unit]. Wide (the whole range
 // is about two units): it must tell a robot still ramping up its turn from one turning steadily,
 // and must not split the few samples near a start pose into separate neighbourhoods. Chosen on
-// seeds 11-20 (docs/LEARNING.md, "The executed rotation in the state"): against the state without
+// seeds 11-20 (docs/LEARNING.md, "How the adopted defaults were chosen"): against the state without
 // it, 0.25 (the action's scale) cost the human-driven corridor 31 steps in the final block, 1.0
 // cost 9, within the seeds' spread (on seeds 1-10 1.0 gained 15).
 static const double kExecutedRotationScale = 1.0;
