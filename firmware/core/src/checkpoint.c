@@ -4,6 +4,7 @@
 #include "fw/checkpoint.h"
 
 #include "fw/prefault.h"
+#include "pi_mutex.h"
 #include "le_bytes.h"
 #include "fw/errfmt.h"
 
@@ -366,7 +367,7 @@ fw_ckpt_writer_t* fw_ckpt_writer_create(const char* path, size_t meta_cap, size_
       return NULL;
     }
   }
-  pthread_mutex_init(&w->mu, NULL);
+  fw_pi_mutex_init(&w->mu);  // the tick reads the counters and acquires buffers
   pthread_cond_init(&w->cv, NULL);
   if (pthread_create(&w->thread, NULL, writer_main, w) != 0) {
     fw_errfmt(err, err_cap, "checkpoint writer: cannot start thread");

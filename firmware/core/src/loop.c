@@ -16,6 +16,7 @@
 #include "run.h"
 #include "fw/config_task.h"
 #include "fw/prefault.h"
+#include "pi_mutex.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -104,7 +105,7 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
   L->bump.node = (uint8_t)cfg->can_node_bumpers;
   L->bump_limit_ticks = fw_config_ticks(cfg, cfg->can_bumper_timeout_s);
 
-  pthread_mutex_init(&L->mbox_mu, NULL);
+  fw_pi_mutex_init(&L->mbox_mu);  // shared with the LCM receive thread
   atomic_init(&L->signal_number, 0);
 
   const fw_safety_config_t sc = {.lockstep = cfg->lockstep,
