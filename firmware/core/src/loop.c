@@ -76,6 +76,7 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
     return NULL;
   }
   L->save_handle = -1;
+  L->held_run = -1;
   // The effective configuration as text, once, for B21R_CONFIG.
   size_t text_len = 0;
   FILE* text = open_memstream(&L->config_text, &text_len);
@@ -137,6 +138,7 @@ static __attribute__((noinline)) void prefault_stack(void) {
 void fw_loop_prefault(fw_loop_t* L) {
   fw_prefault(L, sizeof *L);
   fw_prefault(L->agent_storage, L->agent_bytes);
+  fw_prefault(L->jrec, L->jrec_cap);
   if (L->out.queue != NULL) {
     fw_pubq_prefault(L->out.queue);
   }
@@ -406,7 +408,7 @@ static void publish(fw_loop_t* L) {
     L->status_countdown = L->cfg.status_period_ticks;
     L->status_now = false;
   }
-  fw_out_release_lines(L, false);
+  fw_out_release_reports(L, false);
   fw_out_notify(L);
 }
 
@@ -597,7 +599,7 @@ int fw_loop_shutdown(fw_loop_t* L) {
       rc = -1;
     }
   }
-  fw_out_release_lines(L, true);
+  fw_out_release_reports(L, true);
   fw_out_notify(L);
   return rc;
 }
