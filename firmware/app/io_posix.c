@@ -87,6 +87,11 @@ static void lose(io_posix_t* io, io_posix_device_t* d, const char* cause, int64_
 // The laser driver on the laser line, once its helper thread has opened it: a new link, so the
 // driver finds the LMS200's rate and starts its stream from the beginning.
 static int attach_laser(io_posix_t* io, char* err, size_t err_cap) {
+  io->laser_before.bytes_dropped += io->lms.decoder.counters.bytes_dropped;
+  io->laser_before.crc_errors += io->lms.decoder.counters.bad_crc;
+  io->laser_before.restarts += io->lms.counters.restarts;
+  memset(&io->lms.decoder.counters, 0, sizeof io->lms.decoder.counters);
+  memset(&io->lms.counters, 0, sizeof io->lms.counters);
   if (drv_serial_use_link(&io->laser_port, io->laser_link) != 0 ||
       drv_lms_init(&io->lms, &io->laser_port, &io->lms_config) != 0) {
     snprintf(err, err_cap, "invalid driver settings (baud %d, %d deg, %d cdeg)", (int)io->cfg->laser_baud,
@@ -306,9 +311,9 @@ static int v_laser_poll(void* user, int64_t now_us, lms_scan_t* out) {
 
 static void v_laser_stats(void* user, fw_laser_stats_t* out) {
   const io_posix_t* io = (const io_posix_t*)user;
-  out->bytes_dropped = io->lms.decoder.counters.bytes_dropped;
-  out->crc_errors = io->lms.decoder.counters.bad_crc;
-  out->restarts = io->lms.counters.restarts;
+  out->bytes_dropped = io->laser_before.bytes_dropped + io->lms.decoder.counters.bytes_dropped;
+  out->crc_errors = io->laser_before.crc_errors + io->lms.decoder.counters.bad_crc;
+  out->restarts = io->laser_before.restarts + io->lms.counters.restarts;
 }
 
 static void v_laser_stop(void* user) {

@@ -56,6 +56,9 @@ typedef struct io_posix {
   drv_serial_t laser_port;
   drv_lms_config_t lms_config;
   drv_lms_t lms;
+  // The laser driver's counters of its earlier opens: a reopen starts a new driver, and the
+  // status counters built on them never go back (status_t: monotonic while the process runs).
+  fw_laser_stats_t laser_before;
   drv_serial_t base_port;
   drv_can_t can;
   bool use_can;

@@ -12,6 +12,9 @@ Checks, per base:
 - like udev, the links go away with the device (they dangle until the new emulator is up): a
   pseudo-terminal number the kernel hands to another program meanwhile is never opened (other
   tests running in parallel would lose their data to this controller);
+- every B21R_STATUS counter that the message definition calls monotonic (lib/msgs/status_t.lcm)
+  never goes back over the loss and the reopen; corrupted bytes on the lines before the loss make
+  the laser's and the base's error counters non-zero first;
 - with device_lost_action = exit the controller exits with status 6 after the loss.
 Usage: test_device_lost.py <b21r-controller> <b21r-sim> <world> <rflex|canopen>
 """
@@ -63,6 +66,52 @@ def start_sim(sim_exe, world, d, base, laser_link, base_link):
     return sim
 
 
+STATUS_LCM = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "..", "lib", "msgs",
+                          "status_t.lcm")
+
+
+def monotonic_fields(path=STATUS_LCM):
+    """The fields of status_t that its definition calls monotonic: those of a section whose
+    heading comment says so (up to the next comment line or blank line), those whose own comment
+    says so, and the maxima "since start"."""
+    fields = []
+    section = False
+    heading = False  # the previous line was a comment: a heading may span lines
+    with open(path) as f:
+        for raw in f:
+            line = raw.strip()
+            if not line:
+                section = heading = False
+                continue
+            if line.startswith("//"):
+                section = (section and heading) or "monotonic" in line
+                heading = True
+                continue
+            heading = False
+            parts = line.split("//", 1)
+            decl = parts[0].split()
+            if len(decl) != 2 or not decl[1].endswith(";") or decl[0] not in ("int32_t", "int64_t"):
+                continue
+            comment = parts[1] if len(parts) > 1 else ""
+            if section or "(monotonic)" in comment or "since start" in comment:
+                fields.append(decl[1][:-1])
+    return fields
+
+
+def check_monotonic(statuses, what):
+    """Fails on the first monotonic counter that went back between two B21R_STATUS messages."""
+    fields = monotonic_fields()
+    if len(fields) < 40:
+        fwtest.fail("only %d monotonic fields found in %s" % (len(fields), STATUS_LCM))
+    for i in range(1, len(statuses)):
+        for name in fields:
+            a, b = getattr(statuses[i - 1], name), getattr(statuses[i], name)
+            if b < a:
+                fwtest.fail("%s: B21R_STATUS %s went back from %s to %s (message %d of %d)" %
+                            (what, name, a, b, i, len(statuses)))
+    return fields
+
+
 def main():
     controller, sim_exe, world, base = sys.argv[1:5]
     d = fwtest.workdir("device-lost-" + base)
@@ -81,6 +130,11 @@ def main():
             proc = subprocess.Popen(fwtest.controller_cmd(controller, sim, d, "run", settings), stdout=out, stderr=err)
         off = wait_for(err_path, "starting devices", 0, 30, proc)
         time.sleep(2.0)  # runs under way
+        # Some corrupted bytes on the lines: the error counters count before the loss.
+        sim.control("fault corrupt 0.002")
+        time.sleep(1.5)
+        sim.control("fault clear")
+        time.sleep(1.5)
         unplug(d, laser_link, base_link)
         sim.proc.kill()
         sim.proc.wait()
@@ -119,6 +173,22 @@ def main():
         if not seen or "lost" not in seen[0]:
             fwtest.fail("B21R_STATUS never reported STOP_DEVICE_LOST with its detail")
         fwtest.note("STATUS stop_reason %d: %s" % (STOP_DEVICE_LOST, seen[0]))
+        statuses = [s for _, _, s in read_log(os.path.join(d, "run.lcmlog"), {"B21R_STATUS"})]
+        lost_at = next(i for i, s in enumerate(statuses) if s.stop_reason == STOP_DEVICE_LOST)
+        before = statuses[lost_at]
+        if before.laser_crc_errors + before.laser_bytes_dropped == 0:
+            fwtest.fail("no laser error counted before the loss: the reopen check would prove nothing")
+        if base == "rflex" and before.base_checksum_errors + before.base_bytes_dropped == 0:
+            fwtest.fail("no base error counted before the loss: the reopen check would prove nothing")
+        after = [s for s in statuses[lost_at:] if s.stop_reason != STOP_DEVICE_LOST]
+        if not after:
+            fwtest.fail("no B21R_STATUS after the reopen")
+        fields = check_monotonic(statuses, "device reopened")
+        fwtest.note("%d monotonic counters never went back over %d STATUS messages (laser CRC errors %d, bytes "
+                    "dropped %d, restarts %d before the loss; %d, %d, %d at the end)" %
+                    (len(fields), len(statuses), before.laser_crc_errors, before.laser_bytes_dropped,
+                     before.laser_restarts, statuses[-1].laser_crc_errors, statuses[-1].laser_bytes_dropped,
+                     statuses[-1].laser_restarts))
 
         # device_lost_action = exit: the documented status after the loss.
         settings["device_lost_action"] = "exit"
