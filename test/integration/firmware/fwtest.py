@@ -100,6 +100,14 @@ def run_controller(exe, sim, workdir, name, settings, timeout):
     return rc, text, os.path.join(workdir, name + ".lcmlog")
 
 
+def stop_all(procs):
+    """Kills the processes of a list that still run (a test's clean-up after a failure)."""
+    for p in procs:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+
+
 def workdir(name):
     base = os.environ.get("B21R_TEST_TMP", tempfile.gettempdir())
     d = tempfile.mkdtemp(prefix="b21r-%s-" % name, dir=base)

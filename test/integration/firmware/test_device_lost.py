@@ -118,6 +118,7 @@ def main():
     laser_link = os.path.join(d, "laser.tty")
     base_link = os.path.join(d, "base.tty")
     ok = False
+    procs = []
     sim = start_sim(sim_exe, world, d, base, laser_link, base_link)
     try:
         settings = {"lockstep": "false", "phase_one_runs": 1000, "eval_every_runs": 1000, "hedger_replay": "false",
@@ -128,6 +129,7 @@ def main():
         err_path = os.path.join(d, "run.controller.log")
         with open(err_path, "w") as err, open(os.path.join(d, "run.progress.txt"), "w") as out:
             proc = subprocess.Popen(fwtest.controller_cmd(controller, sim, d, "run", settings), stdout=out, stderr=err)
+            procs.append(proc)
         off = wait_for(err_path, "starting devices", 0, 30, proc)
         time.sleep(2.0)  # runs under way
         # Some corrupted bytes on the lines: the error counters count before the loss.
@@ -196,6 +198,7 @@ def main():
         with open(err2, "w") as err, open(os.path.join(d, "exit.progress.txt"), "w") as out:
             proc = subprocess.Popen(fwtest.controller_cmd(controller, sim, d, "exit", settings), stdout=out,
                                     stderr=err)
+            procs.append(proc)
         wait_for(err2, "starting devices", 0, 30, proc)
         time.sleep(2.0)
         unplug(d, laser_link, base_link)
@@ -208,6 +211,9 @@ def main():
         fwtest.note("device_lost_action = exit -> exit status %d" % rc)
         ok = True
     finally:
+        # A controller left running after a failure would reopen its device paths, which the
+        # kernel hands to other tests' emulators (pseudo-terminal numbers are reused).
+        fwtest.stop_all(procs)
         sim.close()
         fwtest.cleanup(d, ok)
     print("PASS")
