@@ -3,7 +3,9 @@
 """firmware.kill_resume: no finished run is ever lost. The unmodified b21r-controller learns
 against the emulator in lockstep and is killed with SIGKILL at random moments (B21R_KILLS times,
 50 by default; the moment drawn uniformly from B21R_KILL_MAX_S seconds after each start), then
-restarted with the same checkpoint; a last session completes the schedule.
+restarted with the same checkpoint; a last session completes the schedule (30 example runs, then
+B21R_KILL_PHASE_TWO learned runs, 120 by default; a block of 2 evaluation runs every 10; the
+backward replay after each training run with B21R_KILL_REPLAY_PASSES passes, 20 by default).
 
 A run counts as reported when its B21R_RUN reached the controller's event log. Asserted:
 - every restart resumes at least the finished training runs reported before it (its "resumed
@@ -65,8 +67,9 @@ def main():
     ok = False
     sim = fwtest.Sim(sim_exe, world, d, "sim", base="rflex", seed=3)
     ckpt = os.path.join(d, "hedger.ckpt")
-    settings = {"phase_one_runs": 30, "phase_two_runs": 120, "eval_every_runs": 10, "eval_starts": 2,
-                "hedger_replay_passes": 20, "checkpoint_file": ckpt}
+    phase_two = int(os.environ.get("B21R_KILL_PHASE_TWO", "120"))
+    settings = {"phase_one_runs": 30, "phase_two_runs": phase_two, "eval_every_runs": 10, "eval_starts": 2,
+                "hedger_replay_passes": int(os.environ.get("B21R_KILL_REPLAY_PASSES", "20")), "checkpoint_file": ckpt}
     reported = []          # (session, run_t) of every reported run, in order
     resumed_runs = []      # per session: the training runs it said it resumed
     t0 = time.time()
