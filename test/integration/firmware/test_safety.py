@@ -10,7 +10,7 @@ with its reason and detail, and the controller recovers from the transient ones:
   TPDO1, the same `fault bumper 3` as on rFLEX), the bump-panel node's silence (a base fault that
   names the node), SIGTERM.
 Under `fault latency 200` the emulator does not spin (its CPU use over 2 s stays below 20 % of a
-core).
+core). No STATUS counter that the message definition calls monotonic goes back over the stops.
 usage: test_safety.py CONTROLLER SIM WORLD rflex|canopen"""
 import os
 import signal
@@ -105,6 +105,10 @@ def main():
         for _, _, s in read_log(os.path.join(d, "run.lcmlog"), {"B21R_STATUS"}):
             if s.stop_reason != 0 and s.stop_reason not in seen:
                 seen[s.stop_reason] = s.stop_detail
+        statuses = [s for _, _, s in read_log(os.path.join(d, "run.lcmlog"), {"B21R_STATUS"})]
+        fields = fwtest.check_monotonic(statuses, "safety stops")
+        fwtest.note("%d monotonic counters never went back over %d STATUS messages and %d safety stops" %
+                    (len(fields), len(statuses), statuses[-1].safety_stops))
         want = [1, 7] + ([2, 4] if base == "rflex" else [3, 4])
         for r in want:
             if r not in seen or not seen[r]:
