@@ -7,6 +7,7 @@
 #include <poll.h>
 #include <stdio.h>
 #include <string.h>
+#include <sys/eventfd.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <time.h>
@@ -66,66 +67,112 @@ static void lose(io_posix_t* io, io_posix_device_t* d, const char* cause, int64_
     return;
   }
   if (d == &io->laser) {
-    drv_serial_close(&io->laser_port);
+    drv_serial_close(&io->laser_port);  // the port lets go; the helper thread closes the line
+    drv_serial_link_close(io->laser_link);
   } else if (io->use_can) {
     drv_can_close(&io->can);
     io->can_out_n = 0;
   } else {
     drv_serial_close(&io->base_port);
+    drv_serial_link_close(io->base_link);
   }
   d->lost = true;
+  d->opening = false;
   d->losses++;
   snprintf(d->cause, sizeof d->cause, "%s", cause);
   d->backoff_us = backoff_initial_us(io);
   d->retry_at_us = now_us + d->backoff_us;
 }
 
-static int open_laser(io_posix_t* io, char* err, size_t err_cap) {
-  if (drv_serial_open(&io->laser_port, io->cfg->laser_device, (uint32_t)io->cfg->laser_start_baud, err, err_cap) != 0) {
-    return -1;
-  }
-  // A new link: the driver finds the LMS200's rate and starts its stream from the beginning.
-  if (drv_lms_init(&io->lms, &io->laser_port, &io->lms_config) != 0) {
+// The laser driver on the laser line, once its helper thread has opened it: a new link, so the
+// driver finds the LMS200's rate and starts its stream from the beginning.
+static int attach_laser(io_posix_t* io, char* err, size_t err_cap) {
+  io->laser_before.bytes_dropped += io->lms.decoder.counters.bytes_dropped;
+  io->laser_before.crc_errors += io->lms.decoder.counters.bad_crc;
+  io->laser_before.restarts += io->lms.counters.restarts;
+  memset(&io->lms.decoder.counters, 0, sizeof io->lms.decoder.counters);
+  memset(&io->lms.counters, 0, sizeof io->lms.counters);
+  if (drv_serial_use_link(&io->laser_port, io->laser_link) != 0 ||
+      drv_lms_init(&io->lms, &io->laser_port, &io->lms_config) != 0) {
     snprintf(err, err_cap, "invalid driver settings (baud %d, %d deg, %d cdeg)", (int)io->cfg->laser_baud,
              (int)io->cfg->laser_fov_deg, (int)io->cfg->laser_resolution_cdeg);
     drv_serial_close(&io->laser_port);
+    drv_serial_link_close(io->laser_link);
     return -1;
   }
   return 0;
 }
 
-static int open_base(io_posix_t* io, char* err, size_t err_cap) {
-  const fw_config_t* cfg = io->cfg;
-  if (io->use_can) {
-    return (cfg->can_socket[0] != '\0' ? drv_can_open_seqpacket(&io->can, cfg->can_socket, err, err_cap)
-                                       : drv_can_open_socketcan(&io->can, cfg->can_interface, err, err_cap)) == 0
-               ? 0
-               : -1;
-  }
-  if (drv_serial_open(&io->base_port, cfg->base_device, (uint32_t)cfg->base_baud, err, err_cap) != 0) {
+static int attach_base(io_posix_t* io) {
+  if (drv_serial_use_link(&io->base_port, io->base_link) != 0) {
     return -1;
   }
   // The rFLEX loses bytes when fed too fast: a pause after each packet (protocols.md A.1).
-  drv_serial_set_pacing(&io->base_port, 0, (uint32_t)cfg->base_write_gap_us, 0);
+  drv_serial_set_pacing(&io->base_port, 0, (uint32_t)io->cfg->base_write_gap_us, 0);
   return 0;
 }
 
-// One reopen attempt when its time has come; the back-off doubles after each failure.
-static void try_reopen(io_posix_t* io, io_posix_device_t* d, int64_t now_us) {
-  if (!d->lost || now_us < d->retry_at_us) {
-    return;
-  }
-  char e[256];
-  const int rc = d == &io->laser ? open_laser(io, e, sizeof e) : open_base(io, e, sizeof e);
-  if (rc != 0) {
-    const int64_t max_us = (int64_t)(io->cfg->device_reopen_backoff_max_s * 1e6);
-    d->backoff_us = d->backoff_us * 2 < max_us ? d->backoff_us * 2 : max_us;
-    d->retry_at_us = now_us + d->backoff_us;
-    return;
-  }
+static drv_serial_link_t* link_of(io_posix_t* io, const io_posix_device_t* d) {
+  return d == &io->laser ? io->laser_link : (io->use_can ? NULL : io->base_link);
+}
+
+static int open_can(io_posix_t* io, char* err, size_t err_cap) {
+  const fw_config_t* cfg = io->cfg;
+  return (cfg->can_socket[0] != '\0' ? drv_can_open_seqpacket(&io->can, cfg->can_socket, err, err_cap)
+                                      : drv_can_open_socketcan(&io->can, cfg->can_interface, err, err_cap)) == 0
+             ? 0
+             : -1;
+}
+
+static void backoff(io_posix_t* io, io_posix_device_t* d, int64_t now_us) {
+  const int64_t max_us = (int64_t)(io->cfg->device_reopen_backoff_max_s * 1e6);
+  d->backoff_us = d->backoff_us * 2 < max_us ? d->backoff_us * 2 : max_us;
+  d->retry_at_us = now_us + d->backoff_us;
+}
+
+static void reopened(io_posix_device_t* d) {
   d->lost = false;
   d->reopened = true;
   d->reopens++;
+}
+
+// One reopen attempt when its time has come; the back-off doubles after each failure. A serial
+// line is opened by its helper thread: the request goes out in one tick, the result is taken in
+// a later one.
+static void try_reopen(io_posix_t* io, io_posix_device_t* d, int64_t now_us) {
+  if (!d->lost) {
+    return;
+  }
+  drv_serial_link_t* link = link_of(io, d);
+  if (d->opening) {
+    const drv_serial_link_state_t st = drv_serial_link_state(link, NULL, NULL, NULL, 0);
+    if (st == DRV_SERIAL_LINK_OPENING) {
+      return;
+    }
+    d->opening = false;
+    char e[256];
+    if (st == DRV_SERIAL_LINK_OPEN && (d == &io->laser ? attach_laser(io, e, sizeof e) : attach_base(io)) == 0) {
+      reopened(d);
+      return;
+    }
+    backoff(io, d, now_us);
+    return;
+  }
+  if (now_us < d->retry_at_us) {
+    return;
+  }
+  if (link != NULL) {
+    drv_serial_link_open(link, d->path, d == &io->laser ? (uint32_t)io->cfg->laser_start_baud
+                                                        : (uint32_t)io->cfg->base_baud);
+    d->opening = true;
+    return;
+  }
+  char e[256];
+  if (open_can(io, e, sizeof e) != 0) {
+    backoff(io, d, now_us);
+    return;
+  }
+  reopened(d);
 }
 
 static void check_result(io_posix_t* io, io_posix_device_t* d, int rc) {
@@ -191,39 +238,44 @@ static int64_t v_now(void* user) {
   return io_posix_now_us();
 }
 
+// The tick's wait: the helper threads' eventfd (input arrived, a line hung up), the CAN socket
+// (a socket's poll does not involve the tty worker), and timers: the deadline, the rFLEX pause
+// between packets, and a 1 ms retry when the line did not take a packet (never a poll() on a
+// terminal: see drivers/serial.h).
 static int v_wait(void* user, int64_t deadline_us) {
   io_posix_t* io = (io_posix_t*)user;
   int64_t now = io_posix_now_us();
   flush_output(io, now);
   int64_t wake_us = deadline_us;
-  const int base_fd = io->use_can ? io->can.fd : io->base_port.fd;
-  short base_events = POLLIN;
+  short can_events = POLLIN;
   if (io->use_can ? io->can_out_n > 0U : drv_serial_out_pending(&io->base_port)) {
-    const int64_t ready = io->use_can ? now : (int64_t)io->base_port.out.quiet_until_us;
-    if (ready <= now) {
-      base_events |= POLLOUT;
-    } else if (ready < wake_us) {
-      wake_us = ready;  // the chunk gap ends before the deadline: wake up to write the next packet
+    if (io->use_can) {
+      can_events |= POLLOUT;
+    } else {
+      // Still pending after the pause between packets: the line was full; try again in 1 ms.
+      const int64_t quiet = (int64_t)io->base_port.out.quiet_until_us;
+      const int64_t ready = quiet > now ? quiet : now + 1000;
+      wake_us = ready < wake_us ? ready : wake_us;
     }
   }
-  // A lost device has fd -1, which poll() ignores: nothing spins on a closed line.
-  struct pollfd fds[2] = {{.fd = io->laser_port.fd, .events = POLLIN}, {.fd = base_fd, .events = base_events}};
+  // A lost CAN bus has fd -1, which poll() ignores: nothing spins on a closed socket.
+  struct pollfd fds[2] = {{.fd = io->tick_fd, .events = POLLIN},
+                          {.fd = io->use_can ? io->can.fd : -1, .events = can_events}};
   const int64_t left_us = wake_us - now;
   if (left_us <= 0) {
     return 0;
   }
-  // Round up so that a wait never returns just before its deadline and spins.
-  const int timeout_ms = (int)((left_us + 999) / 1000);
-  const int r = poll(fds, 2, timeout_ms);
+  const struct timespec timeout = {.tv_sec = (time_t)(left_us / 1000000), .tv_nsec = (long)(left_us % 1000000) * 1000L};
+  const int r = ppoll(fds, 2, &timeout, NULL);
   if (r < 0) {
     return errno == EINTR ? 1 : -errno;
   }
   now = io_posix_now_us();
-  // A hang-up or error stays set on the descriptor: close it now, or every later poll() returns
-  // at once. (Readable data still pending before a hang-up is lost with the device.)
-  if (fds[0].fd >= 0 && (fds[0].revents & (POLLHUP | POLLERR | POLLNVAL)) != 0) {
-    lose(io, &io->laser, (fds[0].revents & POLLHUP) != 0 ? "hang-up" : "poll error", now);
+  if ((fds[0].revents & POLLIN) != 0) {
+    uint64_t v = 0;
+    (void)!read(io->tick_fd, &v, sizeof v);
   }
+  // A hang-up or error stays set on the socket: close it now, or every later poll() returns at once.
   if (fds[1].fd >= 0 && (fds[1].revents & (POLLHUP | POLLERR | POLLNVAL)) != 0) {
     lose(io, &io->base, (fds[1].revents & POLLHUP) != 0 ? "hang-up" : "poll error", now);
   } else if ((fds[1].revents & POLLOUT) != 0) {
@@ -259,9 +311,9 @@ static int v_laser_poll(void* user, int64_t now_us, lms_scan_t* out) {
 
 static void v_laser_stats(void* user, fw_laser_stats_t* out) {
   const io_posix_t* io = (const io_posix_t*)user;
-  out->bytes_dropped = io->lms.decoder.counters.bytes_dropped;
-  out->crc_errors = io->lms.decoder.counters.bad_crc;
-  out->restarts = io->lms.counters.restarts;
+  out->bytes_dropped = io->laser_before.bytes_dropped + io->lms.decoder.counters.bytes_dropped;
+  out->crc_errors = io->laser_before.crc_errors + io->lms.decoder.counters.bad_crc;
+  out->restarts = io->laser_before.restarts + io->lms.counters.restarts;
 }
 
 static void v_laser_stop(void* user) {
@@ -477,6 +529,7 @@ void io_posix_init(io_posix_t* io, const fw_config_t* cfg) {
   io->base_port.fd = -1;
   io->can.fd = -1;
   io->control_fd = -1;
+  io->tick_fd = -1;
   io->use_can = cfg->base_protocol != FW_BASE_RFLEX;
   io->laser = (io_posix_device_t){.what = "laser", .path = cfg->laser_device};
   io->base = (io_posix_device_t){.what = io->use_can ? "CAN" : "base",
@@ -490,17 +543,87 @@ void io_posix_init(io_posix_t* io, const fw_config_t* cfg) {
 }
 
 
+// The helper threads tell the tick thread of news (from their threads: never blocks).
+static void notify_tick(void* user) {
+  io_posix_t* io = (io_posix_t*)user;
+  const uint64_t one = 1;
+  (void)!write(io->tick_fd, &one, sizeof one);
+}
+
+// Start-up (not a tick): a serial line opened by its helper thread, waited for.
+static int open_line(drv_serial_link_t* link, const char* path, uint32_t baud, char* err, size_t err_cap) {
+  drv_serial_link_open(link, path, baud);
+  const int64_t end = io_posix_now_us() + 10000000;
+  for (;;) {
+    int e = 0;
+    const drv_serial_link_state_t st = drv_serial_link_state(link, NULL, &e, err, err_cap);
+    if (st == DRV_SERIAL_LINK_OPEN) {
+      return 0;
+    }
+    if (st == DRV_SERIAL_LINK_FAILED) {
+      return -1;
+    }
+    if (io_posix_now_us() > end) {
+      snprintf(err, err_cap, "serial: opening %s did not finish within 10 s", path);
+      return -1;
+    }
+    struct pollfd p = {.fd = -1, .events = 0};
+    (void)poll(&p, 0, 2);
+  }
+}
+
+static drv_serial_link_t* start_link(io_posix_t* io, char* err, size_t err_cap) {
+  drv_serial_link_t* link = drv_serial_link_create(notify_tick, io);
+  if (link == NULL) {
+    snprintf(err, err_cap, "out of memory (serial line buffers)");
+    return NULL;
+  }
+  const int rc = drv_serial_link_start(link);
+  if (rc != 0) {
+    snprintf(err, err_cap, "cannot start a serial line thread: %s", strerror(-rc));
+    drv_serial_link_destroy(link);
+    return NULL;
+  }
+  return link;
+}
+
 int io_posix_open(io_posix_t* io, char* err, size_t err_cap) {
   const fw_config_t* cfg = io->cfg;
   char e[256];
-  if (open_laser(io, e, sizeof e) != 0) {
-    snprintf(err, err_cap, "laser: %s", e);
+  io->tick_fd = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+  if (io->tick_fd < 0) {
+    snprintf(err, err_cap, "eventfd: %s", strerror(errno));
     return -1;
   }
-  if (open_base(io, e, sizeof e) != 0) {
-    snprintf(err, err_cap, "%s: %s", io->use_can ? "CAN" : "base", e);
+  io->laser_link = start_link(io, err, err_cap);
+  if (io->laser_link == NULL) {
     io_posix_close(io);
     return -1;
+  }
+  if (open_line(io->laser_link, cfg->laser_device, (uint32_t)cfg->laser_start_baud, e, sizeof e) != 0 ||
+      attach_laser(io, e, sizeof e) != 0) {
+    snprintf(err, err_cap, "laser: %s", e);
+    io_posix_close(io);
+    return -1;
+  }
+  if (io->use_can) {
+    if (open_can(io, e, sizeof e) != 0) {
+      snprintf(err, err_cap, "CAN: %s", e);
+      io_posix_close(io);
+      return -1;
+    }
+  } else {
+    io->base_link = start_link(io, err, err_cap);
+    if (io->base_link == NULL) {
+      io_posix_close(io);
+      return -1;
+    }
+    if (open_line(io->base_link, cfg->base_device, (uint32_t)cfg->base_baud, e, sizeof e) != 0 ||
+        attach_base(io) != 0) {
+      snprintf(err, err_cap, "base: %s", e);
+      io_posix_close(io);
+      return -1;
+    }
   }
   if (cfg->reposition == FW_REPOSITION_EMULATOR) {
     io->control_fd = connect_control(cfg->emulator_control, err, err_cap);
@@ -512,12 +635,30 @@ int io_posix_open(io_posix_t* io, char* err, size_t err_cap) {
   return 0;
 }
 
-// Shutdown only (not a tick): the last commands (zero velocity, brake) leave before the line closes.
+int io_posix_realtime(io_posix_t* io, int policy, int priority, char* err, size_t err_cap) {
+  const int below = priority > 1 ? priority - 1 : 1;
+  drv_serial_link_t* links[2] = {io->laser_link, io->base_link};
+  for (int i = 0; i < 2; ++i) {
+    if (links[i] == NULL) {
+      continue;
+    }
+    const int rc = drv_serial_link_set_scheduler(links[i], policy, below);
+    if (rc != 0) {
+      snprintf(err, err_cap, "serial line thread: real-time priority %d: %s", below, strerror(-rc));
+      return -1;
+    }
+  }
+  return 0;
+}
+
+// Shutdown only (not a tick): the last commands (zero velocity, brake; the laser's stop request)
+// leave before the lines close.
 static void drain_output(io_posix_t* io, int timeout_ms) {
   const int64_t end = io_posix_now_us() + (int64_t)timeout_ms * 1000;
-  while (!io->base.lost && (io->use_can ? io->can_out_n > 0U : drv_serial_out_pending(&io->base_port))) {
+  while ((!io->base.lost && (io->use_can ? io->can_out_n > 0U : drv_serial_out_pending(&io->base_port))) ||
+         (!io->laser.lost && io->laser_link != NULL && drv_serial_link_busy(io->laser_link))) {
     const int64_t now = io_posix_now_us();
-    if (now >= end || v_wait(io, end) < 0) {
+    if (now >= end || v_wait(io, now + 1000 < end ? now + 1000 : end) < 0) {
       return;
     }
     flush_output(io, io_posix_now_us());
@@ -525,9 +666,19 @@ static void drain_output(io_posix_t* io, int timeout_ms) {
 }
 
 void io_posix_close(io_posix_t* io) {
-  drain_output(io, 500);
+  if (io->tick_fd >= 0) {
+    drain_output(io, 500);
+  }
   drv_serial_close(&io->laser_port);
   drv_serial_close(&io->base_port);
+  drv_serial_link_destroy(io->laser_link);  // stops its thread, which closes the line
+  drv_serial_link_destroy(io->base_link);
+  io->laser_link = NULL;
+  io->base_link = NULL;
   drv_can_close(&io->can);
   drop_control(io);
+  if (io->tick_fd >= 0) {
+    close(io->tick_fd);
+    io->tick_fd = -1;
+  }
 }

@@ -4,12 +4,19 @@
 /// emulator's control socket for repositioning, poll() for waiting and CLOCK_MONOTONIC.
 /// The same binding drives the real robot and the emulated one (other device paths).
 ///
-/// Nothing here waits inside a tick: base output goes through bounded queues (the serial port's,
-/// a frame ring for CAN) drained when poll() reports POLLOUT; a start-pose request is sent and its
-/// answer collected in later ticks (lockstep excepted: there the tick waits for the emulator
-/// anyway). A device that reports end of file, EIO, ENODEV or a hang-up is lost: its descriptor
-/// is closed at once (so poll() never spins on it), the loss is reported through `health`, and
-/// the device is reopened after a back-off that doubles up to a limit.
+/// Nothing here waits inside a tick, and the tick thread makes no system call on a terminal that
+/// can wait for the kernel's tty worker (drivers/serial.h, link mode): each serial device (the
+/// laser, the rFLEX base) has a helper thread that opens and closes it, reads its input into a
+/// ring, and carries out the laser driver's rate changes, input flushes and paced requests; it
+/// wakes the tick thread through an eventfd. The tick writes the base's commands itself (a
+/// write() to a terminal does not wait for that worker) from a bounded queue paced by timers,
+/// never by poll(); CAN frames go through a frame ring drained when the socket polls POLLOUT (a
+/// socket's poll does not involve the tty worker). A start-pose request is sent and its answer
+/// collected in later ticks (lockstep excepted: there the tick waits for the emulator anyway).
+/// A device that reports end of file, EIO, ENODEV or a hang-up is lost: its descriptor is
+/// closed at once (by its helper thread; nothing polls a dead line), the loss is reported
+/// through `health`, and the device is reopened after a back-off that doubles up to a limit
+/// (the helper opens it; the tick sees the result in a later tick).
 #ifndef B21R_APP_IO_POSIX_H
 #define B21R_APP_IO_POSIX_H
 
@@ -32,6 +39,7 @@ typedef struct io_posix_device {
   const char* what;               ///< "laser", "base", "CAN bus"
   const char* path;               ///< in the configuration (borrowed)
   bool lost;
+  bool opening;                   ///< a reopen is under way (serial: the helper thread opens it)
   bool reopened;                  ///< since the last health report
   int64_t retry_at_us;            ///< next reopen attempt
   int64_t backoff_us;             ///< wait after the next failed attempt
@@ -42,9 +50,15 @@ typedef struct io_posix_device {
 
 typedef struct io_posix {
   const fw_config_t* cfg;         ///< borrowed; outlives the binding
+  int tick_fd;                    ///< eventfd: a helper thread has news for the tick (-1: none)
+  drv_serial_link_t* laser_link;  ///< the laser line's helper thread
+  drv_serial_link_t* base_link;   ///< the rFLEX line's helper thread (NULL on CANopen)
   drv_serial_t laser_port;
   drv_lms_config_t lms_config;
   drv_lms_t lms;
+  // The laser driver's counters of its earlier opens: a reopen starts a new driver, and the
+  // status counters built on them never go back (status_t: monotonic while the process runs).
+  fw_laser_stats_t laser_before;
   drv_serial_t base_port;
   drv_can_t can;
   bool use_can;
@@ -71,6 +85,10 @@ int io_posix_open(io_posix_t* io, char* err, size_t err_cap);
 
 /// The binding for fw_loop_create.
 fw_io_t io_posix_binding(io_posix_t* io);
+
+/// Real-time scheduling for the helper threads: policy (SCHED_FIFO, SCHED_RR) at priority, one
+/// below the tick thread's. Returns 0, or -1 with a message.
+int io_posix_realtime(io_posix_t* io, int policy, int priority, char* err, size_t err_cap);
 
 void io_posix_close(io_posix_t* io);
 

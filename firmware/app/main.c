@@ -18,6 +18,7 @@
 
 #include <errno.h>
 #include <pthread.h>
+#include <sched.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -76,8 +77,15 @@ static void usage(FILE* f) {
 }
 
 // rt_* settings, then pre-faulting (after mlockall, so that the touched pages stay locked).
-static int apply_realtime(const fw_config_t* cfg, fw_loop_t* loop, char* err, size_t err_cap) {
+static int apply_realtime(const fw_config_t* cfg, fw_loop_t* loop, io_posix_t* io, char* err, size_t err_cap) {
   if (rt_apply(cfg, err, err_cap) != 0) {
+    return -1;
+  }
+  // The serial lines' helper threads (they make the terminal calls the tick must not) run just
+  // below the tick thread, so that input reaches it as soon as the kernel has it.
+  if (cfg->rt_scheduler != FW_RT_OTHER &&
+      io_posix_realtime(io, cfg->rt_scheduler == FW_RT_FIFO ? SCHED_FIFO : SCHED_RR, (int)cfg->rt_priority, err,
+                        err_cap) != 0) {
     return -1;
   }
   if (cfg->rt_prefault) {
@@ -337,7 +345,7 @@ int main(int argc, char** argv) {
                                                 : (cfg.can_socket[0] != '\0' ? cfg.can_socket : cfg.can_interface),
             cfg.lockstep ? ", lockstep" : "");
     // Real-time provisions of the tick thread (this one), after the helper threads exist.
-    if (apply_realtime(&cfg, loop, err, sizeof err) != 0) {
+    if (apply_realtime(&cfg, loop, &io, err, sizeof err) != 0) {
       fprintf(stderr, "b21r-controller: %s\n", err);
       status = EXIT_USAGE;
       fw_loop_signal(loop, 0);

@@ -577,10 +577,14 @@ static int run(app_t* a) {
     nfds_t n = 0;
     pfd[n] = (struct pollfd){a->sig_fd, POLLIN, 0};
     kinds[n++] = 0;
-    pfd[n] = (struct pollfd){a->laser_master, (short)(POLLIN | (a->laser_out.ch_len > 0 ? POLLOUT : 0)), 0};
+    // POLLOUT only for output that is due and waits for room: output held back by the latency
+    // fault is not due yet, and a pty is nearly always writable (poll would return at once).
+    const short laser_out = pend_next_ns(&a->laser_out) <= now ? POLLOUT : 0;
+    const short base_out = pend_next_ns(&a->base_out) <= now ? POLLOUT : 0;
+    pfd[n] = (struct pollfd){a->laser_master, (short)(POLLIN | laser_out), 0};
     kinds[n++] = 1;
     if (a->base_master >= 0) {
-      pfd[n] = (struct pollfd){a->base_master, (short)(POLLIN | (a->base_out.ch_len > 0 ? POLLOUT : 0)), 0};
+      pfd[n] = (struct pollfd){a->base_master, (short)(POLLIN | base_out), 0};
       kinds[n++] = 2;
     }
     if (a->can_listen >= 0) {

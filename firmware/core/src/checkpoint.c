@@ -4,12 +4,14 @@
 #include "fw/checkpoint.h"
 
 #include "fw/prefault.h"
+#include "pi_mutex.h"
 #include "le_bytes.h"
 #include "fw/errfmt.h"
 
 #include <errno.h>
 #include <fcntl.h>
 #include <pthread.h>
+#include <stdatomic.h>
 #include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -282,31 +284,89 @@ int fw_checkpoint_read(const char* path, void* meta, size_t meta_cap, size_t* me
 
 enum { BUF_FREE = 0, BUF_FILLING, BUF_PENDING, BUF_WRITING };
 
+// A journal record waiting to be appended.
+typedef struct journal_slot {
+  uint8_t* buf;
+  size_t size;
+  int32_t run_id;
+  int state;          // BUF_FREE, BUF_PENDING, BUF_WRITING
+  uint64_t order;
+} journal_slot_t;
+
+#define JOURNAL_SLOTS_MAX 16U
+
 struct fw_ckpt_writer {
   char path[4096];
+  char journal_path[4096 + 16];
   size_t meta_cap;
   size_t payload_cap;
   uint8_t* buf[2];
   size_t meta_size[2];
   size_t payload_size[2];
+  int32_t covered_run[2]; // the run whose state the buffer holds (-1: none or unknown)
   int state[2];
   uint64_t order[2];      // submission order: the oldest pending is written first
   uint64_t next_order;
   bool stop;
   fw_ckpt_counters_t counters;
+  // The journal (writer thread: jfd, appended_run, broken; under mu: the slots).
+  journal_slot_t jslot[JOURNAL_SLOTS_MAX];
+  uint32_t jslots;
+  size_t jrecord_cap;
+  int jfd;
+  int32_t appended_run;   // the last run appended in an unbroken sequence since the covering checkpoint
+  bool broken;            // an append failed or a record was skipped: no more until a checkpoint
+  _Atomic int32_t durable_run;
   pthread_mutex_t mu;
   pthread_cond_t cv;
   pthread_t thread;
 };
 
+// The next job in submission order: a checkpoint buffer (0, 1) or a journal slot (2 + i); -1.
 static int pick_pending(const fw_ckpt_writer_t* w) {
   int best = -1;
+  uint64_t best_order = UINT64_MAX;
   for (int i = 0; i < 2; ++i) {
-    if (w->state[i] == BUF_PENDING && (best < 0 || w->order[i] < w->order[best])) {
+    if (w->state[i] == BUF_PENDING && w->order[i] < best_order) {
       best = i;
+      best_order = w->order[i];
+    }
+  }
+  for (uint32_t i = 0; i < w->jslots; ++i) {
+    if (w->jslot[i].state == BUF_PENDING && w->jslot[i].order < best_order) {
+      best = 2 + (int)i;
+      best_order = w->jslot[i].order;
     }
   }
   return best;
+}
+
+static void raise_durable(fw_ckpt_writer_t* w, int32_t run) {
+  if (run > atomic_load(&w->durable_run)) {
+    atomic_store(&w->durable_run, run);
+  }
+}
+
+// Appends one record and syncs it (the writer's thread, no lock held). 0, or -1 with err.
+static int journal_append(fw_ckpt_writer_t* w, const uint8_t* rec, size_t n, char* err, size_t err_cap) {
+  if (w->jfd < 0) {
+    fw_errfmt(err, err_cap, "journal %s is not open", w->journal_path);
+    return -1;
+  }
+  if (write_all(w->jfd, rec, n) != 0 || fdatasync(w->jfd) != 0) {
+    fw_errfmt(err, err_cap, "journal: appending to %s failed: %s (the runs since the last checkpoint are kept "
+              "only in memory until the next one)", w->journal_path, strerror(errno));
+    return -1;
+  }
+  return 0;
+}
+
+// A checkpoint that covers every journalled run is on disk: the journal starts empty again.
+static void journal_reset(fw_ckpt_writer_t* w) {
+  if (w->jfd >= 0 && (ftruncate(w->jfd, 0) != 0 || fdatasync(w->jfd) != 0)) {
+    fprintf(stderr, "b21r-controller: journal: emptying %s failed: %s (its runs are in the checkpoint)\n",
+            w->journal_path, strerror(errno));
+  }
 }
 
 static void* writer_main(void* arg) {
@@ -321,17 +381,58 @@ static void* writer_main(void* arg) {
     if (i < 0) {
       break;
     }
-    w->state[i] = BUF_WRITING;
-    pthread_mutex_unlock(&w->mu);
     char err[FW_CHECKPOINT_ERR_MAX];
+    if (i >= 2) {
+      journal_slot_t* j = &w->jslot[i - 2];
+      j->state = BUF_WRITING;
+      const bool skip = w->broken || j->run_id != w->appended_run + 1;
+      pthread_mutex_unlock(&w->mu);
+      // A record that does not follow the last one without a gap cannot be replayed after it:
+      // it waits for a checkpoint like a run without a journal.
+      const int r = skip ? 1 : journal_append(w, j->buf, j->size, err, sizeof err);
+      if (r < 0) {
+        fprintf(stderr, "b21r-controller: %s\n", err);
+      }
+      pthread_mutex_lock(&w->mu);
+      if (r == 0) {
+        w->counters.journal_written++;
+        w->appended_run = j->run_id;
+        raise_durable(w, j->run_id);
+      } else {
+        w->broken = true;
+        if (r < 0) {
+          w->counters.journal_failed++;
+        } else {
+          w->counters.journal_skipped++;
+        }
+      }
+      j->state = BUF_FREE;
+      pthread_cond_broadcast(&w->cv);
+      continue;
+    }
+    w->state[i] = BUF_WRITING;
+    const int32_t covered = w->covered_run[i];
+    // Every journalled run is in it unless a later run's record went first (never expected: a run
+    // starts after the checkpoint of the one before is submitted).
+    const bool covers_journal = covered >= 0 && covered >= w->appended_run;
+    pthread_mutex_unlock(&w->mu);
     const int r = fw_checkpoint_write(w->path, w->buf[i], w->meta_size[i], w->buf[i] + w->meta_cap,
                                       w->payload_size[i], err, sizeof err);
     if (r != 0) {
       fprintf(stderr, "b21r-controller: %s\n", err);
+    } else if (covers_journal) {
+      journal_reset(w);
     }
     pthread_mutex_lock(&w->mu);
     if (r == 0) {
       w->counters.written++;
+      if (covers_journal) {
+        w->appended_run = covered;
+        w->broken = false;
+      }
+      if (covered >= 0) {
+        raise_durable(w, covered);
+      }
     } else {
       w->counters.failed++;
     }
@@ -355,6 +456,12 @@ fw_ckpt_writer_t* fw_ckpt_writer_create(const char* path, size_t meta_cap, size_
     return NULL;
   }
   strcpy(w->path, path);
+  snprintf(w->journal_path, sizeof w->journal_path, "%s.journal", path);
+  w->jfd = -1;
+  w->appended_run = -1;
+  atomic_init(&w->durable_run, -1);
+  w->covered_run[0] = -1;
+  w->covered_run[1] = -1;
   w->meta_cap = meta_cap;
   w->payload_cap = payload_cap;
   for (int i = 0; i < 2; ++i) {
@@ -366,7 +473,7 @@ fw_ckpt_writer_t* fw_ckpt_writer_create(const char* path, size_t meta_cap, size_
       return NULL;
     }
   }
-  pthread_mutex_init(&w->mu, NULL);
+  fw_pi_mutex_init(&w->mu);  // the tick reads the counters and acquires buffers
   pthread_cond_init(&w->cv, NULL);
   if (pthread_create(&w->thread, NULL, writer_main, w) != 0) {
     fw_errfmt(err, err_cap, "checkpoint writer: cannot start thread");
@@ -413,10 +520,16 @@ int fw_ckpt_writer_acquire(fw_ckpt_writer_t* w, void** meta, size_t* meta_cap, v
 }
 
 void fw_ckpt_writer_submit(fw_ckpt_writer_t* w, int handle, size_t meta_size, size_t payload_size) {
+  fw_ckpt_writer_submit_run(w, handle, meta_size, payload_size, -1);
+}
+
+void fw_ckpt_writer_submit_run(fw_ckpt_writer_t* w, int handle, size_t meta_size, size_t payload_size,
+                               int32_t covered_run) {
   if (handle < 0 || handle > 1) {
     return;
   }
   pthread_mutex_lock(&w->mu);
+  w->covered_run[handle] = covered_run;
   // An older pending checkpoint is superseded by this newer one.
   const int other = 1 - handle;
   if (w->state[other] == BUF_PENDING) {
@@ -431,14 +544,97 @@ void fw_ckpt_writer_submit(fw_ckpt_writer_t* w, int handle, size_t meta_size, si
   pthread_mutex_unlock(&w->mu);
 }
 
+static bool writer_busy(const fw_ckpt_writer_t* w) {
+  for (int i = 0; i < 2; ++i) {
+    if (w->state[i] == BUF_PENDING || w->state[i] == BUF_WRITING) {
+      return true;
+    }
+  }
+  for (uint32_t i = 0; i < w->jslots; ++i) {
+    if (w->jslot[i].state != BUF_FREE) {
+      return true;
+    }
+  }
+  return false;
+}
+
 void fw_ckpt_writer_flush(fw_ckpt_writer_t* w) {
   pthread_mutex_lock(&w->mu);
-  while (w->state[0] == BUF_PENDING || w->state[0] == BUF_WRITING || w->state[1] == BUF_PENDING ||
-         w->state[1] == BUF_WRITING) {
+  while (writer_busy(w)) {
     pthread_cond_wait(&w->cv, &w->mu);
   }
   pthread_mutex_unlock(&w->mu);
 }
+
+int fw_ckpt_writer_journal_init(fw_ckpt_writer_t* w, size_t record_cap, uint32_t slots, int32_t durable_run,
+                                size_t keep_bytes, char* err, size_t err_cap) {
+  if (w->jslots > 0U || slots == 0U || slots > JOURNAL_SLOTS_MAX || record_cap == 0U) {
+    fw_errfmt(err, err_cap, "journal %s: invalid set-up", w->journal_path);
+    return -1;
+  }
+  for (uint32_t i = 0; i < slots; ++i) {
+    w->jslot[i].buf = (uint8_t*)malloc(record_cap);
+    if (w->jslot[i].buf == NULL) {
+      fw_errfmt(err, err_cap, "journal: cannot allocate %zu bytes", record_cap);
+      for (uint32_t k = 0; k < i; ++k) {
+        free(w->jslot[k].buf);
+        w->jslot[k].buf = NULL;
+      }
+      return -1;
+    }
+  }
+  const int fd = open(w->journal_path, O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+  if (fd < 0 || ftruncate(fd, (off_t)keep_bytes) != 0 || fsync(fd) != 0 || fsync_dir_of(w->journal_path) != 0) {
+    fw_errfmt(err, err_cap, "journal: cannot create %s: %s (it lies beside checkpoint_file, which must be in a "
+              "writable directory)", w->journal_path, strerror(errno));
+    if (fd >= 0) {
+      close(fd);
+    }
+    for (uint32_t k = 0; k < slots; ++k) {
+      free(w->jslot[k].buf);
+      w->jslot[k].buf = NULL;
+    }
+    return -1;
+  }
+  pthread_mutex_lock(&w->mu);
+  w->jfd = fd;
+  w->jslots = slots;
+  w->jrecord_cap = record_cap;
+  w->appended_run = durable_run;
+  atomic_store(&w->durable_run, durable_run);
+  pthread_mutex_unlock(&w->mu);
+  return 0;
+}
+
+int fw_ckpt_writer_journal_submit(fw_ckpt_writer_t* w, const void* record, size_t n, int32_t run_id) {
+  pthread_mutex_lock(&w->mu);
+  journal_slot_t* j = NULL;
+  for (uint32_t i = 0; i < w->jslots && j == NULL; ++i) {
+    if (w->jslot[i].state == BUF_FREE) {
+      j = &w->jslot[i];
+    }
+  }
+  if (j == NULL || n > w->jrecord_cap) {
+    // Not journalled: the records after it no longer follow without a gap either.
+    w->counters.journal_skipped++;
+    w->broken = w->jslots > 0U;
+    pthread_mutex_unlock(&w->mu);
+    return -1;
+  }
+  j->state = BUF_WRITING;  // the copy below is ours; the thread does not look at it meanwhile
+  pthread_mutex_unlock(&w->mu);
+  memcpy(j->buf, record, n);
+  pthread_mutex_lock(&w->mu);
+  j->size = n;
+  j->run_id = run_id;
+  j->order = w->next_order++;
+  j->state = BUF_PENDING;
+  pthread_cond_broadcast(&w->cv);
+  pthread_mutex_unlock(&w->mu);
+  return 0;
+}
+
+int32_t fw_ckpt_writer_durable_run(fw_ckpt_writer_t* w) { return atomic_load(&w->durable_run); }
 
 fw_ckpt_counters_t fw_ckpt_writer_counters(fw_ckpt_writer_t* w) {
   pthread_mutex_lock(&w->mu);
@@ -450,6 +646,9 @@ fw_ckpt_counters_t fw_ckpt_writer_counters(fw_ckpt_writer_t* w) {
 void fw_ckpt_writer_prefault(fw_ckpt_writer_t* w) {
   for (int i = 0; i < 2; ++i) {
     fw_prefault(w->buf[i], w->meta_cap + w->payload_cap + 1U);
+  }
+  for (uint32_t i = 0; i < w->jslots; ++i) {
+    fw_prefault(w->jslot[i].buf, w->jrecord_cap);
   }
 }
 
@@ -465,6 +664,12 @@ void fw_ckpt_writer_destroy(fw_ckpt_writer_t* w) {
   pthread_join(w->thread, NULL);
   pthread_mutex_destroy(&w->mu);
   pthread_cond_destroy(&w->cv);
+  if (w->jfd >= 0) {
+    close(w->jfd);
+  }
+  for (uint32_t i = 0; i < w->jslots; ++i) {
+    free(w->jslot[i].buf);
+  }
   free(w->buf[0]);
   free(w->buf[1]);
   free(w);

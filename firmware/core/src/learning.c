@@ -12,15 +12,21 @@
 // replay updates, then checkpoint_points_per_tick points of the save, and the next run starts
 // when the work is done. The work is counted in updates and points, never in time, so a lockstep
 // run stays a function of its inputs however loaded the machine is.
+#define _POSIX_C_SOURCE 200809L  // O_CLOEXEC
 #include "learning.h"
 #include "outputs.h"
 #include "fw/config_task.h"
+#include "fw/journal.h"
 #include "fw/progress.h"
 
+#include <errno.h>
+#include <fcntl.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 int fw_learning_init(fw_loop_t* L, char* err, size_t err_cap) {
   learn_task_t task;
@@ -54,10 +60,24 @@ int fw_learning_init(fw_loop_t* L, char* err, size_t err_cap) {
   if (h != NULL && actor != NULL) {
     L->save_max += actor_serialized_max_size(actor_get_config(actor));
   }
+  // The journal record of one run: at most as many transitions as the learner's run buffer keeps
+  // for the replay (a longer run waits for its checkpoint).
+  learn_learner_config_t llc;
+  learn_learner_config(&task, &lc, &llc);
+  const uint32_t run_cap = llc.kind == LEARN_LEARNER_TABULAR ? llc.tabular.run_capacity : llc.hedger.run_capacity;
+  L->jrec_cap = fw_journal_record_bytes(learn_agent_state_dim(L->agent), run_cap);
+  L->jrec = (uint8_t*)malloc(L->jrec_cap);
+  if (L->jrec == NULL) {
+    snprintf(err, err_cap, "loop: cannot allocate %zu bytes for the journal record", L->jrec_cap);
+    fw_learning_free(L);
+    return -1;
+  }
   return 0;
 }
 
 void fw_learning_free(fw_loop_t* L) {
+  free(L->jrec);
+  L->jrec = NULL;
   free(L->agent_storage);
   L->agent_storage = NULL;
   L->agent = NULL;
@@ -91,23 +111,19 @@ static bool checkpoint_acquire(fw_loop_t* L, void** payload, size_t* payload_cap
   size_t meta_cap = 0;
   L->save_handle = fw_ckpt_writer_acquire(L->out.checkpoints, &meta, &meta_cap, payload, payload_cap);
   if (L->save_handle < 0) {
-    L->checkpoints_skipped++;
-    fw_out_release_lines(L, true);  // this checkpoint will not be written: nothing to wait for
+    L->checkpoints_skipped++;  // the runs wait for their journal records or the next checkpoint
     return false;
   }
   L->save_meta_size = encode_meta(L, (uint8_t*)meta);
   return true;
 }
 
+// Saves happen between runs: the state and progress after the last run that started and ended.
 static void checkpoint_submit(fw_loop_t* L, size_t payload_size) {
-  fw_ckpt_writer_submit(L->out.checkpoints, L->save_handle, L->save_meta_size, payload_size);
+  fw_ckpt_writer_submit_run(L->out.checkpoints, L->save_handle, L->save_meta_size, payload_size,
+                            learn_run_id(L->agent));
   L->save_handle = -1;
   L->checkpoints_submitted++;
-  if (L->lines_holding && L->lines_release_at == 0) {
-    // Every submission ends written, failed or superseded: when the writer has settled as many
-    // as were submitted, this one is on disk (or reported).
-    L->lines_release_at = (uint64_t)L->checkpoints_submitted;
-  }
 }
 
 void fw_learning_checkpoint_now(fw_loop_t* L) {
@@ -142,13 +158,136 @@ void fw_loop_checkpoint_capacity(const fw_loop_t* L, size_t* meta_bytes, size_t*
   *payload_bytes = L->save_max;
 }
 
-void fw_loop_attach_checkpoints(fw_loop_t* L, fw_ckpt_writer_t* writer) { L->out.checkpoints = writer; }
+void fw_loop_attach_checkpoints(fw_loop_t* L, fw_ckpt_writer_t* writer) {
+  L->out.checkpoints = writer;
+  L->reported_progress = learn_schedule(L->agent)->p;
+  L->reports_wait = writer != NULL && hedger_of(L) != NULL;
+  if (!L->reports_wait) {
+    return;
+  }
+  // The runs so far are on disk: in the checkpoint, or in the part of the journal that load
+  // learned again (kept; new records follow it).
+  char err[FW_CHECKPOINT_ERR_MAX];
+  if (fw_ckpt_writer_journal_init(writer, L->jrec_cap, 4U, learn_run_id(L->agent), L->journal_keep, err,
+                                  sizeof err) != 0) {
+    fw_loop_log(L, 2, "b21r-controller: %s; finished runs are reported once their checkpoint is written", err);
+  }
+}
+
+static int load_checkpoint_file(fw_loop_t* L, char* err, size_t err_cap);
+
+// Reads the journal beside the checkpoint (startup only; allocates its contents for the call).
+// Returns the bytes read into *data (0: none or unreadable; *data NULL).
+static size_t journal_read(const char* path, uint8_t** data) {
+  *data = NULL;
+  char jpath[FW_CONFIG_STR_MAX + 16];
+  snprintf(jpath, sizeof jpath, "%s.journal", path);
+  const int fd = open(jpath, O_RDONLY | O_CLOEXEC);
+  if (fd < 0) {
+    return 0;
+  }
+  struct stat st;
+  size_t got = 0;
+  if (fstat(fd, &st) == 0 && st.st_size > 0) {
+    *data = (uint8_t*)malloc((size_t)st.st_size);
+    while (*data != NULL && got < (size_t)st.st_size) {
+      const ssize_t r = read(fd, *data + got, (size_t)st.st_size - got);
+      if (r < 0 && errno == EINTR) {
+        continue;
+      }
+      if (r <= 0) {
+        break;
+      }
+      got += (size_t)r;
+    }
+  }
+  close(fd);
+  if (got == 0) {
+    free(*data);
+    *data = NULL;
+  }
+  return got;
+}
+
+// The journal's runs that follow the loaded progress (fw/journal.h), each learned and counted
+// again as it was online: its transitions through the framework's offline update, its replay,
+// then the schedule's count. Stops at the first record that does not follow (a torn write, a gap,
+// another plan). Sets L->journal_keep to the bytes that hold the records up to the last one used.
+// Returns the runs resumed. Startup only: O(records × (transitions + replay)).
+static int journal_resume(fw_loop_t* L) {
+  uint8_t* data = NULL;
+  const size_t len = journal_read(L->cfg.checkpoint_file, &data);
+  const uint32_t dim = learn_agent_state_dim(L->agent);
+  size_t off = 0;
+  int resumed = 0;
+  L->journal_keep = 0;
+  while (off < len) {
+    fw_journal_run_t run;
+    const uint8_t* tr = NULL;
+    size_t size = 0;
+    if (fw_journal_next(data + off, len - off, &run, &tr, &size) != 1) {
+      break;
+    }
+    if (run.run_id <= learn_run_id(L->agent)) {
+      off += size;  // in the checkpoint already (the process died before the journal was emptied)
+      L->journal_keep = off;
+      continue;
+    }
+    const learn_plan_t next = learn_plan(L->agent);
+    const bool follows = run.run_id == learn_run_id(L->agent) + 1 && run.state_dim == dim && run.kind == next.kind &&
+                         run.phase == next.phase &&
+                         (next.kind != LEARN_RUN_EVAL || run.eval_index == next.eval_index) &&
+                         (next.kind != LEARN_RUN_TRAINING || run.training_index == next.training_index);
+    if (!follows || (run.learned && next.kind != LEARN_RUN_TRAINING)) {
+      break;
+    }
+    if (run.learned) {
+      for (uint32_t i = 0; i < run.n; ++i) {
+        fw_journal_transition_t t;
+        fw_journal_get_transition(tr, dim, i, &t);
+        // A refused transition (a value not finite) was refused online too.
+        (void)learn_offline_transition(L->agent, t.s, t.a, t.r, t.s_next, t.terminal, NULL);
+      }
+      (void)learn_offline_end_run(L->agent);
+    }
+    const learn_plan_t plan = {.kind = run.kind, .phase = run.phase, .eval_index = run.eval_index,
+                               .training_index = run.training_index};
+    if (!learn_resume_run(L->agent, &plan, run.steps, run.goal, run.aborted, NULL)) {
+      break;  // never happens: the plan was checked above
+    }
+    off += size;
+    L->journal_keep = off;
+    resumed++;
+  }
+  free(data);
+  return resumed;
+}
 
 int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
   const char* path = L->cfg.checkpoint_file;
   if (path[0] == '\0') {
     return 0;
   }
+  const int r = load_checkpoint_file(L, err, err_cap);
+  if (r < 0 || hedger_of(L) == NULL) {
+    return r;
+  }
+  if (r == 0) {
+    err[0] = '\0';
+  }
+  const int runs = journal_resume(L);
+  if (runs > 0) {
+    const size_t used = strlen(err);
+    snprintf(err + used, err_cap - used,
+             "%snote: %d finished run%s after the checkpoint learned again from %s.journal (up to run %d)",
+             used > 0 ? "; " : "", runs, runs == 1 ? "" : "s", path, (int)learn_run_id(L->agent));
+  }
+  return r == 1 || runs > 0 ? 1 : 0;
+}
+
+// The checkpoint file itself: 1 loaded, 0 none, -1 refused (err says why).
+static int load_checkpoint_file(fw_loop_t* L, char* err, size_t err_cap) {
+  const char* path = L->cfg.checkpoint_file;
   if (hedger_of(L) == NULL) {
     snprintf(err, err_cap, "checkpoint %s: learner = tabular keeps no checkpoints; set checkpoint_file = \"\"", path);
     return -1;
@@ -259,10 +398,59 @@ int fw_loop_load_checkpoint(fw_loop_t* L, char* err, size_t err_cap) {
 
 // ---- the step's update and the between-run work -------------------------------------------
 
-void fw_learning_run_ended(fw_loop_t* L) {
-  if (L->out.checkpoints != NULL && L->cfg.progress) {
-    L->lines_holding = true;  // the run's line waits for its checkpoint
+void fw_learning_run_ended(fw_loop_t* L, const learn_run_end_t* e) {
+  if (!L->reports_wait) {
+    return;
   }
+  // The run's reports (B21R_RUN, its progress line, the evaluation block it completes) wait until
+  // its journal record, submitted after this tick's update (journal_end), or a checkpoint is on disk.
+  L->held_run = e->run_id;
+  L->jrun = (fw_journal_run_t){.run_id = e->run_id,
+                               .kind = e->plan.kind,
+                               .phase = e->plan.phase,
+                               .training_index = e->plan.training_index,
+                               .eval_index = e->plan.eval_index,
+                               .steps = e->steps,
+                               .goal = e->goal,
+                               .aborted = e->aborted,
+                               .learned = e->learning,
+                               .state_dim = learn_agent_state_dim(L->agent)};
+  L->jend_pending = true;
+}
+
+// A learned transition of the run under way, into its journal record. O(state_dim).
+static void journal_transition(fw_loop_t* L, const learn_experience_t* e) {
+  if (!L->reports_wait || e->evaluating || L->jfull) {
+    return;
+  }
+  fw_journal_transition_t t;
+  memset(&t, 0, sizeof t);
+  memcpy(t.s, e->s, e->state_dim * sizeof(double));
+  memcpy(t.s_next, e->s_next, e->state_dim * sizeof(double));
+  t.a = e->a;
+  t.r = e->reward;
+  t.terminal = e->terminal;
+  if (fw_journal_put_transition(L->jrec, L->jrec_cap, e->state_dim, L->jn, &t)) {
+    L->jn++;
+  } else {
+    L->jfull = true;  // never expected: the record holds as many as the learner's run buffer
+  }
+}
+
+// The run that ended this tick, its last update done: its record goes to the writer, which appends
+// and syncs it before the run counts as durable. Bounded: a CRC and a copy of the record.
+static void journal_end(fw_loop_t* L) {
+  if (!L->jend_pending) {
+    return;
+  }
+  L->jend_pending = false;
+  L->jrun.n = L->jrun.learned ? L->jn : 0U;
+  const size_t n = L->jfull ? 0U : fw_journal_finish(L->jrec, L->jrec_cap, &L->jrun);
+  // A record that cannot be written (n == 0) is handed over as too large: the writer counts it
+  // skipped, and the run becomes durable with the checkpoint that covers it.
+  (void)fw_ckpt_writer_journal_submit(L->out.checkpoints, L->jrec, n > 0U ? n : SIZE_MAX, L->jrun.run_id);
+  L->jn = 0;
+  L->jfull = false;
 }
 
 bool fw_learning_idle(const fw_loop_t* L) { return learn_idle(L->agent) && L->learn_stage == FW_LEARN_IDLE; }
@@ -274,6 +462,7 @@ static bool learn_pending(fw_loop_t* L) {
   if (!learn_update(L->agent, &e)) {
     return false;
   }
+  journal_transition(L, &e);
   fw_out_experience(L, &e);
   return true;
 }
@@ -374,7 +563,9 @@ static void between_runs_slice(fw_loop_t* L) {
 }
 
 void fw_learning_after_command(fw_loop_t* L) {
-  if (learn_pending(L) && !learn_between_runs_due(L->agent)) {
+  const bool updated = learn_pending(L);
+  journal_end(L);
+  if (updated && !learn_between_runs_due(L->agent)) {
     return;
   }
   between_runs_slice(L);
@@ -382,9 +573,12 @@ void fw_learning_after_command(fw_loop_t* L) {
 
 void fw_learning_finish_now(fw_loop_t* L) {
   learn_experience_t e;
-  if (learn_finish_now(L->agent, &e)) {
+  if (learn_update(L->agent, &e)) {
+    journal_transition(L, &e);
     fw_out_experience(L, &e);
   }
+  journal_end(L);
+  (void)learn_finish_now(L->agent, &e);  // the replay (the queued update is done)
   if (L->learn_stage == FW_LEARN_SAVE && L->save_handle >= 0) {
     // A slice-wise save was under way: finish it at once.
     (void)save_step(L, UINT32_MAX);

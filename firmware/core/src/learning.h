@@ -12,8 +12,9 @@ void fw_learning_free(fw_loop_t* L);
 /// After the command: the queued step's update (or prediction) and its experience message, and a
 /// slice of between-run work (the framework's replay, then the checkpoint).
 void fw_learning_after_command(fw_loop_t* L);
-/// A training run ended (its last transition is queued): replay and checkpoint follow.
-void fw_learning_run_ended(fw_loop_t* L);
+/// A run ended (its last transition is queued): its reports wait until its journal record (sent
+/// after this tick's update) or a checkpoint is on disk; a training run's replay and checkpoint follow.
+void fw_learning_run_ended(fw_loop_t* L, const learn_run_end_t* e);
 /// True when no between-run work is left (a run may start).
 bool fw_learning_idle(const fw_loop_t* L);
 /// Finishes all between-run work at once (shutdown; not for the tick): the replay (at most

@@ -16,6 +16,7 @@
 #include "run.h"
 #include "fw/config_task.h"
 #include "fw/prefault.h"
+#include "pi_mutex.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -75,6 +76,7 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
     return NULL;
   }
   L->save_handle = -1;
+  L->held_run = -1;
   // The effective configuration as text, once, for B21R_CONFIG.
   size_t text_len = 0;
   FILE* text = open_memstream(&L->config_text, &text_len);
@@ -104,7 +106,7 @@ fw_loop_t* fw_loop_create(const fw_config_t* cfg, const fw_io_t* io, const fw_lo
   L->bump.node = (uint8_t)cfg->can_node_bumpers;
   L->bump_limit_ticks = fw_config_ticks(cfg, cfg->can_bumper_timeout_s);
 
-  pthread_mutex_init(&L->mbox_mu, NULL);
+  fw_pi_mutex_init(&L->mbox_mu);  // shared with the LCM receive thread
   atomic_init(&L->signal_number, 0);
 
   const fw_safety_config_t sc = {.lockstep = cfg->lockstep,
@@ -136,6 +138,7 @@ static __attribute__((noinline)) void prefault_stack(void) {
 void fw_loop_prefault(fw_loop_t* L) {
   fw_prefault(L, sizeof *L);
   fw_prefault(L->agent_storage, L->agent_bytes);
+  fw_prefault(L->jrec, L->jrec_cap);
   if (L->out.queue != NULL) {
     fw_pubq_prefault(L->out.queue);
   }
@@ -407,7 +410,7 @@ static void publish(fw_loop_t* L) {
     L->status_countdown = L->cfg.status_period_ticks;
     L->status_now = false;
   }
-  fw_out_release_lines(L, false);
+  fw_out_release_reports(L, false);
   fw_out_notify(L);
 }
 
@@ -598,7 +601,7 @@ int fw_loop_shutdown(fw_loop_t* L) {
       rc = -1;
     }
   }
-  fw_out_release_lines(L, true);
+  fw_out_release_reports(L, true);
   fw_out_notify(L);
   return rc;
 }

@@ -14,6 +14,7 @@
 #ifndef FW_LOOP_STATE_H
 #define FW_LOOP_STATE_H
 
+#include "fw/journal.h"
 #include "fw/loop.h"
 #include "fw/safety.h"
 #include "fw/timing.h"
@@ -70,8 +71,21 @@ typedef enum fw_learn_stage {
   FW_LEARN_SAVE = 2,     ///< serialising the learned state into the checkpoint writer, in slices
 } fw_learn_stage_t;
 
-/// Progress lines waiting for the checkpoint of the run they report (outputs.c).
-#define FW_HELD_LINES 8
+/// Reports that wait until their run is on disk (outputs.c): B21R_RUN, B21R_EVAL, progress lines.
+#define FW_HELD_REPORTS 64
+
+typedef struct fw_held_report {
+  int32_t run_id;  // released once every run up to it is durable (fw_ckpt_writer_durable_run)
+  int32_t kind;    // FW_MSG_RUN, FW_MSG_EVAL or FW_MSG_TEXT
+  union {
+    struct {
+      b21r_run_t msg;
+      learn_schedule_progress_t progress;  // the schedule after the run
+    } run;
+    learn_eval_block_t eval;
+    char line[FW_TEXT_MAX];
+  } u;
+} fw_held_report_t;
 
 struct fw_loop {
   fw_config_t cfg;
@@ -101,6 +115,17 @@ struct fw_loop {
   size_t save_payload_cap;
   size_t save_meta_size;
   int64_t learn_ticks;         // ticks that did between-run work (replay or checkpoint slices)
+
+  // The journal of finished runs (fw/journal.h): the record of the run under way (its learned
+  // transitions) or of the run that ended this tick, submitted after the tick's last update.
+  uint8_t* jrec;               // owned; jrec_cap bytes (pre-faulted with rt_prefault)
+  size_t jrec_cap;
+  uint32_t jn;                 // transitions in jrec
+  bool jfull;                  // more transitions than fit: the run waits for its checkpoint
+  bool jend_pending;           // a run ended: its record goes out after this tick's update
+  fw_journal_run_t jrun;       // its fields
+  bool reports_wait;           // checkpoints are written: reports wait until their run is on disk
+  size_t journal_keep;         // bytes of the journal that load learned again (kept and appended to)
 
   // Laser.
   lms_scan_t scan_raw;
@@ -227,12 +252,14 @@ struct fw_loop {
   int64_t checkpoints_submitted;
   int64_t checkpoints_skipped;
   bool policy_fault;           // this tick's learned policy gave a non-finite action (stop, report)
-  // A finished training run's progress line (and the lines after it) wait until its checkpoint
-  // is on disk: a line on the screen means the run survives a kill.
-  char held_lines[FW_HELD_LINES][FW_TEXT_MAX];
-  uint32_t n_held_lines;
-  bool lines_holding;
-  uint64_t lines_release_at;   // writer's written + failed + superseded that releases them (0: not yet known)
+  // A run's reports wait until the run is on disk (its journal record, or a checkpoint): a run
+  // reported done survives a kill. Lines logged meanwhile keep their place behind them.
+  fw_held_report_t held[FW_HELD_REPORTS];
+  uint32_t held_head;
+  uint32_t held_n;
+  int32_t held_run;            // the newest run whose reports are held (-1: none)
+  int64_t reports_early;       // reports released before their run was durable (queue full)
+  learn_schedule_progress_t reported_progress;  // the schedule as the released reports tell it
   char* config_text;           // the effective configuration (fw_config_print), for B21R_CONFIG
   int64_t pace_origin_us;      // lockstep_realtime_factor: monotonic time of pacing tick 0
   int64_t pace_ticks;

@@ -31,43 +31,41 @@ static void emit_line(fw_loop_t* L, int stream, const char* line) {
   fw_out_notify(L);
 }
 
+static void release_one(fw_loop_t* L);
+
+// Every run up to this id is on disk (no checkpoints: every run, there is nothing to wait for).
+static int32_t durable_run(fw_loop_t* L) {
+  return L->reports_wait ? fw_ckpt_writer_durable_run(L->out.checkpoints) : INT32_MAX;
+}
+
+// Reports wait while a run that ended is not on disk yet, and behind any report that waits.
+static bool holding(fw_loop_t* L) { return L->held_n > 0U || L->held_run > durable_run(L); }
+
+// A report into the queue (when it is full the oldest goes out early, counted).
+static fw_held_report_t* hold(fw_loop_t* L, int32_t kind) {
+  if (L->held_n == FW_HELD_REPORTS) {
+    L->reports_early++;
+    release_one(L);
+  }
+  fw_held_report_t* h = &L->held[(L->held_head + L->held_n) % FW_HELD_REPORTS];
+  L->held_n++;
+  h->run_id = L->held_run;
+  h->kind = kind;
+  return h;
+}
+
 void fw_loop_log(fw_loop_t* L, int stream, const char* format, ...) {
   char line[FW_TEXT_MAX];
   va_list ap;
   va_start(ap, format);
   (void)vsnprintf(line, sizeof line, format, ap);
   va_end(ap);
-  if (stream == 1 && L->lines_holding) {
-    // Progress lines keep their order behind a line that waits for its checkpoint.
-    if (L->n_held_lines == FW_HELD_LINES) {
-      fw_out_release_lines(L, true);
-    } else {
-      memcpy(L->held_lines[L->n_held_lines++], line, sizeof line);
-      return;
-    }
-  }
-  emit_line(L, stream, line);
-}
-
-void fw_out_release_lines(fw_loop_t* L, bool force) {
-  if (!L->lines_holding) {
+  if (stream == 1 && holding(L)) {
+    // Progress lines keep their order behind the reports of a run that is not on disk yet.
+    memcpy(hold(L, FW_MSG_TEXT)->u.line, line, sizeof line);
     return;
   }
-  if (!force) {
-    if (L->lines_release_at == 0 || L->out.checkpoints == NULL) {
-      return;
-    }
-    const fw_ckpt_counters_t c = fw_ckpt_writer_counters(L->out.checkpoints);
-    if (c.written + c.failed + c.superseded < L->lines_release_at) {
-      return;
-    }
-  }
-  L->lines_holding = false;
-  L->lines_release_at = 0;
-  for (uint32_t i = 0; i < L->n_held_lines; ++i) {
-    emit_line(L, 1, L->held_lines[i]);
-  }
-  L->n_held_lines = 0;
+  emit_line(L, stream, line);
 }
 
 void fw_out_experience(fw_loop_t* L, const learn_experience_t* step) {
@@ -146,7 +144,7 @@ void fw_out_scan(fw_loop_t* L) {
   fw_pubq_commit(L->out.queue);
 }
 
-void fw_out_eval(fw_loop_t* L, const learn_eval_block_t* b) {
+static void emit_eval(fw_loop_t* L, const learn_eval_block_t* b) {
   if (L->out.queue == NULL) {
     return;
   }
@@ -170,6 +168,14 @@ void fw_out_eval(fw_loop_t* L, const learn_eval_block_t* b) {
   e->mean_steps = b->mean_steps;
   e->ci95_halfwidth = b->ci95_halfwidth;
   fw_pubq_commit(L->out.queue);
+}
+
+void fw_out_eval(fw_loop_t* L, const learn_eval_block_t* b) {
+  if (holding(L)) {
+    hold(L, FW_MSG_EVAL)->u.eval = *b;
+    return;
+  }
+  emit_eval(L, b);
 }
 
 int8_t fw_out_status_mode(const fw_loop_t* L) {
@@ -196,8 +202,9 @@ void fw_out_status(fw_loop_t* L) {
   memcpy(m->u.status.detail, L->safety.detail, sizeof m->u.status.detail);
   s->run_id = learn_run_id(L->agent);
   s->step_id = learn_run_actions(L->agent);
-  s->training_runs = learn_schedule(L->agent)->p.training_runs;
-  s->eval_blocks = learn_schedule(L->agent)->p.eval_blocks;
+  // The runs reported so far (those on disk): a run counted here survives a kill.
+  s->training_runs = L->reported_progress.training_runs;
+  s->eval_blocks = L->reported_progress.eval_blocks;
   const fw_timing_summary_t t = fw_timing_summary(&L->timing);
   s->tick_p50_us = t.p50_us;
   s->tick_p99_us = t.p99_us;
@@ -296,6 +303,18 @@ void fw_out_config(fw_loop_t* L) {
   fw_out_notify(L);
 }
 
+static void emit_run(fw_loop_t* L, const b21r_run_t* run, const learn_schedule_progress_t* progress) {
+  L->reported_progress = *progress;
+  if (L->out.queue == NULL) {
+    return;
+  }
+  fw_msg_t* m = fw_pubq_reserve(L->out.queue, FW_MSG_RUN);
+  if (m != NULL) {
+    m->u.run = *run;
+    fw_pubq_commit(L->out.queue);
+  }
+}
+
 void fw_out_run_end(fw_loop_t* L) {
   if (!L->run_end_ready) {
     return;
@@ -303,12 +322,32 @@ void fw_out_run_end(fw_loop_t* L) {
   L->run_end_ready = false;
   // Every experience of the run has been produced by now (the last one right after the command).
   L->run_end.experiences = (int32_t)(L->exp_seq - L->run_end.first_seq);
-  if (L->out.queue == NULL) {
+  const learn_schedule_progress_t* progress = &learn_schedule(L->agent)->p;
+  if (holding(L)) {
+    fw_held_report_t* h = hold(L, FW_MSG_RUN);
+    h->u.run.msg = L->run_end;
+    h->u.run.progress = *progress;
     return;
   }
-  fw_msg_t* m = fw_pubq_reserve(L->out.queue, FW_MSG_RUN);
-  if (m != NULL) {
-    m->u.run = L->run_end;
-    fw_pubq_commit(L->out.queue);
+  emit_run(L, &L->run_end, progress);
+}
+
+static void release_one(fw_loop_t* L) {
+  const fw_held_report_t* h = &L->held[L->held_head];
+  L->held_head = (L->held_head + 1U) % FW_HELD_REPORTS;
+  L->held_n--;
+  if (h->kind == FW_MSG_RUN) {
+    emit_run(L, &h->u.run.msg, &h->u.run.progress);
+  } else if (h->kind == FW_MSG_EVAL) {
+    emit_eval(L, &h->u.eval);
+  } else {
+    emit_line(L, 1, h->u.line);
+  }
+}
+
+void fw_out_release_reports(fw_loop_t* L, bool force) {
+  const int32_t durable = durable_run(L);
+  while (L->held_n > 0U && (force || L->held[L->held_head].run_id <= durable)) {
+    release_one(L);
   }
 }

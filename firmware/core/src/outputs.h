@@ -17,7 +17,7 @@ void fw_out_config(fw_loop_t* L);
 void fw_out_run_end(fw_loop_t* L);
 void fw_out_notify(fw_loop_t* L);
 int8_t fw_out_status_mode(const fw_loop_t* L);
-/// Emits the held progress lines once the checkpoint they wait for is written (force: now).
-void fw_out_release_lines(fw_loop_t* L, bool force);
+/// Publishes the held reports whose runs are on disk (force: all of them now).
+void fw_out_release_reports(fw_loop_t* L, bool force);
 
 #endif  // FW_OUTPUTS_H

@@ -176,11 +176,10 @@ static void finish_run(fw_loop_t* L, const learn_run_end_t* e, int8_t end_reason
     L->last_run_steps = e->steps;
     L->last_run_goal = e->goal;
   }
-  if (e->learning) {
-    // The replay of the run and the checkpoint run after this tick's command, in slices; the
-    // run's progress line waits until its checkpoint is written (see learning.c).
-    fw_learning_run_ended(L);
-  }
+  // The run's journal record goes out after this tick's update, and its reports (this record,
+  // its progress line, the block it completes) wait until the run is on disk; a training run's
+  // replay and checkpoint follow in slices (learning.c).
+  fw_learning_run_ended(L, e);
   if (L->cfg.progress) {
     const learn_learner_stats_t ls = learn_learner_stats(learn_get_learner(L->agent));
     fw_loop_log(L, 1, "run %4d  phase %d  %-13s %-9s %4d steps  (%s)  store %u/%u", e->run_id, e->plan.phase,

@@ -4,6 +4,7 @@
 #include <drivers/serial.h>
 
 #include "fd_wait.h"
+#include "serial_link.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -149,6 +150,15 @@ int drv_serial_set_baud(drv_serial_t* port, uint32_t baud) {
   if (port == NULL || port->fd < 0 || !drv_serial_baud_supported(baud)) {
     return -EINVAL;
   }
+  if (port->link != NULL) {
+    // The helper thread drains the output and changes the rate, after the requests before it.
+    const int rc = drv_serial_link_set_baud(port->link, baud);
+    if (rc == 0) {
+      port->baud = baud;
+      port->counters.baud_changes++;
+    }
+    return rc;
+  }
   struct termios tio;
   (void)tcdrain(port->fd);
   if (tcgetattr(port->fd, &tio) != 0) {
@@ -176,6 +186,18 @@ void drv_serial_set_pacing(drv_serial_t* port, uint32_t chunk_bytes, uint32_t ch
 ssize_t drv_serial_read(drv_serial_t* port, uint8_t* buf, size_t cap) {
   if (port == NULL || port->fd < 0 || buf == NULL) {
     return -EINVAL;
+  }
+  if (port->link != NULL) {
+    const ssize_t n = drv_serial_link_take(port->link, &port->link_flushes, buf, cap);
+    if (n > 0) {
+      port->counters.bytes_read += (uint64_t)n;
+    } else if (n < 0) {
+      if (port->last_error == 0) {
+        port->counters.read_errors++;
+      }
+      port->last_error = (int)n;
+    }
+    return n;
   }
   for (;;) {
     const ssize_t n = read(port->fd, buf, cap);
@@ -243,6 +265,16 @@ static int write_some(drv_serial_t* port, const uint8_t* data, size_t n, const s
 int drv_serial_write(drv_serial_t* port, const uint8_t* data, size_t n, int timeout_ms) {
   if (port == NULL || port->fd < 0 || (data == NULL && n > 0U)) {
     return -EINVAL;
+  }
+  if (port->link != NULL) {
+    // Written by the helper thread, with this port's pacing, after the requests before it.
+    const int rc = drv_serial_link_write(port->link, data, n, port->chunk_gap_us, port->byte_gap_us);
+    if (rc == 0) {
+      port->counters.bytes_written += (uint64_t)n;
+    } else {
+      port->counters.write_errors++;
+    }
+    return rc;
   }
   struct timespec end;
   clock_gettime(CLOCK_MONOTONIC, &end);
@@ -343,8 +375,8 @@ int drv_serial_flush(drv_serial_t* port, uint64_t now_us) {
 bool drv_serial_out_pending(const drv_serial_t* port) { return port != NULL && port->out.packets > 0U; }
 
 int drv_serial_wait_readable(drv_serial_t* port, int timeout_ms) {
-  if (port == NULL || port->fd < 0) {
-    return -EINVAL;
+  if (port == NULL || port->fd < 0 || port->link != NULL) {
+    return -EINVAL;  // link mode: the owner is notified of input instead
   }
   return drv_fd_wait_readable(port->fd, timeout_ms);
 }
@@ -353,6 +385,9 @@ int drv_serial_flush_input(drv_serial_t* port) {
   if (port == NULL || port->fd < 0) {
     return -EINVAL;
   }
+  if (port->link != NULL) {
+    return drv_serial_link_flush_input(port->link, &port->link_flushes);
+  }
   return tcflush(port->fd, TCIFLUSH) == 0 ? 0 : -errno;
 }
 
@@ -360,10 +395,11 @@ void drv_serial_close(drv_serial_t* port) {
   if (port == NULL) {
     return;
   }
-  if (port->fd >= 0 && port->owns_fd) {
+  if (port->fd >= 0 && port->owns_fd && port->link == NULL) {
     close(port->fd);
   }
   port->fd = -1;
   port->owns_fd = false;
+  port->link = NULL;  // link mode: the owner asks the helper thread to close (drv_serial_link_close)
   memset(&port->out, 0, sizeof port->out);
 }

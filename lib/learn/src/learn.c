@@ -702,6 +702,25 @@ void learn_resume(learn_t* a, const learn_schedule_progress_t* progress, int32_t
   a->plan = learn_schedule_next(&a->sched);
 }
 
+bool learn_resume_run(learn_t* a, const learn_plan_t* plan, int32_t steps, bool goal, bool aborted,
+                      learn_run_end_t* end) {
+  const learn_plan_t next = learn_schedule_next(&a->sched);
+  if (a->running || plan->kind != next.kind || plan->phase != next.phase ||
+      (next.kind == LEARN_RUN_EVAL && plan->eval_index != next.eval_index) ||
+      (next.kind == LEARN_RUN_TRAINING && plan->training_index != next.training_index)) {
+    return false;
+  }
+  learn_begin_run(a);
+  a->actions_taken = steps;
+  learn_run_end_t e;
+  end_run(a, goal, aborted, &e);
+  a->replay_pending = false;  // the caller has done the run's learning
+  if (end != NULL) {
+    *end = e;
+  }
+  return true;
+}
+
 learn_learner_t* learn_get_learner(learn_t* a) { return &a->learner; }
 
 actor_t* learn_get_actor(learn_t* a) { return a->actor; }

@@ -83,6 +83,16 @@ void learn_schedule_init(learn_schedule_t* s, const learn_schedule_config_t* cfg
     begin_block(s);
     return;
   }
+  // Saved after the training run that made a block due (progress is saved between training runs,
+  // never inside a block): the block comes first, as it would have without the restart, and a
+  // phase-one schedule that has used up its runs switches after it.
+  const int32_t blocks_due = (s->cfg.eval_at_start ? 1 : 0) + s->p.training_runs / s->cfg.eval_every;
+  if (s->p.training_runs > 0 && s->p.training_runs % s->cfg.eval_every == 0 && s->p.eval_blocks < blocks_due) {
+    s->switch_pending = s->p.phase == 1 && s->cfg.switch_mode != LEARN_SWITCH_OPERATOR &&
+                        s->p.phase_one_runs >= s->cfg.phase_one_runs;
+    begin_block(s);
+    return;
+  }
   // A phase-one schedule that has used up its runs switches on resume (RUNS mode).
   if (s->p.phase == 1 && s->cfg.switch_mode != LEARN_SWITCH_OPERATOR && s->p.phase_one_runs >= s->cfg.phase_one_runs) {
     s->p.phase = 2;

@@ -100,6 +100,60 @@ def run_controller(exe, sim, workdir, name, settings, timeout):
     return rc, text, os.path.join(workdir, name + ".lcmlog")
 
 
+STATUS_LCM = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "..", "lib", "msgs",
+                          "status_t.lcm")
+
+
+def monotonic_fields(path=STATUS_LCM):
+    """The fields of status_t that its definition calls monotonic: those of a section whose
+    heading comment says so (up to the next comment line or blank line), those whose own comment
+    says so, and the maxima "since start"."""
+    fields = []
+    section = False
+    heading = False  # the previous line was a comment: a heading may span lines
+    with open(path) as f:
+        for raw in f:
+            line = raw.strip()
+            if not line:
+                section = heading = False
+                continue
+            if line.startswith("//"):
+                section = (section and heading) or "monotonic" in line
+                heading = True
+                continue
+            heading = False
+            parts = line.split("//", 1)
+            decl = parts[0].split()
+            if len(decl) != 2 or not decl[1].endswith(";") or decl[0] not in ("int32_t", "int64_t"):
+                continue
+            comment = parts[1] if len(parts) > 1 else ""
+            if section or "(monotonic)" in comment or "since start" in comment:
+                fields.append(decl[1][:-1])
+    return fields
+
+
+def check_monotonic(statuses, what):
+    """Fails on the first monotonic counter that went back between two B21R_STATUS messages."""
+    fields = monotonic_fields()
+    if len(fields) < 40:
+        fail("only %d monotonic fields found in %s" % (len(fields), STATUS_LCM))
+    for i in range(1, len(statuses)):
+        for name in fields:
+            a, b = getattr(statuses[i - 1], name), getattr(statuses[i], name)
+            if b < a:
+                fail("%s: B21R_STATUS %s went back from %s to %s (message %d of %d)" %
+                            (what, name, a, b, i, len(statuses)))
+    return fields
+
+
+def stop_all(procs):
+    """Kills the processes of a list that still run (a test's clean-up after a failure)."""
+    for p in procs:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+
+
 def workdir(name):
     base = os.environ.get("B21R_TEST_TMP", tempfile.gettempdir())
     d = tempfile.mkdtemp(prefix="b21r-%s-" % name, dir=base)

@@ -26,7 +26,7 @@ def start_stress(seconds, log_path):
     if exe is None:
         fwtest.fail("stress-ng is not installed (tools/setup.sh installs it from tools/debian-packages.txt)")
     log = open(log_path, "w")
-    return subprocess.Popen([exe, "--cpu", str(os.cpu_count()), "--io", "1", "--vm", "1", "--vm-bytes", "256M",
+    return subprocess.Popen([exe, "--cpu", str(os.cpu_count()), "--io", "1", "--vm", "1", "--vm-bytes", "512M",
                              "--timeout", "%ds" % seconds, "--metrics-brief"], stdout=log, stderr=subprocess.STDOUT)
 
 
@@ -50,3 +50,29 @@ def rss_kib(pid):
     except OSError:
         pass
     return -1
+
+
+def lateness_us(starts_us, period_us):
+    """The wake-up lateness of every tick from its start times A_k [us, the controller's monotonic
+    clock, as B21R_POSE.utime carries them in real time]: A_k minus its scheduled start S_0 + n P.
+    The schedule's origin S_0 is not in the log: most ticks start within a fraction of a
+    millisecond of their schedule, so their phases (A_k mod P) cluster; the origin is the earliest
+    phase up to 2 ms before the end of the densest millisecond. Valid for latenesses up to P minus 2 ms (a
+    tick a whole period late is a missed period, which the controller counts itself). Returns the
+    latenesses in tick order."""
+    if not starts_us:
+        return []
+    bins = [0] * 100
+    for a in starts_us:
+        bins[(a % period_us) * 100 // period_us] += 1
+    mode = ((max(range(100), key=lambda k: bins[k]) + 1) * period_us) // 100  # the end of the densest bin
+    back = max(d for d in ((mode - a % period_us) % period_us for a in starts_us) if d <= 2000)
+    origin = (mode - back) % period_us
+    return [(a - origin) % period_us for a in starts_us]
+
+
+def percentile(values, q):
+    """Nearest-rank percentile (q in [0, 100]) of a non-empty list."""
+    s = sorted(values)
+    k = max(0, min(len(s) - 1, int(-(-q * len(s) // 100)) - 1))
+    return s[k]

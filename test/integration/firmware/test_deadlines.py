@@ -9,6 +9,9 @@ longest gap between ticks and the resident memory before and after the learner's
 The emulator stands in for devices that do not share the CPU: it runs under SCHED_FIFO too, below
 the controller. Needs CAP_SYS_NICE or RLIMIT_RTPRIO >= 60 (and CAP_IPC_LOCK or a large enough
 RLIMIT_MEMLOCK unless B21R_RT_LOCK_MEMORY=false).
+Also prints the lateness of every tick's start over the whole run (p50, p99, max; from the
+start times its B21R_POSE messages carry), which the benchmark firmware.deadlines_bench reports
+for 10 minutes.
 Environment: B21R_RT_SECONDS (default 600) the length of the run; B21R_RT_LOCK_MEMORY
 (default true).
 usage: test_deadlines.py CONTROLLER SIM WORLD"""
@@ -66,7 +69,11 @@ def main():
         sim.close()
         rtload.stop(stress)
 
-    statuses = [m for _, _, m in fwtest.read_log(os.path.join(d, "rt.lcmlog"), {"B21R_STATUS"})]
+    log = fwtest.read_log(os.path.join(d, "rt.lcmlog"), {"B21R_STATUS", "B21R_POSE", "B21R_RUN"})
+    statuses = [m for _, c, m in log if c == "B21R_STATUS"]
+    # Every tick publishes its pose stamped with the tick's start (real time: the monotonic clock).
+    starts = [m.utime for _, c, m in log if c == "B21R_POSE"]
+    run_ends = sum(1 for _, c, _ in log if c == "B21R_RUN")
     running = [s for s in statuses if s.mode != status_t.MODE_DONE]
     if not running:
         fwtest.fail("no STATUS in the log")
@@ -78,9 +85,16 @@ def main():
             false_stops[FALSE_STOPS[s.stop_reason]] = false_stops.get(FALSE_STOPS[s.stop_reason], 0) + 1
         prev = s.stop_reason
     first_fill = next((s.store_fill for s in running if s.utime > running[0].utime + 9e6), running[0].store_fill)
-    fwtest.note("real time %d s at 10 Hz under stress-ng (--cpu %d --io 1 --vm 1 --vm-bytes 256M); controller "
+    fwtest.note("real time %d s at 10 Hz under stress-ng (--cpu %d --io 1 --vm 1 --vm-bytes 512M); controller "
                 "SCHED_FIFO %d on CPU %d, rt_lock_memory=%s, rt_prefault=true" %
                 (seconds, os.cpu_count(), PRIORITY, cpu, lock))
+    late = rtload.lateness_us(starts, 100000)
+    if late:
+        fwtest.note("  tick start lateness over all %d ticks: p50 %.2f ms, p99 %.2f ms, max %.2f ms; starts more "
+                    "than 10 ms late %d, more than 2 ms late %d; %d run ends" %
+                    (len(late), rtload.percentile(late, 50) / 1e3, rtload.percentile(late, 99) / 1e3,
+                     max(late) / 1e3, sum(1 for x in late if x > 10000), sum(1 for x in late if x > 2000),
+                     run_ends))
     fwtest.note("  ticks %d, missed periods %d, late starts (> 10 ms) %d, overruns %d" %
                 (last.ticks, last.missed_periods, last.late_starts, last.tick_overruns))
     fwtest.note("  wake-up lateness: max %d us (p99 of the last %d ticks %d us); longest gap between tick "

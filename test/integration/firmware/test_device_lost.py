@@ -12,6 +12,9 @@ Checks, per base:
 - like udev, the links go away with the device (they dangle until the new emulator is up): a
   pseudo-terminal number the kernel hands to another program meanwhile is never opened (other
   tests running in parallel would lose their data to this controller);
+- every B21R_STATUS counter that the message definition calls monotonic (lib/msgs/status_t.lcm)
+  never goes back over the loss and the reopen; corrupted bytes on the lines before the loss make
+  the laser's and the base's error counters non-zero first;
 - with device_lost_action = exit the controller exits with status 6 after the loss.
 Usage: test_device_lost.py <b21r-controller> <b21r-sim> <world> <rflex|canopen>
 """
@@ -69,6 +72,7 @@ def main():
     laser_link = os.path.join(d, "laser.tty")
     base_link = os.path.join(d, "base.tty")
     ok = False
+    procs = []
     sim = start_sim(sim_exe, world, d, base, laser_link, base_link)
     try:
         settings = {"lockstep": "false", "phase_one_runs": 1000, "eval_every_runs": 1000, "hedger_replay": "false",
@@ -79,8 +83,14 @@ def main():
         err_path = os.path.join(d, "run.controller.log")
         with open(err_path, "w") as err, open(os.path.join(d, "run.progress.txt"), "w") as out:
             proc = subprocess.Popen(fwtest.controller_cmd(controller, sim, d, "run", settings), stdout=out, stderr=err)
+            procs.append(proc)
         off = wait_for(err_path, "starting devices", 0, 30, proc)
         time.sleep(2.0)  # runs under way
+        # Some corrupted bytes on the lines: the error counters count before the loss.
+        sim.control("fault corrupt 0.002")
+        time.sleep(1.5)
+        sim.control("fault clear")
+        time.sleep(1.5)
         unplug(d, laser_link, base_link)
         sim.proc.kill()
         sim.proc.wait()
@@ -119,6 +129,22 @@ def main():
         if not seen or "lost" not in seen[0]:
             fwtest.fail("B21R_STATUS never reported STOP_DEVICE_LOST with its detail")
         fwtest.note("STATUS stop_reason %d: %s" % (STOP_DEVICE_LOST, seen[0]))
+        statuses = [s for _, _, s in read_log(os.path.join(d, "run.lcmlog"), {"B21R_STATUS"})]
+        lost_at = next(i for i, s in enumerate(statuses) if s.stop_reason == STOP_DEVICE_LOST)
+        before = statuses[lost_at]
+        if before.laser_crc_errors + before.laser_bytes_dropped == 0:
+            fwtest.fail("no laser error counted before the loss: the reopen check would prove nothing")
+        if base == "rflex" and before.base_checksum_errors + before.base_bytes_dropped == 0:
+            fwtest.fail("no base error counted before the loss: the reopen check would prove nothing")
+        after = [s for s in statuses[lost_at:] if s.stop_reason != STOP_DEVICE_LOST]
+        if not after:
+            fwtest.fail("no B21R_STATUS after the reopen")
+        fields = fwtest.check_monotonic(statuses, "device reopened")
+        fwtest.note("%d monotonic counters never went back over %d STATUS messages (laser CRC errors %d, bytes "
+                    "dropped %d, restarts %d before the loss; %d, %d, %d at the end)" %
+                    (len(fields), len(statuses), before.laser_crc_errors, before.laser_bytes_dropped,
+                     before.laser_restarts, statuses[-1].laser_crc_errors, statuses[-1].laser_bytes_dropped,
+                     statuses[-1].laser_restarts))
 
         # device_lost_action = exit: the documented status after the loss.
         settings["device_lost_action"] = "exit"
@@ -126,6 +152,7 @@ def main():
         with open(err2, "w") as err, open(os.path.join(d, "exit.progress.txt"), "w") as out:
             proc = subprocess.Popen(fwtest.controller_cmd(controller, sim, d, "exit", settings), stdout=out,
                                     stderr=err)
+            procs.append(proc)
         wait_for(err2, "starting devices", 0, 30, proc)
         time.sleep(2.0)
         unplug(d, laser_link, base_link)
@@ -138,6 +165,9 @@ def main():
         fwtest.note("device_lost_action = exit -> exit status %d" % rc)
         ok = True
     finally:
+        # A controller left running after a failure would reopen its device paths, which the
+        # kernel hands to other tests' emulators (pseudo-terminal numbers are reused).
+        fwtest.stop_all(procs)
         sim.close()
         fwtest.cleanup(d, ok)
     print("PASS")

@@ -9,6 +9,8 @@ with its reason and detail, and the controller recovers from the transient ones:
 - canopen: laser silence, drive fault (EMCY + statusword), bumper (the CiA 401 bump-panel node's
   TPDO1, the same `fault bumper 3` as on rFLEX), the bump-panel node's silence (a base fault that
   names the node), SIGTERM.
+Under `fault latency 200` the emulator does not spin (its CPU use over 2 s stays below 20 % of a
+core). No STATUS counter that the message definition calls monotonic goes back over the stops.
 usage: test_safety.py CONTROLLER SIM WORLD rflex|canopen"""
 import os
 import signal
@@ -40,10 +42,18 @@ def wait_for(path, text, start, timeout, proc=None):
     return start
 
 
+def cpu_seconds(pid):
+    """User + system CPU time of a process [s] (/proc/<pid>/stat)."""
+    with open("/proc/%d/stat" % pid) as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def main():
     controller, sim_exe, world, base = sys.argv[1:5]
     d = fwtest.workdir("safety-" + base)
     ok = False
+    procs = []
     sim = fwtest.Sim(sim_exe, world, d, "sim", base=base, seed=2, lockstep=False)
     try:
         ckpt = os.path.join(d, "hedger.ckpt")
@@ -52,6 +62,7 @@ def main():
         err_path = os.path.join(d, "run.controller.log")
         with open(err_path, "w") as err, open(os.path.join(d, "run.progress.txt"), "w") as out:
             proc = subprocess.Popen(fwtest.controller_cmd(controller, sim, d, "run", settings), stdout=out, stderr=err)
+            procs.append(proc)
         off = wait_for(err_path, "starting devices", 0, 30, proc)
         time.sleep(1.0)  # the first run is under way
         faults = [("fault laser_drop 1500", "SAFETY STOP (laser silent)", None)]
@@ -72,6 +83,16 @@ def main():
                 sim.control(clear)
             off = wait_for(err_path, "safety stop cleared", off, 60, proc)
             time.sleep(0.5)  # let a run start again
+        # Output held back by `fault latency` does not make the emulator spin (under SCHED_FIFO a
+        # spinning emulator starves the machine): its CPU use over 2 s stays below a fifth of a core.
+        sim.control("fault latency 200")
+        c0, w0 = cpu_seconds(sim.proc.pid), time.time()
+        time.sleep(2.0)
+        share = (cpu_seconds(sim.proc.pid) - c0) / (time.time() - w0)
+        sim.control("fault clear")
+        fwtest.note("fault latency 200        -> emulator CPU use %.1f %% of a core" % (100 * share))
+        if share > 0.2:
+            fwtest.fail("the emulator spins under fault latency 200 (%.0f %% of a core)" % (100 * share))
         proc.send_signal(signal.SIGTERM)
         rc = proc.wait(60)
         if rc != 128 + signal.SIGTERM:
@@ -84,6 +105,10 @@ def main():
         for _, _, s in read_log(os.path.join(d, "run.lcmlog"), {"B21R_STATUS"}):
             if s.stop_reason != 0 and s.stop_reason not in seen:
                 seen[s.stop_reason] = s.stop_detail
+        statuses = [s for _, _, s in read_log(os.path.join(d, "run.lcmlog"), {"B21R_STATUS"})]
+        fields = fwtest.check_monotonic(statuses, "safety stops")
+        fwtest.note("%d monotonic counters never went back over %d STATUS messages and %d safety stops" %
+                    (len(fields), len(statuses), statuses[-1].safety_stops))
         want = [1, 7] + ([2, 4] if base == "rflex" else [3, 4])
         for r in want:
             if r not in seen or not seen[r]:
@@ -104,6 +129,7 @@ def main():
                                                               "lcm_url": "memq://", "operator_key_file": key,
                                                               "checkpoint_file": ckpt, "phase_one_runs": 1000}),
                                    stdout=out, stderr=err)
+                procs.append(joy)
             wait_for(os.path.join(d, "joy.controller.log"), "resumed from", 0, 30, joy)
             wait_for(os.path.join(d, "joy.controller.log"), "SAFETY STOP (deadman released)", 0, 60, joy)
             fwtest.note("joystick phase one without B21R_TELEOP -> 'SAFETY STOP (deadman released)'")
@@ -113,6 +139,9 @@ def main():
                 fwtest.fail("SIGINT: exit status %d" % rc)
         ok = True
     finally:
+        # A controller left running after a failure would reopen its device paths, which the
+        # kernel hands to other tests' emulators (pseudo-terminal numbers are reused).
+        fwtest.stop_all(procs)
         sim.close()
         fwtest.cleanup(d, ok)
     print("PASS")

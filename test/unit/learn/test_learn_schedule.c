@@ -218,6 +218,32 @@ static void test_schedule_resume_continues(void** state) {
   run_block(&s, 10, true, &b);
   assert_int_equal(b.block, 8);
   assert_int_equal(b.training_runs, 45);
+  // Saved after the training run that made a block due: the block comes first (it was not run).
+  p.training_runs = 45;
+  p.phase_two_runs = 15;
+  learn_schedule_init(&s, &c, &p);
+  assert_int_equal(learn_schedule_next(&s).kind, LEARN_RUN_EVAL);
+  run_block(&s, 10, true, &b);
+  assert_int_equal(b.block, 8);
+  assert_int_equal(b.training_runs, 45);
+  assert_int_equal(learn_schedule_next(&s).kind, LEARN_RUN_TRAINING);
+  // ... at the end of phase one too: the block in phase one, then the switch.
+  memset(&p, 0, sizeof p);
+  p.phase = 1;
+  p.training_runs = 30;
+  p.phase_one_runs = 30;
+  p.eval_blocks = 5;
+  learn_schedule_init(&s, &c, &p);
+  assert_int_equal(learn_schedule_next(&s).kind, LEARN_RUN_EVAL);
+  assert_int_equal(learn_schedule_next(&s).phase, 1);
+  run_block(&s, 10, true, &b);
+  assert_int_equal(b.phase, 1);
+  assert_int_equal(learn_schedule_next(&s).phase, 2);
+  assert_int_equal(learn_schedule_next(&s).kind, LEARN_RUN_TRAINING);
+  // Its block done, the same boundary resumes into training (phase two).
+  p.eval_blocks = 6;
+  learn_schedule_init(&s, &c, &p);
+  assert_int_equal(learn_schedule_next(&s).kind, LEARN_RUN_TRAINING);
   // An ended schedule resumes into one final block.
   p.phase_two_runs = 35;
   p.training_runs = 65;

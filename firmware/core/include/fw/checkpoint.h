@@ -75,6 +75,9 @@ typedef struct fw_ckpt_counters {
   uint64_t failed;       ///< write attempts that failed (message on stderr)
   uint64_t superseded;   ///< submissions replaced by a newer one before being written
   uint64_t busy;         ///< acquire calls that found no free buffer (checkpoint skipped)
+  uint64_t journal_written;  ///< journal records on disk (fw/journal.h)
+  uint64_t journal_failed;   ///< journal appends that failed (message on stderr)
+  uint64_t journal_skipped;  ///< records not journalled: no free slot, too large, or after a failure
 } fw_ckpt_counters_t;
 
 /// Creates a writer for path with buffers of meta_cap + payload_cap bytes each (allocated here,
@@ -92,7 +95,35 @@ int fw_ckpt_writer_acquire(fw_ckpt_writer_t* w, void** meta, size_t* meta_cap, v
 /// Queues the buffer of handle (from acquire) with the used sizes for writing. Bounded time.
 void fw_ckpt_writer_submit(fw_ckpt_writer_t* w, int handle, size_t meta_size, size_t payload_size);
 
-/// Waits until every submitted checkpoint is on disk (or failed). For shutdown and tests.
+/// As fw_ckpt_writer_submit, for a checkpoint that holds the learned state and progress after
+/// the run covered_run (-1: none): once it is on disk, every run up to it is durable
+/// (fw_ckpt_writer_durable_run) and the journal, whose runs it covers, is emptied.
+void fw_ckpt_writer_submit_run(fw_ckpt_writer_t* w, int handle, size_t meta_size, size_t payload_size,
+                               int32_t covered_run);
+
+/// The journal of finished runs (fw/journal.h) at `<path>.journal`: records appended and synced
+/// (fdatasync) by the writer's thread, in the order of submission together with the checkpoints.
+/// Sets up `slots` record buffers of record_cap bytes each (allocated here, once), opens the
+/// journal (created if absent) keeping its first keep_bytes (the records the caller has resumed
+/// from; the rest, a torn or unused tail, is cut) and sets the run that is durable already (the
+/// resumed one; -1: none). Start-up only. Returns 0, or -1 with a message naming the file and the
+/// cause.
+int fw_ckpt_writer_journal_init(fw_ckpt_writer_t* w, size_t record_cap, uint32_t slots, int32_t durable_run,
+                                size_t keep_bytes, char* err, size_t err_cap);
+
+/// Copies a finished run's record (fw_journal_finish) for appending. Bounded time (a copy of n
+/// bytes), never waits for the disk. Returns 0, or -1 when the journal is not set up, n exceeds
+/// record_cap or no slot is free (counted in journal_skipped: the run becomes durable with the
+/// next checkpoint that covers it).
+int fw_ckpt_writer_journal_submit(fw_ckpt_writer_t* w, const void* record, size_t n, int32_t run_id);
+
+/// The newest run id up to which every run is on disk: appended to the journal in an unbroken
+/// sequence of run ids after a checkpoint, or covered by a checkpoint. Lock-free (the tick reads it
+/// every tick).
+int32_t fw_ckpt_writer_durable_run(fw_ckpt_writer_t* w);
+
+/// Waits until every submitted checkpoint and journal record is on disk (or failed). For
+/// shutdown and tests.
 void fw_ckpt_writer_flush(fw_ckpt_writer_t* w);
 
 /// Snapshot of the counters (thread-safe).

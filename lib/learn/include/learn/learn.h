@@ -344,6 +344,18 @@ int32_t learn_run_id(const learn_t* a);
 /// Resumes from saved progress (a checkpoint): the schedule's and the last run id. O(1).
 void learn_resume(learn_t* a, const learn_schedule_progress_t* progress, int32_t run_id);
 
+/// Resumes one finished (or aborted) run that a journal recorded after the last saved progress:
+/// the run the schedule plans next (learn_plan) gets the next run id and ends as it ended, so
+/// that the schedule counts it exactly as learn_transition / learn_abort_run did (an evaluation
+/// run inside a block included). The run's learning is the caller's: its transitions through
+/// learn_offline_transition and its between-run work through learn_offline_end_run, before this
+/// call; nothing is left due. plan: the run's plan as recorded; steps: the actions it executed.
+/// Returns false (nothing changed) when a run is under way or the plan is not the one the
+/// schedule plans next (the journal does not follow the saved progress). *end (may be NULL) as
+/// learn_transition fills it. O(1) (plus O(eval_starts) when a block completes).
+bool learn_resume_run(learn_t* a, const learn_plan_t* plan, int32_t steps, bool goal, bool aborted,
+                      learn_run_end_t* end);
+
 /// The learner (for checkpoints, predictions and counters). Owned by the agent.
 learn_learner_t* learn_get_learner(learn_t* a);
 const learn_learner_t* learn_get_learner_const(const learn_t* a);

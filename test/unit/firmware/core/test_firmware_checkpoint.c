@@ -1,8 +1,10 @@
 // SPDX-License-Identifier: MIT
 // Checkpoint files: round trip, every kind of damage refused with a "start fresh" hint, kill -9
-// at random instants never leaves a broken file, and the background writer keeps the newest.
+// at random instants never leaves a broken file, and the background writer keeps the newest;
+// journal records round-trip, damage ends the journal, and the writer makes runs durable in order.
 #define _POSIX_C_SOURCE 200809L
 #include "fw/checkpoint.h"
+#include "fw/journal.h"
 
 #include <b21r_test/alloc_counter.h>
 
@@ -333,6 +335,120 @@ static void test_checkpoint_write_failure_names_path(void** state) {
   assert_non_null(strstr(err, "/nonexistent-dir/x.ckpt.tmp"));
 }
 
+// A journal record round-trips every field and transition; a record cut short reads as the end
+// of the journal, a changed byte as damage.
+static void test_journal_record_round_trip_and_damage(void** state) {
+  (void)state;
+  static uint8_t rec[4096];
+  const uint32_t dim = 4;
+  const fw_journal_run_t run = {.run_id = 17, .kind = 0, .phase = 2, .training_index = 9, .eval_index = -1,
+                                .steps = 3, .goal = true, .aborted = false, .learned = true, .state_dim = dim, .n = 3};
+  for (uint32_t i = 0; i < 3; ++i) {
+    fw_journal_transition_t t;
+    memset(&t, 0, sizeof t);
+    for (uint32_t k = 0; k < dim; ++k) {
+      t.s[k] = 0.25 * i + k;
+      t.s_next[k] = -1.5 * i - k;
+    }
+    t.a = 0.1 * i;
+    t.r = -1.0;
+    t.terminal = i == 2;
+    assert_true(fw_journal_put_transition(rec, sizeof rec, dim, i, &t));
+  }
+  const size_t n = fw_journal_finish(rec, sizeof rec, &run);
+  assert_int_equal(n, fw_journal_record_bytes(dim, 3));
+  assert_false(fw_journal_put_transition(rec, n, dim, 3, &(fw_journal_transition_t){0}));  // no room
+  fw_journal_run_t back;
+  const uint8_t* tr = NULL;
+  size_t size = 0;
+  assert_int_equal(fw_journal_next(rec, n, &back, &tr, &size), 1);
+  assert_int_equal(size, n);
+  assert_true(back.run_id == 17 && back.kind == 0 && back.phase == 2 && back.training_index == 9 &&
+              back.eval_index == -1 && back.steps == 3 && back.goal && !back.aborted && back.learned &&
+              back.state_dim == dim && back.n == 3);
+  for (uint32_t i = 0; i < 3; ++i) {
+    fw_journal_transition_t t;
+    fw_journal_get_transition(tr, dim, i, &t);
+    assert_true(t.s[3] == 0.25 * i + 3 && t.s_next[1] == -1.5 * i - 1 && t.a == 0.1 * i && t.r == -1.0);
+    assert_int_equal(t.terminal, i == 2);
+  }
+  for (size_t cut = 0; cut < n; cut += 7) {
+    assert_int_equal(fw_journal_next(rec, cut, &back, &tr, &size), 0);
+  }
+  for (size_t at = 0; at < n; at += 5) {
+    if (at >= 8 && at < 12) {
+      continue;  // the body size: a larger one reads as cut short, checked above
+    }
+    rec[at] ^= 0x10U;
+    const int r = fw_journal_next(rec, n, &back, &tr, &size);
+    rec[at] ^= 0x10U;
+    assert_int_equal(r, -1);
+  }
+}
+
+static long file_size(const char* path) {
+  struct stat st;
+  return stat(path, &st) == 0 ? (long)st.st_size : -1L;
+}
+
+// The writer appends and syncs each run's record in order and reports the run durable; a run
+// missing from the sequence stops the journal until a checkpoint covers it, and a checkpoint that
+// covers the journalled runs empties the file.
+static void test_journal_writer_durable_in_order(void** state) {
+  (void)state;
+  char err[FW_CHECKPOINT_ERR_MAX];
+  char jpath[600];
+  snprintf(jpath, sizeof jpath, "%s.journal", g_path);
+  fw_ckpt_writer_t* w = fw_ckpt_writer_create(g_path, 16, 4096, err, sizeof err);
+  assert_non_null(w);
+  assert_int_equal(fw_ckpt_writer_durable_run(w), -1);
+  assert_int_equal(fw_ckpt_writer_journal_init(w, 1024, 4, 5, 0, err, sizeof err), 0);
+  assert_int_equal(fw_ckpt_writer_durable_run(w), 5);
+  static uint8_t rec[1024];
+  const fw_journal_run_t run = {.run_id = 6, .kind = 1, .phase = 1, .eval_index = 0, .steps = 40, .state_dim = 3};
+  const size_t n = fw_journal_finish(rec, sizeof rec, &run);
+  assert_true(n > 0);
+  assert_int_equal(fw_ckpt_writer_journal_submit(w, rec, n, 6), 0);
+  assert_int_equal(fw_ckpt_writer_journal_submit(w, rec, n, 7), 0);
+  fw_ckpt_writer_flush(w);
+  assert_int_equal(fw_ckpt_writer_durable_run(w), 7);
+  assert_int_equal(file_size(jpath), (long)(2 * n));
+  // Run 8 not journalled (too large): 9 cannot follow it.
+  assert_int_equal(fw_ckpt_writer_journal_submit(w, rec, 2000, 8), -1);
+  assert_int_equal(fw_ckpt_writer_journal_submit(w, rec, n, 9), 0);
+  fw_ckpt_writer_flush(w);
+  assert_int_equal(fw_ckpt_writer_durable_run(w), 7);
+  fw_ckpt_counters_t c = fw_ckpt_writer_counters(w);
+  assert_int_equal(c.journal_written, 2);
+  assert_int_equal(c.journal_skipped, 2);
+  // A checkpoint of the state after run 9 makes 8 and 9 durable and empties the journal.
+  void* meta = NULL;
+  void* payload = NULL;
+  size_t mc = 0;
+  size_t pc = 0;
+  const int h = fw_ckpt_writer_acquire(w, &meta, &mc, &payload, &pc);
+  assert_true(h >= 0);
+  memset(meta, 1, 16);
+  memset(payload, 2, 100);
+  fw_ckpt_writer_submit_run(w, h, 16, 100, 9);
+  fw_ckpt_writer_flush(w);
+  assert_int_equal(fw_ckpt_writer_durable_run(w), 9);
+  assert_int_equal(file_size(jpath), 0);
+  // The journal goes on after it.
+  assert_int_equal(fw_ckpt_writer_journal_submit(w, rec, n, 10), 0);
+  fw_ckpt_writer_flush(w);
+  assert_int_equal(fw_ckpt_writer_durable_run(w), 10);
+  assert_int_equal(file_size(jpath), (long)n);
+  fw_ckpt_writer_destroy(w);
+  // A new writer keeps the part of the journal it is told to keep and cuts the rest.
+  w = fw_ckpt_writer_create(g_path, 16, 4096, err, sizeof err);
+  assert_non_null(w);
+  assert_int_equal(fw_ckpt_writer_journal_init(w, 1024, 4, 10, 10, err, sizeof err), 0);
+  assert_int_equal(file_size(jpath), 10);
+  fw_ckpt_writer_destroy(w);
+  unlink(jpath);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_crc32_check_value_matches),
@@ -345,6 +461,8 @@ int main(void) {
       cmocka_unit_test_setup(test_checkpoint_kill9_random_instants_never_broken, reset_file),
       cmocka_unit_test_setup(test_ckpt_writer_keeps_newest_and_counts, reset_file),
       cmocka_unit_test(test_checkpoint_write_failure_names_path),
+      cmocka_unit_test(test_journal_record_round_trip_and_damage),
+      cmocka_unit_test_setup(test_journal_writer_durable_in_order, reset_file),
   };
   return cmocka_run_group_tests_name("firmware.checkpoint", tests, setup, teardown);
 }

@@ -493,6 +493,164 @@ static void test_loop_old_obstacle_checkpoint_refused(void** state) {
   assert_int_equal(system(cmd), 0);
 }
 
+// Reads a whole file (NULL when absent); *n its size.
+static uint8_t* slurp(const char* path, size_t* n) {
+  *n = 0;
+  FILE* f = fopen(path, "rb");
+  if (f == NULL) {
+    return NULL;
+  }
+  uint8_t* buf = malloc(1U << 24);
+  assert_non_null(buf);
+  *n = fread(buf, 1, 1U << 24, f);
+  fclose(f);
+  return buf;
+}
+
+static void spill(const char* path, const uint8_t* data, size_t n) {
+  FILE* f = fopen(path, "wb");
+  assert_non_null(f);
+  assert_int_equal(fwrite(data, 1, n, f), n);
+  fclose(f);
+}
+
+// A run reported done survives a kill before its checkpoint: B21R_RUN comes only once the run's
+// journal record is on disk, and a loop resuming from the checkpoint and the journal learns the
+// journalled runs again to exactly the learned state, progress and run id of the uninterrupted
+// loop (its state saved once the run's between-run work is done), for an evaluation run (2) and a
+// training run (4). A torn record at the journal's end is ignored, and the resumed loop finishes
+// the schedule.
+static void journal_kill_after(int32_t kill_run, int32_t training_runs) {
+  char dir[] = "/tmp/b21r-loopjournal-XXXXXX";
+  assert_non_null(mkdtemp(dir));
+  fw_config_t c;
+  harness_config(&c);
+  c.phase_one_runs = 4;
+  c.phase_two_runs = 2;
+  c.eval_every_runs = 2;
+  c.eval_starts = 1;
+  c.hedger_replay_passes = 3;
+  c.learn_updates_per_tick = 2;  // the replay spans many ticks: the kill falls inside it
+  snprintf(c.checkpoint_file, sizeof c.checkpoint_file, "%s/hedger.ckpt", dir);
+  char journal[sizeof c.checkpoint_file + 16];
+  snprintf(journal, sizeof journal, "%s.journal", c.checkpoint_file);
+  char err[FW_LOOP_ERR_MAX];
+  size_t meta_cap = 0;
+  size_t payload_cap = 0;
+
+  assert_int_equal(harness_open(&g_h, &c, false, 5), 0);
+  fw_loop_checkpoint_capacity(g_h.loop, &meta_cap, &payload_cap);
+  fw_ckpt_writer_t* w = fw_ckpt_writer_create(c.checkpoint_file, meta_cap, payload_cap, err, sizeof err);
+  assert_non_null(w);
+  fw_loop_attach_checkpoints(g_h.loop, w);
+  // Runs 0, 1 train, 2 evaluates, 3, 4 train. Until the report of kill_run; the writer is flushed
+  // after every tick so that what is on disk does not depend on its speed.
+  fw_loop_stats_t st;
+  int32_t reported = -1;
+  while (reported < kill_run) {
+    harness_run(&g_h, 1);
+    fw_ckpt_writer_flush(w);
+    if (g_h.runs > 0) {
+      reported = g_h.run[g_h.runs - 1].run_id;
+    }
+  }
+  assert_int_equal(reported, kill_run);
+  assert_int_equal(g_h.run[2].kind, B21R_RUN_T_KIND_EVALUATION);
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.run_id, kill_run);
+  assert_int_equal(st.training_runs, training_runs);
+  // The kill: what is on disk now. The checkpoint covers an earlier run; kill_run is journalled.
+  size_t ck_n = 0;
+  size_t j_n = 0;
+  uint8_t* ck = slurp(c.checkpoint_file, &ck_n);
+  uint8_t* jr = slurp(journal, &j_n);
+  assert_non_null(ck);
+  assert_non_null(jr);
+  uint8_t meta[FW_PROGRESS_READ_MAX];
+  size_t ms = 0;
+  size_t ps = 0;
+  uint8_t* payload = malloc(payload_cap);
+  assert_non_null(payload);
+  assert_int_equal(fw_checkpoint_read(c.checkpoint_file, meta, sizeof meta, &ms, payload, payload_cap, &ps, err,
+                                      sizeof err),
+                   1);
+  fw_progress_t g;
+  assert_int_equal(fw_progress_decode(meta, ms, &g, NULL, 0), 0);
+  print_message("at the kill after run %d: checkpoint after run %d, journal %zu bytes\n", (int)kill_run,
+                (int)g.run_id, j_n);
+  assert_true(g.run_id < kill_run);
+  assert_true(j_n > 0);
+  // The uninterrupted loop: its state once the run's between-run work is done is the reference.
+  assert_int_equal(fw_loop_shutdown(g_h.loop), 0);
+  size_t ref_n = 0;
+  uint8_t* ref = slurp(c.checkpoint_file, &ref_n);
+  assert_non_null(ref);
+  harness_close(&g_h);
+  fw_ckpt_writer_destroy(w);
+
+  // Resume from the files as the kill left them, plus part of a record (a kill during an append).
+  spill(c.checkpoint_file, ck, ck_n);
+  uint8_t* torn = malloc(j_n + 40);
+  assert_non_null(torn);
+  memcpy(torn, jr, j_n);
+  memcpy(torn + j_n, jr, 40);
+  spill(journal, torn, j_n + 40);
+  assert_int_equal(harness_open(&g_h, &c, false, 5), 0);
+  assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), 1);
+  print_message("%s\n", err);
+  assert_non_null(strstr(err, "learned again"));
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.run_id, kill_run);
+  assert_int_equal(st.training_runs, training_runs);
+  w = fw_ckpt_writer_create(c.checkpoint_file, meta_cap, payload_cap, err, sizeof err);
+  assert_non_null(w);
+  fw_loop_attach_checkpoints(g_h.loop, w);
+  // The torn tail is cut, the resumed records kept.
+  size_t kept = 0;
+  free(slurp(journal, &kept));
+  assert_int_equal(kept, j_n);
+  // The resumed state, saved at once, is the uninterrupted loop's byte for byte.
+  assert_int_equal(fw_loop_shutdown(g_h.loop), 0);
+  size_t got_n = 0;
+  uint8_t* got = slurp(c.checkpoint_file, &got_n);
+  assert_non_null(got);
+  assert_int_equal(got_n, ref_n);
+  assert_memory_equal(got, ref, ref_n);
+  harness_close(&g_h);
+  fw_ckpt_writer_destroy(w);
+
+  // Resumed again (from that checkpoint, the journal now emptied), the schedule completes.
+  free(slurp(journal, &kept));
+  assert_int_equal(kept, 0);
+  assert_int_equal(harness_open(&g_h, &c, false, 5), 0);
+  assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), 1);
+  w = fw_ckpt_writer_create(c.checkpoint_file, meta_cap, payload_cap, err, sizeof err);
+  assert_non_null(w);
+  fw_loop_attach_checkpoints(g_h.loop, w);
+  harness_run(&g_h, 100000);
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_true(st.done);
+  assert_int_equal(st.training_runs, 6);
+  assert_int_equal(g_h.run[0].run_id, kill_run + 1);
+  harness_close(&g_h);
+  fw_ckpt_writer_destroy(w);
+  free(ck);
+  free(jr);
+  free(torn);
+  free(ref);
+  free(got);
+  free(payload);
+  char cmd[128];
+  snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+  assert_int_equal(system(cmd), 0);
+}
+
+static void test_loop_journal_resumes_reported_runs_exactly(void** state) {
+  (void)state;
+  journal_kill_after(2, 2);
+  journal_kill_after(4, 4);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_loop_learns_corridor_reaches_goal_from_all_poses),
@@ -502,6 +660,7 @@ int main(void) {
       cmocka_unit_test(test_loop_tick_allocates_nothing),
       cmocka_unit_test(test_loop_checkpoint_restart_resumes),
       cmocka_unit_test(test_loop_old_obstacle_checkpoint_refused),
+      cmocka_unit_test(test_loop_journal_resumes_reported_runs_exactly),
   };
   return cmocka_run_group_tests_name("firmware.loop", tests, NULL, NULL);
 }

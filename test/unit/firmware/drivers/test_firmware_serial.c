@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 // Serial driver over pseudo-terminals: raw 8N1 settings, non-blocking reads, baud changes,
-// pacing, error messages, and rFLEX packets end to end through a pty.
+// pacing, error messages, rFLEX packets end to end through a pty, and link mode (a helper
+// thread makes the terminal calls; the owner never waits for them).
 #define _GNU_SOURCE
 #include <drivers/serial.h>
 #include <proto/rflex.h>
@@ -8,6 +9,8 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <poll.h>
+#include <pthread.h>
+#include <stdatomic.h>
 #include <pty.h>
 #include <setjmp.h>
 #include <stdarg.h>
@@ -257,6 +260,204 @@ static void test_serial_rflex_packets_through_pty(void** state) {
   assert_int_equal(dec.counters.packets_stuffed, 1);
 }
 
+// ---- link mode --------------------------------------------------------------------------------
+
+static atomic_int g_notified;
+
+static void on_news(void* user) {
+  (void)user;
+  atomic_fetch_add(&g_notified, 1);
+}
+
+// A link opened on the pty's path, its helper running, the port in link mode on it.
+static drv_serial_link_t* open_link(fixture_t* fx, drv_serial_t* port, uint32_t baud) {
+  drv_serial_link_t* link = drv_serial_link_create(on_news, NULL);
+  assert_non_null(link);
+  assert_int_equal(drv_serial_link_start(link), 0);
+  drv_serial_link_open(link, fx->path, baud);
+  const double end = now_s() + 2.0;
+  int fd = -1;
+  while (drv_serial_link_state(link, &fd, NULL, NULL, 0) != DRV_SERIAL_LINK_OPEN && now_s() < end) {
+    usleep(1000);
+  }
+  assert_true(fd >= 0);
+  assert_int_equal(drv_serial_use_link(port, link), 0);
+  assert_ptr_equal(port->link, link);
+  assert_int_equal(port->baud, baud);
+  return link;
+}
+
+// Reads through the link until n bytes arrived (about a second at most).
+static void link_read_exact(drv_serial_t* port, uint8_t* buf, size_t n) {
+  size_t got = 0;
+  const double end = now_s() + 2.0;
+  while (got < n && now_s() < end) {
+    const ssize_t k = drv_serial_read(port, buf + got, n - got);
+    assert_true(k >= 0);
+    got += (size_t)k;
+    if (k == 0) {
+      usleep(500);
+    }
+  }
+  assert_int_equal(got, n);
+}
+
+// Input reaches the owner through the helper (which tells it so); the owner's queued packets
+// and its paced requests reach the device; nothing is lost or reordered.
+static void test_serial_link_bytes_both_ways(void** state) {
+  fixture_t* fx = *state;
+  drv_serial_t port;
+  atomic_store(&g_notified, 0);
+  drv_serial_link_t* link = open_link(fx, &port, 115200);
+  uint8_t all[256];
+  for (int i = 0; i < 256; ++i) {
+    all[i] = (uint8_t)i;
+  }
+  uint8_t buf[512];
+  assert_int_equal(drv_serial_read(&port, buf, sizeof buf), 0);
+  assert_int_equal(write(fx->master, all, sizeof all), (ssize_t)sizeof all);
+  link_read_exact(&port, buf, sizeof all);
+  assert_memory_equal(buf, all, sizeof all);
+  assert_true(atomic_load(&g_notified) > 0);
+  assert_int_equal(drv_serial_link_counters(link).bytes_in, 256);
+  // A request written by the helper, then a packet the owner writes itself.
+  assert_int_equal(drv_serial_write(&port, all, 100, 1000), 0);
+  while (drv_serial_link_busy(link)) {
+    usleep(500);
+  }
+  assert_int_equal(drv_serial_queue(&port, all + 100, 50, 0), 0);
+  read_exact(fx->master, buf, 150);
+  assert_memory_equal(buf, all, 150);
+  // A request longer than a slot is refused, not cut.
+  uint8_t big[DRV_SERIAL_LINK_OP_BYTES + 1];
+  memset(big, 0, sizeof big);
+  assert_int_equal(drv_serial_write(&port, big, sizeof big, 1000), -EMSGSIZE);
+  drv_serial_close(&port);
+  assert_null(port.link);
+  drv_serial_link_close(link);
+  drv_serial_link_destroy(link);
+}
+
+// Rate changes and input flushes are carried out by the helper, in order with the requests.
+static void test_serial_link_baud_and_flush(void** state) {
+  fixture_t* fx = *state;
+  drv_serial_t port;
+  drv_serial_link_t* link = open_link(fx, &port, 9600);
+  assert_int_equal(drv_serial_set_baud(&port, 38400), 0);
+  assert_int_equal(port.baud, 38400);
+  while (drv_serial_link_busy(link)) {
+    usleep(500);
+  }
+  struct termios tio;
+  assert_int_equal(tcgetattr(fx->slave, &tio), 0);
+  assert_int_equal(cfgetospeed(&tio), B38400);
+  // Input that arrived before a flush is gone, input after it comes through.
+  const uint8_t old_bytes[4] = {1, 2, 3, 4};
+  assert_int_equal(write(fx->master, old_bytes, sizeof old_bytes), 4);
+  const double end = now_s() + 2.0;
+  while (drv_serial_link_counters(link).bytes_in < 4 && now_s() < end) {
+    usleep(500);
+  }
+  assert_int_equal(drv_serial_flush_input(&port), 0);
+  while (drv_serial_link_busy(link)) {
+    usleep(500);
+  }
+  const uint8_t new_bytes[3] = {7, 8, 9};
+  assert_int_equal(write(fx->master, new_bytes, sizeof new_bytes), 3);
+  uint8_t buf[8];
+  link_read_exact(&port, buf, 3);
+  assert_memory_equal(buf, new_bytes, 3);
+  assert_int_equal(drv_serial_set_baud(&port, 12345), -EINVAL);
+  drv_serial_close(&port);
+  drv_serial_link_destroy(link);
+}
+
+// The owner never waits for the helper's terminal calls: while the helper is busy for about half
+// a second with a paced request, reads, rate changes, flushes and queued packets return at once.
+static void test_serial_link_owner_never_waits(void** state) {
+  fixture_t* fx = *state;
+  drv_serial_t port;
+  drv_serial_link_t* link = open_link(fx, &port, 115200);
+  drv_serial_set_pacing(&port, 0, 0, 5000);  // 5 ms between bytes: 100 bytes keep the helper ~0.5 s
+  uint8_t data[100];
+  memset(data, 0x33, sizeof data);
+  assert_int_equal(drv_serial_write(&port, data, sizeof data, 1000), 0);
+  usleep(20000);  // the helper is inside the request now
+  assert_true(drv_serial_link_busy(link));
+  double worst = 0.0;
+  for (int i = 0; i < 20; ++i) {
+    uint8_t buf[64];
+    const double t0 = now_s();
+    assert_true(drv_serial_read(&port, buf, sizeof buf) >= 0);
+    (void)drv_serial_set_baud(&port, i % 2 == 0 ? 38400 : 115200);
+    (void)drv_serial_flush_input(&port);
+    assert_int_equal(drv_serial_queue(&port, data, 8, 0), 0);
+    const double dt = now_s() - t0;
+    worst = dt > worst ? dt : worst;
+    usleep(5000);
+  }
+  assert_true(drv_serial_link_busy(link));  // the helper is still writing
+  print_message("owner calls while the helper was busy: worst %.0f us\n", worst * 1e6);
+  assert_true(worst < 0.01);
+  drv_serial_close(&port);
+  drv_serial_link_destroy(link);  // stops the helper mid-request
+}
+
+// A hang-up of the line is the link's error (-EPIPE or -EIO) for the owner's reads; the helper
+// then waits instead of spinning on the dead line; the link reopens on request.
+static void test_serial_link_hangup_is_an_error(void** state) {
+  fixture_t* fx = *state;
+  drv_serial_t port;
+  atomic_store(&g_notified, 0);
+  drv_serial_link_t* link = open_link(fx, &port, 115200);
+  close(fx->master);
+  fx->master = -1;
+  uint8_t buf[16];
+  ssize_t r = 0;
+  const double end = now_s() + 2.0;
+  while ((r = drv_serial_read(&port, buf, sizeof buf)) == 0 && now_s() < end) {
+    usleep(1000);
+  }
+  assert_true(r == -EPIPE || r == -EIO);
+  assert_int_equal(port.last_error, (int)r);
+  const int news = atomic_load(&g_notified);
+  usleep(100000);
+  assert_int_equal(atomic_load(&g_notified), news);  // nothing more happens: no spinning
+  drv_serial_close(&port);
+  drv_serial_link_close(link);
+  // The line comes back (a new pty at a new path): the same link opens it.
+  int master = -1;
+  int slave = -1;
+  char path[128];
+  assert_int_equal(openpty(&master, &slave, path, NULL, NULL), 0);
+  drv_serial_link_open(link, path, 115200);
+  const double end2 = now_s() + 2.0;
+  while (drv_serial_link_state(link, NULL, NULL, NULL, 0) != DRV_SERIAL_LINK_OPEN && now_s() < end2) {
+    usleep(1000);
+  }
+  assert_int_equal(drv_serial_use_link(&port, link), 0);
+  assert_int_equal(write(master, "ok", 2), 2);
+  link_read_exact(&port, buf, 2);
+  assert_memory_equal(buf, "ok", 2);
+  // An open that fails is reported with the reason.
+  drv_serial_close(&port);
+  drv_serial_link_open(link, "/nonexistent/ttyS9", 115200);
+  char msg[256];
+  int e = 0;
+  drv_serial_link_state_t st = DRV_SERIAL_LINK_OPENING;
+  const double end3 = now_s() + 2.0;
+  while ((st = drv_serial_link_state(link, NULL, &e, msg, sizeof msg)) == DRV_SERIAL_LINK_OPENING && now_s() < end3) {
+    usleep(1000);
+  }
+  assert_int_equal(st, DRV_SERIAL_LINK_FAILED);
+  assert_int_equal(e, -ENOENT);
+  assert_non_null(strstr(msg, "/nonexistent/ttyS9"));
+  assert_int_equal(drv_serial_use_link(&port, link), -ENOTCONN);
+  drv_serial_link_destroy(link);
+  close(master);
+  close(slave);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test_setup_teardown(test_serial_open_pty_raw_8n1, setup, teardown),
@@ -266,6 +467,10 @@ int main(void) {
       cmocka_unit_test(test_serial_open_errors_have_messages),
       cmocka_unit_test_setup_teardown(test_serial_peer_closed_read_fails, setup, teardown),
       cmocka_unit_test_setup_teardown(test_serial_rflex_packets_through_pty, setup, teardown),
+      cmocka_unit_test_setup_teardown(test_serial_link_bytes_both_ways, setup, teardown),
+      cmocka_unit_test_setup_teardown(test_serial_link_baud_and_flush, setup, teardown),
+      cmocka_unit_test_setup_teardown(test_serial_link_owner_never_waits, setup, teardown),
+      cmocka_unit_test_setup_teardown(test_serial_link_hangup_is_an_error, setup, teardown),
   };
   return cmocka_run_group_tests_name("firmware.serial", tests, NULL, NULL);
 }
