@@ -46,7 +46,9 @@ static void write_init(const fw_config_t* cfg, const char* path, double legacy_a
   fw_config_hedger(cfg, &hc);
   hedger_t* h = NULL;
   assert_int_equal(hedger_create(&h, &hc), HEDGER_OK);
-  const double s[5] = {0.1, 2.5, -0.3, 1.2, 0.0};
+  // the obstacle task's state (goal, obstacle, the obstacle's age) and the executed rotation
+  assert_int_equal(hc.state_dim, 6);
+  const double s[6] = {0.1, 2.5, -0.3, 1.2, 0.5, 0.0};
   assert_int_equal(hedger_insert(h, s, 0.25, 0.5, 0U, NULL), HEDGER_OK);
   static uint8_t payload[1 << 16];
   size_t ps = 0;
