@@ -1,10 +1,12 @@
 // SPDX-License-Identifier: MIT
 // libFuzzer target: the checkpoint's controller section (fw/progress.h). Every accepted section
-// satisfies the documented ranges; a revision-2 section re-encodes to the same bytes; a
-// revision-1 section re-encodes to revision 2 with the same bytes 8-55, and legacy_shift says
-// whether its shift's doubles (56, 64, 80) were not all zero; every refusal has a reason.
+// satisfies the documented ranges; a revision-3 section re-encodes to the same bytes; revisions 1
+// and 2 re-encode to revision 3 with the same bytes 8-55 as the greedy policy without an actor,
+// and legacy_shift says whether a revision-1 shift's doubles (56, 64, 80) were not all zero;
+// every refusal has a reason.
 #include "fw/config.h"
 #include "fw/progress.h"
+#include "learn/learn.h"
 #include <tasks/decl.h>
 #include "fuzz_util.h"
 
@@ -26,8 +28,10 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     return 0;
   }
   const learn_schedule_progress_t* g = &p.schedule;
-  const bool rev1 = size != FW_PROGRESS_BYTES;
-  FUZZ_CHECK(size == FW_PROGRESS_BYTES || size == 96U || size == 104U);
+  const uint32_t rev = size == FW_PROGRESS_BYTES ? 3U : size == FW_PROGRESS_BYTES_2 ? 2U : 1U;
+  const bool rev1 = rev == 1U;
+  FUZZ_CHECK(size == FW_PROGRESS_BYTES || size == FW_PROGRESS_BYTES_2 || size == 96U || size == 104U);
+  FUZZ_CHECK(p.revision == rev);
   FUZZ_CHECK(tasks_by_id(p.task) != NULL);
   FUZZ_CHECK(p.state_dim >= 1U && p.state_dim <= 8U);
   FUZZ_CHECK(g->phase == 1 || g->phase == 2);
@@ -37,11 +41,15 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   FUZZ_CHECK(isfinite(g->example_steps_sum) && g->example_steps_sum >= 0.0);
   FUZZ_CHECK(g->best_example_steps >= 0);
   FUZZ_CHECK(p.run_id >= -1 && (int64_t)p.run_id + 1 >= g->training_runs);
+  FUZZ_CHECK(p.policy == LEARN_POLICY_ACTOR || p.policy == LEARN_POLICY_GREEDY);
+  FUZZ_CHECK(p.policy == LEARN_POLICY_ACTOR || p.actor_bytes == 0U);
+  FUZZ_CHECK(p.actor_bytes <= (1ULL << 40));
+  FUZZ_CHECK(rev == 3U || (p.policy == LEARN_POLICY_GREEDY && p.actor_bytes == 0U));
   FUZZ_CHECK(p.legacy_shift == (rev1 && !(zero_at(data, 56) && zero_at(data, 64) && zero_at(data, 80))));
   uint8_t again[FW_PROGRESS_BYTES];
   FUZZ_CHECK(fw_progress_encode(&p, again) == FW_PROGRESS_BYTES);
-  FUZZ_CHECK(memcmp(again + 8, data + 8, FW_PROGRESS_BYTES - 8U) == 0);
-  FUZZ_CHECK(memcmp(again, "FWMETA02", 8) == 0);
-  FUZZ_CHECK(rev1 || memcmp(again, data, size) == 0);
+  FUZZ_CHECK(memcmp(again + 8, data + 8, FW_PROGRESS_BYTES_2 - 8U) == 0);
+  FUZZ_CHECK(memcmp(again, "FWMETA03", 8) == 0);
+  FUZZ_CHECK(rev != 3U || memcmp(again, data, size) == 0);
   return 0;
 }
