@@ -114,9 +114,9 @@ def main():
     ap.add_argument("--rerun", action="store_true", help="run finished tasks again")
     ap.add_argument("--configs", default=str(CONFIGS), help="folder of the experiment files (default tools/experiments)")
     ap.add_argument("--runner", help="use this b21r-experiment instead of building the host-release one")
-    # report.SECTIONS (the report module needs the sweep's packages, installed after parsing)
-    ap.add_argument("--section", choices=("doorway", "reference_learners", "explore_study"),
-                    help="figures, report: only this section of an existing report (and its figures)")
+    ap.add_argument("--section", metavar="NAME",
+                    help="figures, report: only this section of an existing report (and its figures); an "
+                         "unknown name lists them")
     args = ap.parse_args()
     commands = [w for w in args.words if w in ("run", "figures", "report", "merge", "all")]
     names = [w for w in args.words if w not in commands]
@@ -126,6 +126,10 @@ def main():
         commands = ["run", "merge", "figures", "report"]
     ensure_packages()
     from b21r_exp import figures, reference, report, sweep  # after the packages exist
+
+    # The report's table of sections is the one list of them (its module needs the packages).
+    if args.section is not None and args.section not in report.SECTIONS:
+        ap.error("--section: one of %s" % ", ".join(sorted(report.SECTIONS)))
 
     status = 0
     configs = Path(args.configs).resolve()
