@@ -110,7 +110,7 @@ def main():
         else:
             tolerated_fault("fault noise_laser 0.0005", 3.0)
             tolerated_fault("fault can_errors 0.2", 3.0)
-            tolerated_fault("fault can_drop 0.05", 3.0)
+            tolerated_fault("fault can_drop 0.03", 3.0)
             stop_fault("fault node_stuck 1 1500", "base fault", "stale PDOs", clear=None)
             stop_fault("fault node_stuck 16 1500", "base fault", "heartbeat lost", clear=None)
             stop_fault("fault babble 5 1000", "base fault", "CAN bus flooded", clear=None)
