@@ -292,8 +292,8 @@ static bool bump_silent(fw_loop_t* L, int64_t now_us, char* detail, size_t cap) 
 
 // Faults of the bus itself or of a node's liveness, after the drives' own: a flood from an
 // identifier of no configured node while the drives' answers stay away (a babbling node holds
-// the bus), the bump-panel node's heartbeat lost. Writes the detail
-// and returns true when one is present.
+// the bus), the bump-panel node's heartbeat lost. Writes the detail and returns true when one is
+// present.
 static bool can_node_faults(fw_loop_t* L, int64_t now_us, uint32_t foreign, char* detail, size_t cap) {
   if (foreign >= FLOOD_FRAMES_PER_TICK && !fw_base_any_report(L)) {
     snprintf(detail, cap,
@@ -440,7 +440,9 @@ static void can_nmt_start(fw_loop_t* L, int* failed_node) {
   can_send_nmt(L, CANOPEN_NMT_START, L->bump.node, failed_node);
 }
 
-static void bump_reset(fw_loop_t* L) {
+// The supervision of the nodes starts again (NMT start): the bump-panel node's PDO and heartbeat,
+// the drives' plausibility and answer counts.
+static void can_supervision_reset(fw_loop_t* L) {
   fw_bump_node_t* b = &L->bump;
   b->seen = false;
   b->pdo_new = false;
@@ -501,7 +503,7 @@ void fw_base_restart(fw_loop_t* L) {
     return;
   }
   L->can_start_us = now(L);
-  bump_reset(L);
+  can_supervision_reset(L);
   for (int i = 0; i < 2; ++i) {
     cia402_master_init(&L->drive[i].master);
     L->drive[i].emcy_seen = false;
@@ -532,7 +534,7 @@ int fw_base_start(fw_loop_t* L, char* err, size_t err_cap) {
     return -1;
   }
   L->can_start_us = now(L);
-  bump_reset(L);
+  can_supervision_reset(L);
   int failed_node = -1;
   can_nmt_start(L, &failed_node);
   if (failed_node >= 0) {
