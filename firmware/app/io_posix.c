@@ -70,6 +70,7 @@ static void lose(io_posix_t* io, io_posix_device_t* d, const char* cause, int64_
     drv_serial_close(&io->laser_port);  // the port lets go; the helper thread closes the line
     drv_serial_link_close(io->laser_link);
   } else if (io->use_can) {
+    io->can_before.error_frames += io->can.counters.rx_error_frames;  // the reopen starts from zero
     drv_can_close(&io->can);
     io->can_out_n = 0;
   } else {
@@ -356,6 +357,11 @@ static int v_can_read(void* user, canopen_frame_t* frame) {
   return rc;
 }
 
+static void v_can_stats(void* user, fw_can_stats_t* out) {
+  const io_posix_t* io = (const io_posix_t*)user;
+  out->error_frames = io->can_before.error_frames + io->can.counters.rx_error_frames;
+}
+
 static int v_can_write(void* user, const canopen_frame_t* frame) {
   io_posix_t* io = (io_posix_t*)user;
   if (io->base.lost) {
@@ -512,6 +518,7 @@ static const fw_io_vtable_t k_vt_can = {
     .base_read = NULL,
     .base_write = NULL,
     .can_read = v_can_read,
+    .can_stats = v_can_stats,
     .can_write = v_can_write,
     .request_start_pose = v_request_start_pose,
     .health = v_health,

@@ -59,6 +59,7 @@ typedef struct io_posix {
   // The laser driver's counters of its earlier opens: a reopen starts a new driver, and the
   // status counters built on them never go back (status_t: monotonic while the process runs).
   fw_laser_stats_t laser_before;
+  fw_can_stats_t can_before;      ///< the CAN port's counters of its earlier opens (same reason)
   drv_serial_t base_port;
   drv_can_t can;
   bool use_can;

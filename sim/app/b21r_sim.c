@@ -3,6 +3,7 @@
 #define _GNU_SOURCE  // getopt_long, signalfd, accept4
 #include <errno.h>
 #include <getopt.h>
+#include <linux/can/error.h>
 #include <inttypes.h>
 #include <math.h>
 #include <poll.h>
@@ -347,8 +348,13 @@ static void can_log_frame(app_t* a, const struct can_frame* f, uint64_t now_ns) 
     data[2 * i + 1] = hex[f->data[i] & 0x0F];
   }
   data[2 * dlc] = '\0';
-  fprintf(a->can_log, "(%lld.%06ld) %s %03X#%s\n", (long long)ts.tv_sec, ts.tv_nsec / 1000L, a->opt.can_log_iface,
-          (unsigned)(f->can_id & CAN_SFF_MASK), data);
+  if ((f->can_id & CAN_ERR_FLAG) != 0U) {  // candump's form of an error frame
+    fprintf(a->can_log, "(%lld.%06ld) %s %08X#%s\n", (long long)ts.tv_sec, ts.tv_nsec / 1000L, a->opt.can_log_iface,
+            (unsigned)(f->can_id & (CAN_ERR_FLAG | CAN_ERR_MASK)), data);
+  } else {
+    fprintf(a->can_log, "(%lld.%06ld) %s %03X#%s\n", (long long)ts.tv_sec, ts.tv_nsec / 1000L, a->opt.can_log_iface,
+            (unsigned)(f->can_id & CAN_SFF_MASK), data);
+  }
   if (now_ns >= a->can_log_flush_ns) {
     fflush(a->can_log);
     a->can_log_flush_ns = now_ns + 200000000ULL;
@@ -385,6 +391,23 @@ static void pump(app_t* a, uint64_t now_ns) {
     const size_t i = (a->can_out.head + a->can_out.len) % APP_PEND_FRAMES;
     a->can_out.fr[i].ready_ns = ready;
     sim_can_to_linux(&f, &a->can_out.fr[i].f);
+    ++a->can_out.len;
+  }
+  // Failed CRCs on the bus reach the host as SocketCAN error frames (protocol violation in the
+  // CRC sequence), as a CAN controller with error reporting on delivers them.
+  for (uint32_t k = sim_emu_can_take_error_frames(a->emu); k > 0; --k) {
+    if (a->can_out.len == APP_PEND_FRAMES) {
+      ++a->can_out.dropped;
+      continue;
+    }
+    const size_t i = (a->can_out.head + a->can_out.len) % APP_PEND_FRAMES;
+    struct can_frame* ef = &a->can_out.fr[i].f;
+    memset(ef, 0, sizeof(*ef));
+    ef->can_id = CAN_ERR_FLAG | CAN_ERR_PROT;
+    ef->can_dlc = CAN_ERR_DLC;
+    ef->data[2] = CAN_ERR_PROT_BIT;
+    ef->data[3] = CAN_ERR_PROT_LOC_CRC_SEQ;
+    a->can_out.fr[i].ready_ns = ready;
     ++a->can_out.len;
   }
   pend_flush(&a->laser_out, a->laser_master, now_ns);

@@ -9,6 +9,11 @@
 #include <string.h>
 #include <rng/rng.h>
 
+#define SIM_EMU_FROZEN_SLOTS 4   // PDOs of the hung node kept (TPDO1..TPDO4)
+#define SIM_EMU_BABBLE_HZ 4000.0  // frames per second of a babbling node: half a 500 kbit/s bus
+#define SIM_EMU_BABBLE_BURST 64U  // at most this many babble frames per read burst (bounded work)
+#define SIM_EMU_BABBLE_COB 0x001U // a high-priority identifier: it wins every arbitration
+
 struct sim_emu {
   sim_emu_config_t cfg;
   sim_plant_t* plant;
@@ -20,10 +25,23 @@ struct sim_emu {
   uint64_t substeps_in_period;  // real time: substeps since the last trace point
   bool streaming;               // lockstep: time advances on cycle ends
   // Faults.
-  double corrupt_fraction;
+  double noise_laser;  // per byte of the laser line: line noise or a framing error
+  double noise_base;   // the same on the rFLEX line
   double latency_s;
   int forced_panel;  // -1 = none
   rng_t corrupt_rng;
+  // CAN bus faults (what a real bus does: its CRC never lets a damaged frame through).
+  double can_error_fraction;  // a frame's transmission fails its CRC: error frame, retransmission
+  double can_drop_fraction;   // a frame is lost (the receiver's buffer overran)
+  uint32_t can_error_frames;  // error frames signalled, not yet taken by the transport
+  uint8_t stuck_node;         // 0 = none: the node whose application hangs
+  double stuck_until_s;
+  canopen_frame_t frozen[SIM_EMU_FROZEN_SLOTS];  // its PDOs as they were when it hung
+  size_t n_frozen;
+  uint8_t babble_id_node;     // 0 = none: a node floods the bus with high-priority frames
+  double babble_until_s;
+  double babble_next_s;       // simulated time of its next frame
+  uint64_t babble_frames;
   // Trace.
   sim_trace_point_t* trace;
   size_t trace_len;
@@ -338,20 +356,27 @@ void sim_emu_can_write(sim_emu_t* e, const canopen_frame_t* f) {
 
 // ---- device output ---------------------------------------------------------------------------
 
-static void corrupt(sim_emu_t* e, uint8_t* bytes, size_t n) {
-  if (!(e->corrupt_fraction > 0.0)) {
+// A disturbed serial line: each byte is hit with probability `fraction`; half the hits flip bits
+// (noise within the frame), half are framing errors (the stop bit read as 0), which a Linux tty
+// without IGNPAR or PARMRK delivers as a NUL byte.
+static void corrupt(sim_emu_t* e, double fraction, uint8_t* bytes, size_t n) {
+  if (!(fraction > 0.0)) {
     return;
   }
   for (size_t i = 0; i < n; ++i) {
-    if (rng_uniform(&e->corrupt_rng) < e->corrupt_fraction) {
-      bytes[i] ^= (uint8_t)(1U + rng_below(&e->corrupt_rng, 255U));
+    if (rng_uniform(&e->corrupt_rng) < fraction) {
+      if (rng_uniform(&e->corrupt_rng) < 0.5) {
+        bytes[i] = 0x00U;
+      } else {
+        bytes[i] ^= (uint8_t)(1U + rng_below(&e->corrupt_rng, 255U));
+      }
     }
   }
 }
 
 size_t sim_emu_laser_read(sim_emu_t* e, uint8_t* out, size_t cap) {
   const size_t n = sim_lms_drain(e->laser, out, cap, now(e));
-  corrupt(e, out, n);
+  corrupt(e, e->noise_laser, out, n);
   return n;
 }
 
@@ -360,17 +385,92 @@ size_t sim_emu_base_read(sim_emu_t* e, uint8_t* out, size_t cap) {
     return 0;
   }
   const size_t n = sim_rflex_drain(e->rflex, out, cap, now(e));
-  corrupt(e, out, n);
+  corrupt(e, e->noise_base, out, n);
   return n;
 }
 
+// A node whose application hangs: its CAN controller keeps answering SYNCs from the transmit
+// buffers, which hold the last PDOs it wrote (stale values); its heartbeat and EMCY producer
+// stops. Returns false when the frame is not sent.
+static bool stuck_node_filter(sim_emu_t* e, canopen_frame_t* f) {
+  uint8_t node = 0;
+  const canopen_kind_t kind = canopen_classify(f, &node);
+  if (e->stuck_node == 0U || node != e->stuck_node || !(now(e) < e->stuck_until_s)) {
+    return true;
+  }
+  if (kind == CANOPEN_KIND_HEARTBEAT || kind == CANOPEN_KIND_EMCY) {
+    return false;
+  }
+  for (size_t i = 0; i < e->n_frozen; ++i) {
+    if (e->frozen[i].id == f->id) {
+      *f = e->frozen[i];
+      return true;
+    }
+  }
+  if (e->n_frozen < SIM_EMU_FROZEN_SLOTS) {
+    e->frozen[e->n_frozen++] = *f;  // the value it hung with
+  }
+  return true;
+}
+
+// A babbling node: while it sends, it wins every arbitration, so its frames come first; it sends
+// at SIM_EMU_BABBLE_HZ of simulated time (bounded: no burst is longer than SIM_EMU_BABBLE_BURST).
+static bool babble_frame(sim_emu_t* e, canopen_frame_t* f) {
+  const double t = now(e);
+  if (e->babble_id_node == 0U || !(t < e->babble_until_s) || e->babble_next_s > t) {
+    return false;
+  }
+  if (t - e->babble_next_s > (double)SIM_EMU_BABBLE_BURST / SIM_EMU_BABBLE_HZ) {
+    e->babble_next_s = t - (double)SIM_EMU_BABBLE_BURST / SIM_EMU_BABBLE_HZ;  // the bus had no more room
+  }
+  e->babble_next_s += 1.0 / SIM_EMU_BABBLE_HZ;
+  memset(f, 0, sizeof(*f));
+  f->id = SIM_EMU_BABBLE_COB;
+  f->dlc = 8;
+  for (int i = 0; i < 8; ++i) {
+    f->data[i] = (uint8_t)(e->babble_frames >> (8 * (i % 4)));
+  }
+  e->babble_frames++;
+  return true;
+}
+
 int sim_emu_can_read(sim_emu_t* e, canopen_frame_t* f) {
-  // The bump-panel node first: in lockstep its PDO of a period then precedes the drives' TPDOs.
-  if (e->cia402 == NULL || (!sim_cia401_drain(e->bumpers, f) && !sim_cia402_drain(e->cia402, f))) {
+  if (e->cia402 == NULL) {
     return 0;
   }
-  corrupt(e, f->data, f->dlc <= 8U ? f->dlc : 8U);
-  return 1;
+  if (babble_frame(e, f)) {
+    return 1;
+  }
+  // The bump-panel node first: in lockstep its PDO of a period then precedes the drives' TPDOs.
+  for (;;) {
+    if (!sim_cia401_drain(e->bumpers, f) && !sim_cia402_drain(e->cia402, f)) {
+      return 0;
+    }
+    if (e->babble_id_node != 0U && now(e) < e->babble_until_s) {
+      continue;  // the babbler holds the bus: the other nodes' frames never win arbitration
+    }
+    if (!stuck_node_filter(e, f)) {
+      continue;
+    }
+    if (e->can_drop_fraction > 0.0 && rng_uniform(&e->corrupt_rng) < e->can_drop_fraction) {
+      continue;
+    }
+    // A bit error fails the receivers' CRC check: they signal an error frame and the sender
+    // retransmits the same frame (error passive after 16 failures in a row: it then gets through
+    // or the bus is switched off; here it gets through). No damaged payload is ever delivered.
+    for (int tries = 0; tries < 16 && e->can_error_fraction > 0.0 &&
+                        rng_uniform(&e->corrupt_rng) < e->can_error_fraction;
+         ++tries) {
+      e->can_error_frames++;
+    }
+    return 1;
+  }
+}
+
+uint32_t sim_emu_can_take_error_frames(sim_emu_t* e) {
+  const uint32_t n = e->can_error_frames;
+  e->can_error_frames = 0;
+  return n;
 }
 
 // ---- real time -------------------------------------------------------------------------------
@@ -520,16 +620,44 @@ static sim_emu_ctrl_t control_fault(sim_emu_t* e, char tok[][SPLIT_TOKEN_CAP], s
       sim_cia402_set_silent_until(e->cia402, 0.0);
       sim_cia401_set_silent_until(e->bumpers, 0.0);
     }
-    e->corrupt_fraction = 0.0;
+    sim_lms_set_stuck_until(e->laser, 0.0);
+    e->noise_laser = 0.0;
+    e->noise_base = 0.0;
+    e->can_error_fraction = 0.0;
+    e->can_drop_fraction = 0.0;
+    e->stuck_node = 0;
+    e->n_frozen = 0;
+    e->babble_id_node = 0;
     e->latency_s = 0.0;
     e->forced_panel = -1;
+    return reply_ok(reply, cap);
+  }
+  if (n == 4 && (strcmp(tok[1], "node_stuck") == 0 || strcmp(tok[1], "babble") == 0)) {
+    uint64_t node = 0;
+    double ms = 0.0;
+    if (e->cia402 == NULL) {
+      return reply_error(reply, cap, "node_stuck and babble need the canopen base");
+    }
+    if (!unsigned_number(tok[2], &node) || node < 1U || node > 127U || !number(tok[3], &ms) || ms < 0.0) {
+      return reply_error(reply, cap, "usage: fault node_stuck|babble <node 1..127> <ms>");
+    }
+    if (tok[1][0] == 'n') {
+      e->stuck_node = (uint8_t)node;
+      e->stuck_until_s = now(e) + ms * 1e-3;
+      e->n_frozen = 0;
+    } else {
+      e->babble_id_node = (uint8_t)node;
+      e->babble_until_s = now(e) + ms * 1e-3;
+      e->babble_next_s = now(e);
+    }
     return reply_ok(reply, cap);
   }
   double v = 0.0;
   if (n != 3) {
     return reply_error(reply, cap,
-                       "usage: fault laser_drop|corrupt|base_silent|drive_fault|latency|bumper|"
-                       "bumper_silent <value> | fault clear");
+                       "usage: fault laser_drop|laser_stuck|corrupt|noise_laser|noise_base|can_errors|can_drop|base_silent|"
+                       "drive_fault|latency|bumper|bumper_silent <value> | fault node_stuck|babble <node> <ms> | "
+                       "fault clear");
   }
   const char* kind = tok[1];
   if (strcmp(kind, "bumper") == 0) {
@@ -552,11 +680,30 @@ static sim_emu_ctrl_t control_fault(sim_emu_t* e, char tok[][SPLIT_TOKEN_CAP], s
   const double t = now(e);
   if (strcmp(kind, "laser_drop") == 0) {
     sim_lms_set_silent_until(e->laser, t + v * 1e-3);
+  } else if (strcmp(kind, "laser_stuck") == 0) {
+    sim_lms_set_stuck_until(e->laser, t + v * 1e-3);
   } else if (strcmp(kind, "corrupt") == 0) {
     if (v > 1.0) {
       return reply_error(reply, cap, "corrupt fraction must be in [0, 1]");
     }
-    e->corrupt_fraction = v;
+    e->noise_laser = v;
+    e->noise_base = v;
+    e->can_error_fraction = v;  // on the bus: failed CRCs, error frames, retransmissions
+  } else if (strcmp(kind, "noise_laser") == 0 || strcmp(kind, "noise_base") == 0) {
+    if (v > 1.0) {
+      return reply_error(reply, cap, "noise fraction must be in [0, 1]");
+    }
+    *(kind[6] == 'l' ? &e->noise_laser : &e->noise_base) = v;
+  } else if (strcmp(kind, "can_errors") == 0) {
+    if (e->cia402 == NULL || v > 1.0) {
+      return reply_error(reply, cap, "can_errors needs the canopen base and a fraction in [0, 1]");
+    }
+    e->can_error_fraction = v;
+  } else if (strcmp(kind, "can_drop") == 0) {
+    if (e->cia402 == NULL || v > 1.0) {
+      return reply_error(reply, cap, "can_drop needs the canopen base and a fraction in [0, 1]");
+    }
+    e->can_drop_fraction = v;
   } else if (strcmp(kind, "base_silent") == 0) {
     if (e->rflex != NULL) {
       sim_rflex_set_silent_until(e->rflex, t + v * 1e-3);

@@ -28,6 +28,8 @@ struct sim_lms {
   bool streaming;
   bool installation;
   double silent_until_s;
+  double stuck_until_s;   // scans repeat the last measured distances until then (a frozen sensor)
+  size_t raw_n;           // beams in raw[] from the last measured scan (0 = none yet)
   double sweep_origin_s;  // the mirror's phase: sweeps end at origin + k * sweep period
   double next_sweep_s;    // earliest time the next streamed scan may be taken (paced)
   sim_lms_counters_t counters;
@@ -144,9 +146,16 @@ static uint16_t range_to_raw(sim_lms_t* d, double range_m) {
 static void queue_scan(sim_lms_t* d, double t_s) {
   double angle_min, inc;
   const size_t n = sim_lms_beams(d, &angle_min, &inc);
-  d->scan_fn(d->user, angle_min, inc, n, d->ranges);
-  for (size_t i = 0; i < n; ++i) {
-    d->raw[i] = range_to_raw(d, d->ranges[i]);
+  // A frozen sensor (its measurement stage hangs, the interface still sends) repeats the last
+  // distances bit for bit; the scan index, a counter of the interface, keeps counting.
+  if (!(t_s < d->stuck_until_s) || d->raw_n != n) {
+    d->scan_fn(d->user, angle_min, inc, n, d->ranges);
+    for (size_t i = 0; i < n; ++i) {
+      d->raw[i] = range_to_raw(d, d->ranges[i]);
+    }
+    d->raw_n = n;
+  } else {
+    ++d->counters.repeated_scans;
   }
   const uint8_t scan_index = (uint8_t)(d->counters.scans & 0xFFU);
   const bool with_index = (d->config.availability & 0x01U) != 0U;
@@ -326,5 +335,7 @@ void sim_lms_set_silent_until(sim_lms_t* d, double t_s) {
     sim_byteq_clear(&d->out);  // a dropped sensor loses what it had not yet sent
   }
 }
+
+void sim_lms_set_stuck_until(sim_lms_t* d, double t_s) { d->stuck_until_s = t_s; }
 
 const sim_lms_counters_t* sim_lms_get_counters(const sim_lms_t* d) { return &d->counters; }

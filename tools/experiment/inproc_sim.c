@@ -31,6 +31,9 @@ static bool pull(inproc_sim_t* s) {
         s->n_frames++;
       }
     }
+    uint32_t errors = 0;
+    SIM_CALL(s, errors = sim_emu_can_take_error_frames(s->emu));
+    s->can_error_frames += errors;
   }
   return s->laser_fill > 0 || s->base_fill > 0 || s->n_frames > 0;
 }
@@ -106,6 +109,10 @@ static int v_can_read(void* user, canopen_frame_t* frame) {
   return 1;
 }
 
+static void v_can_stats(void* user, fw_can_stats_t* out) {
+  out->error_frames = ((const inproc_sim_t*)user)->can_error_frames;
+}
+
 static int v_can_write(void* user, const canopen_frame_t* frame) {
   inproc_sim_t* s = (inproc_sim_t*)user;
   SIM_CALL(s, sim_emu_can_write(s->emu, frame));
@@ -131,6 +138,7 @@ static const fw_io_vtable_t k_can = {.now_us = v_now,
                                      .laser_poll = v_laser_poll,
                                      .laser_stats = v_laser_stats,
                                      .can_read = v_can_read,
+                                     .can_stats = v_can_stats,
                                      .can_write = v_can_write,
                                      .request_start_pose = v_request_start_pose};
 

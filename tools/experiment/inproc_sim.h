@@ -47,6 +47,7 @@ typedef struct inproc_sim {
   uint32_t base_fill;
   canopen_frame_t frames[256];
   uint32_t n_frames;
+  uint64_t can_error_frames;  ///< error frames the emulated bus signalled (failed CRCs, frames resent)
   int64_t clock_us;
   uint64_t sim_allocs;  ///< allocations inside emulator calls (only with opt.alloc_probe)
 } inproc_sim_t;

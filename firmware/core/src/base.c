@@ -13,6 +13,16 @@
 // 10 Hz. More often "overwhelms the driver" (protocols.md A.6).
 #define SYS_STATUS_PERIOD_TICKS 20
 
+// Answers in a row whose position stands still while the drive reports a velocity, before the
+// drive's PDOs count as stale (a base fault): one could be a rounding, three are not.
+#define STALE_ANSWERS_LIMIT 3
+// Least movement a reported velocity implies within one period before a still position is
+// implausible [counts]: below it a slow drive may legitimately stay on one count.
+#define STALE_MIN_COUNTS 4.0
+// Frames of no configured node within one tick, with the drives' answers missing, that make the
+// bus flooded: 100 per 0.1 s is a fifth of a 500 kbit/s bus.
+#define FLOOD_FRAMES_PER_TICK 100U
+
 static bool is_rflex(const fw_loop_t* L) { return L->cfg.base_protocol == FW_BASE_RFLEX; }
 
 // ---- rFLEX ------------------------------------------------------------------------------
@@ -71,6 +81,9 @@ static void bump_handle(fw_loop_t* L, const canopen_frame_t* f, canopen_kind_t k
     return;
   }
   canopen_heartbeat_t hb;
+  if (kind == CANOPEN_KIND_HEARTBEAT) {
+    (void)canopen_hb_feed(&b->hb, f, (uint64_t)now_us);
+  }
   if (kind == CANOPEN_KIND_HEARTBEAT && canopen_decode_heartbeat(f, &hb) == PROTO_OK &&
       hb.nmt_state == CANOPEN_NMT_STATE_BOOTUP) {
     b->bootups++;
@@ -93,6 +106,12 @@ static void can_handle(fw_loop_t* L, const canopen_frame_t* f, int64_t now_us) {
     }
   }
   if (i < 0) {
+    // Not ours: another node, or one babbling. Counted; a flood of them is judged each tick.
+    if (kind != CANOPEN_KIND_SYNC && kind != CANOPEN_KIND_NMT) {
+      L->can_foreign_frames++;
+      L->can_foreign_tick++;
+      L->can_foreign_id = f->id;
+    }
     return;
   }
   fw_drive_t* d = &L->drive[i];
@@ -115,6 +134,14 @@ static void can_handle(fw_loop_t* L, const canopen_frame_t* f, int64_t now_us) {
     case CANOPEN_KIND_TPDO2: {
       canopen_tpdo2_t t;
       if (canopen_decode_tpdo2(f, &t) == PROTO_OK) {
+        const double moves = fabs((double)d->velocity) * (double)L->period_us * 1e-6;
+        if (d->have_position && t.position_actual == d->position && moves >= STALE_MIN_COUNTS) {
+          d->stale_answers++;
+          L->can_stale_pdos++;
+        } else {
+          d->stale_answers = 0;
+        }
+        d->have_position = true;
         d->position = t.position_actual;
         d->tpdo2_new = true;
         d->tpdo2_count++;
@@ -165,6 +192,17 @@ static void can_send_cycle(fw_loop_t* L, double v_mps, double w_radps, cia402_re
     if (canopen_encode_rpdo1(&f, d->node, cw, canopen_counts_from_si(value[i], factor[i])) == PROTO_OK) {
       (void)L->io.vt->can_write(L->io.user, &f);
     }
+  }
+  // Answers still missing for the SYNCs sent so far: those beyond the ones already counted are
+  // new (lost frames, or a late drive). A deficit that shrinks again (late answers) is forgotten.
+  for (int i = 0; i < 2; ++i) {
+    fw_drive_t* d = &L->drive[i];
+    const uint32_t a = (int32_t)(d->tpdo1_count - d->tpdo2_count) < 0 ? d->tpdo1_count : d->tpdo2_count;
+    const uint32_t deficit = (int32_t)(L->can_syncs_sent - a) > 0 ? L->can_syncs_sent - a : 0U;
+    if (deficit > d->deficit) {
+      L->can_unanswered_syncs += (int64_t)(deficit - d->deficit);
+    }
+    d->deficit = deficit;
   }
   canopen_frame_t sync;
   (void)canopen_encode_sync(&sync);
@@ -252,9 +290,33 @@ static bool bump_silent(fw_loop_t* L, int64_t now_us, char* detail, size_t cap) 
   return true;
 }
 
+// Faults of the bus itself or of a node's liveness, after the drives' own: a flood from an
+// identifier of no configured node while the drives' answers stay away (a babbling node holds
+// the bus), the bump-panel node's heartbeat lost. Writes the detail and returns true when one is
+// present.
+static bool can_node_faults(fw_loop_t* L, int64_t now_us, uint32_t foreign, char* detail, size_t cap) {
+  if (foreign >= FLOOD_FRAMES_PER_TICK && !fw_base_any_report(L)) {
+    snprintf(detail, cap,
+             "CAN bus flooded: %u frames of id 0x%03x (no configured node) in one tick, no drive answers (a babbling "
+             "node)",
+             (unsigned)foreign, (unsigned)L->can_foreign_id);
+    return true;
+  }
+  const fw_bump_node_t* b = &L->bump;
+  if (L->cfg.can_heartbeat_timeout_s > 0.0 && canopen_hb_expired(&b->hb, (uint64_t)now_us, (uint64_t)L->can_start_us)) {
+    snprintf(detail, cap, "bump-panel node %u (CiA 401): heartbeat lost (none for %d ms)%s", (unsigned)b->node,
+             (int)(L->cfg.can_heartbeat_timeout_s * 1e3), b->pdo_new ? ", its PDOs still arrive (stale)" : "");
+    return true;
+  }
+  return false;
+}
+
 void fw_base_evaluate_faults(fw_loop_t* L, int64_t now_us) {
+  uint32_t foreign = 0;
   if (!is_rflex(L)) {
     L->bump.silent_ticks = L->bump.pdo_new ? 0 : L->bump.silent_ticks + 1;
+    foreign = L->can_foreign_tick;
+    L->can_foreign_tick = 0;
   }
   L->base_fault = false;
   L->base_fault_detail[0] = '\0';
@@ -281,6 +343,14 @@ void fw_base_evaluate_faults(fw_loop_t* L, int64_t now_us) {
     fw_drive_t* d = &L->drive[i];
     const bool hb_expired = L->cfg.can_heartbeat_timeout_s > 0.0 &&
                             canopen_hb_expired(&d->hb, (uint64_t)now_us, (uint64_t)L->can_start_us);
+    if (d->stale_answers >= STALE_ANSWERS_LIMIT) {
+      // Named first: its statusword is as stale as its position, so it would say nothing.
+      L->base_fault = true;
+      snprintf(L->base_fault_detail, sizeof L->base_fault_detail,
+               "%s drive (node %u): stale PDOs: position still for %d answers at %ld counts/s%s", drive_name(i),
+               (unsigned)d->node, (int)d->stale_answers, (long)d->velocity, hb_expired ? ", heartbeat lost" : "");
+      break;
+    }
     if (d->emcy_seen || cia402_fault(d->statusword) || !cia402_operation_enabled(d->statusword) || hb_expired) {
       L->base_fault = true;
       char emcy[32] = "";
@@ -291,6 +361,9 @@ void fw_base_evaluate_faults(fw_loop_t* L, int64_t now_us) {
                drive_name(i), (unsigned)d->node, emcy, (unsigned)d->statusword,
                cia402_state_name(cia402_state_from_statusword(d->statusword)), hb_expired ? ", heartbeat lost" : "");
     }
+  }
+  if (!L->base_fault) {
+    L->base_fault = can_node_faults(L, now_us, foreign, L->base_fault_detail, sizeof L->base_fault_detail);
   }
   if (!L->base_fault) {
     L->base_fault = bump_silent(L, now_us, L->base_fault_detail, sizeof L->base_fault_detail);
@@ -367,10 +440,20 @@ static void can_nmt_start(fw_loop_t* L, int* failed_node) {
   can_send_nmt(L, CANOPEN_NMT_START, L->bump.node, failed_node);
 }
 
-static void bump_reset(fw_bump_node_t* b) {
+// The supervision of the nodes starts again (NMT start): the bump-panel node's PDO and heartbeat,
+// the drives' plausibility and answer counts.
+static void can_supervision_reset(fw_loop_t* L) {
+  fw_bump_node_t* b = &L->bump;
   b->seen = false;
   b->pdo_new = false;
   b->silent_ticks = 0;
+  const double hb_s = L->cfg.can_heartbeat_timeout_s > 0.0 ? L->cfg.can_heartbeat_timeout_s : 1.0;
+  (void)canopen_hb_init(&b->hb, b->node, (uint32_t)(hb_s * 1e6));
+  for (int i = 0; i < 2; ++i) {
+    L->drive[i].have_position = false;
+    L->drive[i].stale_answers = 0;
+    L->drive[i].deficit = 0;
+  }
 }
 
 // Waits (bounded) for the bump-panel node's first TPDO1: it sends one when started and then
@@ -420,7 +503,7 @@ void fw_base_restart(fw_loop_t* L) {
     return;
   }
   L->can_start_us = now(L);
-  bump_reset(&L->bump);
+  can_supervision_reset(L);
   for (int i = 0; i < 2; ++i) {
     cia402_master_init(&L->drive[i].master);
     L->drive[i].emcy_seen = false;
@@ -451,7 +534,7 @@ int fw_base_start(fw_loop_t* L, char* err, size_t err_cap) {
     return -1;
   }
   L->can_start_us = now(L);
-  bump_reset(&L->bump);
+  can_supervision_reset(L);
   int failed_node = -1;
   can_nmt_start(L, &failed_node);
   if (failed_node >= 0) {

@@ -181,9 +181,35 @@ static void take_scan(fw_loop_t* L) {
   L->laser_scans++;
 }
 
+// Beams with a return needed before a repeat counts as stuck: a scan of nothing but "no echo"
+// (open space, a covered window) repeats legitimately.
+#define LASER_STUCK_MIN_RETURNS 8U
+
+// True when the telegram repeats the previous one's distances bit for bit (FNV-1a over the
+// count and the raw values; the scan index is left out: a frozen measurement stage may sit behind
+// an interface that still counts). O(beams).
+static bool scan_repeated(fw_loop_t* L) {
+  const lms_scan_t* r = &L->scan_raw;
+  uint64_t h = 1469598103934665603ULL;
+  h = (h ^ r->count) * 1099511628211ULL;
+  for (uint16_t i = 0; i < r->count && i < LMS_MAX_SCAN_VALUES; ++i) {
+    h = (h ^ r->raw[i]) * 1099511628211ULL;
+  }
+  const bool same = h == L->scan_hash && (uint32_t)(r->count - r->no_return_count) >= LASER_STUCK_MIN_RETURNS;
+  L->scan_hash = h;
+  return same;
+}
+
 static void poll_inputs(fw_loop_t* L, int64_t now_us) {
   const int r = L->io.vt->laser_poll(L->io.user, now_us, &L->scan_raw);
-  if (r == 1) {
+  if (r == 1 && scan_repeated(L)) {
+    // Not a new scan: the command is held as without one, and a laser that only repeats itself
+    // stops the base after laser_timeout_s like a silent one (safety detail: "laser stuck").
+    L->scan_repeats++;
+    L->laser_repeated_scans++;
+    L->scan_repeat_new = true;
+  } else if (r == 1) {
+    L->scan_repeats = 0;
     take_scan(L);
   } else if (r < 0 && !L->laser_error_logged) {
     L->laser_error_logged = true;
@@ -283,6 +309,7 @@ static fw_safety_event_t supervise(fw_loop_t* L, const sensed_t* in, int64_t now
   fw_safety_inputs_t si;
   memset(&si, 0, sizeof si);
   si.laser_silent_ticks = L->laser_silent_ticks;
+  si.laser_repeats = L->scan_repeats;
   si.base_silent_ticks = L->base_silent_ticks;
   si.laser_age_us = now_us - L->last_scan_us;
   si.base_age_us = now_us - L->last_base_us;
@@ -436,6 +463,7 @@ bool fw_loop_tick(fw_loop_t* L, int64_t now_us) {
   publish(L);
 
   L->scan_new = false;
+  L->scan_repeat_new = false;
   fw_base_clear_flags(L);
   L->confirm_pending = false;
   const int64_t end_us = io_now(L);
@@ -480,7 +508,7 @@ int64_t fw_loop_wait(fw_loop_t* L) {
     const int64_t deadline = now + (int64_t)(L->cfg.lockstep_timeout_s * 1e6);
     for (;;) {
       poll_inputs(L, now);
-      if (L->scan_new && fw_base_all_reports(L)) {
+      if ((L->scan_new || L->scan_repeat_new) && fw_base_all_reports(L)) {
         break;
       }
       if (L->io.vt->health != NULL) {

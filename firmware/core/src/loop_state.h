@@ -47,6 +47,12 @@ typedef struct fw_drive {
   int32_t velocity;
   uint16_t emcy_code;
   bool emcy_seen;   // an EMCY with a non-zero code arrived and no good statusword since
+  // Plausibility of its answers: a drive that reports a velocity moves, so a position that stands
+  // still answer after answer is a stale PDO (the node's application hangs, its CAN controller
+  // keeps sending what it last wrote).
+  bool have_position;
+  int32_t stale_answers; // TPDO2s in a row with the same position while the TPDO1 velocity is not ~0
+  uint32_t deficit;     // SYNCs without its answer when the last SYNC went out (already counted)
 } fw_drive_t;
 
 /// The CiA 401 bump-panel node (CANopen base): its TPDO1 carries the 14 panels' contact bits,
@@ -62,6 +68,8 @@ typedef struct fw_bump_node {
   uint64_t bad_pdos;    // its TPDO1 COB-ID with a DLC below 7 (ignored)
   uint64_t bootups;     // boot-up messages: the node restarted (it is started again)
   uint64_t frames;      // every frame from its id (tells a mute node from a PDO-less one)
+  canopen_hb_consumer_t hb; // its heartbeat (supervised with can_heartbeat_timeout_s > 0): a node
+                            // whose application hangs may keep sending stale PDOs, not heartbeats
 } fw_bump_node_t;
 
 /// The learner's work after a step or between runs (learning.c).
@@ -137,6 +145,13 @@ struct fw_loop {
   int64_t laser_scans;
   bool laser_error_logged;
   uint64_t laser_bad_at_scan;  // laser bytes dropped + CRC errors when the last scan arrived
+  // A frozen sensor repeats its distances bit for bit; a real one never does (every beam with a
+  // return carries its own noise of several millimetres), so a repeat is no new scan.
+  uint64_t scan_hash;          // FNV-1a of the last telegram's count and raw values (0 = none)
+  int32_t scan_repeats;        // telegrams in a row that repeated it (0 after a fresh scan)
+  int64_t laser_repeated_scans; // all such repeats (monotonic, B21R_STATUS)
+  bool scan_repeat_new;        // a repeating telegram arrived since the last tick (lockstep: the
+                               // period's laser data is in, though it is no new scan)
   bool lockstep_lost;          // lockstep: a device delivered nothing for lockstep_timeout_s
   char device_lost_detail[FW_SAFETY_DETAIL_MAX];
   uint32_t devices_lost;       // FW_IO_DEVICE_* gone now (the binding reopens them with back-off)
@@ -167,6 +182,11 @@ struct fw_loop {
   int64_t can_start_us;
   uint32_t can_syncs_sent;     // since the NMT start (wraps); every one is answered by a TPDO1 and
                                // a TPDO2 of each operational drive
+  int64_t can_unanswered_syncs; // SYNCs still unanswered when the next went out (monotonic)
+  int64_t can_foreign_frames;  // frames of no configured node (monotonic)
+  int64_t can_stale_pdos;      // TPDO2s whose position stood still against the velocity (monotonic)
+  uint32_t can_foreign_tick;   // foreign frames since the last tick: a flood is a babbling node
+  uint32_t can_foreign_id;     // COB-ID of the last of them
 
   // Mailboxes (filled by other threads).
   pthread_mutex_t mbox_mu;

@@ -253,6 +253,16 @@ void fw_out_status(fw_loop_t* L) {
   s->checkpoint_failures = (int64_t)ckpt.failed;
   s->laser_restarts = (int64_t)ls.restarts;
   s->odometry_rejected = (int64_t)(L->base.odometry.rejected_trans + L->base.odometry.rejected_rot);
+  s->laser_repeated_scans = L->laser_repeated_scans;
+  fw_can_stats_t cs;
+  memset(&cs, 0, sizeof cs);
+  if (L->io.vt->can_stats != NULL) {
+    L->io.vt->can_stats(L->io.user, &cs);
+  }
+  s->can_error_frames = (int64_t)cs.error_frames;
+  s->can_unanswered_syncs = L->can_unanswered_syncs;
+  s->can_foreign_frames = L->can_foreign_frames;
+  s->can_stale_pdos = L->can_stale_pdos;
   s->experiences = L->exp_seq;
   s->experiences_dropped = L->exp_dropped;
   s->tick_max_ever_us = t.max_ever_us;

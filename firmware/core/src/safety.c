@@ -82,7 +82,16 @@ static int32_t current_cause(const fw_safety_t* s, const fw_safety_inputs_t* in,
     return FW_STOP_NON_FINITE;
   }
   if (c->lockstep ? in->laser_silent_ticks >= c->laser_limit_ticks : in->laser_age_us >= c->laser_limit_us) {
-    if (in->laser_bad_since_scan > 0U && c->lockstep) {
+    if (in->laser_repeats > 0) {
+      // Telegrams arrive, valid, but with the same distances: the measurement is frozen.
+      if (c->lockstep) {
+        snprintf(detail, cap, "laser stuck: the same scan %d times in a row, no new scan for %d ticks",
+                 (int)in->laser_repeats, (int)in->laser_silent_ticks);
+      } else {
+        snprintf(detail, cap, "laser stuck: the same scan %d times in a row, no new scan for %lld ms (limit %lld ms)",
+                 (int)in->laser_repeats, (long long)(in->laser_age_us / 1000), (long long)(c->laser_limit_us / 1000));
+      }
+    } else if (in->laser_bad_since_scan > 0U && c->lockstep) {
       // Bytes arrive, but nothing in them is a valid telegram: baud rate, cable or noise.
       snprintf(detail, cap, "laser stream corrupt: no valid telegram for %d ticks, %llu bad bytes or telegrams",
                (int)in->laser_silent_ticks, (unsigned long long)in->laser_bad_since_scan);

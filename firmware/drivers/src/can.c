@@ -8,6 +8,7 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <linux/can.h>
+#include <linux/can/error.h>
 #include <linux/can/raw.h>
 #include <net/if.h>
 #include <poll.h>
@@ -84,6 +85,11 @@ int drv_can_open_socketcan(drv_can_t* port, const char* ifname, char* err, size_
     msg(err, err_len, "cannot bind to", ifname, e);
     return -e;
   }
+  // Error frames (bus errors, failed CRCs, error-passive and bus-off states) are delivered and
+  // counted: they are how a node on a disturbed bus learns that frames had to be sent again.
+  // Without the option the port still works; it then counts none.
+  const can_err_mask_t err_mask = CAN_ERR_PROT | CAN_ERR_CRTL | CAN_ERR_BUSOFF | CAN_ERR_BUSERROR | CAN_ERR_ACK;
+  (void)setsockopt(fd, SOL_CAN_RAW, CAN_RAW_ERR_FILTER, &err_mask, sizeof err_mask);
   port->fd = fd;
   port->owns_fd = true;
   port->transport = DRV_CAN_SOCKETCAN;
@@ -266,6 +272,10 @@ int drv_can_recv(drv_can_t* port, canopen_frame_t* frame) {
     }
     if (cf.can_dlc > 8U) {
       port->counters.rx_bad_size++;
+      continue;
+    }
+    if ((cf.can_id & CAN_ERR_FLAG) != 0U) {
+      port->counters.rx_error_frames++;
       continue;
     }
     if (drv_can_from_linux(&cf, frame) != 0) {

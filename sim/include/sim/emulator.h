@@ -55,17 +55,30 @@
 ///   must lie within +-SIM_WORLD_MAX_ABS (the range of world files), else `error reset: ...`.
 /// - `pose`: `ok <t_s> <x_m> <y_m> <theta_rad> <collided 0|1>` (ground truth; collided latches
 ///   from the first contact until the next reset).
-/// - `fault laser_drop <ms>` | `fault corrupt <fraction>` | `fault base_silent <ms>` |
-///   `fault drive_fault <node>` | `fault latency <ms>` | `fault bumper <panel>` |
-///   `fault bumper_silent <ms>` | `fault clear`.
-///   Durations are simulated time. corrupt: each byte read from a serial line (each data byte of
-///   a CAN frame) is XORed with a random non-zero value with that probability. latency: stored
+/// - `fault laser_drop <ms>` | `fault laser_stuck <ms>` | `fault corrupt <fraction>` |
+///   `fault noise_laser <fraction>` | `fault noise_base <fraction>` |
+///   `fault can_errors <fraction>` | `fault can_drop <fraction>` | `fault base_silent <ms>` | `fault drive_fault <node>` |
+///   `fault latency <ms>` | `fault bumper <panel>` | `fault bumper_silent <ms>` |
+///   `fault node_stuck <node> <ms>` | `fault babble <node> <ms>` | `fault clear`.
+///   Durations are simulated time. laser_stuck: every scan repeats the last measured distances
+///   bit for bit (valid telegrams, CRC and scan index fine: a frozen measurement stage).
+///   corrupt: each byte read from a serial line is hit with that probability, half the hits line
+///   noise (XORed with a random non-zero value), half framing errors (read as NUL, as a Linux tty
+///   without IGNPAR delivers them); noise_laser and noise_base: the same on one line only. On the
+///   CAN bus (corrupt) each frame's transmission fails its CRC with that
+///   probability: the bus signals an error frame (sim_emu_can_take_error_frames) and the frame
+///   is sent again, so, as on a real bus, no damaged payload is delivered; can_errors: the same on
+///   the bus only. can_drop: each frame
+///   is lost with that probability (a receiver overrun). node_stuck: the node's application hangs:
+///   its PDOs keep coming with the values it had (stale), its heartbeat and EMCY stop. babble: a
+///   node floods the bus with COB-ID 0x001 frames (4000 per simulated second) and, winning every
+///   arbitration, keeps every other node's frame off the bus. latency: stored
 ///   here, applied by the transport (b21r-sim holds every outgoing byte/frame that long in wall
 ///   time). bumper: panel 0..13 (or its DIO address 0x40..0x4D) reads pressed (bits 0x0F) until
 ///   `fault clear`, on either base (rFLEX: DIO_REPORT; CANopen: the bump-panel node's TPDO1).
 ///   base_silent: the rFLEX, or on CANopen the drives (the bump-panel node keeps sending).
-///   drive_fault: CANopen base only. bumper_silent: CANopen only; the bump-panel node sends
-///   nothing (no PDO, no heartbeat) for that long.
+///   drive_fault, can_errors, can_drop, node_stuck, babble: CANopen base only. bumper_silent: CANopen only;
+///   the bump-panel node sends nothing (no PDO, no heartbeat) for that long.
 /// - `status`: `ok t=<s> streaming=<0|1> scans=<n> base_reports=<n> contacts=<n> watchdog_trips=<n>`
 ///   (watchdog_trips: times the base's command watchdog stopped it: rFLEX trips, CiA 402 RPDO timeouts).
 /// - `svg <path>`: writes the trace picture (sim/svg.h).
@@ -154,6 +167,9 @@ size_t sim_emu_base_read(sim_emu_t* e, uint8_t* out, size_t cap);
 /// first, then the drives'), or 0.
 void sim_emu_can_write(sim_emu_t* e, const canopen_frame_t* f);
 int sim_emu_can_read(sim_emu_t* e, canopen_frame_t* f);
+/// Error frames the bus signalled (failed CRCs under `fault corrupt`) since the last call; the
+/// transport sends them to the host as error frames. O(1).
+uint32_t sim_emu_can_take_error_frames(sim_emu_t* e);
 
 /// Real-time mode: advances physics and device timing to t_s (no effect in lockstep or for
 /// t_s in the past). O(substeps).

@@ -66,6 +66,7 @@ typedef struct sim_lms_counters {
   uint64_t scans;             ///< 0xB0 telegrams queued
   uint64_t ignored_silent;    ///< requests ignored while silent
   uint64_t queue_overflows;   ///< telegrams dropped because the output queue was full
+  uint64_t repeated_scans;    ///< scans that repeated the previous distances (stuck fault)
 } sim_lms_counters_t;
 
 typedef struct sim_lms sim_lms_t;
@@ -102,6 +103,11 @@ size_t sim_lms_beams(const sim_lms_t* d, double* angle_min_rad, double* incremen
 
 /// The device sends nothing and ignores requests until t_s (fault injection). 0 ends it.
 void sim_lms_set_silent_until(sim_lms_t* d, double t_s);
+
+/// Until t_s every scan repeats the distances of the last measured scan bit for bit (a frozen
+/// measurement stage: the telegrams, their CRC and scan index are fine, the values never change).
+/// 0 ends it. The first scan of a variant is always measured. O(1).
+void sim_lms_set_stuck_until(sim_lms_t* d, double t_s);
 
 /// Restarts the noise stream (range noise and error codes) from seed: every scan after it
 /// depends only on the seed and the scene, not on how many scans came before. O(1).

@@ -146,6 +146,60 @@ def check_monotonic(statuses, what):
     return fields
 
 
+def wait_for(path, text, start, timeout, proc=None):
+    """Waits until `text` appears in the file after offset `start`; returns the new offset."""
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        with open(path) as f:
+            f.seek(start)
+            data = f.read()
+        i = data.find(text)
+        if i >= 0:
+            return start + i + len(text)
+        if proc is not None and proc.poll() is not None:
+            fail("controller exited (%d) while waiting for '%s'" % (proc.returncode, text))
+        time.sleep(0.05)
+    fail("'%s' did not appear in %s within %d s" % (text, path, timeout))
+    return start
+
+
+def read_cut_log(path, channels):
+    """(timestamp, channel, message) of the given channels from an event log that a SIGKILL may
+    have cut anywhere: reading stops at a torn last event."""
+    import lcm
+    from b21r_log import FINGERPRINTS
+    out = []
+    if not os.path.exists(path) or os.path.getsize(path) == 0:
+        return out
+    log = lcm.EventLog(path, "r")
+    try:
+        while True:
+            try:
+                ev = log.read_next_event()
+            except Exception:  # a torn last event
+                break
+            if ev is None:
+                break
+            if ev.channel not in channels:
+                continue
+            t = FINGERPRINTS.get(bytes(ev.data[:8]))
+            if t is not None:
+                try:
+                    out.append((ev.timestamp, ev.channel, t.decode(ev.data)))
+                except Exception:
+                    break
+    finally:
+        log.close()
+    return out
+
+
+def cpu_seconds(pid):
+    """User + system CPU time of a process [s] (/proc/<pid>/stat)."""
+    with open("/proc/%d/stat" % pid) as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def stop_all(procs):
     """Kills the processes of a list that still run (a test's clean-up after a failure)."""
     for p in procs:

@@ -24,37 +24,13 @@ import sys
 import time
 
 import fwtest
-import lcm
-from b21r_log import FINGERPRINTS
 
 FINISHED = (0, 1, 2)  # run_t.END_GOAL, END_COLLISION, END_STEP_LIMIT
 
 
 def read_runs(path):
     """The B21R_RUN messages of an event log that a kill may have cut anywhere."""
-    runs = []
-    if not os.path.exists(path) or os.path.getsize(path) == 0:
-        return runs
-    log = lcm.EventLog(path, "r")
-    try:
-        while True:
-            try:
-                ev = log.read_next_event()
-            except Exception:  # a torn last event
-                break
-            if ev is None:
-                break
-            if ev.channel != "B21R_RUN":
-                continue
-            t = FINGERPRINTS.get(bytes(ev.data[:8]))
-            if t is not None:
-                try:
-                    runs.append(t.decode(ev.data))
-                except Exception:
-                    break
-    finally:
-        log.close()
-    return runs
+    return [m for _, _, m in fwtest.read_cut_log(path, {"B21R_RUN"})]
 
 
 def main():

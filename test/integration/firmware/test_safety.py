@@ -20,33 +20,10 @@ import time
 
 import b21r_opauth
 import fwtest
+from fwtest import cpu_seconds, wait_for
 from b21r_log import read_log
 
 STOP_NAMES = {1: "laser silent", 2: "base silent", 3: "base fault", 4: "bumper", 6: "deadman released", 7: "signal"}
-
-
-def wait_for(path, text, start, timeout, proc=None):
-    """Waits until `text` appears in the file after offset `start`; returns the new offset."""
-    deadline = time.time() + timeout
-    while time.time() < deadline:
-        with open(path) as f:
-            f.seek(start)
-            data = f.read()
-        i = data.find(text)
-        if i >= 0:
-            return start + i + len(text)
-        if proc is not None and proc.poll() is not None:
-            fwtest.fail("controller exited (%d) while waiting for '%s'" % (proc.returncode, text))
-        time.sleep(0.05)
-    fwtest.fail("'%s' did not appear in %s within %d s" % (text, path, timeout))
-    return start
-
-
-def cpu_seconds(pid):
-    """User + system CPU time of a process [s] (/proc/<pid>/stat)."""
-    with open("/proc/%d/stat" % pid) as f:
-        fields = f.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def main():

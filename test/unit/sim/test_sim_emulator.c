@@ -146,6 +146,115 @@ static void test_emu_fault_corrupt_changes_bytes(void** state) {
   assert_true(diff > n[0] * 4 / 10 && diff < n[0] * 6 / 10);
 }
 
+// laser_stuck: the scans keep coming (valid telegrams) with the same distances bit for bit while
+// the robot drives; after the fault ends they change again.
+static void test_emu_fault_laser_stuck_repeats_scan(void** state) {
+  (void)state;
+  sim_emu_t* e = make("corridor10.world", SIM_BASE_RFLEX, SIM_MODE_LOCKSTEP);
+  host_rflex_startup(&g_host);
+  host_read(&g_host);
+  static uint16_t first[LMS_MAX_SCAN_VALUES];
+  memcpy(first, g_host.last_scan.raw, sizeof first);  // the last scan before the fault
+  assert_int_equal(ctl(e, "fault laser_stuck 500"), SIM_EMU_CTRL_OK);
+  for (int k = 0; k < 4; ++k) {
+    host_velocity(&g_host, 0.3, 0.0);
+    host_read(&g_host);
+    assert_int_equal(g_host.scans, 1);
+    assert_memory_equal(first, g_host.last_scan.raw, sizeof first);
+  }
+  assert_int_equal(sim_lms_get_counters(sim_emu_laser(e))->repeated_scans, 4);
+  for (int k = 0; k < 3; ++k) {  // past 0.5 s of simulated time
+    host_velocity(&g_host, 0.3, 0.0);
+    host_read(&g_host);
+  }
+  assert_int_equal(g_host.scans, 1);
+  assert_memory_not_equal(first, g_host.last_scan.raw, sizeof first);
+  sim_emu_destroy(e);
+}
+
+// Runs a CANopen emulator for `cycles` SYNC cycles driving forward, after `fault` (NULL = none);
+// returns the hash of every frame received and the error frames signalled.
+static uint64_t can_run(const char* fault, int cycles, uint32_t* error_frames, int* tpdo2) {
+  sim_emu_t* e = make("corridor10.world", SIM_BASE_CANOPEN, SIM_MODE_LOCKSTEP);
+  host_canopen_startup(&g_host);
+  host_read(&g_host);
+  if (fault != NULL) {
+    assert_int_equal(ctl(e, fault), SIM_EMU_CTRL_OK);
+  }
+  *error_frames = 0;
+  *tpdo2 = 0;
+  g_host.hash = 1469598103934665603ULL;
+  for (int k = 0; k < cycles; ++k) {
+    host_can_cycle(&g_host, CIA402_CW_ENABLE_OPERATION, 0.3, 0.0);
+    host_read(&g_host);
+    *error_frames += sim_emu_can_take_error_frames(e);
+    *tpdo2 += g_host.tpdo2;
+  }
+  const uint64_t h = g_host.hash;
+  sim_emu_destroy(e);
+  return h;
+}
+
+// can_errors: failed CRCs are signalled as error frames and the frames resent, so the host
+// receives exactly the frames of a clean run (never a damaged payload); can_drop loses frames.
+static void test_emu_fault_can_errors_resend_and_drop_loses(void** state) {
+  (void)state;
+  uint32_t err0 = 0, err1 = 0, err2 = 0;
+  int n0 = 0, n1 = 0, n2 = 0;
+  const uint64_t clean = can_run(NULL, 30, &err0, &n0);
+  const uint64_t errors = can_run("fault can_errors 0.3", 30, &err1, &n1);
+  (void)can_run("fault can_drop 0.3", 30, &err2, &n2);
+  assert_int_equal(err0, 0);
+  assert_true(err1 > 10);
+  assert_true(clean == errors);
+  assert_int_equal(n1, n0);
+  assert_int_equal(err2, 0);
+  assert_true(n2 < n0 * 9 / 10 && n2 > n0 / 2);
+}
+
+// node_stuck: the drive's PDOs keep answering each SYNC with the values it had (its position
+// stands still while the robot drives), its heartbeats stop; babble floods the bus from COB-ID
+// 0x001, at most a bounded burst per read, and keeps the other nodes' frames off it.
+static void test_emu_fault_node_stuck_and_babble(void** state) {
+  (void)state;
+  sim_emu_t* e = make("corridor10.world", SIM_BASE_CANOPEN, SIM_MODE_LOCKSTEP);
+  host_canopen_startup(&g_host);
+  host_read(&g_host);
+  for (int k = 0; k < 5; ++k) {
+    host_can_cycle(&g_host, CIA402_CW_ENABLE_OPERATION, 0.3, 0.0);
+    host_read(&g_host);
+  }
+  assert_int_equal(ctl(e, "fault node_stuck 1 1000"), SIM_EMU_CTRL_OK);
+  int heartbeats = 0;
+  int32_t pos = 0;
+  for (int k = 0; k < 8; ++k) {
+    host_can_cycle(&g_host, CIA402_CW_ENABLE_OPERATION, 0.3, 0.0);
+    host_read(&g_host);
+    assert_int_equal(g_host.tpdo2, 2);
+    if (k == 0) {
+      pos = g_host.last_tpdo2[0].position_actual;
+    }
+    assert_int_equal(g_host.last_tpdo2[0].position_actual, pos);
+    assert_true(g_host.last_tpdo1[0].velocity_actual != 0);
+    heartbeats += g_host.heartbeats;
+  }
+  assert_true(heartbeats <= 8);  // the rotation drive's only (one per 0.1 s)
+  assert_int_equal(ctl(e, "fault clear"), SIM_EMU_CTRL_OK);
+  host_can_cycle(&g_host, CIA402_CW_ENABLE_OPERATION, 0.3, 0.0);
+  host_read(&g_host);
+  assert_true(g_host.last_tpdo2[0].position_actual != pos);
+
+  assert_int_equal(ctl(e, "fault babble 5 1000"), SIM_EMU_CTRL_OK);
+  assert_int_equal(ctl(e, "fault babble 0 1000"), SIM_EMU_CTRL_ERROR);
+  for (int k = 0; k < 3; ++k) {
+    host_can_cycle(&g_host, CIA402_CW_ENABLE_OPERATION, 0.3, 0.0);
+    host_read(&g_host);
+    assert_int_equal(g_host.tpdo1 + g_host.tpdo2 + g_host.bump_pdos, 0);
+    assert_true(g_host.other > 0 && g_host.other <= 64);
+  }
+  sim_emu_destroy(e);
+}
+
 // bumper 3 presses enclosure panel 3 (DIO 0x43, bits 0x0F) from the next period until cleared.
 static void test_emu_fault_bumper_reports_panel(void** state) {
   (void)state;
@@ -304,6 +413,9 @@ int main(void) {
       cmocka_unit_test(test_emu_fault_laser_drop_silences_laser),
       cmocka_unit_test(test_emu_fault_base_silent_and_clear),
       cmocka_unit_test(test_emu_fault_corrupt_changes_bytes),
+      cmocka_unit_test(test_emu_fault_laser_stuck_repeats_scan),
+      cmocka_unit_test(test_emu_fault_can_errors_resend_and_drop_loses),
+      cmocka_unit_test(test_emu_fault_node_stuck_and_babble),
       cmocka_unit_test(test_emu_fault_bumper_reports_panel),
       cmocka_unit_test(test_emu_fault_drive_fault_on_canopen),
       cmocka_unit_test(test_emu_fault_bumper_silent_on_canopen),

@@ -35,6 +35,11 @@ typedef struct fw_laser_stats {
   uint64_t restarts;        ///< driver start-overs (timeouts, silence)
 } fw_laser_stats_t;
 
+/// CAN bus counters for STATUS (monotonic over reopens).
+typedef struct fw_can_stats {
+  uint64_t error_frames;    ///< error frames received: the bus signalled a failed frame and resent it
+} fw_can_stats_t;
+
 /// Devices of fw_io_health_t (bit mask).
 #define FW_IO_DEVICE_LASER 1U
 #define FW_IO_DEVICE_BASE 2U
@@ -79,6 +84,9 @@ typedef struct fw_io_vtable {
 
   /// CANopen: receives one frame: 1 (frame), 0 (none pending), < 0 (error). NULL for rFLEX.
   int (*can_read)(void* user, canopen_frame_t* frame);
+
+  /// CANopen: bus counters; may be NULL (then reported as 0).
+  void (*can_stats)(void* user, fw_can_stats_t* out);
 
   /// CANopen: sends one frame without waiting (queued when the bus is busy): 0, or < 0 (-ENOBUFS:
   /// the bounded queue is full, counted in fw_io_health_t.output_overflows).

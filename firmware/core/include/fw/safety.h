@@ -62,6 +62,8 @@ typedef struct fw_safety_inputs {
   int64_t base_age_us;         ///< now − time of the last odometry
   uint64_t laser_bad_since_scan; ///< bytes dropped + telegrams refused (CRC) since the last scan:
                                ///< a silent laser with these > 0 is reported as a corrupt stream
+  int32_t laser_repeats;       ///< telegrams in a row that repeated the last scan bit for bit: a
+                               ///< silent laser with this > 0 is reported as stuck
   bool device_lost;            ///< a device is gone (EOF, EIO, ENODEV, hang-up) or, in lockstep, silent
   const char* device_lost_detail; ///< e.g. "laser device lost: /dev/ttyUSB0 (EIO)"
   bool base_fault;             ///< EMCY, statusword fault, heartbeat lost, watchdog, bump-panel node silent

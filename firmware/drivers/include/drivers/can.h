@@ -6,8 +6,8 @@
 /// - Emulated bus: an AF_UNIX SOCK_SEQPACKET socket (named path or inherited descriptor) whose
 ///   every record is one Linux `struct can_frame` (16 bytes). The emulator serves the bus; the
 ///   record boundaries of SOCK_SEQPACKET keep frames whole.
-/// Only standard 11-bit data frames are passed up; extended, RTR and error frames are counted
-/// and dropped. On a kernel without CAN support opening an interface fails with a message that
+/// Only standard 11-bit data frames are passed up; extended and RTR frames are counted and
+/// dropped, error frames (SocketCAN: enabled with CAN_RAW_ERR_FILTER) counted apart. On a kernel without CAN support opening an interface fails with a message that
 /// says so (and suggests the emulated bus).
 ///
 /// Not thread-safe. No allocation. Negative errno values on failure.
@@ -35,7 +35,8 @@ typedef enum drv_can_transport {
 typedef struct drv_can_counters {
   uint64_t frames_tx;
   uint64_t frames_rx;
-  uint64_t rx_dropped_kind;   ///< Extended, RTR or error frames received and dropped.
+  uint64_t rx_dropped_kind;   ///< Extended or RTR frames received and dropped.
+  uint64_t rx_error_frames;   ///< Error frames received (failed CRCs, bus errors): the bus resent the frame.
   uint64_t rx_bad_size;       ///< Records that were not one struct can_frame (empty ones too), or DLC > 8.
   uint64_t tx_would_block;    ///< Sends refused because the socket buffer was full.
   uint64_t errors;            ///< Other send/receive failures.

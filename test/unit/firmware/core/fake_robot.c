@@ -37,9 +37,14 @@ static void emit_scan(fake_robot_t* f) {
   uint8_t no_return[SYNTH_MAX_BEAMS];
   const int n = synth_lidar_scan(&f->world, &f->lidar, &f->rng, f->robot.x_m, f->robot.y_m, f->robot.theta_rad, ranges,
                                  no_return, SYNTH_MAX_BEAMS);
-  uint16_t raw[SYNTH_MAX_BEAMS];
-  for (int i = 0; i < n; ++i) {
-    raw[i] = no_return[i] != 0 ? lms_beam_status_raw(LMS_BEAM_NO_ECHO, 13) : lms_range_to_raw(ranges[i], LMS_UNIT_MM, 13);
+  uint16_t* raw = f->last_raw;
+  if (f->laser_stuck_ticks > 0 && f->last_n == n) {
+    f->laser_stuck_ticks--;  // the same distances again
+  } else {
+    for (int i = 0; i < n; ++i) {
+      raw[i] = no_return[i] != 0 ? lms_beam_status_raw(LMS_BEAM_NO_ECHO, 13) : lms_range_to_raw(ranges[i], LMS_UNIT_MM, 13);
+    }
+    f->last_n = n;
   }
   uint8_t tel[LMS_MAX_TELEGRAM_BYTES];
   const size_t len = lms_encode_scan_reply(tel, sizeof tel, raw, (size_t)n, LMS_UNIT_MM, 0, NULL, 0);

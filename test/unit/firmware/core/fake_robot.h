@@ -59,6 +59,8 @@ typedef struct fake_robot {
   // Laser link: the host side decodes real telegrams.
   uint8_t laser_bytes[FAKE_BYTES];
   uint32_t laser_fill;
+  uint16_t last_raw[SYNTH_MAX_BEAMS];  // the last scan's raw values (repeated while stuck)
+  int last_n;
   lms_decoder_t lms_dec;
   // Base link.
   uint8_t base_bytes[FAKE_BYTES];   // device -> host
@@ -82,6 +84,7 @@ typedef struct fake_robot {
   int64_t bump_pdos;
   // Faults.
   int32_t laser_drop_ticks;
+  int32_t laser_stuck_ticks;  ///< periods whose scan repeats the last distances (a frozen sensor)
   int32_t base_silent_ticks;
   int32_t bumper_ticks;
   double corrupt_fraction;

@@ -107,6 +107,34 @@ static void test_loop_laser_silence_stops_within_one_tick(void** state) {
   harness_close(&g_h);
 }
 
+// A stuck laser (valid telegrams repeating the same distances) is no source of new scans: the
+// command is held, the repeats are counted, and after the laser's limit the robot stops with
+// the detail "laser stuck", in real time and in lockstep (where the repeats still pace the ticks:
+// no lockstep timeout); it resumes once the scans change again.
+static void expect_stuck_laser_stops(void (*tweak)(fw_config_t*)) {
+  open_running(false, tweak);
+  g_h.fake.laser_stuck_ticks = 8;
+  const int ticks = expect_stop_within(FW_STOP_LASER_SILENT, 20);
+  assert_true(ticks >= 4 && ticks <= 5);
+  assert_non_null(strstr(g_h.last_status_detail, "laser stuck: the same scan"));
+  expect_resume(60 + REPLAY_TICKS);
+  fw_loop_stats_t st;
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.runs_aborted, 1);
+  assert_true(st.stop_reason != FW_STOP_DEVICE_LOST);
+  harness_close(&g_h);
+}
+
+static void test_loop_stuck_laser_stops_real_time(void** state) {
+  (void)state;
+  expect_stuck_laser_stops(real_time);
+}
+
+static void test_loop_stuck_laser_stops_lockstep(void** state) {
+  (void)state;
+  expect_stuck_laser_stops(NULL);
+}
+
 // Between scans: a period without a new scan holds the command in force and learns nothing, in
 // phase one (the example's run) and in phase two (the learned policy's). Silences shorter than
 // the laser's limit, so the runs go on.
@@ -665,6 +693,8 @@ static void test_loop_late_start_and_missed_periods_counted(void** state) {
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_loop_laser_silence_stops_within_one_tick),
+      cmocka_unit_test(test_loop_stuck_laser_stops_real_time),
+      cmocka_unit_test(test_loop_stuck_laser_stops_lockstep),
       cmocka_unit_test(test_loop_between_scans_command_held),
       cmocka_unit_test(test_loop_lockstep_silence_ends_loop),
       cmocka_unit_test(test_loop_base_silence_stops_within_one_tick),
