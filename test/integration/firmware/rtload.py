@@ -2,6 +2,7 @@
 """rtload: helpers of the deadline tests (label rt): stress-ng on every core, the privilege to
 use real-time scheduling, a process's resident memory."""
 import os
+import re
 import resource
 import shutil
 import subprocess
@@ -28,6 +29,36 @@ def start_stress(seconds, log_path):
     log = open(log_path, "w")
     return subprocess.Popen([exe, "--cpu", str(os.cpu_count()), "--io", "1", "--vm", "1", "--vm-bytes", "512M",
                              "--timeout", "%ds" % seconds, "--metrics-brief"], stdout=log, stderr=subprocess.STDOUT)
+
+
+def start_reference(cpu, priority, seconds, log_path):
+    """cyclictest (rt-tests): a bare SCHED_FIFO thread at `priority` on `cpu` waking every
+    millisecond for `seconds`, memory locked: the platform's own wake-up latency over the same
+    interval and load, the reference the controller's lateness is judged against (a thread that
+    does nothing can be late only because of the kernel, the hypervisor or the hardware)."""
+    exe = shutil.which("cyclictest")
+    if exe is None:
+        fwtest.fail("cyclictest is not installed (tools/setup.sh installs rt-tests from tools/debian-packages.txt)")
+    log = open(log_path, "w")
+    return subprocess.Popen([exe, "-m", "-q", "-p", str(priority), "-a", str(cpu), "-i", "1000", "-D", "%ds" % seconds],
+                            stdout=log, stderr=subprocess.STDOUT)
+
+
+def reference_max_us(proc, log_path):
+    """Waits for cyclictest to end; returns its largest wake-up latency [us] or None."""
+    try:
+        proc.wait(60)
+    except subprocess.TimeoutExpired:
+        stop(proc)
+    with open(log_path) as f:
+        m = [int(x) for x in re.findall(r"Max:\s*(\d+)", f.read())]
+    return max(m) if m else None
+
+
+def steal_jiffies():
+    """The time every CPU of this (virtual) machine waited for its hypervisor [USER_HZ ticks]."""
+    with open("/proc/stat") as f:
+        return int(f.readline().split()[8])
 
 
 def stop(proc):
