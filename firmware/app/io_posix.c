@@ -360,6 +360,7 @@ static int v_can_read(void* user, canopen_frame_t* frame) {
 static void v_can_stats(void* user, fw_can_stats_t* out) {
   const io_posix_t* io = (const io_posix_t*)user;
   out->error_frames = io->can_before.error_frames + io->can.counters.rx_error_frames;
+  out->bus_off = io->can.bus_off;
 }
 
 static int v_can_write(void* user, const canopen_frame_t* frame) {

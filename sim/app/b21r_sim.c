@@ -410,6 +410,21 @@ static void pump(app_t* a, uint64_t now_ns) {
     a->can_out.fr[i].ready_ns = ready;
     ++a->can_out.len;
   }
+  // The host's controller going bus-off and restarting, as SocketCAN reports both.
+  for (sim_emu_bus_event_t ev = sim_emu_can_take_bus_event(a->emu); ev != SIM_EMU_BUS_NONE;
+       ev = sim_emu_can_take_bus_event(a->emu)) {
+    if (a->can_out.len == APP_PEND_FRAMES) {
+      ++a->can_out.dropped;
+      continue;
+    }
+    const size_t i = (a->can_out.head + a->can_out.len) % APP_PEND_FRAMES;
+    struct can_frame* ef = &a->can_out.fr[i].f;
+    memset(ef, 0, sizeof(*ef));
+    ef->can_id = CAN_ERR_FLAG | (ev == SIM_EMU_BUS_OFF ? CAN_ERR_BUSOFF : CAN_ERR_RESTARTED);
+    ef->can_dlc = CAN_ERR_DLC;
+    a->can_out.fr[i].ready_ns = ready;
+    ++a->can_out.len;
+  }
   pend_flush(&a->laser_out, a->laser_master, now_ns);
   if (a->base_master >= 0) {
     pend_flush(&a->base_out, a->base_master, now_ns);

@@ -34,6 +34,10 @@ struct sim_emu {
   double can_error_fraction;  // a frame's transmission fails its CRC: error frame, retransmission
   double can_drop_fraction;   // a frame is lost (the receiver's buffer overran)
   uint32_t can_error_frames;  // error frames signalled, not yet taken by the transport
+  bool bus_off;               // the host's CAN controller is off the bus: it sends and receives nothing
+  double bus_off_until_s;     // simulated time its restart brings it back
+  bool bus_off_pending;       // the bus-off error frame is yet to be taken by the transport
+  bool bus_restart_pending;   // the restart's error frame likewise
   uint8_t stuck_node;         // 0 = none: the node whose application hangs
   double stuck_until_s;
   canopen_frame_t frozen[SIM_EMU_FROZEN_SLOTS];  // its PDOs as they were when it hung
@@ -314,8 +318,8 @@ void sim_emu_base_write(sim_emu_t* e, const uint8_t* bytes, size_t n) {
 }
 
 void sim_emu_can_write(sim_emu_t* e, const canopen_frame_t* f) {
-  if (e->cia402 == NULL) {
-    return;
+  if (e->cia402 == NULL || (e->bus_off && now(e) < e->bus_off_until_s)) {
+    return;  // a controller off the bus sends nothing
   }
   const double t = now(e);
   sim_cia401_feed(e->bumpers, f, t);
@@ -438,6 +442,16 @@ int sim_emu_can_read(sim_emu_t* e, canopen_frame_t* f) {
   if (e->cia402 == NULL) {
     return 0;
   }
+  if (e->bus_off) {
+    if (now(e) < e->bus_off_until_s) {
+      // Off the bus the host receives nothing; the nodes' frames go by unheard.
+      while (sim_cia401_drain(e->bumpers, f) || sim_cia402_drain(e->cia402, f)) {
+      }
+      return 0;
+    }
+    e->bus_off = false;
+    e->bus_restart_pending = true;
+  }
   if (babble_frame(e, f)) {
     return 1;
   }
@@ -465,6 +479,18 @@ int sim_emu_can_read(sim_emu_t* e, canopen_frame_t* f) {
     }
     return 1;
   }
+}
+
+sim_emu_bus_event_t sim_emu_can_take_bus_event(sim_emu_t* e) {
+  if (e->bus_off_pending) {
+    e->bus_off_pending = false;
+    return SIM_EMU_BUS_OFF;
+  }
+  if (e->bus_restart_pending) {
+    e->bus_restart_pending = false;
+    return SIM_EMU_BUS_RESTARTED;
+  }
+  return SIM_EMU_BUS_NONE;
 }
 
 uint32_t sim_emu_can_take_error_frames(sim_emu_t* e) {
@@ -628,6 +654,10 @@ static sim_emu_ctrl_t control_fault(sim_emu_t* e, char tok[][SPLIT_TOKEN_CAP], s
     e->stuck_node = 0;
     e->n_frozen = 0;
     e->babble_id_node = 0;
+    if (e->bus_off) {
+      e->bus_off = false;
+      e->bus_restart_pending = true;
+    }
     e->latency_s = 0.0;
     e->forced_panel = -1;
     return reply_ok(reply, cap);
@@ -655,7 +685,7 @@ static sim_emu_ctrl_t control_fault(sim_emu_t* e, char tok[][SPLIT_TOKEN_CAP], s
   double v = 0.0;
   if (n != 3) {
     return reply_error(reply, cap,
-                       "usage: fault laser_drop|laser_stuck|corrupt|noise_laser|noise_base|can_errors|can_drop|base_silent|"
+                       "usage: fault laser_drop|laser_stuck|corrupt|noise_laser|noise_base|can_errors|can_drop|bus_off|base_silent|"
                        "drive_fault|latency|bumper|bumper_silent <value> | fault node_stuck|babble <node> <ms> | "
                        "fault clear");
   }
@@ -699,6 +729,14 @@ static sim_emu_ctrl_t control_fault(sim_emu_t* e, char tok[][SPLIT_TOKEN_CAP], s
       return reply_error(reply, cap, "can_errors needs the canopen base and a fraction in [0, 1]");
     }
     e->can_error_fraction = v;
+  } else if (strcmp(kind, "bus_off") == 0) {
+    if (e->cia402 == NULL) {
+      return reply_error(reply, cap, "bus_off needs the canopen base");
+    }
+    e->bus_off = true;
+    e->bus_off_until_s = t + v * 1e-3;
+    e->bus_off_pending = true;
+    e->bus_restart_pending = false;
   } else if (strcmp(kind, "can_drop") == 0) {
     if (e->cia402 == NULL || v > 1.0) {
       return reply_error(reply, cap, "can_drop needs the canopen base and a fraction in [0, 1]");

@@ -34,6 +34,13 @@ static bool pull(inproc_sim_t* s) {
     uint32_t errors = 0;
     SIM_CALL(s, errors = sim_emu_can_take_error_frames(s->emu));
     s->can_error_frames += errors;
+    for (sim_emu_bus_event_t ev = SIM_EMU_BUS_NONE;;) {
+      SIM_CALL(s, ev = sim_emu_can_take_bus_event(s->emu));
+      if (ev == SIM_EMU_BUS_NONE) {
+        break;
+      }
+      s->can_bus_off = ev == SIM_EMU_BUS_OFF;
+    }
   }
   return s->laser_fill > 0 || s->base_fill > 0 || s->n_frames > 0;
 }
@@ -111,6 +118,7 @@ static int v_can_read(void* user, canopen_frame_t* frame) {
 
 static void v_can_stats(void* user, fw_can_stats_t* out) {
   out->error_frames = ((const inproc_sim_t*)user)->can_error_frames;
+  out->bus_off = ((const inproc_sim_t*)user)->can_bus_off;
 }
 
 static int v_can_write(void* user, const canopen_frame_t* frame) {

@@ -48,6 +48,7 @@ typedef struct inproc_sim {
   canopen_frame_t frames[256];
   uint32_t n_frames;
   uint64_t can_error_frames;  ///< error frames the emulated bus signalled (failed CRCs, frames resent)
+  bool can_bus_off;           ///< the emulated host controller is bus-off
   int64_t clock_us;
   uint64_t sim_allocs;  ///< allocations inside emulator calls (only with opt.alloc_probe)
 } inproc_sim_t;

@@ -295,6 +295,16 @@ static bool bump_silent(fw_loop_t* L, int64_t now_us, char* detail, size_t cap) 
 // the bus), the bump-panel node's heartbeat lost. Writes the detail and returns true when one is
 // present.
 static bool can_node_faults(fw_loop_t* L, int64_t now_us, uint32_t foreign, char* detail, size_t cap) {
+  fw_can_stats_t cs = {0};
+  if (L->io.vt->can_stats != NULL) {
+    L->io.vt->can_stats(L->io.user, &cs);
+  }
+  if (cs.bus_off) {
+    // Named before the drives' silence it causes: the fault is this computer's interface.
+    // (Restart advice in docs/robot.md: the detail has 128 bytes.)
+    snprintf(detail, cap, "CAN bus-off: this computer's CAN controller left the bus (check termination, bit rate, wiring)");
+    return true;
+  }
   if (foreign >= FLOOD_FRAMES_PER_TICK && !fw_base_any_report(L)) {
     snprintf(detail, cap,
              "CAN bus flooded: %u frames of id 0x%03x (no configured node) in one tick, no drive answers (a babbling "

@@ -88,7 +88,8 @@ int drv_can_open_socketcan(drv_can_t* port, const char* ifname, char* err, size_
   // Error frames (bus errors, failed CRCs, error-passive and bus-off states) are delivered and
   // counted: they are how a node on a disturbed bus learns that frames had to be sent again.
   // Without the option the port still works; it then counts none.
-  const can_err_mask_t err_mask = CAN_ERR_PROT | CAN_ERR_CRTL | CAN_ERR_BUSOFF | CAN_ERR_BUSERROR | CAN_ERR_ACK;
+  const can_err_mask_t err_mask =
+      CAN_ERR_PROT | CAN_ERR_CRTL | CAN_ERR_BUSOFF | CAN_ERR_BUSERROR | CAN_ERR_ACK | CAN_ERR_RESTARTED;
   (void)setsockopt(fd, SOL_CAN_RAW, CAN_RAW_ERR_FILTER, &err_mask, sizeof err_mask);
   port->fd = fd;
   port->owns_fd = true;
@@ -276,6 +277,12 @@ int drv_can_recv(drv_can_t* port, canopen_frame_t* frame) {
     }
     if ((cf.can_id & CAN_ERR_FLAG) != 0U) {
       port->counters.rx_error_frames++;
+      if ((cf.can_id & CAN_ERR_BUSOFF) != 0U) {
+        port->bus_off = true;
+        port->counters.bus_off_events++;
+      } else if ((cf.can_id & CAN_ERR_RESTARTED) != 0U) {
+        port->bus_off = false;
+      }
       continue;
     }
     if (drv_can_from_linux(&cf, frame) != 0) {
@@ -283,6 +290,7 @@ int drv_can_recv(drv_can_t* port, canopen_frame_t* frame) {
       continue;
     }
     port->counters.frames_rx++;
+    port->bus_off = false;  // a frame arrived: the controller is on the bus (its restart report may be lost)
     return 1;
   }
 }

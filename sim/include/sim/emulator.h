@@ -57,7 +57,8 @@
 ///   from the first contact until the next reset).
 /// - `fault laser_drop <ms>` | `fault laser_stuck <ms>` | `fault corrupt <fraction>` |
 ///   `fault noise_laser <fraction>` | `fault noise_base <fraction>` |
-///   `fault can_errors <fraction>` | `fault can_drop <fraction>` | `fault base_silent <ms>` | `fault drive_fault <node>` |
+///   `fault can_errors <fraction>` | `fault can_drop <fraction>` | `fault bus_off <ms>` |
+///   `fault base_silent <ms>` | `fault drive_fault <node>` |
 ///   `fault latency <ms>` | `fault bumper <panel>` | `fault bumper_silent <ms>` |
 ///   `fault node_stuck <node> <ms>` | `fault babble <node> <ms>` | `fault clear`.
 ///   Durations are simulated time. laser_stuck: every scan repeats the last measured distances
@@ -69,7 +70,10 @@
 ///   probability: the bus signals an error frame (sim_emu_can_take_error_frames) and the frame
 ///   is sent again, so, as on a real bus, no damaged payload is delivered; can_errors: the same on
 ///   the bus only. can_drop: each frame
-///   is lost with that probability (a receiver overrun). node_stuck: the node's application hangs:
+///   is lost with that probability (a receiver overrun). bus_off: the host's CAN controller goes
+///   bus-off (after too many failed transmissions a controller switches itself off the bus):
+///   for that long it receives and sends nothing, then restarts; the transport signals both as
+///   error frames (sim_emu_can_take_bus_event). node_stuck: the node's application hangs:
 ///   its PDOs keep coming with the values it had (stale), its heartbeat and EMCY stop. babble: a
 ///   node floods the bus with COB-ID 0x001 frames (4000 per simulated second) and, winning every
 ///   arbitration, keeps every other node's frame off the bus. latency: stored
@@ -77,7 +81,7 @@
 ///   time). bumper: panel 0..13 (or its DIO address 0x40..0x4D) reads pressed (bits 0x0F) until
 ///   `fault clear`, on either base (rFLEX: DIO_REPORT; CANopen: the bump-panel node's TPDO1).
 ///   base_silent: the rFLEX, or on CANopen the drives (the bump-panel node keeps sending).
-///   drive_fault, can_errors, can_drop, node_stuck, babble: CANopen base only. bumper_silent: CANopen only;
+///   drive_fault, can_errors, can_drop, bus_off, node_stuck, babble: CANopen base only. bumper_silent: CANopen only;
 ///   the bump-panel node sends nothing (no PDO, no heartbeat) for that long.
 /// - `status`: `ok t=<s> streaming=<0|1> scans=<n> base_reports=<n> contacts=<n> watchdog_trips=<n>`
 ///   (watchdog_trips: times the base's command watchdog stopped it: rFLEX trips, CiA 402 RPDO timeouts).
@@ -170,6 +174,17 @@ int sim_emu_can_read(sim_emu_t* e, canopen_frame_t* f);
 /// Error frames the bus signalled (failed CRCs under `fault corrupt`) since the last call; the
 /// transport sends them to the host as error frames. O(1).
 uint32_t sim_emu_can_take_error_frames(sim_emu_t* e);
+
+/// A change of the host's CAN controller state under `fault bus_off`, for the transport to signal
+/// as an error frame (SocketCAN: CAN_ERR_BUSOFF, then CAN_ERR_RESTARTED).
+typedef enum sim_emu_bus_event {
+  SIM_EMU_BUS_NONE = 0,
+  SIM_EMU_BUS_OFF = 1,        ///< the controller went bus-off
+  SIM_EMU_BUS_RESTARTED = 2,  ///< it is back on the bus
+} sim_emu_bus_event_t;
+/// The next pending state change, bus-off before its restart; SIM_EMU_BUS_NONE when there is
+/// none. Call it after sim_emu_can_read (a restart is noticed there). O(1).
+sim_emu_bus_event_t sim_emu_can_take_bus_event(sim_emu_t* e);
 
 /// Real-time mode: advances physics and device timing to t_s (no effect in lockstep or for
 /// t_s in the past). O(substeps).

@@ -14,7 +14,9 @@ a core: no fault makes it spin).
   frames are counted in can_unanswered_syncs and tolerated; a drive stuck on its old values
   (stale PDOs while it reports a velocity) is a base fault; the bump-panel node stuck (stale
   PDOs, no heartbeat) is a base fault "heartbeat lost"; a babbling node that holds the bus is a
-  base fault "CAN bus flooded", its frames counted in can_foreign_frames.
+  base fault "CAN bus flooded", its frames counted in can_foreign_frames; this computer's
+  controller going bus-off (its error frame, then nothing on the bus until its restart) is a base
+  fault "CAN bus-off", cleared after the restart.
 No STATUS counter that the message definition calls monotonic goes back.
 usage: test_bus_faults.py CONTROLLER SIM WORLD rflex|canopen"""
 import os
@@ -114,6 +116,7 @@ def main():
             stop_fault("fault node_stuck 1 1500", "base fault", "stale PDOs", clear=None)
             stop_fault("fault node_stuck 16 1500", "base fault", "heartbeat lost", clear=None)
             stop_fault("fault babble 5 1000", "base fault", "CAN bus flooded", clear=None)
+            stop_fault("fault bus_off 1000", "base fault", "CAN bus-off", clear=None)
         proc.send_signal(signal.SIGTERM)
         rc = proc.wait(60)
         if rc != 128 + signal.SIGTERM:

@@ -52,6 +52,7 @@ BASE = {"rflex": [("base silent", "fault base_silent 1500", "base silent", "faul
                     ("bump-panel silent", "fault bumper_silent 1500", "base fault", None, 0),
                     ("drive stuck", "fault node_stuck 1 1500", "base fault", None, 0),
                     ("babbling node", "fault babble 5 1000", "base fault", None, 0),
+                    ("bus-off", "fault bus_off 1000", "base fault", None, 0),
                     ("failed CRCs", "fault can_errors 0.2", None, "fault clear", 20),
                     ("lost frames", "fault can_drop 0.03", None, "fault clear", 20)]}
 

@@ -255,6 +255,56 @@ static void test_emu_fault_node_stuck_and_babble(void** state) {
   sim_emu_destroy(e);
 }
 
+// bus_off: the host's controller goes off the bus: a bus-off event, then nothing is received (and
+// what the host sends is lost) until its restart, in real time after the fault's duration, in
+// lockstep (where the host's periods cannot pass without answers) at `fault clear`; a restart
+// event, and frames again. rFLEX refuses it.
+static void test_emu_fault_bus_off_and_restart(void** state) {
+  (void)state;
+  sim_emu_t* e = make("corridor10.world", SIM_BASE_CANOPEN, SIM_MODE_LOCKSTEP);
+  host_canopen_startup(&g_host);
+  host_read(&g_host);
+  assert_int_equal(sim_emu_can_take_bus_event(e), SIM_EMU_BUS_NONE);
+  assert_int_equal(ctl(e, "fault bus_off 300"), SIM_EMU_CTRL_OK);
+  assert_int_equal(sim_emu_can_take_bus_event(e), SIM_EMU_BUS_OFF);
+  for (int k = 0; k < 3; ++k) {
+    host_can_cycle(&g_host, CIA402_CW_ENABLE_OPERATION, 0.3, 0.0);
+    host_read(&g_host);
+    assert_int_equal(g_host.tpdo1 + g_host.tpdo2 + g_host.bump_pdos + g_host.heartbeats, 0);
+  }
+  assert_int_equal(sim_emu_can_take_bus_event(e), SIM_EMU_BUS_NONE);
+  assert_int_equal(ctl(e, "fault clear"), SIM_EMU_CTRL_OK);
+  assert_int_equal(sim_emu_can_take_bus_event(e), SIM_EMU_BUS_RESTARTED);
+  host_can_cycle(&g_host, CIA402_CW_ENABLE_OPERATION, 0.3, 0.0);
+  host_read(&g_host);
+  assert_int_equal(g_host.tpdo2, 2);
+  sim_emu_destroy(e);
+
+  e = make("corridor10.world", SIM_BASE_CANOPEN, SIM_MODE_REALTIME);
+  host_canopen_startup(&g_host);
+  assert_int_equal(ctl(e, "fault bus_off 300"), SIM_EMU_CTRL_OK);
+  int heard = 0;
+  for (int ms = 1; ms <= 290; ++ms) {
+    sim_emu_run_until(e, ms * 1e-3);
+    host_read(&g_host);
+    heard += g_host.heartbeats + g_host.tpdo1 + g_host.bump_pdos;
+  }
+  assert_int_equal(heard, 0);
+  assert_int_equal(sim_emu_can_take_bus_event(e), SIM_EMU_BUS_OFF);
+  for (int ms = 291; ms <= 600; ++ms) {
+    sim_emu_run_until(e, ms * 1e-3);
+    host_read(&g_host);
+    heard += g_host.heartbeats;
+  }
+  assert_int_equal(sim_emu_can_take_bus_event(e), SIM_EMU_BUS_RESTARTED);
+  assert_true(heard > 0);  // the nodes' heartbeats are heard again
+  sim_emu_destroy(e);
+
+  e = make("corridor10.world", SIM_BASE_RFLEX, SIM_MODE_LOCKSTEP);
+  assert_int_equal(ctl(e, "fault bus_off 300"), SIM_EMU_CTRL_ERROR);
+  sim_emu_destroy(e);
+}
+
 // bumper 3 presses enclosure panel 3 (DIO 0x43, bits 0x0F) from the next period until cleared.
 static void test_emu_fault_bumper_reports_panel(void** state) {
   (void)state;
@@ -416,6 +466,7 @@ int main(void) {
       cmocka_unit_test(test_emu_fault_laser_stuck_repeats_scan),
       cmocka_unit_test(test_emu_fault_can_errors_resend_and_drop_loses),
       cmocka_unit_test(test_emu_fault_node_stuck_and_babble),
+      cmocka_unit_test(test_emu_fault_bus_off_and_restart),
       cmocka_unit_test(test_emu_fault_bumper_reports_panel),
       cmocka_unit_test(test_emu_fault_drive_fault_on_canopen),
       cmocka_unit_test(test_emu_fault_bumper_silent_on_canopen),

@@ -35,9 +35,10 @@ typedef struct fw_laser_stats {
   uint64_t restarts;        ///< driver start-overs (timeouts, silence)
 } fw_laser_stats_t;
 
-/// CAN bus counters for STATUS (monotonic over reopens).
+/// CAN bus counters for STATUS (monotonic over reopens) and the host controller's state.
 typedef struct fw_can_stats {
   uint64_t error_frames;    ///< error frames received: the bus signalled a failed frame and resent it
+  bool bus_off;             ///< this host's CAN controller is bus-off (it sends and receives nothing)
 } fw_can_stats_t;
 
 /// Devices of fw_io_health_t (bit mask).

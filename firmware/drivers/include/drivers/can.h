@@ -36,7 +36,8 @@ typedef struct drv_can_counters {
   uint64_t frames_tx;
   uint64_t frames_rx;
   uint64_t rx_dropped_kind;   ///< Extended or RTR frames received and dropped.
-  uint64_t rx_error_frames;   ///< Error frames received (failed CRCs, bus errors): the bus resent the frame.
+  uint64_t rx_error_frames;   ///< Error frames received (failed CRCs, bus errors: the bus resent the frame; bus-off, restart).
+  uint64_t bus_off_events;    ///< Times this host's controller reported going bus-off.
   uint64_t rx_bad_size;       ///< Records that were not one struct can_frame (empty ones too), or DLC > 8.
   uint64_t tx_would_block;    ///< Sends refused because the socket buffer was full.
   uint64_t errors;            ///< Other send/receive failures.
@@ -48,6 +49,7 @@ typedef struct drv_can {
   bool owns_fd;
   drv_can_transport_t transport;
   drv_can_counters_t counters;
+  bool bus_off;               ///< The controller reported bus-off and no restart or frame since.
 } drv_can_t;
 
 /// Opens a raw SocketCAN socket bound to `ifname` (non-blocking).

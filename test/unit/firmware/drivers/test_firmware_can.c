@@ -7,6 +7,7 @@
 
 #include <errno.h>
 #include <linux/can.h>
+#include <linux/can/error.h>
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -119,6 +120,36 @@ static void test_can_recv_drops_foreign_records(void** state) {
   assert_int_equal(fx->host.counters.frames_rx, 1);
 }
 
+// The controller's bus-off report sets the port's bus_off state (counted), its restart report
+// clears it; so does any frame received after a restart report was lost.
+static void test_can_bus_off_and_restart(void** state) {
+  fixture_t* fx = *state;
+  struct can_frame cf;
+  memset(&cf, 0, sizeof cf);
+  cf.can_id = CAN_ERR_FLAG | CAN_ERR_BUSOFF;
+  cf.can_dlc = CAN_ERR_DLC;
+  assert_int_equal(send(fx->fds[1], &cf, sizeof cf, 0), (ssize_t)sizeof cf);
+  canopen_frame_t g;
+  assert_int_equal(drv_can_recv(&fx->host, &g), 0);
+  assert_true(fx->host.bus_off);
+  assert_int_equal(fx->host.counters.bus_off_events, 1);
+  cf.can_id = CAN_ERR_FLAG | CAN_ERR_RESTARTED;
+  assert_int_equal(send(fx->fds[1], &cf, sizeof cf, 0), (ssize_t)sizeof cf);
+  assert_int_equal(drv_can_recv(&fx->host, &g), 0);
+  assert_false(fx->host.bus_off);
+  cf.can_id = CAN_ERR_FLAG | CAN_ERR_BUSOFF;
+  assert_int_equal(send(fx->fds[1], &cf, sizeof cf, 0), (ssize_t)sizeof cf);
+  memset(&cf, 0, sizeof cf);
+  cf.can_id = 0x701;
+  cf.can_dlc = 1;
+  cf.data[0] = CANOPEN_NMT_STATE_OPERATIONAL;
+  assert_int_equal(send(fx->fds[1], &cf, sizeof cf, 0), (ssize_t)sizeof cf);
+  assert_int_equal(drv_can_recv(&fx->host, &g), 1);
+  assert_false(fx->host.bus_off);
+  assert_int_equal(fx->host.counters.bus_off_events, 2);
+  assert_int_equal(fx->host.counters.rx_error_frames, 3);
+}
+
 // Invalid frames are refused before they reach the bus; a closed peer is reported as -EPIPE.
 static void test_can_invalid_send_and_peer_closed(void** state) {
   fixture_t* fx = *state;
@@ -217,6 +248,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test_setup_teardown(test_can_seqpacket_canopen_exchange, setup, teardown),
       cmocka_unit_test_setup_teardown(test_can_recv_drops_foreign_records, setup, teardown),
+      cmocka_unit_test_setup_teardown(test_can_bus_off_and_restart, setup, teardown),
       cmocka_unit_test_setup_teardown(test_can_invalid_send_and_peer_closed, setup, teardown),
       cmocka_unit_test(test_can_linux_conversion),
       cmocka_unit_test(test_can_named_seqpacket_connects),
