@@ -70,7 +70,10 @@ static void lose(io_posix_t* io, io_posix_device_t* d, const char* cause, int64_
     drv_serial_close(&io->laser_port);  // the port lets go; the helper thread closes the line
     drv_serial_link_close(io->laser_link);
   } else if (io->use_can) {
-    io->can_before.error_frames += io->can.counters.rx_error_frames;  // the reopen starts from zero
+    // Carried over (the reopened port counts from zero) and taken off the closed port at once: a
+    // STATUS between now and the reopen must not count them twice.
+    io->can_before.error_frames += io->can.counters.rx_error_frames;
+    io->can.counters.rx_error_frames = 0;
     drv_can_close(&io->can);
     io->can_out_n = 0;
   } else {

@@ -165,8 +165,8 @@ static const key_desc_t k_keys[] = {
    "CANopen node id of the translation drive"},
   {NULL, "can_node_rotation", KIND_INT, OFF(can_node_rotation), 1, 127, false, false, NULL, "2",
    "CANopen node id of the rotation (steering) drive"},
-  {NULL, "can_heartbeat_timeout_s", KIND_DOUBLE, OFF(can_heartbeat_timeout_s), 0, 10, false, false, NULL, "0",
-   "a drive heartbeat silent this long is a fault (0 = no heartbeat supervision)"},
+  {NULL, "can_heartbeat_timeout_s", KIND_DOUBLE, OFF(can_heartbeat_timeout_s), 0, 10, false, false, NULL, "0.5",
+   "a node's heartbeat (the drives', the bump-panel node's) silent this long is a base fault (0 = no heartbeat supervision; nodes that send none need 0)"},
   {NULL, "can_node_bumpers", KIND_INT, OFF(can_node_bumpers), 1, 127, false, false, NULL, "16",
    "CANopen node id of the CiA 401 digital-input node that reads the 14 bump panels (TPDO1 = COB-ID "
    "0x180 + id); with base_protocol = canopen the controller does not start without it"},

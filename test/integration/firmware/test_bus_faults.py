@@ -49,8 +49,6 @@ def main():
         settings = {"lockstep": "false", "phase_one_runs": 1000, "eval_every_runs": 1000,
                     "checkpoint_file": os.path.join(d, "hedger.ckpt"), "safety_clear_ticks": 5,
                     "hedger_replay": "false"}
-        if base == "canopen":
-            settings["can_heartbeat_timeout_s"] = 0.5  # node liveness supervised
         err_path = os.path.join(d, "run.controller.log")
         with open(err_path, "w") as err, open(os.path.join(d, "run.progress.txt"), "w") as out:
             proc = subprocess.Popen(fwtest.controller_cmd(controller, sim, d, "run", settings), stdout=out, stderr=err)
