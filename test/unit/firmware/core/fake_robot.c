@@ -89,6 +89,8 @@ static void emit_base(fake_robot_t* f) {
     push_frame(f, &fr);
     (void)canopen_encode_tpdo2(&fr, node, (int32_t)lround(pos[i]));
     push_frame(f, &fr);
+    (void)canopen_encode_heartbeat(&fr, node, CANOPEN_NMT_STATE_OPERATIONAL);  // one per period
+    push_frame(f, &fr);
   }
 }
 
@@ -102,13 +104,19 @@ static void push_bumpers(fake_robot_t* f) {
   f->bump_pdos++;
 }
 
-// The bump-panel node's periodic TPDO1 (its event timer is one period), before the drives' TPDOs.
+// The bump-panel node's periodic TPDO1 (its event timer is one period) and heartbeat, before the
+// drives' TPDOs.
 static void emit_bumpers(fake_robot_t* f) {
   if (f->bump_silent_ticks > 0) {
     f->bump_silent_ticks--;
     return;
   }
   push_bumpers(f);
+  if (f->bump_operational && !f->bump_absent) {
+    canopen_frame_t fr;
+    (void)canopen_encode_heartbeat(&fr, CANOPEN_NODE_BUMPERS_DEFAULT, CANOPEN_NMT_STATE_OPERATIONAL);
+    push_frame(f, &fr);
+  }
 }
 
 static void set_bumper(fake_robot_t* f, bool pressed) {
