@@ -235,6 +235,9 @@ static const key_desc_t k_keys[] = {
    "policy = actor: target step [rad/s] per tick of discounting that one rad/s gains"},
   {NULL, "actor_step_max", KIND_DOUBLE, OFF(actor_step_max), 0, 4, false, false, NULL, "0.1",
    "policy = actor: largest change of its target action after one run [rad/s]"},
+  {NULL, "actor_trust_radius", KIND_DOUBLE, OFF(actor_trust_radius), 0, 4, false, false, NULL, "0",
+   "policy = actor: largest distance of its target action from the action the runs took at that state [rad/s] "
+   "(0: no bound)"},
   {NULL, "actor_fit_steps", KIND_INT, OFF(actor_fit_steps), 0, 100000, false, false, NULL, "200",
    "policy = actor: Adam steps of each fit to its targets"},
   {NULL, "actor_clone_steps", KIND_INT, OFF(actor_clone_steps), 0, 100000, false, false, NULL, "300",

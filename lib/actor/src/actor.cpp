@@ -221,7 +221,7 @@ bool valid(const actor_config_t* c) {
          positive_finite(c->value_bandwidth) && c->value_min_neighbours >= 1u &&
          c->value_min_neighbours <= c->value_k && c->ridge >= 0.0 && std::isfinite(c->ridge) && c->step_gain >= 0.0 &&
          std::isfinite(c->step_gain) && c->step_max >= 0.0 && std::isfinite(c->step_max) &&
-         positive_finite(c->learning_rate);
+         c->trust_radius >= 0.0 && std::isfinite(c->trust_radius) && positive_finite(c->learning_rate);
 }
 
 bool live(const actor_t* a) { return a != nullptr && a->magic == kLive; }
@@ -501,6 +501,14 @@ void query_step(actor_t& A, uint32_t j) {
     if (step < -A.cfg.step_max) step = -A.cfg.step_max;
   }
   double y = A.qpi[j] + step;
+  // Within the trust radius of the recorded action, where the local models have data (actor.h,
+  // step 7); this also pulls back a π that has left it. Then the bounds (a recorded action may
+  // lie outside them).
+  if (A.cfg.trust_radius > 0.0) {
+    const double recorded = A.a[A.qslot[j]];
+    if (y > recorded + A.cfg.trust_radius) y = recorded + A.cfg.trust_radius;
+    if (y < recorded - A.cfg.trust_radius) y = recorded - A.cfg.trust_radius;
+  }
   if (y > A.cfg.action_max) y = A.cfg.action_max;
   if (y < A.cfg.action_min) y = A.cfg.action_min;
   A.qy[j] = y;
@@ -764,6 +772,7 @@ actor_config_t actor_config_default(void) ACTOR_NOEXCEPT {
   c.ridge = 1e-3;
   c.step_gain = 0.3;
   c.step_max = 0.1;
+  c.trust_radius = 0.0;
   c.clone_steps = 300u;
   c.fit_steps = 200u;
   c.learning_rate = 3e-3;

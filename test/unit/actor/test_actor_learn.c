@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 // The actor learns: cloning reproduces its teacher, the slope of the returns moves it past the
-// teacher on the toy task, the work is bounded per slice and its result does not depend on the
+// teacher on the toy task, the trust radius keeps it near the recorded actions while only the
+// teacher drives, the work is bounded per slice and its result does not depend on the
 // slicing, nothing is allocated, and a diverging fit is undone.
 #include <math.h>
 #include <setjmp.h>
@@ -70,6 +71,34 @@ static void test_actor_moves_past_teacher(void** state) {
   assert_true(c->queries_with_slope > c->queries / 2);
   assert_int_equal(c->fits, 19);
   free(mem);
+}
+
+// While only the teacher drives, its runs never answer the actor's moves: without a bound the
+// steps add up run after run (the local models are linear, the slope keeps its sign) and the
+// actor's action walks far past anything the runs did; the trust radius keeps it within that
+// distance of the recorded actions (about 0, the teacher's noise aside). Same runs both ways.
+static void test_actor_trust_radius_bounds_drift_from_data(void** state) {
+  (void)state;
+  double mean[2] = {0.0, 0.0};
+  const double radius[2] = {0.0, 0.125};
+  for (int v = 0; v < 2; ++v) {
+    actor_config_t cfg = toy_config();
+    cfg.trust_radius = radius[v];
+    void* mem = NULL;
+    actor_t* a = toy_actor(&cfg, &mem);
+    rng_t rng;
+    rng_seed(&rng, 13);
+    for (int run = 0; run < 20; ++run) {
+      toy_run(a, TOY_TEACHER, &rng);
+      toy_end_run(a, 5000);
+    }
+    mean[v] = toy_mean_action(a);
+    free(mem);
+  }
+  print_message("mean action after 20 teacher runs (teacher about 0): no bound %.3f, trust radius 0.125 %.3f\n",
+                mean[0], mean[1]);
+  assert_true(mean[0] > 0.3);
+  assert_true(mean[1] < 0.15);
 }
 
 // The same calls with slices of 1, 37 and unbounded work give the same bytes; every slice stays
@@ -193,6 +222,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_actor_first_run_clones_teacher),
       cmocka_unit_test(test_actor_moves_past_teacher),
+      cmocka_unit_test(test_actor_trust_radius_bounds_drift_from_data),
       cmocka_unit_test(test_actor_slicing_does_not_change_result),
       cmocka_unit_test(test_actor_no_allocation),
       cmocka_unit_test(test_actor_diverging_fit_undone),

@@ -32,9 +32,17 @@
 ///  6. The slope of the return in the action, γ ∇V_q · B_q, in ticks of discounting:
 ///     g_q = γ ∇V_q · B_q / (|V_q| ln(1/γ)) (|V_q| floored at 1e-6 of the largest |V| of Q;
 ///     0 where either model lacks neighbours or anything is not finite).
-///  7. Targets y_q = clip(π(s_q) + clip(cfg.step_gain g_q, ±cfg.step_max), action bounds), and
+///  7. Targets y_q = clip(π(s_q) + clip(cfg.step_gain g_q, ±cfg.step_max), action bounds), then
+///     kept within cfg.trust_radius of the recorded action a_q (when cfg.trust_radius > 0), and
 ///     cfg.fit_steps full-batch Adam steps (learning rate cfg.learning_rate) on the mean of
 ///     (π(s_q) − y_q)². A fit that leaves a parameter non-finite is undone (counted).
+///     Why the trust radius: both local models are linear, so the slope at a state does not
+///     shrink as π moves away from the recorded actions, and the same recent runs are queried
+///     again after the next run. Without a bound the steps add up run after run wherever the
+///     slope keeps one sign, also where that sign is only the value model's noise: while an
+///     example policy drives (its runs do not answer the actor's moves) the actor's action at
+///     such states walks up to 0.1 per run to far outside what the runs ever did, where neither
+///     model has data. The bound keeps every target where the models were fitted.
 ///
 /// Work between runs, in slices. Every step is cut into atomic operations and a slice runs
 /// operations while its work is below the caller's budget, in work units:
@@ -144,6 +152,8 @@ typedef struct actor_config_s {
   double ridge;                             ///< on the local slopes, >= 0; 1e-3
   double step_gain;                         ///< target step per tick of discounting of slope, >= 0; 0.3
   double step_max;                          ///< largest target step per run [action units], >= 0; 0.1
+  double trust_radius;                      ///< largest distance of a target from the action recorded
+                                            ///< at its state [action units], >= 0 (0: no bound); 0
   uint32_t clone_steps;                     ///< Adam steps of the behaviour cloning; 300
   uint32_t fit_steps;                       ///< Adam steps of each fit to the targets; 200
   double learning_rate;                     ///< Adam's (> 0); 3e-3
