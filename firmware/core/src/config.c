@@ -235,6 +235,15 @@ static const key_desc_t k_keys[] = {
    "policy = actor: target step [rad/s] per tick of discounting that one rad/s gains"},
   {NULL, "actor_step_max", KIND_DOUBLE, OFF(actor_step_max), 0, 4, false, false, NULL, "0.1",
    "policy = actor: largest change of its target action after one run [rad/s]"},
+  {NULL, "actor_trust_radius", KIND_DOUBLE, OFF(actor_trust_radius), 0, 4, false, false, NULL, "0",
+   "policy = actor: largest distance of its target action from the action the runs took at that state [rad/s] "
+   "(0: no bound)"},
+  {NULL, "actor_slope_min_t", KIND_DOUBLE, OFF(actor_slope_min_t), 0, 100, false, false, NULL, "3",
+   "policy = actor: it steps only where the slope of the return in the action is at least this many standard "
+   "errors (clustered by run) from 0 (0: every slope)"},
+  {NULL, "actor_rewarded_window", KIND_BOOL, OFF(actor_rewarded_window), 0, 0, false, false, NULL, "true",
+   "policy = actor: the value window reaches back until it holds actor_runs runs that collected a reward "
+   "(false: the last actor_runs runs)"},
   {NULL, "actor_fit_steps", KIND_INT, OFF(actor_fit_steps), 0, 100000, false, false, NULL, "200",
    "policy = actor: Adam steps of each fit to its targets"},
   {NULL, "actor_clone_steps", KIND_INT, OFF(actor_clone_steps), 0, 100000, false, false, NULL, "300",

@@ -143,6 +143,9 @@ void fw_config_learn_settings(const fw_config_t* cfg, learn_config_t* c) {
   c->actor.max_queries = (uint32_t)cfg->actor_queries;
   c->actor.step_gain = cfg->actor_step_gain;
   c->actor.step_max = cfg->actor_step_max;
+  c->actor.trust_radius = cfg->actor_trust_radius;
+  c->actor.slope_min_t = cfg->actor_slope_min_t;
+  c->actor.rewarded_window = cfg->actor_rewarded_window ? 1u : 0u;
   c->actor.fit_steps = (uint32_t)cfg->actor_fit_steps;
   c->actor.clone_steps = (uint32_t)cfg->actor_clone_steps;
   c->actor.learning_rate = cfg->actor_learning_rate;

@@ -17,6 +17,7 @@
 
 #include <rng/rng.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -48,6 +49,7 @@ enum class Stage : uint32_t {
   kIdle = 0,
   kReturns,      // Monte-Carlo returns of the run, newest first
   kClone,        // behaviour cloning on the ring (after the first run)
+  kWindow,       // the first run of the window (rewarded_window), newest entries first
   kPool,         // the last runs' entries
   kDraw,         // the query set drawn from them
   kModelFill,    // coordinates of the dynamics model's points
@@ -122,6 +124,10 @@ struct actor {
   // Between-run work.
   Stage stage;
   uint64_t work_run;  // id of the run whose end is being learned
+  uint64_t win_first;     // first run of the window (kWindow's result)
+  uint64_t win_run;       // run kWindow is scanning
+  uint32_t win_found;     // rewarded runs it has passed
+  int win_rewarded;       // the scanned run has a non-zero reward
   uint32_t cursor;    // item of the stage under way
   uint32_t returns_n;
   double ret;         // running return (kReturns)
@@ -221,7 +227,8 @@ bool valid(const actor_config_t* c) {
          positive_finite(c->value_bandwidth) && c->value_min_neighbours >= 1u &&
          c->value_min_neighbours <= c->value_k && c->ridge >= 0.0 && std::isfinite(c->ridge) && c->step_gain >= 0.0 &&
          std::isfinite(c->step_gain) && c->step_max >= 0.0 && std::isfinite(c->step_max) &&
-         positive_finite(c->learning_rate);
+         c->trust_radius >= 0.0 && std::isfinite(c->trust_radius) && c->slope_min_t >= 0.0 &&
+         std::isfinite(c->slope_min_t) && c->rewarded_window <= 1u && positive_finite(c->learning_rate);
 }
 
 bool live(const actor_t* a) { return a != nullptr && a->magic == kLive; }
@@ -369,6 +376,7 @@ struct LocalFit {
   bool ok;
   double value[kMaxOut];
   double grad[kMaxOut][kDim];  // per coordinate unit
+  double contrast_se[kMaxOut];  // standard error of c · grad[o] per output (infinite when not formed)
 };
 
 // Gaussian-weighted linear regression at xq over the k nearest points of tree within the
@@ -376,11 +384,20 @@ struct LocalFit {
 // (never on the intercept, the prediction). coord(id, x) writes point id's dims coordinates,
 // out(id, y) its n_out outputs. ok: at least min_n neighbours and positive definite normal
 // equations. O(search + k (dims + n_out) dims + dims³ + n_out dims²), no allocation.
-template <class Coord, class Out>
+//
+// With contrast c (dims values, may be null) it also gives the standard error of c · grad[o] for
+// every output o, robust to correlation within a group (group(id): the run a point came from; the
+// points of one run share its noise, so they count as one observation): the cluster sandwich
+// Var = G/(G−1) Σ_groups (Σ_j w_j (u·z_j) e_jo)² with u = M⁻¹ c and e_jo output o's residual;
+// fewer than two groups: infinite. group() must not decrease with the id. Reorders A.nb (the
+// neighbours) by id. O(k log k + k (dims + n_out) dims) more.
+template <class Coord, class Out, class Group>
 void local_linear(const actor_t& A, const hg::KdTree& tree, uint32_t k, uint32_t min_n, uint32_t dims, uint32_t n_out,
-                  const double* xq, const Coord& coord, const Out& out, LocalFit& f) {
+                  const double* xq, const Coord& coord, const Out& out, LocalFit& f, const double* contrast,
+                  const Group& group) {
   f.n = 0;
   f.ok = false;
+  for (uint32_t o = 0; o < kMaxOut; ++o) f.contrast_se[o] = std::numeric_limits<double>::infinity();
   for (uint32_t o = 0; o < n_out; ++o) {
     f.value[o] = 0.0;
     for (uint32_t i = 0; i < dims; ++i) f.grad[o][i] = 0.0;
@@ -424,6 +441,45 @@ void local_linear(const actor_t& A, const hg::KdTree& tree, uint32_t k, uint32_t
     f.value[o] = beta[P - 1];
   }
   f.ok = hg::finite_all(f.value, n_out);
+  if (!f.ok || contrast == nullptr) return;
+  hg::SysVec u(P);
+  for (int r = 0; r < P; ++r) b[r] = r < static_cast<int>(dims) ? contrast[r] : 0.0;
+  ldlt.solve(b, u);
+  // Each neighbour's share of c · β_o's error, w_j (u·z_j) e_jo, summed per group; the
+  // neighbours in id order, so that a group's points are adjacent.
+  hg::Neighbour* nb = A.nb;
+  std::sort(nb, nb + n, [](const hg::Neighbour& p, const hg::Neighbour& q) { return p.id < q.id; });
+  double var[kMaxOut] = {};
+  double sum[kMaxOut] = {};
+  uint32_t groups = 0;
+  for (uint32_t j = 0; j < n; ++j) {
+    const bool first = j == 0u || group(nb[j].id) != group(nb[j - 1u].id);
+    if (first) {
+      ++groups;
+      for (uint32_t o = 0; o < n_out; ++o) {
+        var[o] += sum[o] * sum[o];
+        sum[o] = 0.0;
+      }
+    }
+    const double w = std::exp(-nb[j].d2);
+    coord(nb[j].id, x);
+    out(nb[j].id, y);
+    double uz = u[static_cast<int>(dims)];
+    for (uint32_t i = 0; i < dims; ++i) {
+      x[i] -= xq[i];
+      uz += u[static_cast<int>(i)] * x[i];
+    }
+    for (uint32_t o = 0; o < n_out; ++o) {
+      double fit = f.value[o];
+      for (uint32_t i = 0; i < dims; ++i) fit += f.grad[o][i] * x[i];
+      sum[o] += w * uz * (y[o] - fit);
+    }
+  }
+  if (groups < 2u) return;
+  for (uint32_t o = 0; o < n_out; ++o) {
+    const double v = (var[o] + sum[o] * sum[o]) * static_cast<double>(groups) / static_cast<double>(groups - 1u);
+    if (std::isfinite(v)) f.contrast_se[o] = std::sqrt(v);
+  }
 }
 
 void model_coord(const actor_t& A, uint32_t slot, double* x) {
@@ -458,7 +514,7 @@ void query_targets(actor_t& A, uint32_t j) {
         const double* s1 = next_at(A, A.mrows[id]);
         for (uint32_t i = 0; i < A.sd; ++i) y[i] = s1[i] - s0[i];
       },
-      fm);
+      fm, nullptr, [&A](uint32_t id) { return A.run[A.mrows[id]]; });
   double effect[kMaxOut];  // B = d(s' - s)/da [state units per action unit]
   double next[kMaxOut];
   const double da = p.out - A.a[slot];
@@ -468,23 +524,35 @@ void query_targets(actor_t& A, uint32_t j) {
   }
   double xv[kDim];
   value_coord(A, next, xv);
+  // The slope γ ∇V · B is a contrast of the value model's coefficients: c_i = γ v_k[i] B_i.
+  double contrast[kDim];
+  for (uint32_t i = 0; i < sd; ++i) contrast[i] = A.cfg.gamma * A.v_k[i] * effect[i];
   LocalFit fv;
   local_linear(
       A, A.vtree, A.cfg.value_k, A.cfg.value_min_neighbours, sd, 1u, xv,
       [&A](uint32_t id, double* x) { value_coord(A, state_at(A, A.pool[id]), x); },
-      [&A](uint32_t id, double* y) { y[0] = A.g[A.pool[id]]; }, fv);
+      [&A](uint32_t id, double* y) { y[0] = A.g[A.pool[id]]; }, fv, A.cfg.slope_min_t > 0.0 ? contrast : nullptr,
+      [&A](uint32_t id) { return A.run[A.pool[id]]; });
   double slope = 0.0;
   for (uint32_t i = 0; i < sd; ++i) slope += fv.grad[0][i] * A.v_k[i] * effect[i];
   slope *= A.cfg.gamma;
   const double vq = fv.ok ? fv.value[0] : 0.0;
   const bool ok = fm.ok && fv.ok && std::isfinite(slope) && std::isfinite(vq);
-  A.qg[j] = ok ? slope : 0.0;
+  // Step 7's significance test: a slope within slope_min_t of its standard error is the noise of
+  // the few runs the value model saw; stepping on it would walk the actor wherever the noise
+  // keeps its sign (actor.h). The query still holds π there (target = π).
+  // Its error is the value model's, B taken as exact: adding B's (the dynamics model's, through
+  // γ ∇V) held back the gentle teacher's early runs (docs/LEARNING.md).
+  const bool significant =
+      A.cfg.slope_min_t <= 0.0 || std::fabs(slope) >= A.cfg.slope_min_t * fv.contrast_se[0];
+  A.qg[j] = ok && significant ? slope : 0.0;
   A.qv[j] = std::isfinite(vq) ? vq : 0.0;
   A.qok[j] = ok ? 1u : 0u;
   const double av = std::fabs(A.qv[j]);
   if (av > A.vmax) A.vmax = av;
   ++A.counters.queries;
   if (ok) ++A.counters.queries_with_slope;
+  if (ok && significant) ++A.counters.queries_stepped;
 }
 
 // Step 7's target of query j (after every query's value is known: the floor of |V| needs the
@@ -501,6 +569,14 @@ void query_step(actor_t& A, uint32_t j) {
     if (step < -A.cfg.step_max) step = -A.cfg.step_max;
   }
   double y = A.qpi[j] + step;
+  // Within the trust radius of the recorded action, where the local models have data (actor.h,
+  // step 7); this also pulls back a π that has left it. Then the bounds (a recorded action may
+  // lie outside them).
+  if (A.cfg.trust_radius > 0.0) {
+    const double recorded = A.a[A.qslot[j]];
+    if (y > recorded + A.cfg.trust_radius) y = recorded + A.cfg.trust_radius;
+    if (y < recorded - A.cfg.trust_radius) y = recorded - A.cfg.trust_radius;
+  }
   if (y > A.cfg.action_max) y = A.cfg.action_max;
   if (y < A.cfg.action_min) y = A.cfg.action_min;
   A.qy[j] = y;
@@ -574,6 +650,14 @@ void start_improvement(actor_t& A) {
   A.stage = Stage::kPool;
   A.cursor = 0;
   A.n_pool = 0;
+  A.win_first = A.work_run + 1u >= A.cfg.recent_runs ? A.work_run + 1u - A.cfg.recent_runs : 0u;
+  if (A.cfg.rewarded_window != 0u) {
+    A.stage = Stage::kWindow;
+    A.win_run = A.work_run;
+    A.win_found = 0;
+    A.win_rewarded = 0;
+    A.win_first = 0;  // the whole ring unless enough rewarded runs are found
+  }
 }
 
 // Runs the due work for about budget units; returns the units done.
@@ -614,8 +698,35 @@ uint64_t run_work(actor_t& A, uint64_t budget) {
         if (fit_unit(A)) finish_work(A);
         break;
       }
+      case Stage::kWindow: {
+        // Back from the newest entry (the runs' entries are contiguous, ids increasing) until
+        // recent_runs runs with a non-zero reward lie in the window: runs that collected none
+        // (ended in a failure scored 0, or at the step limit) say nothing about where the reward
+        // is, and a window of only such runs has V = 0 everywhere and no slope (actor.h, step 5).
+        bool found = false;
+        while (A.cursor < A.count && units() < budget) {
+          const uint32_t slot = slot_of(A, A.count - 1u - A.cursor);
+          if (A.run[slot] != A.win_run) {
+            if (A.win_rewarded != 0) ++A.win_found;
+            if (A.win_found >= A.cfg.recent_runs) {
+              A.win_first = A.win_run;
+              found = true;
+              break;
+            }
+            A.win_run = A.run[slot];
+            A.win_rewarded = 0;
+          }
+          if (A.r[slot] > 0.0 || A.r[slot] < 0.0) A.win_rewarded = 1;
+          ++A.cursor;
+          ++items;
+        }
+        if (!found && A.cursor < A.count) break;
+        A.stage = Stage::kPool;
+        A.cursor = 0;
+        break;
+      }
       case Stage::kPool: {
-        const uint64_t first = A.work_run + 1u >= A.cfg.recent_runs ? A.work_run + 1u - A.cfg.recent_runs : 0u;
+        const uint64_t first = A.win_first;
         while (A.cursor < A.count && units() < budget) {
           const uint32_t slot = slot_of(A, A.cursor);
           if (A.run[slot] >= first) A.pool[A.n_pool++] = slot;
@@ -764,6 +875,9 @@ actor_config_t actor_config_default(void) ACTOR_NOEXCEPT {
   c.ridge = 1e-3;
   c.step_gain = 0.3;
   c.step_max = 0.1;
+  c.trust_radius = 0.0;
+  c.slope_min_t = 3.0;
+  c.rewarded_window = 1u;
   c.clone_steps = 300u;
   c.fit_steps = 200u;
   c.learning_rate = 3e-3;

@@ -40,12 +40,17 @@ actor_t* toy_actor(const actor_config_t* cfg, void** storage) {
 
 static double clampd(double x) { return x < -1.0 ? -1.0 : (x > 1.0 ? 1.0 : x); }
 
-int toy_run(actor_t* a, toy_driver_t driver, rng_t* rng) {
+int toy_run(actor_t* a, toy_driver_t driver, rng_t* rng) { return toy_run_effect(a, driver, rng, 0.02); }
+
+int toy_run_effect(actor_t* a, toy_driver_t driver, rng_t* rng, double effect) {
   double s[2] = {0.1 + 0.05 * rng_uniform(rng), 0.0};
+  // Without an action effect x moves exactly and the goal lies 0-0.2 before x = 1, drawn per run:
+  // the returns' noise is the run's alone, the dynamics model is exact.
+  const double goal_x = effect > 0.0 ? 1.0 : 1.0 - 0.2 * rng_uniform(rng);
   for (int t = 0; t < TOY_STEP_LIMIT; ++t) {
-    double act = 0.0;
+    double act = driver == TOY_FAIL ? -1.0 : 0.0;
     double noise = 0.0;
-    if (rng_uniform(rng) < 0.2) {
+    if (driver != TOY_FAIL && rng_uniform(rng) < 0.2) {
       noise = (driver == TOY_TEACHER ? 0.3 : 0.1) * rng_normal(rng);
     }
     if (driver == TOY_ACTOR) {
@@ -53,10 +58,12 @@ int toy_run(actor_t* a, toy_driver_t driver, rng_t* rng) {
       assert_true(st == ACTOR_OK || st == ACTOR_UNTRAINED);
     }
     act = clampd(act + noise);
-    double sn[2] = {s[0] + 0.02 * (0.5 + act) + 0.002 * rng_normal(rng), act};
-    const int goal = sn[0] >= 1.0;
-    assert_int_equal(actor_record(a, s, act, goal ? 1.0 : 0.0, sn, goal), ACTOR_OK);
-    if (goal) {
+    const double drift = effect > 0.0 ? effect * (0.5 + act) : 0.01;
+    double sn[2] = {s[0] + drift + (effect > 0.0 ? 0.002 * rng_normal(rng) : 0.0), act};
+    const int goal = sn[0] >= goal_x;
+    const int fail = driver == TOY_FAIL && sn[0] < 0.0;
+    assert_int_equal(actor_record(a, s, act, goal ? 1.0 : 0.0, sn, goal || fail), ACTOR_OK);
+    if (goal || fail) {
       return t + 1;
     }
     s[0] = sn[0];

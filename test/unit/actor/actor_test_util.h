@@ -22,12 +22,19 @@ actor_config_t toy_config(void);
 /// Storage for cfg (aligned; free with free()) and the actor in it.
 actor_t* toy_actor(const actor_config_t* cfg, void** storage);
 
-/// Who drives a toy run.
-typedef enum toy_driver { TOY_TEACHER = 0, TOY_ACTOR = 1 } toy_driver_t;
+/// Who drives a toy run. TOY_FAIL: action -1 throughout, the run ends (terminal, reward 0) once
+/// x < 0, like a collision that scores 0.
+typedef enum toy_driver { TOY_TEACHER = 0, TOY_ACTOR = 1, TOY_FAIL = 2 } toy_driver_t;
 
 /// One run recorded into the actor (the teacher: a = 0 + 0.3 N(0,1) on 20 % of steps; the actor:
 /// its action + 0.1 N(0, 1) on 20 % of steps). Returns the steps taken.
 int toy_run(actor_t* a, toy_driver_t driver, rng_t* rng);
+
+/// The same with the action's effect on x per step (toy_run: 0.02); 0: the action changes nothing
+/// but the state's last-action entry, x moves by exactly 0.01 a step and the goal lies at a
+/// threshold drawn per run from [0.8, 1], so every slope of the return in the action is the value
+/// model's noise, shared by the points of a run.
+int toy_run_effect(actor_t* a, toy_driver_t driver, rng_t* rng, double effect);
 
 /// Ends the run and does all its between-run work in slices of budget units; returns the slices.
 uint64_t toy_end_run(actor_t* a, uint32_t budget);

@@ -198,6 +198,9 @@ typedef struct fw_config {
   int32_t actor_queries;           ///< actor: largest query set per run
   double actor_step_gain;          ///< actor: target step per tick of discounting of slope
   double actor_step_max;           ///< actor: largest target step per run [rad/s]
+  double actor_trust_radius;       ///< actor: largest distance of a target from the recorded action [rad/s]; 0 none
+  double actor_slope_min_t;        ///< actor: steps only where |slope| >= this many standard errors; 0 every slope
+  bool actor_rewarded_window;      ///< actor: the value window reaches back to actor_runs rewarded runs
   int32_t actor_fit_steps;         ///< actor: Adam steps per fit
   int32_t actor_clone_steps;       ///< actor: Adam steps of the first run's behaviour cloning
   double actor_learning_rate;      ///< actor: Adam's learning rate

@@ -19,22 +19,42 @@
 ///  2. After the first run that recorded anything: behaviour cloning, cfg.clone_steps full-batch
 ///     Adam steps on (s, a) of every recorded transition. Nothing else that time.
 ///  3. Later runs: a query set Q of at most cfg.max_queries transitions drawn (seeded, without
-///     replacement, in recording order) from the last cfg.recent_runs runs.
+///     replacement, in recording order) from the window: the last cfg.recent_runs runs, or with
+///     cfg.rewarded_window as many runs back as it takes to hold cfg.recent_runs runs that
+///     collected a non-zero reward (the whole ring if it holds fewer). Why: a run that collected
+///     none (a failure scored 0, a run stopped at the step limit) says nothing about where the
+///     reward is; after cfg.recent_runs such runs in a row the last runs' returns are all 0, V is
+///     0 everywhere, no query has a slope and the actor can never move again.
 ///  4. For each q in Q, a local linear model of the state change s' − s on the scaled state and
 ///     action [s/scale, a/action_scale] over every recorded non-terminal transition (Gaussian
 ///     weights, bandwidth cfg.model_bandwidth, cfg.model_k nearest within the kernel's 1 % radius,
 ///     ridge cfg.ridge on the slopes, at least cfg.model_min_neighbours): at (s_q, a_q) it gives
 ///     the predicted change D_q and the action's effect B_q = ∂(s' − s)/∂a.
-///  5. The state value V: a local linear regression of the returns G over the states of the last
-///     cfg.recent_runs runs (cfg.value_bandwidth, cfg.value_k, at least
+///  5. The state value V: a local linear regression of the returns G over the states of the window's
+///     runs (cfg.value_bandwidth, cfg.value_k, at least
 ///     cfg.value_min_neighbours), at the state the actor's action is predicted to lead to,
 ///     s_q + D_q + B_q (π(s_q) − a_q): its value V_q and gradient ∇V_q.
 ///  6. The slope of the return in the action, γ ∇V_q · B_q, in ticks of discounting:
 ///     g_q = γ ∇V_q · B_q / (|V_q| ln(1/γ)) (|V_q| floored at 1e-6 of the largest |V| of Q;
-///     0 where either model lacks neighbours or anything is not finite).
-///  7. Targets y_q = clip(π(s_q) + clip(cfg.step_gain g_q, ±cfg.step_max), action bounds), and
+///     0 where either model lacks neighbours or anything is not finite). With cfg.slope_min_t > 0
+///     also 0 where |γ ∇V_q · B_q| is below cfg.slope_min_t times its standard error: the slope
+///     is a contrast of the value model's coefficients, its error from the cluster sandwich with
+///     one cluster per run (a run's returns share its noise, so the value model has about as many
+///     observations as runs; B_q taken as exact). Why: the step rule saturates at a third of a
+///     tick, the slope's noise is of that order, and a step on noise that keeps its sign from run
+///     to run (while an example policy drives, the same runs are queried again) walks the actor
+///     off the data (below).
+///  7. Targets y_q = clip(π(s_q) + clip(cfg.step_gain g_q, ±cfg.step_max), action bounds), then
+///     kept within cfg.trust_radius of the recorded action a_q (when cfg.trust_radius > 0), and
 ///     cfg.fit_steps full-batch Adam steps (learning rate cfg.learning_rate) on the mean of
 ///     (π(s_q) − y_q)². A fit that leaves a parameter non-finite is undone (counted).
+///     Why the trust radius: both local models are linear, so the slope at a state does not
+///     shrink as π moves away from the recorded actions, and the same recent runs are queried
+///     again after the next run. Without a bound the steps add up run after run wherever the
+///     slope keeps one sign, also where that sign is only the value model's noise: while an
+///     example policy drives (its runs do not answer the actor's moves) the actor's action at
+///     such states walks up to 0.1 per run to far outside what the runs ever did, where neither
+///     model has data. The bound keeps every target where the models were fitted.
 ///
 /// Work between runs, in slices. Every step is cut into atomic operations and a slice runs
 /// operations while its work is below the caller's budget, in work units:
@@ -144,6 +164,12 @@ typedef struct actor_config_s {
   double ridge;                             ///< on the local slopes, >= 0; 1e-3
   double step_gain;                         ///< target step per tick of discounting of slope, >= 0; 0.3
   double step_max;                          ///< largest target step per run [action units], >= 0; 0.1
+  double trust_radius;                      ///< largest distance of a target from the action recorded
+                                            ///< at its state [action units], >= 0 (0: no bound); 0
+  double slope_min_t;                       ///< a query steps only where |slope| >= slope_min_t × its
+                                            ///< standard error (step 7), >= 0 (0: every slope); 3
+  uint32_t rewarded_window;                 ///< 1: the window reaches back to recent_runs runs with a
+                                            ///< non-zero reward (steps 3, 5); 0: the last recent_runs; 1
   uint32_t clone_steps;                     ///< Adam steps of the behaviour cloning; 300
   uint32_t fit_steps;                       ///< Adam steps of each fit to the targets; 200
   double learning_rate;                     ///< Adam's (> 0); 3e-3
@@ -161,6 +187,7 @@ typedef struct actor_counters_s {
   uint64_t fits_undone;         ///< fits undone because a parameter became non-finite
   uint64_t queries;             ///< queries of the local models
   uint64_t queries_with_slope;  ///< of them, with both models formed and a finite slope
+  uint64_t queries_stepped;     ///< of them, with a slope that passed the significance test
   uint64_t slices;              ///< actor_end_run_step calls that did work
   uint64_t output_faults;       ///< actor_act outputs that were not finite
   uint32_t max_slice_work;      ///< gauge: largest work of one slice [units]
