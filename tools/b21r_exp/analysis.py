@@ -338,11 +338,20 @@ def ablation_comparisons(variants):
 # ---- reference learners against the product's learner, by training steps ----------------------
 
 # The product's own learner beside the reference learners, from whichever of these results exist:
-# (experiment, variant, label). Both run the 10 m corridor on the emulated B21r.
+# (experiment, variant, label). All run the 10 m corridor on the emulated B21r: HEDGER's greedy
+# policy (the default) and the actor (policy = actor, actor_corridor), each from the Fig. 4
+# examples and from the gentle teacher.
 PRODUCT_PROGRESS = (
-    ("fig4_corridor_examples", "", "product: HEDGER, proportional examples (gains 0.5-2; Fig. 4 set-up)"),
-    ("ablation_teachers", "example_gain_range=0.25,0.35", "product: HEDGER, gentle teacher (gains 0.25-0.35)"),
+    ("fig4_corridor_examples", "", "product: greedy policy (HEDGER), proportional examples (gains 0.5-2; Fig. 4 set-up)"),
+    ("ablation_teachers", "example_gain_range=0.25,0.35", "product: greedy policy (HEDGER), gentle teacher (gains 0.25-0.35)"),
+    ("actor_corridor", "example_gain_range=0.5,2",
+     "product: actor on HEDGER's values (policy = actor), proportional examples (gains 0.5-2; Fig. 4 set-up)"),
+    ("actor_corridor", "example_gain_range=0.25,0.35",
+     "product: actor on HEDGER's values (policy = actor), gentle teacher (gains 0.25-0.35)"),
 )
+# Experiments whose only place in the report is a product row of the reference-learner table: their
+# learning curves are drawn in that section's figure, not in one of their own.
+PRODUCT_ONLY = ("actor_corridor",)
 TOLERANCES = (0.01, 0.03)
 LEARNER_LABELS = {"sac": "SAC (Stable-Baselines3)", "ppo": "PPO (Stable-Baselines3)", "td3": "TD3 (Stable-Baselines3)"}
 

@@ -367,6 +367,8 @@ def make_all(out, fig_dir, configs_dir, captions=None, only=None):
         title = first[0].get("title") or name
         kind = first[0]["kind"]
         cmd = command_for(name)
+        if kind == "learn" and name in analysis.PRODUCT_ONLY:
+            continue
         if kind == "learn" and name.startswith(("ablation_", analysis.EXPLORE_PREFIX)):
             p = os.path.join(fig_dir, name + ".png")
             caps[os.path.basename(p)] = ablation_figure(name, variants, title, p, cmd)

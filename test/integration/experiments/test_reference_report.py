@@ -9,7 +9,9 @@ result files, whichever exist (fixture files written here, with known answers):
   evaluation (failures at the step limit), with the order-statistics 95 % interval from 6 seeds;
 - the product's learner gets its row from a learn result (training steps of both phases per
   evaluation block, collisions among its training runs), and a "not run yet" row where its
-  result files are missing;
+  result files are missing: the greedy policy from fig4_corridor_examples and ablation_teachers'
+  gentle-teacher variant, the actor (policy = actor) from actor_corridor's two variants, each row
+  from its own variant's files;
 - `report --section reference_learners` replaces only its own section of an existing report (the
   rest kept, the prose between its markers kept, no duplicate on a second run) and draws the
   learning-curve figure; the full report has the section too.
@@ -61,12 +63,19 @@ def reference_result(algorithm, seed, curve, walls):
                           "evaluations": evals, "episodes": [], "wall_time_s": 1.0}}
 
 
-def learn_result(seed, experiment="fig4_corridor_examples", variant=""):
-    """A product learn result: 3 blocks after 5, 10, 15 training runs of 140 steps (one on a wall)."""
+GREEDY_FIG4 = "product: greedy policy (HEDGER), proportional examples"
+GREEDY_GENTLE = "product: greedy policy (HEDGER), gentle teacher"
+ACTOR_FIG4 = "product: actor on HEDGER's values (policy = actor), proportional examples"
+ACTOR_GENTLE = "product: actor on HEDGER's values (policy = actor), gentle teacher"
+
+
+def learn_result(seed, experiment="fig4_corridor_examples", variant="", means=(300.0, 150.0, 138.0), walls=1):
+    """A product learn result: 3 blocks (mean steps `means`) after 5, 10, 15 training runs of 140
+    steps (`walls` of them, 0 or 1, on a wall)."""
     runs = [{"run_id": i, "kind": "train", "phase": 1 if i < 10 else 2, "training_index": i, "steps": 140,
-             "outcome": "collision" if i == 2 else "goal"} for i in range(15)]
+             "outcome": "collision" if i == 2 and walls else "goal"} for i in range(15)]
     blocks = []
-    for b, m in enumerate((300.0, 150.0, 138.0)):
+    for b, m in enumerate(means):
         s, ok = poses(m)
         blocks.append({"block": b, "training_runs": 5 * (b + 1), "phase": 1, "steps": s, "success": ok,
                        "training_steps": 700 * (b + 1)})
@@ -161,10 +170,12 @@ def main():
         r = row(text, "PPO")
         if r[4] != "4,096 (0)" or r[2] != "2":
             fail("PPO (2 seeds: a median without an interval): %r" % r)
-        for label in ("product: HEDGER, proportional examples", "product: HEDGER, gentle teacher"):
+        for label in (GREEDY_FIG4, GREEDY_GENTLE, ACTOR_FIG4, ACTOR_GENTLE):
             r = row(text, label)
             if "not run yet" not in r[3]:
                 fail("a missing product result is not marked 'not run yet': %r" % r)
+        if "run actor_corridor` (variant `example_gain_range=0.25,0.35`)" not in row(text, ACTOR_GENTLE)[3]:
+            fail("the actor's missing row does not name its experiment and variant: %r" % row(text, ACTOR_GENTLE))
         png = os.path.join(d, "docs", "figures", "ref_fixture.png")
         if not os.path.exists(png) or "ref_fixture.png" not in section(text):
             fail("the learning-curve figure was not drawn or not linked")
@@ -172,6 +183,12 @@ def main():
         # The product's learner from its learn results; prose kept; no second section.
         for seed in (1, 2, 3):
             write(out, learn_result(seed))
+        # The actor's gentle-teacher variant (two seeds, a different curve), and a Fig. 4 variant of the
+        # same experiment that must not be read for it.
+        for seed in (1, 2):
+            write(out, learn_result(seed, "actor_corridor", "example_gain_range=0.25,0.35", (139.0, 138.5, 138.2),
+                                    walls=0))
+        write(out, learn_result(1, "actor_corridor", "example_gain_range=0.5,2", (1000.0, 1000.0, 1000.0)))
         text = text.replace("_(Prose to be written", "Kept prose. _(Prose to be written", 1)
         with open(report, "w") as f:
             f.write(text)
@@ -182,26 +199,42 @@ def main():
             text = f.read()
         if text.count("<!-- section:reference_learners -->") != 1 or "Kept prose." not in text:
             fail("a second run duplicated the section or lost its prose")
-        r = row(text, "product: HEDGER, proportional examples")
+        r = row(text, GREEDY_FIG4)
         # blocks 300, 150, 138 after 700, 1400, 2100 training steps: within 1 % and 3 % from 2100; 1 run on a wall
         if r[1] != "ode" or r[2] != "3" or r[3] != "2,100" or r[4] != "2,100 (0)" or r[5] != "2,100 (0)" or \
                 r[6] != "1 (3)" or r[7] != "1" or r[8] != "138.0":
             fail("the product's row from its learn results: %r" % r)
-        if "not run yet" not in row(text, "product: HEDGER, gentle teacher")[3]:
+        if "not run yet" not in row(text, GREEDY_GENTLE)[3]:
             fail("the gentle teacher's missing results are not marked")
+        r = row(text, ACTOR_GENTLE)
+        # blocks 139.0, 138.5, 138.2 after 700, 1400, 2100: within 1 % (<= 138.673) from 1400, 3 % from 700; no wall
+        if r[2] != "2" or r[4] != "1,400 (0)" or r[5] != "700 (0)" or r[6] != "0 (0)" or r[8] != "138.2" or \
+                r[9] != "2 of 2 seeds":
+            fail("the actor's gentle-teacher row from its own variant's results: %r" % r)
+        r = row(text, ACTOR_FIG4)
+        if r[2] != "1" or r[4] != "> budget (1)" or r[8] != "1000.0" or r[9] != "0 of 1 seeds":
+            fail("the actor's Fig. 4 row from its own variant's results: %r" % r)
 
-        # The full report has the section too (reference results only).
+        # The full report has the section too (reference results and the actor's), and draws no figure of
+        # the actor's experiment alone (its curves are in the section's figure).
         out2 = os.path.join(d, "out2")
         for seed, (c, w) in enumerate(zip(sac, walls), 1):
             write(out2, reference_result("sac", seed, c, w))
+        for seed in (1, 2):
+            write(out2, learn_result(seed, "actor_corridor", "example_gain_range=0.25,0.35", (139.0, 138.5, 138.2),
+                                     walls=0))
         full = os.path.join(d, "full", "RESULTS.md")
         p = subprocess.run([VENV_PY, TOOL, "report", "--configs", confs, "--out", out2, "--report", full],
                            capture_output=True, text=True, timeout=300)
         if p.returncode != 0:
             fail("the full report failed: %s" % (p.stdout + p.stderr)[-3000:])
         with open(full) as f:
-            if row(f.read(), "SAC")[4] != want_1:
-                fail("the full report's table differs from the section's")
+            text = f.read()
+        if row(text, "SAC")[4] != want_1 or row(text, ACTOR_GENTLE)[4] != "1,400 (0)":
+            fail("the full report's table differs from the section's")
+        figs = os.listdir(os.path.join(d, "full", "figures"))
+        if "ref_fixture.png" not in figs or any(f.startswith("actor_corridor") for f in figs):
+            fail("the full report's figures: %r (the reference figure, and none of actor_corridor alone)" % figs)
     print("PASS")
     return 0
 
