@@ -6,8 +6,8 @@
 // datagram each: well-formed struct can_frame
 // records, short and long ones, empty ones, extended/RTR/error ids and DLCs above 8. Properties:
 // every frame passed up is a standard data frame (id <= 0x7FF, dlc <= 8);
-// every record is either passed up or counted as dropped; the peer is never taken for closed
-// while it is open.
+// every record is either passed up or counted (dropped, or an error frame; bus-off reports among
+// the error frames); the peer is never taken for closed while it is open.
 #include <drivers/can.h>
 
 #include "fuzz_util.h"
@@ -51,7 +51,8 @@ int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   }
   const drv_can_counters_t* c = &port.counters;
   FUZZ_CHECK(c->frames_rx == frames);
-  FUZZ_CHECK(c->frames_rx + c->rx_bad_size + c->rx_dropped_kind == records);
+  FUZZ_CHECK(c->frames_rx + c->rx_bad_size + c->rx_dropped_kind + c->rx_error_frames == records);
+  FUZZ_CHECK(c->bus_off_events <= c->rx_error_frames);
   FUZZ_CHECK(c->errors == 0);
   drv_can_close(&port);  // does not own the descriptor
   return 0;
