@@ -43,6 +43,8 @@ constexpr uint32_t kMagic = 0x48444752u;  // "HDGR": a live instance
 /// box lies beyond the search's bound). Entries arrive in time order, so a block holds a piece
 /// of a trajectory and its box is tight.
 constexpr uint32_t kFreshBlock = 32;
+/// Entries the k_max-nearest searches gather before selecting (KnnCollect): twice the largest k.
+constexpr uint32_t kCollectCap = 2u * HEDGER_MAX_K;
 /// Relative tolerance of the IVH comparison, so that a query exactly at the point of largest
 /// leverage is inside despite rounding.
 constexpr double kIvhTol = 1e-9;
@@ -103,8 +105,8 @@ bool spans_inputs(const Eigen::Matrix<double, D + 1, 1>* rows, uint32_t n) noexc
   {
     constexpr double eps = std::numeric_limits<double>::epsilon();
     const double delta = 4.0 * D * D * eps * tr;
-    SymFactor ldlt;
-    if (ldlt.compute_from(scatter)) {
+    FactorOf<D> ldlt;
+    if (ldlt.compute(scatter)) {
       double det = 1.0;
       double dmin = ldlt.pivot(0);
       for (int i = 0; i < D; ++i) {
@@ -290,9 +292,9 @@ double seeded_r2(const hedger& h, const double* x, double r2max, uint32_t k, con
 template <int D>
 void find_neighbours(hedger& h, const double* x, Neigh& out) noexcept {
   const uint32_t k = h.cfg.k_max;
-  KnnSet rs(out.nb, k, seeded_r2<D, D>(h, x, h.r2max, k, h.seed_fit, h.n_seed_fit));
+  KnnCollect<kCollectCap> rs(k, seeded_r2<D, D>(h, x, h.r2max, k, h.seed_fit, h.n_seed_fit));
   query_store<D>(h, x, rs);
-  out.n = rs.size();
+  out.n = rs.finish(out.nb);
   for (uint32_t i = 0; i < out.n; ++i) {
     out.w[i] = std::exp(-out.nb[i].d2 / h.h2);
     h.seed_fit[i] = out.nb[i].id;
@@ -313,7 +315,7 @@ struct FitGeom {
   double sw;       ///< Σ w_i
   double var_sum;  ///< Σ (w_i r_i·c)², kRegression
   Vec c;           ///< A⁻¹ e (the intercept's row of A⁻¹), kRegression
-  SymFactor ldlt;  ///< A = XᵀWX + λ diag(1…1, 0), kRegression
+  FactorOf<D + 1> ldlt;  ///< A = XᵀWX + λ diag(1…1, 0), kRegression
 };
 
 /// Row r_i = [x_i − x, 1] of neighbour slot s: centred at the query, so the prediction is the
@@ -357,12 +359,12 @@ void fit_geometry(const hedger& h, const double* x, const uint32_t* ids, const d
   {
     // Independent-variable hull: inside iff e^T V^-1 e <= max_i h_ii.
     const Mat& v = unweighted_ivh ? xtx : xtwx;
-    SymFactor ldlt;
-    if (!spans_inputs<D>(rows, n) || !factor_spd(ldlt, v)) {
+    FactorOf<D + 1> ldlt;
+    if (!spans_inputs<D>(rows, n) || !factor_spd<D + 1>(ldlt, v)) {
       g.status = FitGeom<D>::kSingular;
       return;
     }
-    const Mat vinv = ldlt.inverse_as<Mat>();
+    const Mat vinv = ldlt.inverse();
     const double lq = vinv(D, D);
     double hmax = 0.0;
     for (uint32_t i = 0; i < n; ++i) {
@@ -378,7 +380,7 @@ void fit_geometry(const hedger& h, const double* x, const uint32_t* ids, const d
   // Ridge LWR: (X^T W X + λ diag(1…1, 0)) β = X^T W q; the intercept is not shrunk.
   Mat a = xtwx;
   for (int j = 0; j < D; ++j) a(j, j) += h.cfg.ridge;
-  if (!factor_spd(g.ldlt, a)) {
+  if (!factor_spd<D + 1>(g.ldlt, a)) {
     g.status = FitGeom<D>::kSingular;
     return;
   }
@@ -483,7 +485,7 @@ inline void neigh_ids(const Neigh& nb, uint32_t* ids) noexcept {
 template <int D>
 void predict_x(hedger& h, const double* x, Neigh& nb, hedger_prediction_t& p) noexcept {
   find_neighbours<D>(h, x, nb);
-  uint32_t ids[HEDGER_MAX_K];
+  uint32_t ids[HEDGER_MAX_K] = {};  // (GCC cannot see that nb.n <= HEDGER_MAX_K)
   neigh_ids(nb, ids);
   FitGeom<D> g;
   fit_geometry<D>(h, x, ids, nb.w, nb.n, g);
@@ -637,7 +639,7 @@ struct ModelGeom {
   Mat a, b;             ///< XᵀWX + ridge and XᵀW²X, kept for the fit without u²
   Mat cov, cov_alt;     ///< A⁻¹ B A⁻¹: Var(e·β) = s² eᵀ cov e
   Mat vinv;             ///< the IVH matrix's inverse (v_ok)
-  SymFactor af, af_alt;
+  FactorOf<P> af, af_alt;
 };
 
 /// The design row e = [0…0, u, u², 1] of action act (raw) and the pessimism's direction
@@ -680,9 +682,9 @@ void model_geometry(hedger& h, const double* x, double reach, ModelGeom<D>& g) n
   const double h2 = h.h2 * reach * reach;
   Neighbour nbuf[HEDGER_MAX_K];
   const uint32_t k = h.cfg.k_max;
-  KnnSet rs(nbuf, k, seeded_r2<D, D - 1>(h, x, h.r2max * reach * reach, k, h.seed_state, h.n_seed_state));
+  KnnCollect<kCollectCap> rs(k, seeded_r2<D, D - 1>(h, x, h.r2max * reach * reach, k, h.seed_state, h.n_seed_state));
   query_store<D, D - 1>(h, x, rs);
-  const uint32_t n = rs.size();
+  const uint32_t n = rs.finish(nbuf);
   g.n = n;
   for (uint32_t i = 0; i < n; ++i) h.seed_state[i] = nbuf[i].id;
   h.n_seed_state = n;
@@ -714,9 +716,9 @@ void model_geometry(hedger& h, const double* x, double reach, ModelGeom<D>& g) n
   }
   if (!unweighted_ivh) v = a;
   for (int j = 0; j < P - 1; ++j) a(j, j) += h.cfg.ridge;
-  if (!factor_spd(g.af, a)) return;
+  if (!factor_spd<P>(g.af, a)) return;
   {
-    const Mat ainv = g.af.template inverse_as<Mat>();
+    const Mat ainv = g.af.inverse();
     g.cov = ainv * b * ainv;
   }
   // The neighbours' policy at the query state: a locally linear regression of their actions on
@@ -764,9 +766,9 @@ void model_geometry(hedger& h, const double* x, double reach, ModelGeom<D>& g) n
     sa_t.noalias() += (wz[i] * rows[i][D - 1]) * z;
   }
   for (int j = 0; j < D - 1; ++j) sa_m(j, j) += h.cfg.ridge;
-  SymFactor sa_f;
+  FactorOf<D> sa_f;
   g.status = ModelGeom<D>::kFormed;
-  if (!factor_spd(sa_f, sa_m)) return;
+  if (!factor_spd<D>(sa_f, sa_m)) return;
   g.anchor_ok = 1;
   const SVec alpha = sa_f.solve(sa_t);
   const double u_anchor = alpha[D - 1];
@@ -784,9 +786,9 @@ void model_geometry(hedger& h, const double* x, double reach, ModelGeom<D>& g) n
   g.tol = 1e-12 * (1.0 + g.umax - g.umin);
   // The IVH test of the chosen action's value (model_value): a widened kernel's model only
   // ranks the actions, its value is the average.
-  SymFactor vf;
-  if (reach <= 1.0 && factor_spd(vf, v)) {
-    g.vinv = vf.inverse_as<Mat>();
+  FactorOf<P> vf;
+  if (reach <= 1.0 && factor_spd<P>(vf, v)) {
+    g.vinv = vf.inverse();
     double hmax = 0.0;
     for (uint32_t i = 0; i < n; ++i) {
       double hi = rows[i].dot(g.vinv * rows[i]);
@@ -810,11 +812,11 @@ void model_alt(ModelGeom<D>& g) noexcept {
   a(D1, D1) = 1.0;
   b.row(D1).setZero();
   b.col(D1).setZero();
-  if (!factor_spd(g.af_alt, a)) {
+  if (!factor_spd<D + 2>(g.af_alt, a)) {
     g.alt = ModelGeom<D>::kAltSingular;
     return;
   }
-  const Mat ainv = g.af_alt.template inverse_as<Mat>();
+  const Mat ainv = g.af_alt.inverse();
   g.cov_alt = ainv * b * ainv;
   g.alt = ModelGeom<D>::kAltFormed;
 }

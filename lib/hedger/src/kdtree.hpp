@@ -24,6 +24,7 @@
 #ifndef HEDGER_KDTREE_HPP
 #define HEDGER_KDTREE_HPP
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -111,6 +112,59 @@ class KnnSet {
   uint32_t k_;
   uint32_t n_;
   double r2max_;
+  double bound_;
+};
+
+/// The same k smallest (d2, id) with d2 <= r2max as KnnSet, gathered unsorted in an internal
+/// buffer of Cap entries (Cap >= 2 k) and selected once, by finish(). Why: a k-NN search bounded
+/// by a close guess of the k-th distance (HEDGER's seeded searches) adds about 1.5 k entries, and
+/// KnnSet's sorted insertion (binary search and block move) of each was as costly as computing
+/// the distances (callgrind, b21r-train at k = 64); here an entry costs a comparison and a store,
+/// the selection O(Cap) when the buffer fills (the bound then tightens to the k-th distance so
+/// far) and O(k log k) at the end. The result is the same set in the same (d2, id) order, so
+/// nothing downstream can tell the two apart. Measured on b21r-train at the controller's defaults
+/// (k = 64, Cap = 128): 2.6 % fewer instructions and about 7 % less CPU time than KnnSet (an
+/// early exit on partial distances, also tried, saved 1.5 % of the instructions and cost 5 % more
+/// CPU time in mispredicted branches). About 16 Cap bytes; no allocation.
+template <uint32_t Cap>
+class KnnCollect {
+ public:
+  KnnCollect(uint32_t k, double r2max)
+      : k_(k >= 1 && 2 * k <= Cap ? k : 0),
+        n_(0),
+        bound_(k_ > 0 ? r2max : -std::numeric_limits<double>::infinity()) {}
+  bool ok() const { return k_ > 0; }
+  /// The acceptance bound: r2max, or the k-th distance once the buffer has been compacted.
+  double worst() const { return bound_; }
+  void add(double d2, uint32_t id) {
+    if (!(d2 <= bound_)) return;
+    buf_[n_++] = Neighbour{d2, id};
+    if (n_ == Cap) {
+      select_k();
+      bound_ = buf_[k_ - 1].d2;
+    }
+  }
+  /// Writes the (up to) k smallest entries, sorted by (d2, id), into out (capacity k); returns
+  /// their number. O(n + k log k).
+  uint32_t finish(Neighbour* out) {
+    if (n_ > k_) select_k();
+    std::sort(buf_, buf_ + n_, Less{});
+    for (uint32_t i = 0; i < n_; ++i) out[i] = buf_[i];
+    return n_;
+  }
+
+ private:
+  struct Less {
+    bool operator()(const Neighbour& a, const Neighbour& b) const { return nb_less(a.d2, a.id, b.d2, b.id); }
+  };
+  /// Keeps the k smallest entries (in any order, the k-th of them last).
+  void select_k() {
+    std::nth_element(buf_, buf_ + (k_ - 1), buf_ + n_, Less{});
+    n_ = k_;
+  }
+  Neighbour buf_[Cap];
+  uint32_t k_;
+  uint32_t n_;
   double bound_;
 };
 

@@ -98,6 +98,26 @@ void check_dim(uint32_t n, bool grid, uint64_t seed, uint64_t slice) {
         hg::kd_query<D>(mem.t, q, sa, all);
         hg::brute_query<D>(pts.data(), n, q, sb);
         expect_same(a, sa.size(), b, sb.size());
+        // KnnCollect: the same entries in the same order, with a buffer that rarely fills (256)
+        // and one that fills and compacts often (the smallest allowed, 2 k).
+        Neighbour c[64];
+        hg::KnnCollect<256> sc(k, r2);
+        hg::kd_query<D>(mem.t, q, sc, all);
+        expect_same(c, sc.finish(c), b, sb.size());
+        if (k <= 3) {
+          hg::KnnCollect<6> sd(k, r2);
+          hg::kd_query<D>(mem.t, q, sd, all);
+          expect_same(c, sd.finish(c), b, sb.size());
+        }
+        if (D > 1) {
+          // State-only distances (the first D - 1 coordinates).
+          constexpr int DQ = D > 1 ? D - 1 : 1;
+          KnnSet se(b, k, r2);
+          hg::brute_query<D, DQ>(pts.data(), n, q, se);
+          hg::KnnCollect<128> sf(k, r2);
+          hg::kd_query<D, DQ>(mem.t, q, sf, all);
+          expect_same(c, sf.finish(c), b, se.size());
+        }
       }
     }
     for (double r : radii) {
@@ -250,9 +270,23 @@ void test_kdtree_queries_do_not_allocate(void**) {
     KnnSet s(a, 32, 0.25);
     hg::kd_query<D>(mem.t, q, s, [](uint32_t) { return true; });
     sum += s.size() ? a[0].d2 : 0.0;
+    hg::KnnCollect<64> c(32, 0.25);
+    hg::kd_query<D>(mem.t, q, c, [](uint32_t) { return true; });
+    sum += c.finish(a) ? a[0].d2 : 0.0;
   }
   assert_int_equal(alloc_counter_end(), 0);
   assert_true(sum >= 0.0);
+}
+
+// KnnCollect rejects a k it cannot hold (0, or more than half its buffer) as KnnSet rejects 0.
+void test_kdtree_knn_collect_rejects_bad_k(void**) {
+  hg::KnnCollect<8> zero(0, 1.0), big(5, 1.0), fine(4, 1.0);
+  assert_false(zero.ok());
+  assert_false(big.ok());
+  assert_true(fine.ok());
+  big.add(0.5, 1);
+  Neighbour out[8];
+  assert_int_equal(big.finish(out), 0);
 }
 
 // The node count formula is exact for a full build.
@@ -278,6 +312,7 @@ int main(void) {
       cmocka_unit_test(test_kdtree_radius_sort_orders_by_distance_then_id),
       cmocka_unit_test(test_kdtree_knn_set_rejects_k_zero),
       cmocka_unit_test(test_kdtree_queries_do_not_allocate),
+      cmocka_unit_test(test_kdtree_knn_collect_rejects_bad_k),
       cmocka_unit_test(test_kdtree_node_count_formula_exact),
   };
   return cmocka_run_group_tests_name("hedger.kdtree", tests, nullptr, nullptr);

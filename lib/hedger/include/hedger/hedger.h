@@ -19,11 +19,11 @@
 ///                     (store: coordinates 8D, value 8, sequence 8, flags 1, fresh index 4,
 ///                      run tag 4, anchor weight 4; two kd-trees: coordinates 8D + id 4 each)
 ///   per fresh entry   8 D + 4 bytes;  per run record (2 state_dim + 3) · 8 bytes, and with
-///                     replay_cache the geometry its replay keeps: 6,656 bytes at D = 4, 7,184 at
+///                     replay_cache the geometry its replay keeps: 4,016 bytes at D = 4, 4,864 at
 ///                     D = 5, 10,096 at D = 9 (two searches' neighbours, factorisations, inverses);
 ///                     + ~1 KiB.
 /// D = 4 (3-D state + action): 147 bytes per stored point measured at 20k points. The firmware's
-/// corridor learner (D = 5, run_capacity 1,008) keeps 7.2 MB of replay records.
+/// corridor learner (D = 5, run_capacity 1,008) keeps 4.9 MB of replay records.
 ///
 /// Choices (hedger.md leaves them open; measured on the mountain-car test and the benchmark):
 /// - Bandwidth: fixed h in scaled units, not tied to the neighbourhood, so "unknown" means
