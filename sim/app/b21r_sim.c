@@ -308,6 +308,20 @@ static void pend_push(pend_t* p, const uint8_t* b, size_t n, uint64_t ready_ns) 
   ++p->ch_len;
 }
 
+// The next free slot of the frame queue, cleared and due at ready_ns; NULL (the frame counted as
+// dropped) when the queue is full.
+static struct can_frame* frame_pend_slot(frame_pend_t* p, uint64_t ready_ns) {
+  if (p->len == APP_PEND_FRAMES) {
+    ++p->dropped;
+    return NULL;
+  }
+  const size_t i = (p->head + p->len) % APP_PEND_FRAMES;
+  ++p->len;
+  p->fr[i].ready_ns = ready_ns;
+  memset(&p->fr[i].f, 0, sizeof(p->fr[i].f));
+  return &p->fr[i].f;
+}
+
 static void pend_flush(pend_t* p, int fd, uint64_t now_ns) {
   while (p->ch_len > 0 && p->ch[p->ch_head].ready_ns <= now_ns) {
     const size_t n = p->ch[p->ch_head].n;
@@ -384,46 +398,30 @@ static void pump(app_t* a, uint64_t now_ns) {
   }
   canopen_frame_t f;
   while (sim_emu_can_read(a->emu, &f)) {
-    if (a->can_out.len == APP_PEND_FRAMES) {
-      ++a->can_out.dropped;
-      continue;
+    struct can_frame* out = frame_pend_slot(&a->can_out, ready);
+    if (out != NULL) {
+      sim_can_to_linux(&f, out);
     }
-    const size_t i = (a->can_out.head + a->can_out.len) % APP_PEND_FRAMES;
-    a->can_out.fr[i].ready_ns = ready;
-    sim_can_to_linux(&f, &a->can_out.fr[i].f);
-    ++a->can_out.len;
   }
   // Failed CRCs on the bus reach the host as SocketCAN error frames (protocol violation in the
   // CRC sequence), as a CAN controller with error reporting on delivers them.
   for (uint32_t k = sim_emu_can_take_error_frames(a->emu); k > 0; --k) {
-    if (a->can_out.len == APP_PEND_FRAMES) {
-      ++a->can_out.dropped;
-      continue;
+    struct can_frame* ef = frame_pend_slot(&a->can_out, ready);
+    if (ef != NULL) {
+      ef->can_id = CAN_ERR_FLAG | CAN_ERR_PROT;
+      ef->can_dlc = CAN_ERR_DLC;
+      ef->data[2] = CAN_ERR_PROT_BIT;
+      ef->data[3] = CAN_ERR_PROT_LOC_CRC_SEQ;
     }
-    const size_t i = (a->can_out.head + a->can_out.len) % APP_PEND_FRAMES;
-    struct can_frame* ef = &a->can_out.fr[i].f;
-    memset(ef, 0, sizeof(*ef));
-    ef->can_id = CAN_ERR_FLAG | CAN_ERR_PROT;
-    ef->can_dlc = CAN_ERR_DLC;
-    ef->data[2] = CAN_ERR_PROT_BIT;
-    ef->data[3] = CAN_ERR_PROT_LOC_CRC_SEQ;
-    a->can_out.fr[i].ready_ns = ready;
-    ++a->can_out.len;
   }
   // The host's controller going bus-off and restarting, as SocketCAN reports both.
   for (sim_emu_bus_event_t ev = sim_emu_can_take_bus_event(a->emu); ev != SIM_EMU_BUS_NONE;
        ev = sim_emu_can_take_bus_event(a->emu)) {
-    if (a->can_out.len == APP_PEND_FRAMES) {
-      ++a->can_out.dropped;
-      continue;
+    struct can_frame* ef = frame_pend_slot(&a->can_out, ready);
+    if (ef != NULL) {
+      ef->can_id = CAN_ERR_FLAG | (ev == SIM_EMU_BUS_OFF ? CAN_ERR_BUSOFF : CAN_ERR_RESTARTED);
+      ef->can_dlc = CAN_ERR_DLC;
     }
-    const size_t i = (a->can_out.head + a->can_out.len) % APP_PEND_FRAMES;
-    struct can_frame* ef = &a->can_out.fr[i].f;
-    memset(ef, 0, sizeof(*ef));
-    ef->can_id = CAN_ERR_FLAG | (ev == SIM_EMU_BUS_OFF ? CAN_ERR_BUSOFF : CAN_ERR_RESTARTED);
-    ef->can_dlc = CAN_ERR_DLC;
-    a->can_out.fr[i].ready_ns = ready;
-    ++a->can_out.len;
   }
   pend_flush(&a->laser_out, a->laser_master, now_ns);
   if (a->base_master >= 0) {
