@@ -72,6 +72,13 @@ int toy_run_effect(actor_t* a, toy_driver_t driver, rng_t* rng, double effect) {
   return TOY_STEP_LIMIT;
 }
 
+void toy_runs(actor_t* a, toy_driver_t driver, rng_t* rng, int runs) {
+  for (int run = 0; run < runs; ++run) {
+    toy_run(a, driver, rng);
+    toy_end_run(a, 5000);
+  }
+}
+
 uint64_t toy_end_run(actor_t* a, uint32_t budget) {
   int pending = 0;
   assert_int_equal(actor_end_run_begin(a, &pending), ACTOR_OK);

@@ -39,6 +39,9 @@ int toy_run_effect(actor_t* a, toy_driver_t driver, rng_t* rng, double effect);
 /// Ends the run and does all its between-run work in slices of budget units; returns the slices.
 uint64_t toy_end_run(actor_t* a, uint32_t budget);
 
+/// `runs` runs of one driver, each ended with its between-run work in slices of 5,000 units.
+void toy_runs(actor_t* a, toy_driver_t driver, rng_t* rng, int runs);
+
 /// The actor's mean action over x = 0.05 .. 0.95 (last action 0).
 double toy_mean_action(actor_t* a);
 

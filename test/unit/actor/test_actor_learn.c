@@ -52,10 +52,7 @@ static void test_actor_moves_past_teacher(void** state) {
   actor_t* a = toy_actor(&cfg, &mem);
   rng_t rng;
   rng_seed(&rng, 11);
-  for (int run = 0; run < 5; ++run) {
-    toy_run(a, TOY_TEACHER, &rng);
-    toy_end_run(a, 5000);
-  }
+  toy_runs(a, TOY_TEACHER, &rng, 5);
   const double after_teacher = toy_mean_action(a);
   int steps = 0;
   for (int run = 0; run < 15; ++run) {
@@ -90,10 +87,7 @@ static void test_actor_trust_radius_bounds_drift_from_data(void** state) {
     actor_t* a = toy_actor(&cfg, &mem);
     rng_t rng;
     rng_seed(&rng, 13);
-    for (int run = 0; run < 20; ++run) {
-      toy_run(a, TOY_TEACHER, &rng);
-      toy_end_run(a, 5000);
-    }
+    toy_runs(a, TOY_TEACHER, &rng, 20);
     mean[v] = toy_mean_action(a);
     free(mem);
   }
@@ -153,15 +147,9 @@ static void test_actor_slope_test_stops_walk_on_noise(void** state) {
   actor_t* a = toy_actor(&cfg, &mem);
   rng_t rng;
   rng_seed(&rng, 11);
-  for (int run = 0; run < 5; ++run) {
-    toy_run(a, TOY_TEACHER, &rng);
-    toy_end_run(a, 5000);
-  }
+  toy_runs(a, TOY_TEACHER, &rng, 5);
   const double after_teacher = toy_mean_action(a);
-  for (int run = 0; run < 15; ++run) {
-    toy_run(a, TOY_ACTOR, &rng);
-    toy_end_run(a, 5000);
-  }
+  toy_runs(a, TOY_ACTOR, &rng, 15);
   const double after = toy_mean_action(a);
   print_message("real slope, 3-standard-error test: mean action after the teacher %.3f, after 15 own runs %.3f\n",
                 after_teacher, after);
@@ -184,14 +172,8 @@ static void test_actor_rewarded_window_keeps_signal_after_failures(void** state)
     actor_t* a = toy_actor(&cfg, &mem);
     rng_t rng;
     rng_seed(&rng, 19);
-    for (int run = 0; run < 5; ++run) {
-      toy_run(a, TOY_TEACHER, &rng);
-      toy_end_run(a, 5000);
-    }
-    for (int run = 0; run < 10; ++run) {
-      toy_run(a, TOY_FAIL, &rng);
-      toy_end_run(a, 5000);
-    }
+    toy_runs(a, TOY_TEACHER, &rng, 5);
+    toy_runs(a, TOY_FAIL, &rng, 10);
     const uint64_t before = actor_counters(a)->queries_stepped;
     toy_run(a, TOY_FAIL, &rng);
     toy_end_run(a, 5000);
