@@ -29,6 +29,7 @@ b21r_bootstrap.ensure()
 
 import argparse
 import bisect
+import os
 import signal
 import sys
 
@@ -52,14 +53,26 @@ def _types_by_fingerprint():
 FINGERPRINTS = _types_by_fingerprint()
 
 
-def read_log(path, channels=None, skipped=None):
+def read_log(path, channels=None, skipped=None, cut=False):
     """All events of the log with a B21R type (optionally only the given channels), decoded, in
     file order: [(timestamp_us, channel, message)]. Events of unknown types are skipped, and
-    counted per channel in the dict `skipped` when one is given."""
+    counted per channel in the dict `skipped` when one is given. cut=True reads a log that is
+    still being written or that a SIGKILL cut anywhere: a missing or empty file gives [], and
+    reading stops at a torn last event."""
     out = []
+    if cut and (not os.path.exists(path) or os.path.getsize(path) == 0):
+        return out
     log = lcm.EventLog(path, "r")
     try:
-        for ev in log:
+        while True:
+            try:
+                ev = log.read_next_event()
+            except Exception:
+                if not cut:
+                    raise
+                break  # a torn last event
+            if ev is None:
+                break
             if channels is not None and ev.channel not in channels:
                 continue
             t = FINGERPRINTS.get(bytes(ev.data[:8]))
@@ -67,7 +80,12 @@ def read_log(path, channels=None, skipped=None):
                 if skipped is not None:
                     skipped[ev.channel] = skipped.get(ev.channel, 0) + 1
                 continue
-            out.append((ev.timestamp, ev.channel, t.decode(ev.data)))
+            try:
+                out.append((ev.timestamp, ev.channel, t.decode(ev.data)))
+            except Exception:
+                if not cut:
+                    raise
+                break
     finally:
         log.close()
     return out

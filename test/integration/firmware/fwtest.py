@@ -163,36 +163,6 @@ def wait_for(path, text, start, timeout, proc=None):
     return start
 
 
-def read_cut_log(path, channels):
-    """(timestamp, channel, message) of the given channels from an event log that a SIGKILL may
-    have cut anywhere: reading stops at a torn last event."""
-    import lcm
-    from b21r_log import FINGERPRINTS
-    out = []
-    if not os.path.exists(path) or os.path.getsize(path) == 0:
-        return out
-    log = lcm.EventLog(path, "r")
-    try:
-        while True:
-            try:
-                ev = log.read_next_event()
-            except Exception:  # a torn last event
-                break
-            if ev is None:
-                break
-            if ev.channel not in channels:
-                continue
-            t = FINGERPRINTS.get(bytes(ev.data[:8]))
-            if t is not None:
-                try:
-                    out.append((ev.timestamp, ev.channel, t.decode(ev.data)))
-                except Exception:
-                    break
-    finally:
-        log.close()
-    return out
-
-
 def cpu_seconds(pid):
     """User + system CPU time of a process [s] (/proc/<pid>/stat)."""
     with open("/proc/%d/stat" % pid) as f:

@@ -66,7 +66,7 @@ def fill_store(controller, sim_exe, world, d, ckpt, samples):
                     p.kill()
                     fwtest.fail("filling the store: the controller %s (see %s)" %
                                 ("ended" if p.returncode is not None else "took more than 30 min", err_path))
-                st = fwtest.read_cut_log(log_path, {"B21R_STATUS"})
+                st = fwtest.read_log(log_path, {"B21R_STATUS"}, cut=True)
                 fill = st[-1][2].store_fill if st else 0
             p.send_signal(signal.SIGTERM)
             if p.wait(120) != 128 + signal.SIGTERM:

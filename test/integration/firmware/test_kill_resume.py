@@ -30,7 +30,7 @@ FINISHED = (0, 1, 2)  # run_t.END_GOAL, END_COLLISION, END_STEP_LIMIT
 
 def read_runs(path):
     """The B21R_RUN messages of an event log that a kill may have cut anywhere."""
-    return [m for _, _, m in fwtest.read_cut_log(path, {"B21R_RUN"})]
+    return [m for _, _, m in fwtest.read_log(path, {"B21R_RUN"}, cut=True)]
 
 
 def main():

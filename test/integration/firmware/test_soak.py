@@ -152,7 +152,7 @@ def main():
         return reasons
 
     def runs_of(s):
-        return [m for _, _, m in fwtest.read_cut_log(s.log_path, {"B21R_RUN"})]
+        return [m for _, _, m in fwtest.read_log(s.log_path, {"B21R_RUN"}, cut=True)]
 
     def start_session():
         s = Session(controller, sim, d, len(sessions), settings)
@@ -173,7 +173,7 @@ def main():
         if sig == signal.SIGTERM and rc != 128 + signal.SIGTERM:
             fwtest.fail("session %s: SIGTERM gave exit status %d" % (s.name, rc))
         account(s, s.new_text(), None)
-        statuses = [m for _, _, m in fwtest.read_cut_log(s.log_path, {"B21R_STATUS"})]
+        statuses = [m for _, _, m in fwtest.read_log(s.log_path, {"B21R_STATUS"}, cut=True)]
         if statuses and statuses[-1].missed_periods != 0:
             fwtest.fail("session %s: %d missed periods" % (s.name, statuses[-1].missed_periods))
         runs = runs_of(s)
