@@ -163,6 +163,25 @@ def wait_for(path, text, start, timeout, proc=None):
     return start
 
 
+def wait_for_any(path, texts, start, timeout, proc=None):
+    """Waits until one of `texts` appears in the file after offset `start`; returns (the text that
+    appears first, the offset after it)."""
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        with open(path) as f:
+            f.seek(start)
+            data = f.read()
+        found = [(data.find(t), t) for t in texts if data.find(t) >= 0]
+        if found:
+            i, t = min(found)
+            return t, start + i + len(t)
+        if proc is not None and proc.poll() is not None:
+            fail("controller exited (%d) while waiting for one of %s" % (proc.returncode, texts))
+        time.sleep(0.05)
+    fail("none of %s appeared in %s within %d s" % (texts, path, timeout))
+    return None, start
+
+
 def cpu_seconds(pid):
     """User + system CPU time of a process [s] (/proc/<pid>/stat)."""
     with open("/proc/%d/stat" % pid) as f:

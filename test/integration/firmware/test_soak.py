@@ -41,8 +41,8 @@ LEAK_KIB = 256
 FINISHED = (0, 1, 2)  # run_t.END_GOAL, END_COLLISION, END_STEP_LIMIT
 FALSE = ("laser silent", "base silent", "base fault", "device lost")
 
-# (name, command, stop reason expected (or a tuple: the first expected, the others allowed) or None
-# when tolerated, clear command or None, seconds)
+# (name, command, stop reason expected (or a tuple: any of them answers the fault, and the others
+# may follow) or None when tolerated, clear command or None, seconds)
 COMMON = [("laser drop", "fault laser_drop 1500", "laser silent", None, 0),
           ("laser stuck", "fault laser_stuck 1500", "laser silent", None, 0),
           ("bumper", "fault bumper 3", "bumper", "fault clear", 0),
@@ -51,7 +51,8 @@ COMMON = [("laser drop", "fault laser_drop 1500", "laser silent", None, 0),
 BASE = {"rflex": [("base silent", "fault base_silent 1500", "base silent", "fault clear", 0),
                   ("base line noise", "fault noise_base 0.002", None, "fault clear", 20)],
         "canopen": [("drive fault", "fault drive_fault 2", "base fault", "fault clear", 0),
-                    # silent drives: base silence first, then their heartbeats are missed (a base fault)
+                    # silent drives: their answers stop (base silence, 350 ms) and so do their heartbeats
+                    # (a base fault 500 ms after the last one): either may be seen first
                     ("drives silent", "fault base_silent 1500", ("base silent", "base fault"), "fault clear", 0),
                     ("bump-panel silent", "fault bumper_silent 1500", "base fault", None, 0),
                     ("drive stuck", "fault node_stuck 1 1500", "base fault", None, 0),
@@ -211,7 +212,8 @@ def main():
             sim.control(inject)
             if reason is not None:
                 reasons = reason if isinstance(reason, tuple) else (reason,)
-                off = fwtest.wait_for(s.err_path, "SAFETY STOP (%s)" % reasons[0], s.offset, 60, s.proc)
+                _, off = fwtest.wait_for_any(s.err_path, ["SAFETY STOP (%s)" % r for r in reasons], s.offset, 60,
+                                             s.proc)
                 if clear is not None:
                     time.sleep(0.5)
                     sim.control(clear)
