@@ -148,37 +148,26 @@ def check_monotonic(statuses, what):
 
 def wait_for(path, text, start, timeout, proc=None):
     """Waits until `text` appears in the file after offset `start`; returns the new offset."""
-    deadline = time.time() + timeout
-    while time.time() < deadline:
-        with open(path) as f:
-            f.seek(start)
-            data = f.read()
-        i = data.find(text)
-        if i >= 0:
-            return start + i + len(text)
-        if proc is not None and proc.poll() is not None:
-            fail("controller exited (%d) while waiting for '%s'" % (proc.returncode, text))
-        time.sleep(0.05)
-    fail("'%s' did not appear in %s within %d s" % (text, path, timeout))
-    return start
+    return wait_for_any(path, [text], start, timeout, proc)[1]
 
 
 def wait_for_any(path, texts, start, timeout, proc=None):
     """Waits until one of `texts` appears in the file after offset `start`; returns (the text that
     appears first, the offset after it)."""
+    what = "'%s'" % texts[0] if len(texts) == 1 else "one of %s" % texts
     deadline = time.time() + timeout
     while time.time() < deadline:
         with open(path) as f:
             f.seek(start)
             data = f.read()
-        found = [(data.find(t), t) for t in texts if data.find(t) >= 0]
+        found = [(i, t) for i, t in ((data.find(t), t) for t in texts) if i >= 0]
         if found:
             i, t = min(found)
             return t, start + i + len(t)
         if proc is not None and proc.poll() is not None:
-            fail("controller exited (%d) while waiting for one of %s" % (proc.returncode, texts))
+            fail("controller exited (%d) while waiting for %s" % (proc.returncode, what))
         time.sleep(0.05)
-    fail("none of %s appeared in %s within %d s" % (texts, path, timeout))
+    fail("%s did not appear in %s within %d s" % (what, path, timeout))
     return None, start
 
 
