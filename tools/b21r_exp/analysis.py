@@ -340,7 +340,8 @@ def ablation_comparisons(variants):
 # The product's own learner beside the reference learners, from whichever of these results exist:
 # (experiment, variant, label). All run the 10 m corridor on the emulated B21r: HEDGER's greedy
 # policy (the default) and the actor (policy = actor, actor_corridor), each from the Fig. 4
-# examples and from the gentle teacher.
+# examples and from the gentle teacher, and both from the sloppy human's examples
+# (corridor_human_10m).
 PRODUCT_PROGRESS = (
     ("fig4_corridor_examples", "", "product: greedy policy (HEDGER), proportional examples (gains 0.5-2; Fig. 4 set-up)"),
     ("ablation_teachers", "example_gain_range=0.25,0.35", "product: greedy policy (HEDGER), gentle teacher (gains 0.25-0.35)"),
@@ -348,10 +349,13 @@ PRODUCT_PROGRESS = (
      "product: actor on HEDGER's values (policy = actor), proportional examples (gains 0.5-2; Fig. 4 set-up)"),
     ("actor_corridor", "example_gain_range=0.25,0.35",
      "product: actor on HEDGER's values (policy = actor), gentle teacher (gains 0.25-0.35)"),
+    ("corridor_human_10m", "policy=greedy", "product: greedy policy (HEDGER), sloppy human's examples (Fig. 5's driver)"),
+    ("corridor_human_10m", "policy=actor",
+     "product: actor on HEDGER's values (policy = actor), sloppy human's examples (Fig. 5's driver)"),
 )
 # Experiments whose only place in the report is a product row of the reference-learner table: their
 # learning curves are drawn in that section's figure, not in one of their own.
-PRODUCT_ONLY = ("actor_corridor",)
+PRODUCT_ONLY = ("actor_corridor", "corridor_human_10m")
 TOLERANCES = (0.01, 0.03)
 LEARNER_LABELS = {"sac": "SAC (Stable-Baselines3)", "ppo": "PPO (Stable-Baselines3)", "td3": "TD3 (Stable-Baselines3)"}
 

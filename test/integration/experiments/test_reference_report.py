@@ -10,8 +10,9 @@ result files, whichever exist (fixture files written here, with known answers):
 - the product's learner gets its row from a learn result (training steps of both phases per
   evaluation block, collisions among its training runs), and a "not run yet" row where its
   result files are missing: the greedy policy from fig4_corridor_examples and ablation_teachers'
-  gentle-teacher variant, the actor (policy = actor) from actor_corridor's two variants, each row
-  from its own variant's files;
+  gentle-teacher variant, the actor (policy = actor) from actor_corridor's two variants, both
+  policies from the sloppy human's examples (corridor_human_10m's two variants), each row from its
+  own variant's files;
 - `report --section reference_learners` replaces only its own section of an existing report (the
   rest kept, the prose between its markers kept, no duplicate on a second run) and draws the
   learning-curve figure; the full report has the section too.
@@ -67,6 +68,8 @@ GREEDY_FIG4 = "product: greedy policy (HEDGER), proportional examples"
 GREEDY_GENTLE = "product: greedy policy (HEDGER), gentle teacher"
 ACTOR_FIG4 = "product: actor on HEDGER's values (policy = actor), proportional examples"
 ACTOR_GENTLE = "product: actor on HEDGER's values (policy = actor), gentle teacher"
+GREEDY_HUMAN = "product: greedy policy (HEDGER), sloppy human"
+ACTOR_HUMAN = "product: actor on HEDGER's values (policy = actor), sloppy human"
 
 
 def learn_result(seed, experiment="fig4_corridor_examples", variant="", means=(300.0, 150.0, 138.0), walls=1):
@@ -170,7 +173,7 @@ def main():
         r = row(text, "PPO")
         if r[4] != "4,096 (0)" or r[2] != "2":
             fail("PPO (2 seeds: a median without an interval): %r" % r)
-        for label in (GREEDY_FIG4, GREEDY_GENTLE, ACTOR_FIG4, ACTOR_GENTLE):
+        for label in (GREEDY_FIG4, GREEDY_GENTLE, ACTOR_FIG4, ACTOR_GENTLE, GREEDY_HUMAN, ACTOR_HUMAN):
             r = row(text, label)
             if "not run yet" not in r[3]:
                 fail("a missing product result is not marked 'not run yet': %r" % r)
@@ -189,6 +192,9 @@ def main():
             write(out, learn_result(seed, "actor_corridor", "example_gain_range=0.25,0.35", (139.0, 138.5, 138.2),
                                     walls=0))
         write(out, learn_result(1, "actor_corridor", "example_gain_range=0.5,2", (1000.0, 1000.0, 1000.0)))
+        # The human's examples: the actor's variant of corridor_human_10m only (the greedy one missing).
+        for seed in (1, 2, 3):
+            write(out, learn_result(seed, "corridor_human_10m", "policy=actor", (150.0, 141.0, 140.0), walls=0))
         text = text.replace("_(Prose to be written", "Kept prose. _(Prose to be written", 1)
         with open(report, "w") as f:
             f.write(text)
@@ -206,6 +212,13 @@ def main():
             fail("the product's row from its learn results: %r" % r)
         if "not run yet" not in row(text, GREEDY_GENTLE)[3]:
             fail("the gentle teacher's missing results are not marked")
+        if "run corridor_human_10m` (variant `policy=greedy`)" not in row(text, GREEDY_HUMAN)[3]:
+            fail("the greedy policy's missing human row does not name its experiment and variant: %r" %
+                 row(text, GREEDY_HUMAN))
+        r = row(text, ACTOR_HUMAN)
+        # blocks 150, 141, 140 after 700, 1400, 2100: never within 1 % (censored), 3 % (<= 141.419) from 1400
+        if r[2] != "3" or r[4] != "> budget (3)" or r[5] != "1,400 (0)" or r[8] != "140.0" or r[9] != "3 of 3 seeds":
+            fail("the actor's human row from its own variant's results: %r" % r)
         r = row(text, ACTOR_GENTLE)
         # blocks 139.0, 138.5, 138.2 after 700, 1400, 2100: within 1 % (<= 138.673) from 1400, 3 % from 700; no wall
         if r[2] != "2" or r[4] != "1,400 (0)" or r[5] != "700 (0)" or r[6] != "0 (0)" or r[8] != "138.2" or \
