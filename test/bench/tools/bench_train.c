@@ -6,21 +6,25 @@
 // B21R_RUN records, so nothing is ranked or vetted).
 //
 // Two modes:
-//   time (default)   two learner settings, each recording its own session, best of 3 (the machine
-//                    may be shared): the controller's defaults (every learned experience is one
-//                    update, and the between-runs backward replay makes hedger_replay_passes (20)
-//                    more of it, each with a greedy search for the lambda-return), and
-//                    hedger_replay_passes = 1. CPU and wall time of decoding, of an in-run
-//                    reference (the same HEDGER calls on experiences already decoded in memory: the
-//                    learner's own cost, which no trainer can beat) and of the trainer; experiences
-//                    and updates per CPU second are printed, not checked (they depend on the load).
-//                    Exit 1 when the trainer learns another state than the reference, makes other
-//                    updates, or takes more than 10 % more CPU time than the reference plus the
-//                    decoding (a ratio within one process).
+//   time (default)   two learner settings, each recording its own session: the controller's
+//                    defaults (every learned experience is one update, and the between-runs
+//                    backward replay makes hedger_replay_passes (20) more of it, each with a greedy
+//                    search for the lambda-return), and hedger_replay_passes = 1. CPU and wall time
+//                    of decoding, of an in-run reference (the same HEDGER calls on experiences
+//                    already decoded in memory: the learner's own cost, which no trainer can beat)
+//                    and of the trainer, interleaved (reference, trainer, trainer, reference, ...)
+//                    and the best of 5 each, so that a burst of other work on a shared machine
+//                    falls on both. Experiences and updates per CPU second and the trainer's CPU
+//                    time over the reference are printed, not checked: they depend on the load
+//                    (measured on this 2-core machine with one other job: the same binary gave
+//                    -4 % to +46 % over the reference, best of 3, run after run). Exit 1 when the
+//                    trainer learns another state than the reference or makes other updates.
 //   --instructions   under callgrind (CTest tools.train_instructions): the trainer's instructions
 //                    per learned experience at the controller's defaults, against the budget
-//                    below. Exit 1 over it.
-//
+//                    below; and, with one replay pass (where the trainer's own work, reading and
+//                    decoding the log and calling the framework, is the largest part of the
+//                    whole), the trainer's instructions against those of decoding plus the in-run
+//                    reference: at most 10 % more. Exit 1 over either.
 // The budget: an hour of a 10 Hz robot's driving (36,000 experiences) retrains in a minute on the
 // slowest computer the controller targets, a Cortex-A53-class board (1.2 GHz, 0.5 instructions
 // per cycle, AArch64 needing up to 1.25x the x86-64 count: 480 M x86-64 instructions per second):
@@ -45,7 +49,8 @@
 #include <unistd.h>
 
 #define BUDGET_INSTRUCTIONS_PER_EXPERIENCE 800000.0
-#define REPEATS 3
+#define REPEATS 5
+#define OVERHEAD_LIMIT 0.10
 
 typedef struct times {
   double wall_s;
@@ -195,6 +200,34 @@ typedef struct measured {
   bool same_state;
 } measured_t;
 
+// One timed trainer run on the log at path; compares its learned state with the reference's
+// (ref_state: the reference has run before). Returns 0, or -1 with a message.
+static int time_trainer(fw_config_t* c, const char* path, measured_t* m, const uint8_t* ref_state,
+                        size_t ref_state_n) {
+  const train_options_t opt = {.progress = NULL, .progress_period_s = 1.0};
+  char err[TRAIN_ERR_MAX];
+  const times_t t0 = now_times();
+  trainer_t* t = trainer_create(c, &opt, err, sizeof err);
+  if (t == NULL || trainer_add_log(t, path, err, sizeof err) != 0) {
+    fprintf(stderr, "bench_train: %s\n", err);
+    trainer_destroy(t);
+    return -1;
+  }
+  trainer_finish(t);
+  keep_best(&m->train, since(t0));
+  m->st = trainer_stats(t);
+  hedger_t* h = trainer_hedger(t);
+  m->updates = hedger_counters(h)->updates;
+  const size_t sz = hedger_serialized_size(h);
+  uint8_t* buf = (uint8_t*)malloc(sz);
+  size_t written = 0;
+  m->same_state = buf != NULL && ref_state != NULL && hedger_save(h, buf, sz, &written) == HEDGER_OK &&
+                  written == ref_state_n && memcmp(buf, ref_state, written) == 0;
+  free(buf);
+  trainer_destroy(t);
+  return 0;
+}
+
 // Records a session with c, then times decoding, the reference and the trainer on its log.
 // Returns 0, or -1 with a message on stderr.
 static int measure(fw_config_t* c, const char* dir, measured_t* m) {
@@ -219,35 +252,20 @@ static int measure(fw_config_t* c, const char* dir, measured_t* m) {
   }
   uint8_t* ref_state = NULL;
   size_t ref_state_n = 0;
-  for (int r = 0; r < REPEATS; ++r) {
-    const times_t t0 = now_times();
-    m->used = reference(&hc, x, m->experiences, r == 0 ? &ref_state : NULL, &ref_state_n, &m->ref_updates);
-    keep_best(&m->ref, since(t0));
-  }
   int rc = 0;
+  // Interleaved, the order alternating (reference first in even repeats), so that a stretch of
+  // load on the machine slows both rather than one.
   for (int r = 0; r < REPEATS && rc == 0; ++r) {
-    const train_options_t opt = {.progress = NULL, .progress_period_s = 1.0};
-    char err[TRAIN_ERR_MAX];
-    const times_t t0 = now_times();
-    trainer_t* t = trainer_create(c, &opt, err, sizeof err);
-    if (t == NULL || trainer_add_log(t, path, err, sizeof err) != 0) {
-      fprintf(stderr, "bench_train: %s\n", err);
-      trainer_destroy(t);
-      rc = -1;
-      break;
+    for (int leg = 0; leg < 2 && rc == 0; ++leg) {
+      if ((leg == 0) == (r % 2 == 0)) {
+        const times_t t0 = now_times();
+        m->used = reference(&hc, x, m->experiences, ref_state == NULL ? &ref_state : NULL, &ref_state_n,
+                            &m->ref_updates);
+        keep_best(&m->ref, since(t0));
+      } else {
+        rc = time_trainer(c, path, m, ref_state, ref_state_n);
+      }
     }
-    trainer_finish(t);
-    keep_best(&m->train, since(t0));
-    m->st = trainer_stats(t);
-    hedger_t* h = trainer_hedger(t);
-    m->updates = hedger_counters(h)->updates;
-    const size_t sz = hedger_serialized_size(h);
-    uint8_t* buf = (uint8_t*)malloc(sz);
-    size_t written = 0;
-    m->same_state = buf != NULL && ref_state != NULL && hedger_save(h, buf, sz, &written) == HEDGER_OK &&
-                    written == ref_state_n && memcmp(buf, ref_state, written) == 0;
-    free(buf);
-    trainer_destroy(t);
   }
   unlink(path);
   free(ref_state);
@@ -276,25 +294,17 @@ static bool report(const char* name, const fw_config_t* c, const measured_t* m) 
   printf("%-44s %9.4f %9.4f %14.0f %14.0f %14.0f\n", "trainer (b21r-train): log file -> HEDGER", m->train.wall_s,
          m->train.cpu_s, (double)m->st.used / m->train.wall_s, rate_exp, rate_upd);
   const double overhead = m->train.cpu_s / (m->ref.cpu_s + m->decode.cpu_s) - 1.0;
-  printf("trainer CPU time over reference + decoding: %+.1f %% (limit +10 %%)\n", 100.0 * overhead);
+  printf("trainer CPU time over reference + decoding: %+.1f %% (printed only; checked in instructions by "
+         "tools.train_instructions)\n", 100.0 * overhead);
   printf("learned experiences per CPU second: %.0f (each costs %.1f updates; a 10 Hz robot's hour of driving trains "
          "in %.1f s of this machine's CPU)\n", rate_exp, per_exp, 36000.0 / rate_exp);
   printf("learned state identical to the reference's: %s\n", m->same_state ? "yes" : "NO");
-  return m->same_state && (long)m->st.used == m->used && m->ref_updates == m->updates && overhead <= 0.10;
+  return m->same_state && (long)m->st.used == m->used && m->ref_updates == m->updates;
 }
 
-// The session's log under callgrind: the instructions of the trainer, from trainer_create to
-// trainer_finish, per learned experience, against the budget. The recording runs before the
-// counting starts (instr_start). Returns true within budget.
-static bool count_instructions(fw_config_t* c, const char* dir) {
-  char path[128];
-  snprintf(path, sizeof path, "%s/session.lcmlog", dir);
-  const long n_log = record_session(c, path);
-  if (n_log <= 0) {
-    fprintf(stderr, "bench_train: could not record the session\n");
-    return false;
-  }
-  instr_start();
+// Instructions of one trainer (trainer_create to trainer_finish) on the log at path; its counters
+// into st and updates. UINT64_MAX on failure (message on stderr).
+static uint64_t trainer_instructions(const fw_config_t* c, const char* path, train_stats_t* st, uint64_t* updates) {
   const train_options_t opt = {.progress = NULL, .progress_period_s = 1.0};
   char err[TRAIN_ERR_MAX];
   instr_begin();
@@ -302,15 +312,59 @@ static bool count_instructions(fw_config_t* c, const char* dir) {
   if (t == NULL || trainer_add_log(t, path, err, sizeof err) != 0) {
     fprintf(stderr, "bench_train: %s\n", err);
     trainer_destroy(t);
-    return false;
+    return UINT64_MAX;
   }
   trainer_finish(t);
   const uint64_t n = instr_end();
-  const train_stats_t st = trainer_stats(t);
-  const uint64_t updates = hedger_counters(trainer_hedger(t))->updates;
+  *st = trainer_stats(t);
+  *updates = hedger_counters(trainer_hedger(t))->updates;
   trainer_destroy(t);
+  return n;
+}
+
+// Under callgrind, each setting's session recorded before the counting starts (instr_start):
+// - the controller's defaults: the trainer's instructions per learned experience, against the
+//   budget;
+// - one replay pass: the trainer's instructions against decoding plus the in-run reference, at
+//   most OVERHEAD_LIMIT more (the trainer's own work is the same per experience at any pass count,
+//   and the largest fraction of the whole with one pass).
+// Returns true when both hold.
+static bool count_instructions(fw_config_t* c, fw_config_t* one_pass, const char* dir) {
+  char path[128];
+  char path_one[128];
+  snprintf(path, sizeof path, "%s/session.lcmlog", dir);
+  snprintf(path_one, sizeof path_one, "%s/session-one-pass.lcmlog", dir);
+  const long n_log = record_session(c, path);
+  const long n_log_one = record_session(one_pass, path_one);
+  if (n_log <= 0 || n_log_one <= 0) {
+    fprintf(stderr, "bench_train: could not record the sessions\n");
+    return false;
+  }
+  exp_rec_t* x = (exp_rec_t*)malloc((size_t)n_log_one * sizeof *x);
+  if (x == NULL) {
+    return false;
+  }
+  hedger_config_t hc_one;
+  fw_config_hedger(one_pass, &hc_one);
+  instr_start();
+
+  train_stats_t st;
+  uint64_t updates = 0;
+  const uint64_t n = trainer_instructions(c, path, &st, &updates);
+
+  train_stats_t st_one;
+  uint64_t updates_one = 0;
+  const uint64_t n_train_one = trainer_instructions(one_pass, path_one, &st_one, &updates_one);
+  uint64_t ref_updates_one = 0;
+  instr_begin();
+  const long n_exp_one = decode_all(path_one, x, n_log_one);
+  const long used_one = reference(&hc_one, x, n_exp_one, NULL, NULL, &ref_updates_one);
+  const uint64_t n_ref_one = instr_end();
+  free(x);
   unlink(path);
-  if (n == UINT64_MAX || st.used == 0) {
+  unlink(path_one);
+  if (n == UINT64_MAX || n_train_one == UINT64_MAX || n_ref_one == UINT64_MAX || st.used == 0 ||
+      n_ref_one == 0) {
     return false;
   }
   const double per_exp = (double)n / (double)st.used;
@@ -325,7 +379,16 @@ static bool count_instructions(fw_config_t* c, const char* dir) {
   printf("budget %.0f per learned experience (an hour of driving retrained in a minute on a Cortex-A53 at 1.2 GHz): "
          "%s (%.0f %%)\n", BUDGET_INSTRUCTIONS_PER_EXPERIENCE, ok ? "within" : "OVER",
          100.0 * per_exp / BUDGET_INSTRUCTIONS_PER_EXPERIENCE);
-  return ok;
+  const double overhead = (double)n_train_one / (double)n_ref_one - 1.0;
+  const bool same = (long)st_one.used == used_one && updates_one == ref_updates_one;
+  const bool ok_overhead = same && overhead <= OVERHEAD_LIMIT;
+  printf("\none replay pass, its own session (%ld experiences, %llu learned, %llu HEDGER updates):\n", n_log_one,
+         (unsigned long long)st_one.used, (unsigned long long)updates_one);
+  printf("decoding + in-run reference %llu instructions, trainer %llu: %+.1f %% (limit %+.0f %%)%s: %s\n",
+         (unsigned long long)n_ref_one, (unsigned long long)n_train_one, 100.0 * overhead, 100.0 * OVERHEAD_LIMIT,
+         same ? "" : "; the trainer and the reference learned other experiences or made other updates",
+         ok_overhead ? "within" : "OVER");
+  return ok && ok_overhead;
 }
 
 int main(int argc, char** argv) {
@@ -347,14 +410,14 @@ int main(int argc, char** argv) {
   c.phase_one_runs = 30;
   c.phase_two_runs = 35;
   c.eval_every_runs = 5;
+  fw_config_t one_pass = c;
+  one_pass.hedger_replay_passes = 1;
   if (instructions) {
-    const bool ok = count_instructions(&c, dir);
+    const bool ok = count_instructions(&c, &one_pass, dir);
     rmdir(dir);
     printf("%s\n", ok ? "tools.train_instructions: within budget" : "tools.train_instructions: FAILED");
     return ok ? 0 : 1;
   }
-  fw_config_t one_pass = c;
-  one_pass.hedger_replay_passes = 1;
   measured_t m_defaults;
   measured_t m_one_pass;
   const int rc = measure(&c, dir, &m_defaults) | measure(&one_pass, dir, &m_one_pass);
@@ -363,7 +426,8 @@ int main(int argc, char** argv) {
     return 1;
   }
   printf("tools.train_bench: offline HEDGER training from an experience log (corridor, the controller's HEDGER\n"
-         "settings; each setting records its own session; best of %d; the machine may be shared)\n",
+         "settings; each setting records its own session; reference and trainer interleaved, best of %d each; times\n"
+         "depend on the machine's load and are printed, not checked)\n",
          REPEATS);
   const bool ok_defaults = report("the controller's defaults", &c, &m_defaults);
   const bool ok_one_pass = report("one replay pass (hedger_replay_passes = 1)", &one_pass, &m_one_pass);
