@@ -289,6 +289,9 @@ static const key_desc_t k_keys[] = {
    "backward passes over every finished training run (between runs, sliced over ticks)"},
   {NULL, "hedger_replay_lambda", KIND_DOUBLE, OFF(hedger_replay_lambda), 0, 1, false, false, NULL, "0.9",
    "target of the replay: the lambda-return, 0 = Q-learning's r + gamma max Q, 1 = the run's own return"},
+  {NULL, "hedger_replay_alpha", KIND_DOUBLE, OFF(hedger_replay_alpha), 0, 1, false, false, NULL, "0",
+   "learning rate of the replay's updates (0 = alpha); fewer passes with a larger step: 3 passes of "
+   "0.7741 move a value as far as 20 of 0.2 (1 - 0.7741 = 0.8^(20/3)) with 3/20 of the replay's updates"},
   {NULL, "hedger_greedy_method", KIND_ENUM, OFF(hedger_greedy_method), 0, 0, false, false, k_greedy, "state_model",
    "greedy action: per_action = one prediction per candidate; state_model = one local model at the "
    "state, quadratic in the action (falls back to per_action where it cannot be formed)"},

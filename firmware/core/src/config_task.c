@@ -167,6 +167,7 @@ void fw_config_learn_settings(const fw_config_t* cfg, learn_config_t* c) {
   c->replay = cfg->hedger_replay;
   c->replay_passes = (uint32_t)cfg->hedger_replay_passes;
   c->replay_lambda = cfg->hedger_replay_lambda;
+  c->replay_alpha = cfg->hedger_replay_alpha;
   c->input_scale_n = (uint32_t)cfg->hedger_input_scale_n;
   for (int32_t i = 0; i < cfg->hedger_input_scale_n && i <= (int32_t)LEARN_MAX_STATE; ++i) {
     c->input_scale[i] = cfg->hedger_input_scale[i];

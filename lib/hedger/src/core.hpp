@@ -1113,9 +1113,10 @@ void write_slot(hedger& h, uint32_t slot, const double* x, double q, uint8_t fl)
 /// close (a full small store merges most new points). Insert: q_j += κ (q − q_j) with the kernel
 /// weight κ between them. Flags are OR-ed, so a reward-bearing transition protects the point it
 /// is merged into.
-inline void merge_into(hedger& h, uint32_t j, double d2, double q, bool td, double target, uint8_t fl) noexcept {
+inline void merge_into(hedger& h, uint32_t j, double d2, double q, bool td, double target, double alpha,
+                       uint8_t fl) noexcept {
   if (td) {
-    h.val[j] += h.cfg.alpha * (target - h.val[j]);
+    h.val[j] += alpha * (target - h.val[j]);
   } else {
     h.val[j] += std::exp(-d2 / h.h2) * (q - h.val[j]);
   }
@@ -1131,6 +1132,7 @@ struct NewPoint {
   uint8_t flags;
   bool td;
   double target;
+  double alpha;  ///< an update's learning rate (the merge rule's step)
   bool have_near;
   uint32_t near_slot;
   double near_d2;
@@ -1172,7 +1174,7 @@ template <int D>
 hedger_store_op_t store_point(hedger& h, const double* x, const NewPoint& np, uint32_t* merged) noexcept {
   *merged = kNone;
   if (np.have_near && np.near_d2 <= h.merge_r2) {
-    merge_into(h, np.near_slot, np.near_d2, np.q, np.td, np.target, np.flags);
+    merge_into(h, np.near_slot, np.near_d2, np.q, np.td, np.target, np.alpha, np.flags);
     *merged = np.near_slot;
     return HEDGER_STORE_MERGED;
   }
@@ -1212,7 +1214,7 @@ hedger_store_op_t store_point(hedger& h, const double* x, const NewPoint& np, ui
     }
   }
   if (np.have_near && np.red_d2 < vd2) {
-    merge_into(h, np.near_slot, np.near_d2, np.q, np.td, np.target, np.flags);
+    merge_into(h, np.near_slot, np.near_d2, np.q, np.td, np.target, np.alpha, np.flags);
     *merged = np.near_slot;
     return HEDGER_STORE_MERGED;
   }
@@ -1279,12 +1281,12 @@ struct ReplayRecord {
 };
 
 /// Steps 2–6 of the training update for (s, a) with a given target r + γ q' (info.target set by
-/// the caller): q = Q(s, a), q_new = q + α (target − q), store (s, a) with q_new, pull the
-/// neighbours, track r. With a cache (the replay's record) the neighbourhood and the geometry
+/// the caller) and learning rate alpha (cfg.alpha; the replay's cfg.replay_alpha): q = Q(s, a),
+/// q_new = q + α (target − q), store (s, a) with q_new, pull the neighbours, track r. With a cache (the replay's record) the neighbourhood and the geometry
 /// of the prediction are taken from it while valid, else found and kept in it.
 template <int D>
-void learn_target(hedger& h, const double* s, double a, double r, int terminal, hedger_update_info_t& info,
-                  FitCache<D>* cache = nullptr) noexcept {
+void learn_target(hedger& h, const double* s, double a, double r, int terminal, double alpha,
+                  hedger_update_info_t& info, FitCache<D>* cache = nullptr) noexcept {
   // 2. q = Q(s, a) with its neighbourhood.
   double x[static_cast<size_t>(D)];
   scale_input<D>(h, s, a, x);
@@ -1309,7 +1311,7 @@ void learn_target(hedger& h, const double* s, double a, double r, int terminal, 
   info.q_old = p.value;
   info.kind = p.kind;
   // 3. New value.
-  const double q_new = p.value + h.cfg.alpha * (info.target - p.value);
+  const double q_new = p.value + alpha * (info.target - p.value);
   info.q_new = q_new;
   // 4. Store (s, a). Remember the neighbours' sequence numbers: a neighbour evicted by the
   //    store step is not pulled (its slot now holds the new point).
@@ -1317,7 +1319,7 @@ void learn_target(hedger& h, const double* s, double a, double r, int terminal, 
   for (uint32_t i = 0; i < n; ++i) nseq[i] = h.seq[fc.ids[i]];
   const uint8_t fl = (terminal || !(r >= 0.0 && r <= 0.0)) ? HEDGER_POINT_PROTECTED : 0;
   const bool have = n > 0;
-  const NewPoint np{q_new, fl, true, info.target, have, have ? fc.ids[0] : 0, fc.near_d2, fc.red_d2};
+  const NewPoint np{q_new, fl, true, info.target, alpha, have, have ? fc.ids[0] : 0, fc.near_d2, fc.red_d2};
   uint32_t merged;
   info.store_op = store_point<D>(h, x, np, &merged);
   // 5. Pull each neighbour toward q_new by α κ_i (a merged point had its update already).
@@ -1325,7 +1327,7 @@ void learn_target(hedger& h, const double* s, double a, double r, int terminal, 
   for (uint32_t i = 0; i < n; ++i) {
     const uint32_t sl = fc.ids[i];
     if (h.seq[sl] != nseq[i] || sl == merged) continue;
-    h.val[sl] += h.cfg.alpha * fc.w[i] * (q_new - h.val[sl]);
+    h.val[sl] += alpha * fc.w[i] * (q_new - h.val[sl]);
     ++pulled;
   }
   info.n_pulled = pulled;
@@ -1368,7 +1370,7 @@ void update(hedger& h, const double* s, double a, double r, const double* sn, in
   // 1. q' from the greedy search at s' (done once; returned for reuse as the next action).
   next_greedy<D>(h, sn, terminal, info);
   info.target = r + h.cfg.gamma * info.q_next;
-  learn_target<D>(h, s, a, r, terminal, info);
+  learn_target<D>(h, s, a, r, terminal, h.cfg.alpha, info);
   record_run(h, s, a, r, sn, terminal);
 }
 
@@ -1381,7 +1383,7 @@ void learn(hedger& h, const double* s, double a, double r, const double* sn, int
   info.next_status = HEDGER_OK;
   info.q_next = terminal ? 0.0 : q_next;
   info.target = r + h.cfg.gamma * info.q_next;
-  learn_target<D>(h, s, a, r, terminal, info);
+  learn_target<D>(h, s, a, r, terminal, h.cfg.alpha, info);
   record_run(h, s, a, r, sn, terminal);
 }
 
@@ -1396,7 +1398,7 @@ hedger_store_op_t insert(hedger& h, const double* s, double a, double q, uint8_t
   KnnSet rs(buf, km, std::numeric_limits<double>::infinity());
   query_store<D>(h, x, rs);
   const bool have = rs.size() > 0;
-  const NewPoint np{q, fl, false, 0.0, have, have ? buf[0].id : 0, have ? buf[0].d2 : 0.0,
+  const NewPoint np{q, fl, false, 0.0, 0.0, have, have ? buf[0].id : 0, have ? buf[0].d2 : 0.0,
                     rs.size() >= km ? buf[km - 1].d2 : std::numeric_limits<double>::infinity()};
   uint32_t merged;
   const hedger_store_op_t op = store_point<D>(h, x, np, &merged);
@@ -1450,6 +1452,7 @@ template <int D>
 uint32_t replay_step(hedger& h, uint32_t max_updates) noexcept {
   const uint32_t sd = h.cfg.state_dim;
   const double lambda = h.cfg.replay_lambda;
+  const double replay_alpha = h.cfg.replay_alpha > 0.0 ? h.cfg.replay_alpha : h.cfg.alpha;
   const uint64_t budget = static_cast<uint64_t>(max_updates) * kReplayUnitsPerUpdate;
   uint64_t spent = 0;
   uint32_t done = 0;
@@ -1484,7 +1487,7 @@ uint32_t replay_step(hedger& h, uint32_t max_updates) noexcept {
     info.target = (h.replay_k == 0) ? r + h.cfg.gamma * boot
                                     : r + h.cfg.gamma * ((1.0 - lambda) * boot + lambda * h.replay_next_return);
     if (terminal) info.target = r;
-    learn_target<D>(h, s, a, r, terminal, info, rc != nullptr ? &rc->fit : nullptr);
+    learn_target<D>(h, s, a, r, terminal, replay_alpha, info, rc != nullptr ? &rc->fit : nullptr);
     ++h.counters.replayed_updates;
     h.replay_next_return = info.target;
     ++done;

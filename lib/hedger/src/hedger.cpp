@@ -56,6 +56,7 @@ bool valid_config(const hedger_config_t* c) {
   if (c->replay > 1 || (c->replay == 1 && c->run_capacity == 0)) return false;
   if (c->replay_passes < 1 || c->replay_passes > HEDGER_MAX_REPLAY_PASSES) return false;
   if (!(c->replay_lambda >= 0.0 && c->replay_lambda <= 1.0)) return false;
+  if (!(c->replay_alpha >= 0.0 && c->replay_alpha <= 1.0)) return false;
   if (c->replay_cache > 1) return false;
   if (c->greedy_method != static_cast<uint32_t>(HEDGER_GREEDY_PER_ACTION) &&
       c->greedy_method != static_cast<uint32_t>(HEDGER_GREEDY_STATE_MODEL)) {
@@ -220,6 +221,7 @@ hedger_config_t hedger_config_default(void) HEDGER_NOEXCEPT {
   c.replay = 0;
   c.replay_passes = 1;
   c.replay_lambda = 0.0;
+  c.replay_alpha = 0.0;
   c.replay_cache = 1;
   c.greedy_method = static_cast<uint32_t>(HEDGER_GREEDY_PER_ACTION);
   c.greedy_pessimism = 0.0;

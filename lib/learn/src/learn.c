@@ -98,6 +98,7 @@ learn_config_t learn_config_default(void) {
   c.replay = true;
   c.replay_passes = 20U;
   c.replay_lambda = 0.9;
+  c.replay_alpha = 0.0;
   c.tabular_bins = 10U;
   c.tabular_actions = 9U;
   c.explore_sigma = 0.3;
@@ -155,6 +156,7 @@ void learn_learner_config(const learn_task_t* task, const learn_config_t* cfg, l
   hc->replay = cfg->replay ? 1U : 0U;
   hc->replay_passes = cfg->replay_passes;
   hc->replay_lambda = cfg->replay_lambda;
+  hc->replay_alpha = cfg->replay_alpha;
   hc->greedy_method = (uint32_t)cfg->greedy_method;
   hc->greedy_pessimism = cfg->greedy_pessimism;
   hc->greedy_reach = cfg->greedy_reach > 0.0 ? cfg->greedy_reach : task->greedy_reach;

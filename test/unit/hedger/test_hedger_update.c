@@ -5,6 +5,7 @@
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <stdlib.h>
 
 #include <cmocka.h>
 
@@ -300,6 +301,69 @@ static void test_end_run_replay_propagates_reward(void** state) {
   hedger_destroy(h);
 }
 
+// The replay's own learning rate (cfg.replay_alpha): the online update keeps alpha, the replay's
+// updates take replay_alpha; 0 means alpha, bit for bit. On the far-apart chain each state is its
+// own stored point, so the terminal state's value after one replayed update is known exactly:
+// alpha 0.5 online gives 0.5, the replay's step 0.5 then 0.75, a replay step of 1 the reward.
+static hedger_t* replay_chain(double replay_alpha, double* v_before, double* v_after) {
+  hedger_config_t c = hand_config();
+  c.run_capacity = 8;
+  c.replay = 1;
+  c.gamma = 0.9;
+  c.alpha = 0.5;
+  c.replay_alpha = replay_alpha;
+  c.greedy_coarse_actions = 3;
+  c.bandwidth = 0.1;
+  hedger_t* h = ht_create(&c);
+  for (int t = 0; t < 3; ++t) {
+    const double s[1] = {(double)t}, sn[1] = {(double)t + 1.0};
+    hedger_update(h, s, 0.0, 0.0, sn, 0, NULL);
+  }
+  const double s3[1] = {3.0};
+  hedger_update(h, s3, 0.0, 1.0, NULL, 1, NULL);
+  hedger_prediction_t p;
+  hedger_predict(h, s3, 0.0, &p);
+  *v_before = p.value;
+  assert_int_equal(hedger_end_run(h, NULL), HEDGER_OK);
+  hedger_predict(h, s3, 0.0, &p);
+  *v_after = p.value;
+  return h;
+}
+
+static void test_end_run_replay_alpha(void** state) {
+  (void)state;
+  double before[3], after[3];
+  hedger_t* h_default = replay_chain(0.0, &before[0], &after[0]);
+  hedger_t* h_same = replay_chain(0.5, &before[1], &after[1]);
+  hedger_t* h_full = replay_chain(1.0, &before[2], &after[2]);
+  for (int i = 0; i < 3; ++i) assert_float_equal(before[i], 0.5, 1e-12);
+  assert_float_equal(after[0], 0.75, 1e-12);
+  assert_float_equal(after[2], 1.0, 1e-12);
+  // replay_alpha = alpha is the default's learned state, byte for byte.
+  const size_t n = hedger_serialized_size(h_default);
+  assert_int_equal(n, hedger_serialized_size(h_same));
+  uint8_t* a = malloc(n);
+  uint8_t* b = malloc(n);
+  assert_int_equal(hedger_save(h_default, a, n, NULL), HEDGER_OK);
+  assert_int_equal(hedger_save(h_same, b, n, NULL), HEDGER_OK);
+  assert_memory_equal(a, b, n);
+  free(a);
+  free(b);
+  hedger_destroy(h_default);
+  hedger_destroy(h_same);
+  hedger_destroy(h_full);
+  // Outside [0, 1]: refused.
+  hedger_config_t c = hand_config();
+  c.run_capacity = 8;
+  c.replay = 1;
+  hedger_t* bad = NULL;
+  c.replay_alpha = 1.5;
+  assert_int_equal(hedger_create(&bad, &c), HEDGER_ERR_INVALID_ARG);
+  c.replay_alpha = -0.1;
+  assert_int_equal(hedger_create(&bad, &c), HEDGER_ERR_INVALID_ARG);
+  assert_null(bad);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_update_hand_example_matches_steps),
@@ -311,6 +375,7 @@ int main(void) {
       cmocka_unit_test(test_greedy_refines_interior_maximum),
       cmocka_unit_test(test_update_non_finite_rejected),
       cmocka_unit_test(test_end_run_replay_propagates_reward),
+      cmocka_unit_test(test_end_run_replay_alpha),
   };
   return cmocka_run_group_tests_name("hedger.update", tests, NULL, NULL);
 }

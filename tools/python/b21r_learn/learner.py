@@ -61,6 +61,7 @@ _SETTINGS = {
     "hedger_replay": ("replay", bool),
     "hedger_replay_passes": ("replay_passes", int),
     "hedger_replay_lambda": ("replay_lambda", float),
+    "hedger_replay_alpha": ("replay_alpha", float),
     "hedger_input_scale": ("input_scale", lambda v: [float(x) for x in v]),
     "tabular_bins": ("tabular_bins", int),
     "tabular_actions": ("tabular_actions", int),
@@ -271,8 +272,8 @@ class Learner:
       (scaled units), ``hedger_merge_radius``, ``hedger_greedy_actions``,
       ``hedger_greedy_method`` ("state_model", "per_action"), ``hedger_greedy_pessimism``,
       ``hedger_greedy_reach`` (0: the task's), ``hedger_replay``, ``hedger_replay_passes``,
-      ``hedger_replay_lambda``, ``hedger_input_scale`` (overrides the scales: state, last action,
-      action), ``tabular_bins``, ``tabular_actions``;
+      ``hedger_replay_lambda``, ``hedger_replay_alpha`` (0: alpha), ``hedger_input_scale``
+      (overrides the scales: state, last action, action), ``tabular_bins``, ``tabular_actions``;
     - acting: ``explore_sigma`` (phase two's exploration offset, standard deviation in action
       units; the controller's explore_sigma_radps, 0.1 rad/s of +-1 rad/s: default 0.05 of the
       action range), ``explore_probability`` (per training step, the chance a segment starts;

@@ -221,6 +221,7 @@ typedef struct fw_config {
   int32_t checkpoint_points_per_tick; ///< between runs: stored points serialised per tick
   int32_t hedger_replay_passes;    ///< backward passes per replayed run
   double hedger_replay_lambda;     ///< λ of the replay's λ-return target (0 Q-learning, 1 the run's return)
+  double hedger_replay_alpha;      ///< learning rate of the replay's updates (0 = alpha)
   int32_t hedger_greedy_method;    ///< hedger_greedy_method_t
   double hedger_greedy_pessimism;  ///< κ: greedy ranks by value − κ · standard error
   double hedger_greedy_reach;      ///< state model: kernel widening where the state has too few neighbours (0 = the task's)

@@ -62,6 +62,10 @@
 ///   every state it passed. The lambda-return with lambda = 0.9 (an effective horizon of ten steps
 ///   of the run, then the learned value) over 20 passes learned the corridor best (6 seeds x 65
 ///   runs: 10/10 in every phase-two block; lambda = 0 and 0.8 failed runs, 1.0 more failures).
+///   The replay's own step (cfg.replay_alpha) lets fewer passes move a value as far: 3 passes of
+///   0.7741 (1 − 0.7741 = 0.8^(20/3)) with the controller's k_max at 48 learned as 20 passes of
+///   α = 0.2 did on held-out seeds for 0.56 of b21r-train's instructions (docs/LEARNING.md); the
+///   controller's default stays 20 passes of α.
 /// - Greedy method (cfg.greedy_method; the library's defaults are HEDGER_GREEDY_PER_ACTION,
 ///   greedy_pessimism 0, greedy_reach 1; the firmware sets the state model and the rest below).
 ///   HEDGER_GREEDY_PER_ACTION: one prediction per candidate action, each with its own
@@ -317,6 +321,10 @@ typedef struct hedger_config {
   double replay_lambda;  ///< target of the replay, [0, 1]: the λ-return
                          ///< T_t = r_t + γ ((1 − λ) max_a Q(s_{t+1}, a) + λ T_{t+1}); 0 = the
                          ///< Q-learning target, 1 = the return of the run as driven. Default 0.
+  double replay_alpha;   ///< learning rate of the replay's updates, [0, 1]; 0 = alpha. Fewer passes
+                         ///< with a larger step move a value about as far as many small ones
+                         ///< (N passes of α_r ≈ M of α when 1 − α_r = (1 − α)^(M/N)) for N/M of the
+                         ///< replay's updates. Default 0.
   uint32_t replay_cache; ///< 1: the replay keeps, per record of the run, the geometry of its two
                          ///< local models (the neighbours found, the factorised normal equations,
                          ///< the hull tests) and, while no stored point has moved, repeats only
