@@ -1282,8 +1282,9 @@ struct ReplayRecord {
 
 /// Steps 2–6 of the training update for (s, a) with a given target r + γ q' (info.target set by
 /// the caller) and learning rate alpha (cfg.alpha; the replay's cfg.replay_alpha): q = Q(s, a),
-/// q_new = q + α (target − q), store (s, a) with q_new, pull the neighbours, track r. With a cache (the replay's record) the neighbourhood and the geometry
-/// of the prediction are taken from it while valid, else found and kept in it.
+/// q_new = q + α (target − q), store (s, a) with q_new, pull the neighbours, track r. With a
+/// cache (the replay's record) the neighbourhood and the geometry of the prediction are taken
+/// from it while valid, else found and kept in it.
 template <int D>
 void learn_target(hedger& h, const double* s, double a, double r, int terminal, double alpha,
                   hedger_update_info_t& info, FitCache<D>* cache = nullptr) noexcept {

@@ -268,24 +268,36 @@ static void test_update_non_finite_rejected(void** state) {
   hedger_destroy(h);
 }
 
-// Backward replay re-applies the run newest first and propagates a final reward back.
-static void test_end_run_replay_propagates_reward(void** state) {
-  (void)state;
+// The replay tests' chain: s = 0, 1, 2, 3 (far apart: no neighbour sharing, each state its own
+// stored point), action 0, reward 1 at the terminal end; alpha 0.5 online, the replay's step
+// replay_alpha (0 = alpha).
+static hedger_config_t chain_config(double replay_alpha) {
   hedger_config_t c = hand_config();
   c.run_capacity = 8;
   c.replay = 1;
   c.gamma = 0.9;
   c.alpha = 0.5;
+  c.replay_alpha = replay_alpha;
   c.greedy_coarse_actions = 3;
   c.bandwidth = 0.1;
-  hedger_t* h = ht_create(&c);
-  // A chain s = 0, 1, 2, 3 (far apart: no neighbour sharing), action 0, reward at the end.
+  return c;
+}
+
+static void drive_chain(hedger_t* h) {
   for (int t = 0; t < 3; ++t) {
     const double s[1] = {(double)t}, sn[1] = {(double)t + 1.0};
     hedger_update(h, s, 0.0, 0.0, sn, 0, NULL);
   }
   const double s3[1] = {3.0};
   hedger_update(h, s3, 0.0, 1.0, NULL, 1, NULL);
+}
+
+// Backward replay re-applies the run newest first and propagates a final reward back.
+static void test_end_run_replay_propagates_reward(void** state) {
+  (void)state;
+  const hedger_config_t c = chain_config(0.0);
+  hedger_t* h = ht_create(&c);
+  drive_chain(h);
   assert_int_equal(hedger_counters(h)->run_fill, 4);
   uint32_t replayed = 0;
   assert_int_equal(hedger_end_run(h, &replayed), HEDGER_OK);
@@ -302,25 +314,14 @@ static void test_end_run_replay_propagates_reward(void** state) {
 }
 
 // The replay's own learning rate (cfg.replay_alpha): the online update keeps alpha, the replay's
-// updates take replay_alpha; 0 means alpha, bit for bit. On the far-apart chain each state is its
-// own stored point, so the terminal state's value after one replayed update is known exactly:
-// alpha 0.5 online gives 0.5, the replay's step 0.5 then 0.75, a replay step of 1 the reward.
+// updates take replay_alpha; 0 means alpha, bit for bit. On the chain the terminal state's value
+// after one replayed update is known exactly: alpha 0.5 online gives 0.5, the replay's step 0.5
+// then 0.75, a replay step of 1 the reward.
 static hedger_t* replay_chain(double replay_alpha, double* v_before, double* v_after) {
-  hedger_config_t c = hand_config();
-  c.run_capacity = 8;
-  c.replay = 1;
-  c.gamma = 0.9;
-  c.alpha = 0.5;
-  c.replay_alpha = replay_alpha;
-  c.greedy_coarse_actions = 3;
-  c.bandwidth = 0.1;
+  const hedger_config_t c = chain_config(replay_alpha);
   hedger_t* h = ht_create(&c);
-  for (int t = 0; t < 3; ++t) {
-    const double s[1] = {(double)t}, sn[1] = {(double)t + 1.0};
-    hedger_update(h, s, 0.0, 0.0, sn, 0, NULL);
-  }
+  drive_chain(h);
   const double s3[1] = {3.0};
-  hedger_update(h, s3, 0.0, 1.0, NULL, 1, NULL);
   hedger_prediction_t p;
   hedger_predict(h, s3, 0.0, &p);
   *v_before = p.value;
@@ -353,11 +354,8 @@ static void test_end_run_replay_alpha(void** state) {
   hedger_destroy(h_same);
   hedger_destroy(h_full);
   // Outside [0, 1]: refused.
-  hedger_config_t c = hand_config();
-  c.run_capacity = 8;
-  c.replay = 1;
+  hedger_config_t c = chain_config(1.5);
   hedger_t* bad = NULL;
-  c.replay_alpha = 1.5;
   assert_int_equal(hedger_create(&bad, &c), HEDGER_ERR_INVALID_ARG);
   c.replay_alpha = -0.1;
   assert_int_equal(hedger_create(&bad, &c), HEDGER_ERR_INVALID_ARG);
