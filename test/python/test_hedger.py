@@ -266,7 +266,7 @@ class BindingContract(unittest.TestCase):
         c = b21r_learn.controller_learner_config("corridor")
         self.assertEqual(c["state_dim"], 4)
         self.assertEqual(c["input_scale"][:5], [1.0, 0.5, 0.125, 1.0, 0.25])
-        self.assertEqual((c["k_min"], c["k_max"], c["greedy_reach"]), (6, 64, 8.0))
+        self.assertEqual((c["k_min"], c["k_max"], c["greedy_reach"]), (6, 48, 8.0))
         c3 = b21r_learn.controller_learner_config("corridor", {"state_rotation": False})
         self.assertEqual(c3["state_dim"], 3)
         self.assertEqual(c3["input_scale"][:4], [1.0, 0.5, 0.125, 0.25])

@@ -266,7 +266,7 @@ static const key_desc_t k_keys[] = {
    "stored samples of the value function (fixed memory)"},
   {NULL, "hedger_k_min", KIND_INT, OFF(hedger_k_min), 1, 64, false, false, NULL, "6",
    "fewer neighbours than this and HEDGER answers 'unknown'"},
-  {NULL, "hedger_k_max", KIND_INT, OFF(hedger_k_max), 2, 64, false, false, NULL, "64",
+  {NULL, "hedger_k_max", KIND_INT, OFF(hedger_k_max), 2, 64, false, false, NULL, "48",
    "neighbourhood size of a prediction (cost: the tick's greedy search and update grow with it)"},
   {NULL, "hedger_bandwidth", KIND_DOUBLE, OFF(hedger_bandwidth), 0, 100, true, false, NULL, "0.25",
    "kernel bandwidth h in scaled input units (inputs scaled to about [0, 1])"},
@@ -285,13 +285,14 @@ static const key_desc_t k_keys[] = {
    "costs about 0.27 ms of CPU at 20k stored points on a 2-core x86-64; see README)"},
   {NULL, "checkpoint_points_per_tick", KIND_INT, OFF(checkpoint_points_per_tick), 1, 100000000, false, false, NULL,
    "4096", "between runs: stored points serialised into the checkpoint per tick; bounds the tick's time"},
-  {NULL, "hedger_replay_passes", KIND_INT, OFF(hedger_replay_passes), 1, 64, false, false, NULL, "20",
+  {NULL, "hedger_replay_passes", KIND_INT, OFF(hedger_replay_passes), 1, 64, false, false, NULL, "3",
    "backward passes over every finished training run (between runs, sliced over ticks)"},
   {NULL, "hedger_replay_lambda", KIND_DOUBLE, OFF(hedger_replay_lambda), 0, 1, false, false, NULL, "0.9",
    "target of the replay: the lambda-return, 0 = Q-learning's r + gamma max Q, 1 = the run's own return"},
-  {NULL, "hedger_replay_alpha", KIND_DOUBLE, OFF(hedger_replay_alpha), 0, 1, false, false, NULL, "0",
-   "learning rate of the replay's updates (0 = alpha); fewer passes with a larger step: 3 passes of "
-   "0.7741 move a value as far as 20 of 0.2 (1 - 0.7741 = 0.8^(20/3)) with 3/20 of the replay's updates"},
+  {NULL, "hedger_replay_alpha", KIND_DOUBLE, OFF(hedger_replay_alpha), 0, 1, false, false, NULL, "0.7741",
+   "learning rate of the replay's updates (0 = alpha): 3 passes of 0.7741 move a value as far as 20 passes "
+   "of alpha 0.2 (1 - 0.7741 = 0.8^(20/3)) with 3/20 of the updates; with another alpha or pass count, "
+   "1 - (1 - alpha)^(20 / passes) keeps that reach"},
   {NULL, "hedger_greedy_method", KIND_ENUM, OFF(hedger_greedy_method), 0, 0, false, false, k_greedy, "state_model",
    "greedy action: per_action = one prediction per candidate; state_model = one local model at the "
    "state, quadratic in the action (falls back to per_action where it cannot be formed)"},

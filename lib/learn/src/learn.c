@@ -88,7 +88,7 @@ learn_config_t learn_config_default(void) {
   c.last_action_scale = 1.0;
   c.capacity = 20000U;
   c.k_min = 8U;
-  c.k_max = 64U;
+  c.k_max = 48U;
   c.bandwidth = 0.2;
   c.merge_radius = 0.02;
   c.greedy_actions = 9U;
@@ -96,9 +96,9 @@ learn_config_t learn_config_default(void) {
   c.greedy_pessimism = 4.0;
   c.greedy_reach = 0.0;
   c.replay = true;
-  c.replay_passes = 20U;
+  c.replay_passes = 3U;
   c.replay_lambda = 0.9;
-  c.replay_alpha = 0.0;
+  c.replay_alpha = 0.7741;
   c.tabular_bins = 10U;
   c.tabular_actions = 9U;
   c.explore_sigma = 0.3;
@@ -187,6 +187,7 @@ void learn_learner_config(const learn_task_t* task, const learn_config_t* cfg, l
   tc->replay = hc->replay;
   tc->replay_passes = hc->replay_passes;
   tc->replay_lambda = hc->replay_lambda;
+  tc->replay_alpha = hc->replay_alpha;
 }
 
 void learn_actor_config(const learn_task_t* task, const learn_config_t* cfg, actor_config_t* out) {

@@ -42,6 +42,7 @@ tabq_config_t tabq_config_default(void) {
   c.replay = 0;
   c.replay_passes = 1;
   c.replay_lambda = 0.0;
+  c.replay_alpha = 0.0;
   return c;
 }
 
@@ -76,7 +77,8 @@ tabq_status_t tabq_config_validate(const tabq_config_t* c) {
   }
   if (c->run_capacity > TABQ_MAX_RUN || c->replay > 1 || (c->replay == 1 && c->run_capacity == 0) ||
       c->replay_passes < 1 || c->replay_passes > TABQ_MAX_REPLAY_PASSES ||
-      !(c->replay_lambda >= 0.0 && c->replay_lambda <= 1.0)) {
+      !(c->replay_lambda >= 0.0 && c->replay_lambda <= 1.0) ||
+      !(c->replay_alpha >= 0.0 && c->replay_alpha <= 1.0)) {
     return TABQ_ERR_INVALID_ARG;
   }
   return cell_count(c) == 0 ? TABQ_ERR_INVALID_ARG : TABQ_OK;
@@ -246,8 +248,8 @@ tabq_status_t tabq_greedy(tabq_t* self, const double* state, double* action, dou
   return g.known ? TABQ_OK : TABQ_NO_KNOWN_ACTION;
 }
 
-// The update of one cell toward target; returns the value before.
-static double update_cell(tabq_t* t, const double* s, double a, double target, int* known_old) {
+// The update of one cell toward target with step alpha; returns the value before.
+static double update_cell(tabq_t* t, const double* s, double a, double target, double alpha, int* known_old) {
   const uint32_t cell = state_base(t, s) + action_index(t, a);
   const bool known = t->visits[cell] > 0;
   const double q = known ? t->q[cell] : 0.0;
@@ -257,7 +259,7 @@ static double update_cell(tabq_t* t, const double* s, double a, double target, i
     t->counters.predictions_unknown++;
     t->counters.cells_visited++;
   }
-  t->q[cell] = q + t->cfg.alpha * (target - q);
+  t->q[cell] = q + alpha * (target - q);
   if (t->visits[cell] < UINT32_MAX) {
     t->visits[cell]++;
   }
@@ -272,6 +274,7 @@ static void replay_step(tabq_t* t, uint32_t max_updates) {
   const uint32_t sd = t->cfg.state_dim;
   const uint32_t cap = t->cfg.run_capacity;
   const double lambda = t->cfg.replay_lambda;
+  const double alpha = t->cfg.replay_alpha > 0.0 ? t->cfg.replay_alpha : t->cfg.alpha;
   uint32_t done = 0;
   while (t->replay_pending && done < max_updates) {
     const uint32_t idx = (t->run_head + cap - 1U - t->replay_k % cap) % cap;
@@ -286,7 +289,7 @@ static void replay_step(tabq_t* t, uint32_t max_updates) {
     if (terminal) {
       target = r;
     }
-    (void)update_cell(t, rec, a, target, NULL);
+    (void)update_cell(t, rec, a, target, alpha, NULL);
     t->counters.replayed_updates++;
     t->replay_next_return = target;
     ++done;
@@ -317,7 +320,7 @@ tabq_status_t tabq_learn(tabq_t* self, const double* state, double action, doubl
     replay_step(self, UINT32_MAX);
   }
   const double target = terminal ? reward : reward + self->cfg.gamma * q_next;
-  const double q = update_cell(self, state, action, target, known_old);
+  const double q = update_cell(self, state, action, target, self->cfg.alpha, known_old);
   if (q_old != NULL) {
     *q_old = q;
   }

@@ -11,7 +11,7 @@
 //                    (same points, queries, k) at every size.
 //   --instructions   under callgrind (CTest hedger.update_instructions): with the firmware's corridor
 //                    learner (3 features and the executed rotation + action: D = 5, the greedy state
-//                    model, k 6..64, 20 replay passes of the λ-return, replay cache) on synthetic
+//                    model, k 6..48, 3 replay passes of the λ-return at step 0.7741, replay cache) on synthetic
 //                    corridor data at 20k and 100k points (the store full: every new point evicts
 //                    or merges), the instructions of each online update (hedger_update: greedy at s'
 //                    + learning + store + a rebuild slice), against a quarter of the tick's budget
@@ -302,13 +302,14 @@ hedger_config_t corridor_config(uint32_t n) {
   c.action_max = 1.0;
   c.capacity = n;
   c.k_min = 6;
-  c.k_max = 64;
+  c.k_max = 48;
   c.bandwidth = 0.25;
   const double scale[5] = {1.0, 0.5, 0.125, 1.0, 0.25};
   for (int i = 0; i < 5; ++i) c.input_scale[i] = scale[i];
   c.run_capacity = 1008;
   c.replay = 1;
-  c.replay_passes = 20;
+  c.replay_passes = 3;
+  c.replay_alpha = 0.7741;
   c.replay_lambda = 0.9;
   c.greedy_method = HEDGER_GREEDY_STATE_MODEL;
   c.greedy_pessimism = 4.0;
@@ -397,7 +398,7 @@ int count_instructions() {
   hedger_t* stores[2] = {corridor_store(sizes[0]), corridor_store(sizes[1])};
   instr_start();
   std::printf("hedger.update_instructions: instructions per update, the firmware's corridor learner (D = 5, state "
-              "model, k 6..64, 20 replay passes), synthetic corridor data, store full; two 140-step runs and their "
+              "model, k 6..48, 3 replay passes), synthetic corridor data, store full; two 140-step runs and their "
               "replays per size, in slices of %u update-equivalents\n", kSliceUpdates);
   std::printf("%8s %-32s %8s %10s %10s %10s %10s\n", "points", "update", "count", "p50", "p99", "max", "mean");
   int fail = 0;

@@ -27,7 +27,8 @@ from b21r import experience_t
 import fwtest
 from b21r_log import read_log
 
-# 4 replay passes instead of the default 20: the sanitizer build is slow.
+# 4 replay passes, not the default 3: the trainer learns the session's state only when given the
+# session's settings (--set).
 SESSION = {"phase_one_runs": 30, "eval_every_runs": 1000, "eval_starts": 1, "hedger_replay_passes": 4}
 TRAINER_SETS = ["--set", "hedger_replay_passes=4"]
 

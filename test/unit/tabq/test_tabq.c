@@ -152,6 +152,45 @@ static void test_tabq_replay_propagates_the_reward(void** state) {
   }
 }
 
+// The replay's own step (replay_alpha): online updates keep alpha (0.5), the replay's take
+// replay_alpha. One run 0 → 4, one backward pass at λ = 1: with replay_alpha = 1 every step holds its
+// return exactly; with 0 (= alpha) the replay moves each value half way (the last step's 0.5 online
+// value to 0.75, the others from 0 to half their return).
+static void test_tabq_replay_alpha(void** state) {
+  (void)state;
+  for (int own = 0; own <= 1; ++own) {
+    tabq_config_t c = chain_config();
+    c.alpha = 0.5;
+    c.run_capacity = 16;
+    c.replay = 1;
+    c.replay_lambda = 1.0;
+    c.replay_alpha = own ? 1.0 : 0.0;
+    inst_t in = make(&c);
+    for (int s = 0; s < CHAIN_N - 1; ++s) {
+      (void)learn_one(in.t, s, 1.0);
+    }
+    double v3 = -1.0;
+    const double s3 = 3.0;
+    assert_int_equal(tabq_predict(in.t, &s3, 1.0, &v3, NULL), TABQ_OK);
+    assert_true(eq(v3, 0.5));  // online: alpha, whatever replay_alpha
+    assert_int_equal(tabq_end_run_begin(in.t, NULL), TABQ_OK);
+    assert_int_equal(tabq_end_run_step(in.t, UINT32_MAX, NULL), TABQ_OK);
+    for (int s = 0; s < CHAIN_N - 1; ++s) {
+      const double st = s;
+      double v = -1.0;
+      assert_int_equal(tabq_predict(in.t, &st, 1.0, &v, NULL), TABQ_OK);
+      const double want = own ? q_star(s, 1.0) : (s == 3 ? 0.75 : 0.5 * q_star(s, 1.0));
+      assert_true(fabs(v - want) <= 1e-12);
+    }
+    free(in.storage);
+  }
+  tabq_config_t c = chain_config();
+  c.replay_alpha = 1.5;
+  assert_int_equal(tabq_config_validate(&c), TABQ_ERR_INVALID_ARG);
+  c.replay_alpha = -0.1;
+  assert_int_equal(tabq_config_validate(&c), TABQ_ERR_INVALID_ARG);
+}
+
 // Equal values: the smallest |action| wins; unvisited actions never win; an executed action is
 // learned at its nearest grid action.
 static void test_tabq_greedy_ties_and_unknown(void** state) {
@@ -284,6 +323,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_tabq_chain_learns_exact_values),
       cmocka_unit_test(test_tabq_replay_propagates_the_reward),
+      cmocka_unit_test(test_tabq_replay_alpha),
       cmocka_unit_test(test_tabq_greedy_ties_and_unknown),
       cmocka_unit_test(test_tabq_fixed_memory_and_determinism),
       cmocka_unit_test(test_tabq_bad_input),

@@ -68,6 +68,8 @@ typedef struct tabq_config {
                                          ///< run_capacity > 0. Default 0.
   uint32_t replay_passes;                ///< backward passes, 1..TABQ_MAX_REPLAY_PASSES. Default 1.
   double replay_lambda;                  ///< λ of the replay target, [0, 1] (as hedger_config_t). Default 0.
+  double replay_alpha;                   ///< learning rate of the replay's updates, [0, 1]; 0 = alpha (as
+                                         ///< hedger_config_t). Default 0.
 } tabq_config_t;
 
 /// Counters (monotonic) and gauges.
