@@ -243,6 +243,51 @@ static void test_replay_cache_slices_reused_updates_eight_to_one(void** state) {
   hedger_destroy(h[1]);
 }
 
+// While the kd-tree is being rebuilt every replayed update also advances the rebuild, reused or
+// not, so a reused update then counts three eighths of an update (6 units of 16), as in a full
+// store: a slow rebuild (rebuild_work_per_update 64 over a store of 3,000 points) stays under way
+// through the whole replay, and the reused passes take 3 × 39 × 6 + 3 × 13 = 741 units: 13 slices
+// of 64 end in them, the first also finishing the first pass (at 2 units they took 6, and a slice
+// then did up to 32 updates' rebuild work). The learned state is the same as without the cache.
+static void test_replay_cache_slices_count_the_rebuild(void** state) {
+  (void)state;
+  hedger_config_t c[2] = {replay_config(1, 4000), replay_config(0, 4000)};
+  uint32_t reused_slices = 0;
+  hedger_t* h[2];
+  for (int i = 0; i < 2; ++i) {
+    c[i].fresh_capacity = 4096;
+    c[i].rebuild_work_per_update = 64;
+    h[i] = ht_create(&c[i]);
+    uint64_t rs = 9;
+    for (int j = 0; j < 3000; ++j) {
+      const double x[3] = {ht_uniform(&rs, -3.0, 3.0), ht_uniform(&rs, -3.0, 3.0), ht_uniform(&rs, -1.0, 1.0)};
+      assert_int_equal(hedger_insert(h[i], x, ht_uniform(&rs, -1.0, 1.0), 0.0, 0, NULL), HEDGER_OK);
+    }
+    drive_run(&h[i], 1, &rs, 40);
+    uint32_t pending = 0, left = 0;
+    assert_int_equal(hedger_end_run_begin(h[i], &pending), HEDGER_OK);
+    assert_int_equal(pending, 4 * 40);
+    const uint64_t rebuilds = hedger_counters(h[i])->rebuilds;
+    do {
+      assert_int_equal(hedger_end_run_step(h[i], 4, &left), HEDGER_OK);
+      if (i == 0 && left < pending - 40) ++reused_slices;
+    } while (left > 0);
+    assert_int_equal(hedger_counters(h[i])->rebuilds, rebuilds);  // under way throughout
+  }
+  assert_true(hedger_counters(h[0])->replay_reused > 200);
+  assert_int_equal(reused_slices, 13);
+  const size_t n = hedger_serialized_size(h[0]);
+  uint8_t* b0 = malloc(n);
+  uint8_t* b1 = malloc(n);
+  assert_int_equal(hedger_save(h[0], b0, n, NULL), HEDGER_OK);
+  assert_int_equal(hedger_save(h[1], b1, n, NULL), HEDGER_OK);
+  assert_memory_equal(b0, b1, n);
+  free(b0);
+  free(b1);
+  hedger_destroy(h[0]);
+  hedger_destroy(h[1]);
+}
+
 // The cache costs run_capacity records of memory, and nothing without a replay.
 static void test_replay_cache_memory_only_with_replay(void** state) {
   (void)state;
@@ -261,6 +306,7 @@ int main(void) {
       cmocka_unit_test(test_replay_cache_identical_across_tags_and_weights),
       cmocka_unit_test(test_replay_cache_not_carried_to_the_next_run),
       cmocka_unit_test(test_replay_cache_slices_reused_updates_eight_to_one),
+      cmocka_unit_test(test_replay_cache_slices_count_the_rebuild),
       cmocka_unit_test(test_replay_cache_memory_only_with_replay),
   };
   return cmocka_run_group_tests_name("hedger.replay", tests, NULL, NULL);
