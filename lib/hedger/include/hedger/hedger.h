@@ -87,7 +87,7 @@
 ///     runs 9 → 0; seeds 1-10, failed runs: Fig. 5 2 against 9, obstacles 10 against 41. At
 ///     0.25 rad/s (the action's scale) the human-driven corridor lost (final block 274.7 ± 26.1
 ///     against 243.5 ± 4.3; 252.3 ± 7.0 at 1 rad/s).
-///   * the corridor's target angle at 0.125 rad per scaled unit (was 0.5) with k_max 64 (was 32):
+///   * the corridor's target angle at 0.125 rad per scaled unit (was 0.5) with k_max 64 (was 32; 48 now):
 ///     an off-axis start is judged by runs that started at a similar heading. Fig. 4 -0.8 ± 0.2,
 ///     Fig. 5 -4.6 ± 4.2; seeds 1-10: Fig. 4 -0.6 ± 0.3, obstacles -14.8 ± 19.2, Fig. 5
 ///     +6.7 ± 20.5 (not significant). Cost: tick p50 74 us against 59, max 576 us against 412
