@@ -115,6 +115,8 @@ class MountainCar(unittest.TestCase):
                 self.assertGreater(last["mean_return"], rand["mean_return"])
             finals.append(last["successes"])
         print("final blocks, seeds 1-10: %s" % finals)
+        # Measured at the defaults: 9 seeds and 97 starts (seed 1 ends at 7/10); the bounds allow no
+        # seed less, so a learner that loses a seed's last block fails here.
         self.assertGreaterEqual(sum(f == 10 for f in finals), 9, "every start reached on at least 9 of 10 seeds")
         self.assertGreaterEqual(sum(finals), 95, "at least 95 of 100 starts reached")
 

@@ -1434,8 +1434,9 @@ inline uint32_t replay_begin(hedger& h) noexcept {
 /// the neighbourhoods of evict_candidates points whether or not the geometry is reused: measured
 /// (callgrind, hedger.update_instructions: the firmware's corridor learner, 20k and 100k points,
 /// store full) a reused update then costs about a quarter of one that forms its geometry, so it
-/// counts kReplayUnitsFull more. So does a reused update while the kd-tree is being rebuilt: every
-/// update advances the rebuild by rebuild_budget units whether or not it reuses its geometry
+/// counts kReplayUnitsFull more. So does a reused update while the kd-tree is being rebuilt (or a
+/// rebuild is due to start): every update advances it by rebuild_budget units whether or not it
+/// reuses its geometry
 /// (measured: firmware.tick_instructions at 20k points, capacity 110k, a rebuild under way during
 /// the second pass: 32 reused updates in one slice took 5.7 M instructions against about 0.5 M
 /// for 32 without a rebuild).

@@ -5,7 +5,8 @@ against the emulator in lockstep and is killed with SIGKILL at random moments (B
 50 by default; the moment drawn uniformly from B21R_KILL_MAX_S seconds after each start), then
 restarted with the same checkpoint; a last session completes the schedule (30 example runs, then
 B21R_KILL_PHASE_TWO learned runs, 120 by default; a block of 2 evaluation runs every 10; the
-backward replay after each training run with B21R_KILL_REPLAY_PASSES passes, 20 by default).
+backward replay after each training run with B21R_KILL_REPLAY_PASSES passes, 20 by default: a
+longer replay than the controller's 3 passes, so that more kills land between runs).
 
 A run counts as reported when its B21R_RUN reached the controller's event log. Asserted:
 - every restart resumes at least the finished training runs reported before it (its "resumed

@@ -246,9 +246,9 @@ static void test_replay_cache_slices_reused_updates_eight_to_one(void** state) {
 // While the kd-tree is being rebuilt every replayed update also advances the rebuild, reused or
 // not, so a reused update then counts three eighths of an update (6 units of 16), as in a full
 // store: a slow rebuild (rebuild_work_per_update 64 over a store of 3,000 points) stays under way
-// through the whole replay, and the reused passes take 3 × 39 × 6 + 3 × 13 = 741 units: 13 slices
-// of 64 end in them, the first also finishing the first pass (at 2 units they took 6, and a slice
-// then did up to 32 updates' rebuild work). The learned state is the same as without the cache.
+// through the whole replay: the first pass takes 40 × 16 units, 10 slices of 64, and the reused
+// passes 3 × 39 × 6 + 3 × 13 = 741 units, 13 slices (at 2 units they took 5, and a slice then did
+// up to 32 updates' rebuild work). The learned state is the same as without the cache.
 static void test_replay_cache_slices_count_the_rebuild(void** state) {
   (void)state;
   hedger_config_t c[2] = {replay_config(1, 4000), replay_config(0, 4000)};

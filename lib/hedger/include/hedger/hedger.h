@@ -528,7 +528,8 @@ hedger_status_t hedger_end_run(hedger_t* self, uint32_t* replayed) HEDGER_NOEXCE
 /// An update whose searches reuse their record's geometry (cfg.replay_cache) counts an eighth of
 /// one that forms it (measured: about a fifteenth of its instructions), and three eighths in a
 /// full store, where its store step evicts (measured: about a quarter), or while the kd-tree is
-/// being rebuilt (each update advances the rebuild whether or not it reuses), so a step never costs
+/// being rebuilt or due to be (each update advances the rebuild whether or not it reuses), so a
+/// step never costs
 /// more than max_updates updates without the cache, and the passes after the first go about
 /// eight times faster (in a full store, where every eviction moves a point, most updates form
 /// their geometry again). The results are bit-identical to hedger_end_run(), however the work is

@@ -142,7 +142,7 @@ typedef struct learn_config {
   bool replay;                  ///< backward replay of each finished training run
   uint32_t replay_passes;
   double replay_lambda;
-  double replay_alpha;          ///< HEDGER's replay step, [0, 1]; 0 = alpha
+  double replay_alpha;          ///< the replay's step (HEDGER's and tabular Q's), [0, 1]; 0 = alpha
   uint32_t input_scale_n;       ///< 0 = the task's scales, else state dimension + 1 values
   double input_scale[LEARN_MAX_STATE + 1U];
   uint32_t tabular_bins;        ///< per state dimension (learner = tabular)

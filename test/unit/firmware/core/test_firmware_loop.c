@@ -29,14 +29,13 @@
 static harness_t g_h;
 
 // The paper's 30 example runs, then 5 learned runs; one block after each phase (a block every
-// 5 runs, and the default 20 replay passes, cost too much time in the sanitizer build; the
-// integration tests and the main job run the defaults and the paper's cadence).
+// 5 runs costs too much time in the sanitizer build; the integration tests and the main job run
+// the paper's cadence).
 static void short_schedule(fw_config_t* c) {
   harness_config(c);
   c->phase_one_runs = 30;
   c->phase_two_runs = 5;
   c->eval_every_runs = 30;
-  c->hedger_replay_passes = 4;
   c->progress = true;
 }
 
@@ -175,7 +174,6 @@ static void test_loop_tick_allocates_nothing(void** state) {
   c.eval_every_runs = 3;
   c.eval_starts = 4;
   c.progress = true;
-  c.hedger_replay_passes = 4;  // shorter between-run slices: more runs and blocks in 3000 ticks
   assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
   harness_run(&g_h, 5);
   alloc_counter_begin();

@@ -74,8 +74,9 @@ static int expect_stop_within(int reason, int max_ticks) {
 }
 
 // Between runs the learner replays the aborted run in slices before the next run starts: up to
-// replay_passes x the run's steps / learn_updates_per_tick ticks (runs here are under 100 steps).
-#define REPLAY_TICKS (20 * 100 / 4)
+// replay_passes x the run's steps / learn_updates_per_tick ticks (runs here are under 100 steps;
+// the harness keeps the default 3 passes and 4 updates per tick).
+#define REPLAY_TICKS (3 * 100 / 4)
 
 static void expect_resume(int max_ticks) {
   fw_loop_stats_t st;
@@ -509,7 +510,7 @@ static void test_loop_config_and_run_records(void** state) {
   assert_true(g_h.config.lockstep);
   assert_non_null(strstr(g_h.config_text, "max_steps_per_run = 40\n"));
   assert_non_null(strstr(g_h.config_text, "lockstep_realtime_factor = 0\n"));
-  harness_run(&g_h, 1000);  // a 40-step run and its replay between runs: about 250 ticks
+  harness_run(&g_h, 1000);  // a 40-step run and its replay between runs: about 70 ticks
   assert_true(g_h.runs >= 3);
   int64_t next_first = 0;
   for (int k = 0; k < g_h.runs && k < 64; ++k) {
