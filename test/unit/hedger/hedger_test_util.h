@@ -23,6 +23,10 @@ static inline double ht_uniform(uint64_t* s, double lo, double hi) {
 /// Standard normal (Box–Muller; uses two draws).
 double ht_normal(uint64_t* s);
 
+/// True when a and b hold the same learned state: the same serialized size and the same bytes
+/// from hedger_save() (the tests' bit-for-bit comparison of two instances).
+int ht_same_saved(const hedger_t* a, const hedger_t* b);
+
 /// hedger_create() that must succeed.
 static inline hedger_t* ht_create(const hedger_config_t* cfg) {
   hedger_t* h = NULL;

@@ -131,13 +131,7 @@ static void check_against_recomputing(uint32_t capacity, uint64_t seed, hedger_c
   hedger_counters_t a = *k0, b = *k1;
   a.replay_reused = b.replay_reused = 0;
   assert_memory_equal(&a, &b, sizeof a);
-  const size_t n = hedger_serialized_size(h[0]);
-  assert_int_equal(n, hedger_serialized_size(h[1]));
-  uint8_t* other = malloc(n);
-  assert_int_equal(hedger_save(h[0], buf, cap, NULL), HEDGER_OK);
-  assert_int_equal(hedger_save(h[1], other, n, NULL), HEDGER_OK);
-  assert_memory_equal(buf, other, n);
-  free(other);
+  assert_true(ht_same_saved(h[0], h[1]));
   free(buf);
   hedger_destroy(h[0]);
   hedger_destroy(h[1]);
@@ -190,14 +184,7 @@ static void test_replay_cache_not_carried_to_the_next_run(void** state) {
     }
     for (int i = 0; i < 2; ++i) assert_int_equal(hedger_end_run(h[i], NULL), HEDGER_OK);
   }
-  const size_t n = hedger_serialized_size(h[0]);
-  uint8_t* b0 = malloc(n);
-  uint8_t* b1 = malloc(n);
-  assert_int_equal(hedger_save(h[0], b0, n, NULL), HEDGER_OK);
-  assert_int_equal(hedger_save(h[1], b1, n, NULL), HEDGER_OK);
-  assert_memory_equal(b0, b1, n);
-  free(b0);
-  free(b1);
+  assert_true(ht_same_saved(h[0], h[1]));
   hedger_destroy(h[0]);
   hedger_destroy(h[1]);
 }
@@ -231,14 +218,7 @@ static void test_replay_cache_slices_reused_updates_eight_to_one(void** state) {
   assert_int_equal(first_pass_slices[0], 10);
   assert_int_equal(slices[0], 10 + 5);
   assert_int_equal(slices[1], 40);
-  const size_t n = hedger_serialized_size(h[0]);
-  uint8_t* b0 = malloc(n);
-  uint8_t* b1 = malloc(n);
-  assert_int_equal(hedger_save(h[0], b0, n, NULL), HEDGER_OK);
-  assert_int_equal(hedger_save(h[1], b1, n, NULL), HEDGER_OK);
-  assert_memory_equal(b0, b1, n);
-  free(b0);
-  free(b1);
+  assert_true(ht_same_saved(h[0], h[1]));
   hedger_destroy(h[0]);
   hedger_destroy(h[1]);
 }
@@ -276,14 +256,7 @@ static void test_replay_cache_slices_count_the_rebuild(void** state) {
   }
   assert_true(hedger_counters(h[0])->replay_reused > 200);
   assert_int_equal(reused_slices, 13);
-  const size_t n = hedger_serialized_size(h[0]);
-  uint8_t* b0 = malloc(n);
-  uint8_t* b1 = malloc(n);
-  assert_int_equal(hedger_save(h[0], b0, n, NULL), HEDGER_OK);
-  assert_int_equal(hedger_save(h[1], b1, n, NULL), HEDGER_OK);
-  assert_memory_equal(b0, b1, n);
-  free(b0);
-  free(b1);
+  assert_true(ht_same_saved(h[0], h[1]));
   hedger_destroy(h[0]);
   hedger_destroy(h[1]);
 }
