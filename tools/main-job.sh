@@ -44,11 +44,13 @@ out="${B21R_OUT:-$repo/build/main-job/$(date +%Y%m%d-%H%M%S)}"
 mkdir -p "$out"
 out="$(cd "$out" && pwd)"
 
-say "configuring and building the $preset preset (b21r-controller, b21r-sim, LCM types)"
+say "configuring and building the $preset preset (b21r-controller, b21r-sim, LCM types, the Python binding)"
 if [[ ! -f "$build/build.ninja" ]]; then
   cmake --preset "$preset" >"$out/build.log" 2>&1 || { tail -30 "$out/build.log"; exit 1; }
 fi
+# b21r_learn_core: the picture of what was learned (step 6) reads the checkpoint through b21r_learn.
 cmake --build --preset "$preset" -j "$jobs" --target b21r-controller b21r_sim_app b21r_msgs_python b21r_experiment \
+  b21r_learn_core \
   >>"$out/build.log" 2>&1 || { tail -40 "$out/build.log"; say "error: build failed (log: $out/build.log)"; exit 1; }
 controller="$build/bin/b21r-controller"
 sim="$build/bin/b21r-sim"
