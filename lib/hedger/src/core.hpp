@@ -364,15 +364,18 @@ void fit_geometry(const hedger& h, const double* x, const uint32_t* ids, const d
       g.status = FitGeom<D>::kSingular;
       return;
     }
+    // Inside iff some leverage admits the query (the same test as against the largest: rounding
+    // is monotone), so the first that does settles it; the largest leverages are at the
+    // neighbourhood's edge, so the farthest neighbours go first.
     const Mat vinv = ldlt.inverse();
     const double lq = vinv(D, D);
-    double hmax = 0.0;
-    for (uint32_t i = 0; i < n; ++i) {
+    bool inside = false;
+    for (uint32_t i = n; i-- > 0 && !inside;) {
       double hi = rows[i].dot(vinv * rows[i]);
       if (!unweighted_ivh) hi *= w[i];
-      if (hi > hmax) hmax = hi;
+      inside = lq <= hi * (1.0 + kIvhTol);
     }
-    if (!(lq <= hmax * (1.0 + kIvhTol))) {
+    if (!inside) {
       g.status = FitGeom<D>::kHull;
       return;
     }
@@ -628,12 +631,17 @@ struct ModelGeom {
   uint8_t anchor_ok;    ///< the anchor's regression could be factorised (else the model fails)
   uint8_t anchor_unweighted;  ///< every neighbour's anchor weight was (nearly) 0
   Alt alt;              ///< the fit without the u² column (af_alt, cov_alt), formed on demand
-  uint8_t v_ok;         ///< reach <= 1 and the IVH matrix factorised: vinv, hmax valid
+  uint8_t v_ok;         ///< reach <= 1 and the IVH matrix factorised: vinv valid
   uint32_t n;
+  uint32_t h_scanned;   ///< hmax covers the h_scanned farthest neighbours
   double sw;            ///< Σ w_i
   double abar;          ///< the neighbours' mean action (scaled)
   double u_anchor, umin, umax, tol;  ///< the neighbours' policy and the action's hull
-  double hmax;          ///< the largest leverage of the IVH test
+  /// The IVH test's largest leverage, found on demand (model_value): the largest over the
+  /// h_scanned farthest neighbours. A test stops at the first leverage that admits the action,
+  /// with the outcome of the full maximum (rounding is monotone); later tests of the same
+  /// geometry (the replay's passes) go on from there.
+  double hmax;
   uint32_t ids[HEDGER_MAX_K];
   double w[HEDGER_MAX_K];
   Mat a, b;             ///< XᵀWX + ridge and XᵀW²X, kept for the fit without u²
@@ -707,12 +715,42 @@ void model_geometry(hedger& h, const double* x, double reach, ModelGeom<D>& g) n
   a.setZero();
   b.setZero();
   const bool unweighted_ivh = (h.cfg.ivh_mode == static_cast<uint32_t>(HEDGER_IVH_UNWEIGHTED));
+  // A = Σ (w_i r_i) r_iᵀ, B = Σ (w_i² r_i) r_iᵀ and V (Σ r_i r_iᵀ, or A) one column at a time,
+  // each column summed over the neighbours in a register accumulator: every entry is the same
+  // products added in the same order as rank-1 updates of the whole matrices would add them (the
+  // same bits), without loading and storing three P × P matrices per neighbour (b21r-train on a
+  // corridor session: 2 % fewer instructions in all).
+  Vec zw[HEDGER_MAX_K], zb[HEDGER_MAX_K];
   for (uint32_t i = 0; i < n; ++i) {
     Vec& r = rows[i];
     model_row<D>(h, x, g.ids[i], abar, r);
-    a.noalias() += (w[i] * r) * r.transpose();
-    b.noalias() += (w[i] * w[i] * r) * r.transpose();
-    if (unweighted_ivh) v.noalias() += r * r.transpose();
+    zw[i] = w[i] * r;
+    zb[i] = (w[i] * w[i]) * r;
+  }
+  if (unweighted_ivh) {
+    for (int c = 0; c < P; ++c) {
+      Vec ca = Vec::Zero(), cb = Vec::Zero(), cv = Vec::Zero();
+      for (uint32_t i = 0; i < n; ++i) {
+        const double rc = rows[i][c];
+        ca.noalias() += zw[i] * rc;
+        cb.noalias() += zb[i] * rc;
+        cv.noalias() += rows[i] * rc;
+      }
+      a.col(c) = ca;
+      b.col(c) = cb;
+      v.col(c) = cv;
+    }
+  } else {
+    for (int c = 0; c < P; ++c) {
+      Vec ca = Vec::Zero(), cb = Vec::Zero();
+      for (uint32_t i = 0; i < n; ++i) {
+        const double rc = rows[i][c];
+        ca.noalias() += zw[i] * rc;
+        cb.noalias() += zb[i] * rc;
+      }
+      a.col(c) = ca;
+      b.col(c) = cb;
+    }
   }
   if (!unweighted_ivh) v = a;
   for (int j = 0; j < P - 1; ++j) a(j, j) += h.cfg.ridge;
@@ -789,13 +827,8 @@ void model_geometry(hedger& h, const double* x, double reach, ModelGeom<D>& g) n
   FactorOf<P> vf;
   if (reach <= 1.0 && factor_spd<P>(vf, v)) {
     g.vinv = vf.inverse();
-    double hmax = 0.0;
-    for (uint32_t i = 0; i < n; ++i) {
-      double hi = rows[i].dot(g.vinv * rows[i]);
-      if (!unweighted_ivh) hi *= w[i];
-      if (hi > hmax) hmax = hi;
-    }
-    g.hmax = hmax;
+    g.hmax = 0.0;
+    g.h_scanned = 0;
     g.v_ok = 1;
   }
 }
@@ -892,7 +925,17 @@ bool model_value(hedger& h, const double* x, ModelGeom<D>& g, GreedyResult& out)
   if (g.v_ok && res.value >= q_min(h) && res.value <= q_max(h)) {
     Vec e, d;
     model_design<D>(h, g.abar, u_anchor, res.action, e, d);
-    lwr = e.dot(g.vinv * e) <= g.hmax * (1.0 + kIvhTol);
+    const double le = e.dot(g.vinv * e);
+    lwr = le <= g.hmax * (1.0 + kIvhTol);
+    const bool unweighted_ivh = (h.cfg.ivh_mode == static_cast<uint32_t>(HEDGER_IVH_UNWEIGHTED));
+    while (!lwr && g.h_scanned < n) {
+      // Farthest first: the largest leverages are at the neighbourhood's edge.
+      const uint32_t i = n - 1u - g.h_scanned++;
+      double hi = rows[i].dot(g.vinv * rows[i]);
+      if (!unweighted_ivh) hi *= w[i];
+      if (hi > g.hmax) g.hmax = hi;
+      lwr = le <= g.hmax * (1.0 + kIvhTol);
+    }
   }
   if (!lwr) {
     res.value = swq / g.sw;
