@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "hedger_test_internal.hpp"
 #include "kdtree.hpp"
 
 extern "C" {
@@ -23,13 +24,8 @@ using hg::Neighbour;
 using hg::Node;
 using hg::RadiusSet;
 
-uint64_t splitmix(uint64_t& s) {
-  uint64_t z = (s += 0x9E3779B97F4A7C15ull);
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-  return z ^ (z >> 31);
-}
-double uniform(uint64_t& s) { return static_cast<double>(splitmix(s) >> 11) * 0x1.0p-53; }
+using ht::splitmix;
+using ht::uniform;
 
 struct TreeMem {
   std::vector<double> pts;

@@ -11,6 +11,7 @@
 #include <cstring>
 #include <type_traits>
 
+#include "hedger_test_internal.hpp"
 #include "linalg.hpp"
 
 extern "C" {
@@ -19,22 +20,12 @@ extern "C" {
 
 namespace {
 
-uint64_t splitmix(uint64_t& s) {
-  uint64_t z = (s += 0x9E3779B97F4A7C15ull);
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-  return z ^ (z >> 31);
-}
-double uniform(uint64_t& s) { return static_cast<double>(splitmix(s) >> 11) * 0x1.0p-53; }
+using ht::kExact;
+using ht::splitmix;
+using ht::uniform;
 
-// Bit for bit where the compiler cannot fuse a multiply and an add (x86-64 without FMA, the host
-// builds); elsewhere (AArch64 contracts a * b + c by default, in each copy of the code as it sees
-// fit) the two agree to rounding on the positive definite matrices only.
-#if defined(__x86_64__) && !defined(__FMA__)
-constexpr bool kExact = true;
-#else
-constexpr bool kExact = false;
-#endif
+// Bit for bit where ht::kExact; elsewhere the two agree to rounding on the positive definite
+// matrices only.
 
 bool same_bits(double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; }
 bool close(double a, double b) { return std::abs(a - b) <= 1e-8 * (1.0 + std::abs(a) + std::abs(b)); }

@@ -11,6 +11,7 @@
 #include <cstdint>
 
 #include "core.hpp"
+#include "hedger_test_internal.hpp"
 
 extern "C" {
 #include <cmocka.h>
@@ -20,13 +21,7 @@ namespace {
 
 constexpr int kD = 3;  // 2-D state + action
 
-uint64_t splitmix(uint64_t& s) {
-  uint64_t z = (s += 0x9E3779B97F4A7C15ull);
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-  return z ^ (z >> 31);
-}
-double uniform(uint64_t& s) { return static_cast<double>(splitmix(s) >> 11) * 0x1.0p-53; }
+using ht::uniform;
 
 // A value concave in the action with its best action moving with the state, plus noise.
 double value_of(const double* s, double a, double noise) {
@@ -73,6 +68,9 @@ void expect_rank_one_sums(const hedger& h, const double* x, const hg::ModelGeom<
 }
 
 void check_against_plain_forms(uint32_t ivh_mode) {
+  // The plain forms are the same sums in the same order: the same bits, unless the compiler fuses
+  // multiplies and adds differently in the two (AArch64), where the test has nothing exact to say.
+  if (!ht::kExact) skip();
   hedger_config_t c = hedger_config_default();
   c.state_dim = 2;
   c.capacity = 3000;
