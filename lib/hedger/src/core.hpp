@@ -364,12 +364,13 @@ void fit_geometry(const hedger& h, const double* x, const uint32_t* ids, const d
       g.status = FitGeom<D>::kSingular;
       return;
     }
-    // Inside iff some leverage admits the query (the same test as against the largest: rounding
-    // is monotone), so the first that does settles it; the largest leverages are at the
-    // neighbourhood's edge, so the farthest neighbours go first.
+    // Inside iff lq <= max(0, h_ii) (1 + tol): iff lq <= 0 or some leverage admits the query
+    // (the same test as against the largest: rounding is monotone), so the first that does
+    // settles it; the largest leverages are at the neighbourhood's edge, so the farthest
+    // neighbours go first.
     const Mat vinv = ldlt.inverse();
     const double lq = vinv(D, D);
-    bool inside = false;
+    bool inside = lq <= 0.0;
     for (uint32_t i = n; i-- > 0 && !inside;) {
       double hi = rows[i].dot(vinv * rows[i]);
       if (!unweighted_ivh) hi *= w[i];
