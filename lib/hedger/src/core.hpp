@@ -728,30 +728,18 @@ void model_geometry(hedger& h, const double* x, double reach, ModelGeom<D>& g) n
     zw[i] = w[i] * r;
     zb[i] = (w[i] * w[i]) * r;
   }
-  if (unweighted_ivh) {
-    for (int c = 0; c < P; ++c) {
-      Vec ca = Vec::Zero(), cb = Vec::Zero(), cv = Vec::Zero();
-      for (uint32_t i = 0; i < n; ++i) {
-        const double rc = rows[i][c];
-        ca.noalias() += zw[i] * rc;
-        cb.noalias() += zb[i] * rc;
-        cv.noalias() += rows[i] * rc;
-      }
-      a.col(c) = ca;
-      b.col(c) = cb;
-      v.col(c) = cv;
+  // Only the unweighted IVH needs the third sum (the weighted one's V is A before the ridge).
+  for (int c = 0; c < P; ++c) {
+    Vec ca = Vec::Zero(), cb = Vec::Zero(), cv = Vec::Zero();
+    for (uint32_t i = 0; i < n; ++i) {
+      const double rc = rows[i][c];
+      ca.noalias() += zw[i] * rc;
+      cb.noalias() += zb[i] * rc;
+      if (unweighted_ivh) cv.noalias() += rows[i] * rc;
     }
-  } else {
-    for (int c = 0; c < P; ++c) {
-      Vec ca = Vec::Zero(), cb = Vec::Zero();
-      for (uint32_t i = 0; i < n; ++i) {
-        const double rc = rows[i][c];
-        ca.noalias() += zw[i] * rc;
-        cb.noalias() += zb[i] * rc;
-      }
-      a.col(c) = ca;
-      b.col(c) = cb;
-    }
+    a.col(c) = ca;
+    b.col(c) = cb;
+    if (unweighted_ivh) v.col(c) = cv;
   }
   if (!unweighted_ivh) v = a;
   for (int j = 0; j < P - 1; ++j) a(j, j) += h.cfg.ridge;
