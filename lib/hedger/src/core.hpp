@@ -49,6 +49,43 @@ constexpr uint32_t kCollectCap = 2u * HEDGER_MAX_K;
 /// leverage is inside despite rounding.
 constexpr double kIvhTol = 1e-9;
 
+/// The normal equations' sums over n rows r_i, a column at a time, each column summed over the
+/// rows in register accumulators: the lower triangle (diagonal included) of m0 = Σ_i z0_i r_iᵀ,
+/// with kSecond that of m1 = Σ_i r_i r_iᵀ, with kFull the whole of mf = Σ_i zf_i r_iᵀ. Entry
+/// (j, c) is Σ_i z_i[j] r_i[c] added in the order of i: the bits of rank-1 updates of the whole
+/// matrices. m0's and m1's strict upper triangles are left as they were. Why only the lower:
+/// those matrices are read only through the LDLᵀ factorisation, which reads no other part
+/// (FixedLdlt, SymFactor), so their upper halves were work for nothing; the sums share each
+/// column's load of r_i[c] (docs/development.md gives the measured gain). O(n P²), no allocation.
+template <int P, bool kSecond, bool kFull, int C = 0>
+void column_sums(const Eigen::Matrix<double, P, 1>* r, uint32_t n, const Eigen::Matrix<double, P, 1>* z0,
+                 Eigen::Matrix<double, P, P>& m0, Eigen::Matrix<double, P, P>& m1,
+                 const Eigen::Matrix<double, P, 1>* zf, Eigen::Matrix<double, P, P>& mf) noexcept {
+  constexpr int L = P - C;
+  using Tail = Eigen::Matrix<double, L, 1>;
+  Tail a0 = Tail::Zero(), a1 = Tail::Zero();
+  Eigen::Matrix<double, P, 1> af = Eigen::Matrix<double, P, 1>::Zero();
+  for (uint32_t i = 0; i < n; ++i) {
+    const double rc = r[i][C];
+    a0.noalias() += z0[i].template tail<L>() * rc;
+    if constexpr (kSecond) a1.noalias() += r[i].template tail<L>() * rc;
+    if constexpr (kFull) af.noalias() += zf[i] * rc;
+  }
+  m0.col(C).template tail<L>() = a0;
+  if constexpr (kSecond) m1.col(C).template tail<L>() = a1;
+  if constexpr (kFull) mf.col(C) = af;
+  if constexpr (C + 1 < P) column_sums<P, kSecond, kFull, C + 1>(r, n, z0, m0, m1, zf, mf);
+}
+
+/// Copies m's strict lower triangle onto its upper one (a lower_sums() result as a whole
+/// symmetric matrix, for any reader of the full matrix). O(P²).
+template <int P>
+void mirror_lower(Eigen::Matrix<double, P, P>& m) noexcept {
+  for (int c = 1; c < P; ++c) {
+    for (int j = 0; j < c; ++j) m(j, c) = m(c, j);
+  }
+}
+
 /// Smallest ratio λmin / λmax of the eigenvalues of a neighbourhood's centred scatter matrix for
 /// which its points count as spanning every input dimension (spans_inputs()). A ratio of 1e-12
 /// is a spread ratio of 1e-6 between the thinnest and the widest direction, far above the
@@ -340,18 +377,26 @@ void fit_geometry(const hedger& h, const double* x, const uint32_t* ids, const d
     return;
   }
   Vec rows[HEDGER_MAX_K];
-  Mat xtwx = Mat::Zero();
-  Mat xtx = Mat::Zero();
+  Vec zw[HEDGER_MAX_K];
+  Mat xtwx, xtx, unused;
   double sw = 0.0;
   const bool unweighted_ivh = (h.cfg.ivh_mode == static_cast<uint32_t>(HEDGER_IVH_UNWEIGHTED));
   for (uint32_t i = 0; i < n; ++i) {
     Vec& r = rows[i];
     fit_row<D>(h, x, ids[i], r);
     sw += w[i];
-    xtwx.noalias() += (w[i] * r) * r.transpose();
-    if (unweighted_ivh) xtx.noalias() += r * r.transpose();
+    zw[i] = w[i] * r;
   }
   g.sw = sw;
+  // XᵀWX and XᵀX are factorised only: their lower triangles are summed (column_sums) and
+  // mirrored, so that each is a whole symmetric matrix.
+  if (unweighted_ivh) {
+    column_sums<D + 1, true, false>(rows, n, zw, xtwx, xtx, nullptr, unused);
+    mirror_lower<D + 1>(xtx);
+  } else {
+    column_sums<D + 1, false, false>(rows, n, zw, xtwx, xtx, nullptr, unused);
+  }
+  mirror_lower<D + 1>(xtwx);
   if (h.cfg.local_model == static_cast<uint32_t>(HEDGER_LOCAL_LWA)) {
     g.status = FitGeom<D>::kAverage;
     return;
@@ -712,15 +757,10 @@ void model_geometry(hedger& h, const double* x, double reach, ModelGeom<D>& g) n
   Vec rows[HEDGER_MAX_K];
   Mat& a = g.a;
   Mat& b = g.b;
-  Mat v = Mat::Zero();
-  a.setZero();
-  b.setZero();
+  Mat v;
   const bool unweighted_ivh = (h.cfg.ivh_mode == static_cast<uint32_t>(HEDGER_IVH_UNWEIGHTED));
-  // A = Σ (w_i r_i) r_iᵀ, B = Σ (w_i² r_i) r_iᵀ and V (Σ r_i r_iᵀ, or A) one column at a time,
-  // each column summed over the neighbours in a register accumulator: every entry is the same
-  // products added in the same order as rank-1 updates of the whole matrices would add them (the
-  // same bits), without loading and storing three P × P matrices per neighbour (b21r-train on a
-  // corridor session: 2 % fewer instructions in all).
+  // A = Σ (w_i r_i) r_iᵀ and V (Σ r_i r_iᵀ, or A) are factorised only: their lower triangles
+  // are summed and mirrored. B = Σ (w_i² r_i) r_iᵀ enters the covariance A⁻¹ B A⁻¹ whole.
   Vec zw[HEDGER_MAX_K], zb[HEDGER_MAX_K];
   for (uint32_t i = 0; i < n; ++i) {
     Vec& r = rows[i];
@@ -728,19 +768,14 @@ void model_geometry(hedger& h, const double* x, double reach, ModelGeom<D>& g) n
     zw[i] = w[i] * r;
     zb[i] = (w[i] * w[i]) * r;
   }
-  // Only the unweighted IVH needs the third sum (the weighted one's V is A before the ridge).
-  for (int c = 0; c < P; ++c) {
-    Vec ca = Vec::Zero(), cb = Vec::Zero(), cv = Vec::Zero();
-    for (uint32_t i = 0; i < n; ++i) {
-      const double rc = rows[i][c];
-      ca.noalias() += zw[i] * rc;
-      cb.noalias() += zb[i] * rc;
-      if (unweighted_ivh) cv.noalias() += rows[i] * rc;
-    }
-    a.col(c) = ca;
-    b.col(c) = cb;
-    if (unweighted_ivh) v.col(c) = cv;
+  // Only the unweighted IVH needs the second sum (the weighted one's V is A before the ridge).
+  if (unweighted_ivh) {
+    column_sums<P, true, true>(rows, n, zw, a, v, zb, b);
+    mirror_lower<P>(v);
+  } else {
+    column_sums<P, false, true>(rows, n, zw, a, v, zb, b);
   }
+  mirror_lower<P>(a);
   if (!unweighted_ivh) v = a;
   for (int j = 0; j < P - 1; ++j) a(j, j) += h.cfg.ridge;
   if (!factor_spd<P>(g.af, a)) return;

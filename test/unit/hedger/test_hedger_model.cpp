@@ -1,9 +1,10 @@
 // SPDX-License-Identifier: MIT
 // The greedy state model's geometry (model_geometry) and value (model_value) stages against the
-// plain forms they replace: the normal equations equal the neighbour-by-neighbour rank-1 sums bit
-// for bit, and the IVH test, which scans the neighbours' leverages on demand and carries the scan
-// across the values of one geometry (the replay's passes), decides as the test against the
-// largest leverage of all neighbours.
+// plain forms they replace: the normal equations (the state model's and a prediction's) equal the
+// neighbour-by-neighbour rank-1 sums bit for bit where they are read, and the IVH test, which
+// scans the neighbours' leverages on demand and carries the scan across the values of one
+// geometry (the replay's passes), decides as the test against the largest leverage of all
+// neighbours.
 #include <cmath>
 #include <csetjmp>
 #include <cstdarg>
@@ -46,25 +47,80 @@ void complete_scan(const hedger& h, const double* x, hg::ModelGeom<kD>& g) {
   g.h_scanned = g.n;
 }
 
-// The normal equations, summed column by column in model_geometry(), hold the bits of the
-// neighbour-by-neighbour rank-1 sums A = Σ (w_i r_i) r_iᵀ (+ the ridge) and B = Σ (w_i² r_i) r_iᵀ.
+// The normal equations, summed column by column in model_geometry() (the lower triangles of A and
+// of the IVH matrix V only, B whole), hold the bits of the neighbour-by-neighbour rank-1 sums
+// A = Σ (w_i r_i) r_iᵀ (+ the ridge), B = Σ (w_i² r_i) r_iᵀ and V = Σ r_i r_iᵀ (unweighted IVH) or
+// A without the ridge (weighted), where they are read: A's and V's lower triangles (A is mirrored,
+// V is seen through its inverse, the same bits as the plain V's), B whole.
 void expect_rank_one_sums(const hedger& h, const double* x, const hg::ModelGeom<kD>& g) {
-  using Vec = Eigen::Matrix<double, kD + 2, 1>;
-  using Mat = Eigen::Matrix<double, kD + 2, kD + 2>;
-  Mat a = Mat::Zero(), b = Mat::Zero();
+  constexpr int P = kD + 2;
+  using Vec = Eigen::Matrix<double, P, 1>;
+  using Mat = Eigen::Matrix<double, P, P>;
+  Mat a = Mat::Zero(), b = Mat::Zero(), v = Mat::Zero();
   for (uint32_t i = 0; i < g.n; ++i) {
     Vec r;
     hg::model_row<kD>(h, x, g.ids[i], g.abar, r);
     a.noalias() += (g.w[i] * r) * r.transpose();
     b.noalias() += (g.w[i] * g.w[i] * r) * r.transpose();
+    v.noalias() += r * r.transpose();
   }
+  if (h.cfg.ivh_mode != static_cast<uint32_t>(HEDGER_IVH_UNWEIGHTED)) v = a;
   for (int j = 0; j < kD + 1; ++j) a(j, j) += h.cfg.ridge;
-  for (int j = 0; j < kD + 2; ++j) {
-    for (int k = 0; k < kD + 2; ++k) {
-      assert_true(a(j, k) == g.a(j, k));
+  for (int j = 0; j < P; ++j) {
+    for (int k = 0; k < P; ++k) {
+      if (j >= k) assert_true(a(j, k) == g.a(j, k));
+      assert_true(g.a(j, k) == g.a(k, j));
       assert_true(b(j, k) == g.b(j, k));
     }
   }
+  hg::FactorOf<P> vf;
+  assert_true(hg::factor_spd<P>(vf, v));
+  const Mat vinv = vf.inverse();
+  for (int j = 0; j < P; ++j) {
+    for (int k = 0; k < P; ++k) assert_true(vinv(j, k) == g.vinv(j, k));
+  }
+}
+
+// The same for a prediction's geometry (fit_geometry) on the neighbourhood ids, w at the query
+// (x, action): its ridge regression's factorisation, seen through c = A⁻¹ e, and its IVH outcome
+// equal the plain rank-1 forms'. Returns true when the regression was formed.
+bool expect_fit_rank_one_sums(const hedger& h, const double* x, const uint32_t* ids, const double* w,
+                              uint32_t n) {
+  constexpr int P = kD + 1;
+  using Vec = Eigen::Matrix<double, P, 1>;
+  using Mat = Eigen::Matrix<double, P, P>;
+  hg::FitGeom<kD> g;
+  hg::fit_geometry<kD>(h, x, ids, w, n, g);
+  Mat a = Mat::Zero(), v = Mat::Zero();
+  Vec rows[HEDGER_MAX_K];
+  for (uint32_t i = 0; i < n; ++i) {
+    hg::fit_row<kD>(h, x, ids[i], rows[i]);
+    a.noalias() += (w[i] * rows[i]) * rows[i].transpose();
+    v.noalias() += rows[i] * rows[i].transpose();
+  }
+  const bool unweighted = h.cfg.ivh_mode == static_cast<uint32_t>(HEDGER_IVH_UNWEIGHTED);
+  if (!unweighted) v = a;
+  hg::FactorOf<P> vf;
+  assert_true(hg::factor_spd<P>(vf, v));
+  const Mat vinv = vf.inverse();
+  double hmax = 0.0;
+  for (uint32_t i = 0; i < n; ++i) {
+    double hi = rows[i].dot(vinv * rows[i]);
+    if (!unweighted) hi *= w[i];
+    hmax = hi > hmax ? hi : hmax;
+  }
+  const bool inside = vinv(kD, kD) <= hmax * (1.0 + hg::kIvhTol);
+  assert_int_equal(g.status == hg::FitGeom<kD>::kHull, !inside);
+  if (!inside) return false;
+  for (int j = 0; j < kD; ++j) a(j, j) += h.cfg.ridge;
+  hg::FactorOf<P> af;
+  assert_true(hg::factor_spd<P>(af, a));
+  assert_int_equal(g.status, hg::FitGeom<kD>::kRegression);
+  Vec e = Vec::Zero();
+  e[kD] = 1.0;
+  const Vec c = af.solve(e);
+  for (int j = 0; j < P; ++j) assert_true(c[j] == g.c[j]);
+  return true;
 }
 
 void check_against_plain_forms(uint32_t ivh_mode) {
@@ -88,7 +144,7 @@ void check_against_plain_forms(uint32_t ivh_mode) {
   }
   hedger_observe_reward(hp, -1.0);
   hedger_observe_reward(hp, 1.0);
-  uint32_t models = 0, lwr = 0, lwa = 0, stopped_early = 0;
+  uint32_t models = 0, lwr = 0, lwa = 0, stopped_early = 0, fits = 0;
   double* const val = h.val;
   const uint32_t fill = h.fill;
   double base[3000];
@@ -101,6 +157,10 @@ void check_against_plain_forms(uint32_t ivh_mode) {
     hg::model_geometry<kD>(h, x, 1.0, g);
     if (g.status != hg::ModelGeom<kD>::kFormed || !g.v_ok) continue;
     expect_rank_one_sums(h, x, g);
+    // A prediction at (x, the neighbourhood's mean action) on the same neighbours.
+    x[kD - 1] = g.abar;
+    if (expect_fit_rank_one_sums(h, x, g.ids, g.w, g.n)) ++fits;
+    x[kD - 1] = 0.0;
     hg::ModelGeom<kD> full = g;
     complete_scan(h, x, full);
     // Three passes over one geometry with other values, as the replay's: the chosen action moves.
@@ -128,6 +188,7 @@ void check_against_plain_forms(uint32_t ivh_mode) {
   assert_true(lwr > 50);
   assert_true(lwa > 5);
   assert_true(stopped_early > 50);
+  assert_true(fits > 100);
   hedger_destroy(hp);
 }
 
