@@ -77,7 +77,7 @@ void column_sums(const Eigen::Matrix<double, P, 1>* r, uint32_t n, const Eigen::
   if constexpr (C + 1 < P) column_sums<P, kSecond, kFull, C + 1>(r, n, z0, m0, m1, zf, mf);
 }
 
-/// Copies m's strict lower triangle onto its upper one (a lower_sums() result as a whole
+/// Copies m's strict lower triangle onto its upper one (a column_sums() result as a whole
 /// symmetric matrix, for any reader of the full matrix). O(P²).
 template <int P>
 void mirror_lower(Eigen::Matrix<double, P, P>& m) noexcept {
