@@ -376,20 +376,23 @@ void fit_geometry(const hedger& h, const double* x, const uint32_t* ids, const d
     g.status = FitGeom<D>::kUnknown;
     return;
   }
+  double sw = 0.0;
+  for (uint32_t i = 0; i < n; ++i) sw += w[i];
+  g.sw = sw;
+  if (h.cfg.local_model == static_cast<uint32_t>(HEDGER_LOCAL_LWA)) {
+    g.status = FitGeom<D>::kAverage;
+    return;
+  }
   Vec rows[HEDGER_MAX_K];
   Vec zw[HEDGER_MAX_K];
-  Mat xtwx, xtx, unused;
-  double sw = 0.0;
-  const bool unweighted_ivh = (h.cfg.ivh_mode == static_cast<uint32_t>(HEDGER_IVH_UNWEIGHTED));
   for (uint32_t i = 0; i < n; ++i) {
-    Vec& r = rows[i];
-    fit_row<D>(h, x, ids[i], r);
-    sw += w[i];
-    zw[i] = w[i] * r;
+    fit_row<D>(h, x, ids[i], rows[i]);
+    zw[i] = w[i] * rows[i];
   }
-  g.sw = sw;
   // XᵀWX and XᵀX are factorised only: their lower triangles are summed (column_sums) and
   // mirrored, so that each is a whole symmetric matrix.
+  Mat xtwx, xtx, unused;
+  const bool unweighted_ivh = (h.cfg.ivh_mode == static_cast<uint32_t>(HEDGER_IVH_UNWEIGHTED));
   if (unweighted_ivh) {
     column_sums<D + 1, true, false>(rows, n, zw, xtwx, xtx, nullptr, unused);
     mirror_lower<D + 1>(xtx);
@@ -397,10 +400,6 @@ void fit_geometry(const hedger& h, const double* x, const uint32_t* ids, const d
     column_sums<D + 1, false, false>(rows, n, zw, xtwx, xtx, nullptr, unused);
   }
   mirror_lower<D + 1>(xtwx);
-  if (h.cfg.local_model == static_cast<uint32_t>(HEDGER_LOCAL_LWA)) {
-    g.status = FitGeom<D>::kAverage;
-    return;
-  }
   {
     // Independent-variable hull: inside iff e^T V^-1 e <= max_i h_ii.
     const Mat& v = unweighted_ivh ? xtx : xtwx;
