@@ -86,6 +86,18 @@ void mirror_lower(Eigen::Matrix<double, P, P>& m) noexcept {
   }
 }
 
+/// The IVH's leverage of row r (a neighbour's, centred at the query) under the inverse vinv of
+/// the IVH matrix: h = r·V⁻¹r, times the neighbour's kernel weight w with the weighted IVH
+/// (HEDGER_IVH_WEIGHTED). The query lies inside the hull when its own leverage is at most the
+/// largest of the neighbours' (fit_geometry, model_value). O(P²).
+template <int P>
+double ivh_leverage(const Eigen::Matrix<double, P, P>& vinv, const Eigen::Matrix<double, P, 1>& r, double w,
+                    bool unweighted) noexcept {
+  double hi = r.dot(vinv * r);
+  if (!unweighted) hi *= w;
+  return hi;
+}
+
 /// Smallest ratio λmin / λmax of the eigenvalues of a neighbourhood's centred scatter matrix for
 /// which its points count as spanning every input dimension (spans_inputs()). A ratio of 1e-12
 /// is a spread ratio of 1e-6 between the thinnest and the widest direction, far above the
@@ -416,9 +428,7 @@ void fit_geometry(const hedger& h, const double* x, const uint32_t* ids, const d
     const double lq = vinv(D, D);
     bool inside = lq <= 0.0;
     for (uint32_t i = n; i-- > 0 && !inside;) {
-      double hi = rows[i].dot(vinv * rows[i]);
-      if (!unweighted_ivh) hi *= w[i];
-      inside = lq <= hi * (1.0 + kIvhTol);
+      inside = lq <= ivh_leverage<D + 1>(vinv, rows[i], w[i], unweighted_ivh) * (1.0 + kIvhTol);
     }
     if (!inside) {
       g.status = FitGeom<D>::kHull;
@@ -954,8 +964,7 @@ bool model_value(hedger& h, const double* x, ModelGeom<D>& g, GreedyResult& out)
     while (!lwr && g.h_scanned < n) {
       // Farthest first: the largest leverages are at the neighbourhood's edge.
       const uint32_t i = n - 1u - g.h_scanned++;
-      double hi = rows[i].dot(g.vinv * rows[i]);
-      if (!unweighted_ivh) hi *= w[i];
+      const double hi = ivh_leverage<P>(g.vinv, rows[i], w[i], unweighted_ivh);
       if (hi > g.hmax) g.hmax = hi;
       lwr = le <= g.hmax * (1.0 + kIvhTol);
     }
