@@ -23,18 +23,25 @@
 //                    -4 % to +46 % over the reference, best of 3, run after run). Exit 1 when the
 //                    trainer learns another state than the reference or makes other updates.
 //   --instructions   under callgrind (CTest tools.train_instructions): the trainer's instructions
-//                    per learned experience at the controller's defaults, against the budget
-//                    below; and, with one replay pass (where the trainer's own work, reading and
-//                    decoding the log and calling the framework, is the largest part of the
-//                    whole), the trainer's instructions against those of decoding plus the in-run
-//                    reference: at most 10 % more (exit 1 over either); and the former defaults'
-//                    instructions per learned experience (printed, with the defaults' ratio to them).
+//                    per learned experience at the controller's defaults, against the budget and
+//                    the throughput target below; and, with one replay pass (where the trainer's
+//                    own work, reading and decoding the log and calling the framework, is the
+//                    largest part of the whole), the trainer's instructions against those of
+//                    decoding plus the in-run reference: at most 10 % more (exit 1 over any of the
+//                    three); and the former defaults' instructions per learned experience
+//                    (printed, with the defaults' ratio to them).
 // The budget: an hour of a 10 Hz robot's driving (36,000 experiences) retrains in a minute on the
 // slowest computer the controller targets, a Cortex-A53-class board (1.2 GHz, 0.5 instructions
 // per cycle, AArch64 needing up to 1.25x the x86-64 count: 480 M x86-64 instructions per second):
 // 60 s × 480 M/s / 36,000 = 800,000 instructions per learned experience. The controller's own
 // between-run replay costs the same per experience (it is the same HEDGER work), so within it a
 // run's replay on the robot takes at most about 1.7 ms of A53 time per step driven.
+// The throughput target (issue 44): 20,000 learned experiences per CPU second at the defaults on
+// this project's reference machine (the 2-core x86-64 VM of docs/development.md), which runs the
+// trainer's work at 5.73 G instructions per CPU second (the median of six timed runs,
+// 21,601 learned/s at 265,423 instructions each; 4.7-5.3 G/s in a slower hour): at most
+// 5.73 G / 20,000 = 286,000 instructions per learned experience. Checked in instructions so that
+// the verdict is the code's, not the machine's load; the timed mode prints the rate itself.
 // Usage: bench_train [--instructions]
 #define _POSIX_C_SOURCE 200809L
 #include "instr.h"
@@ -53,6 +60,7 @@
 #include <unistd.h>
 
 #define BUDGET_INSTRUCTIONS_PER_EXPERIENCE 800000.0
+#define TARGET_INSTRUCTIONS_PER_EXPERIENCE 286000.0
 #define REPEATS 5
 #define OVERHEAD_LIMIT 0.10
 
@@ -328,7 +336,7 @@ static uint64_t trainer_instructions(const fw_config_t* c, const char* path, tra
 
 // Under callgrind, each setting's session recorded before the counting starts (instr_start):
 // - the controller's defaults: the trainer's instructions per learned experience, against the
-//   budget;
+//   budget and the throughput target;
 // - one replay pass: the trainer's instructions against decoding plus the in-run reference, at
 //   most OVERHEAD_LIMIT more (the trainer's own work is the same per experience at any pass count,
 //   and the largest fraction of the whole with one pass).
@@ -380,7 +388,9 @@ static bool count_instructions(fw_config_t* c, fw_config_t* one_pass, fw_config_
     return false;
   }
   const double per_exp = (double)n / (double)st.used;
-  const bool ok = per_exp <= BUDGET_INSTRUCTIONS_PER_EXPERIENCE;
+  const bool ok_budget = per_exp <= BUDGET_INSTRUCTIONS_PER_EXPERIENCE;
+  const bool ok_target = per_exp <= TARGET_INSTRUCTIONS_PER_EXPERIENCE;
+  const bool ok = ok_budget && ok_target;
   printf("tools.train_instructions: b21r-train's trainer on a session of the paper's schedule (corridor, the "
          "controller's defaults: %d replay passes)\n", c->hedger_replay_passes);
   printf("%ld experiences in the log, %llu learned, %llu runs, %llu HEDGER updates (%.1f per learned)\n", n_log,
@@ -389,8 +399,11 @@ static bool count_instructions(fw_config_t* c, fw_config_t* one_pass, fw_config_
   printf("%llu instructions: %.0f per learned experience, %.0f per update\n", (unsigned long long)n, per_exp,
          (double)n / (double)updates);
   printf("budget %.0f per learned experience (an hour of driving retrained in a minute on a Cortex-A53 at 1.2 GHz): "
-         "%s (%.0f %%)\n", BUDGET_INSTRUCTIONS_PER_EXPERIENCE, ok ? "within" : "OVER",
+         "%s (%.0f %%)\n", BUDGET_INSTRUCTIONS_PER_EXPERIENCE, ok_budget ? "within" : "OVER",
          100.0 * per_exp / BUDGET_INSTRUCTIONS_PER_EXPERIENCE);
+  printf("throughput target %.0f per learned experience (20,000 learned experiences per CPU second on the reference "
+         "machine, 5.73 G instructions per CPU second): %s (%.0f %%)\n", TARGET_INSTRUCTIONS_PER_EXPERIENCE,
+         ok_target ? "within" : "OVER", 100.0 * per_exp / TARGET_INSTRUCTIONS_PER_EXPERIENCE);
   const double overhead = (double)n_train_one / (double)n_ref_one - 1.0;
   const bool same = (long)st_one.used == used_one && updates_one == ref_updates_one;
   const bool ok_overhead = same && overhead <= OVERHEAD_LIMIT;
