@@ -32,6 +32,11 @@ struct trainer {
   bool run_learned;      // at least one experience of it went through hedger_update
   int32_t run_id;
   int64_t next_seq;      // expected seq of the next experience (-1: none yet in this log)
+  // The decisions' spacing (decision_ticks): a run's experiences are that many steps apart, but
+  // its last (the run ended inside a window). A spacing off that is followed by another
+  // experience of the run means the log was recorded with another decision_ticks.
+  int32_t prev_step_id;
+  int32_t off_spacing;   // the spacing of the previous pair when it was off, else 0
   double progress_next_s;
   double started_s;
 };
@@ -224,15 +229,32 @@ static int learn(trainer_t* t, const b21r_experience_t* e, const char* path, cha
     return -1;
   }
   const bool restart = t->next_seq > 0 && e->seq == 0;
+  const bool consecutive = t->next_seq >= 0 && e->seq == t->next_seq;
   if (t->next_seq >= 0 && !restart && e->seq != t->next_seq) {
     t->stats.seq_gaps++;
   }
   t->next_seq = e->seq + 1;
-  if (!t->in_run || restart || e->run_id != t->run_id) {
+  const bool same_run = t->in_run && !restart && e->run_id == t->run_id;
+  if (!same_run) {
     end_run(t);
     t->in_run = true;
     t->run_id = e->run_id;
   }
+  const int32_t ticks = t->cfg.decision_ticks > 1 ? t->cfg.decision_ticks : 1;
+  if (same_run && consecutive) {
+    if (t->off_spacing != 0) {
+      fw_errfmt(err, err_cap,
+          "%s: experience seq %lld: the log's steps are %d control tick(s) apart, this configuration's "
+          "decision_ticks = %d: give the setting the controller ran with (--set decision_ticks=%d)",
+          path, (long long)e->seq - 1, (int)t->off_spacing, (int)ticks, (int)t->off_spacing);
+      return -1;
+    }
+    const int32_t spacing = e->step_id - t->prev_step_id;
+    t->off_spacing = spacing != ticks && e->terminal == 0 && spacing > 0 ? spacing : 0;
+  } else {
+    t->off_spacing = 0;
+  }
+  t->prev_step_id = e->step_id;
   if (e->evaluating && !t->opt.include_eval) {
     t->stats.skipped_eval++;
     return 0;

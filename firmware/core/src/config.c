@@ -330,8 +330,9 @@ static const key_desc_t k_keys[] = {
   {NULL, "explore_sigma_radps", KIND_DOUBLE, OFF(explore_sigma_radps), 0, 4, false, false, NULL, "0.1",
    "phase two: standard deviation of the offset an exploration segment adds to the greedy action [rad/s]"},
   {NULL, "explore_probability", KIND_DOUBLE, OFF(explore_probability), 0, 1, false, false, NULL, "0.2",
-   "probability per training step (outside a segment) that an exploration segment starts; phase one's "
-   "example dither (example_noise_radps) starts its segments the same way"},
+   "probability per training decision (outside a segment; a decision is decision_ticks steps) that an "
+   "exploration segment starts; phase one's example dither (example_noise_radps) starts its segments the "
+   "same way"},
   {NULL, "explore_hold_s", KIND_DOUBLE, OFF(explore_hold_s), 0, 100, false, false, NULL, "0",
    "duration of an exploration segment, and of a phase-one dither segment: one offset held this long (0 = "
    "one step)"},
@@ -345,6 +346,11 @@ static const key_desc_t k_keys[] = {
   {NULL, "state_rotation", KIND_BOOL, OFF(state_rotation), 0, 0, false, false, NULL, "true",
    "the learner's state ends with the rotation the base executes, the last command sent [rad/s]: the "
    "acceleration limit ties the next rotation to it (false = the paper's task features alone)"},
+  {NULL, "decision_ticks", KIND_INT, OFF(decision_ticks), 1, 10, false, false, NULL, "1",
+   "the driver and the learned policy decide every this many control ticks and the rotation holds in "
+   "between; the learner learns each decision as one step (discount gamma^N): a decision moves the robot "
+   "far enough for the values to rank it (1 = every tick, the paper's; 2 learned shorter paths from a "
+   "sloppy human's examples: docs/LEARNING.md). Exploration and dither segments count decisions"},
 
   {"Output", "lcm_url", KIND_STRING, OFF(lcm_url), 0, 0, false, false, NULL, "",
    "LCM provider (\"\" = LCM's default or $LCM_DEFAULT_URL; \"none\" = no LCM)"},

@@ -176,7 +176,9 @@ void fw_config_learn_settings(const fw_config_t* cfg, learn_config_t* c) {
   c->tabular_actions = (uint32_t)cfg->tabular_actions;
   c->explore_sigma = cfg->explore_sigma_radps;
   c->explore_probability = cfg->explore_probability;
-  const int64_t hold = (int64_t)floor(cfg->explore_hold_s / dt_s + 0.5);
+  c->decision_ticks = cfg->decision_ticks > 1 ? (uint32_t)cfg->decision_ticks : 1U;
+  // A segment is held for explore_hold_s: that many decisions of decision_ticks ticks each.
+  const int64_t hold = (int64_t)floor(cfg->explore_hold_s / (dt_s * (double)c->decision_ticks) + 0.5);
   c->explore_hold_steps = hold > 1 ? (uint32_t)hold : 1U;
   c->example_dither_sigma = cfg->example_noise_radps;
   c->advisor = cfg->advisor;

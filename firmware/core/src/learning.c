@@ -350,8 +350,8 @@ static int load_checkpoint_file(fw_loop_t* L, char* err, size_t err_cap) {
   if (hs != HEDGER_OK) {
     free(payload);
     snprintf(err, err_cap,
-             "checkpoint %s: the learned state was refused (%s; hedger_capacity, the task or the action limits may "
-             "differ from when it was written); to start fresh, move the file away (e.g. mv '%s' '%s.bad')",
+             "checkpoint %s: the learned state was refused (%s; hedger_capacity, gamma, decision_ticks, the task or "
+             "the action limits may differ from when it was written); to start fresh, move the file away (e.g. mv '%s' '%s.bad')",
              path, hedger_status_str(hs), path, path);
     return -1;
   }

@@ -7,6 +7,11 @@
 // learned after the command went out. Its q' is the greedy value at the new state, which the
 // learned policy's action choice computes anyway: the search runs once.
 //
+// Why decisions every decision_ticks control ticks: one tick's rotation changes the return by a
+// fraction of a step, less than the error of the local values (docs/LEARNING.md): a decision
+// held for N ticks moves the robot N times as far, and its transition is learned as one step of
+// discount gamma^N with the window's discounted rewards, so the values rank what a decision does.
+//
 // Why slices between runs: the replay of a finished run costs replay_passes × its length updates,
 // tens of milliseconds at 20k points on a PC and seconds on a small onboard computer, and the
 // actor's learning a few hundred million instructions. The caller does one slice per control
@@ -60,6 +65,12 @@ struct learn {
   bool policy_fault;           // the last learn_act's learned policy gave a non-finite action
   uint64_t policy_faults;
   int64_t steps;
+  // The decision under way (cfg.decision_ticks > 1): its action, held until the next decision,
+  // and the discounted rewards of its ticks so far.
+  double held_action;
+  int8_t held_source;
+  double window_reward;
+  double window_discount;      // gamma^(ticks of the window so far)
 };
 
 _Static_assert(LEARN_SOURCE_ADVISOR + 1 == LEARN_N_SOURCES, "the sources are counted in steps_by_source");
@@ -104,6 +115,7 @@ learn_config_t learn_config_default(void) {
   c.explore_sigma = 0.3;
   c.explore_probability = 0.1;
   c.explore_hold_steps = 1U;
+  c.decision_ticks = 1U;
   c.example_dither_sigma = 0.3;
   c.advisor = true;
   c.replay_updates_per_slice = 200U;
@@ -116,8 +128,20 @@ uint32_t learn_state_dim(const learn_task_t* task, const learn_config_t* cfg) {
   return task->state_dim + (cfg->state_last_action ? 1U : 0U);
 }
 
+// The discount of one control tick.
 static double discount(const learn_task_t* task, const learn_config_t* cfg) {
   return cfg->gamma > 0.0 ? cfg->gamma : task->gamma;
+}
+
+static uint32_t decision_ticks(const learn_config_t* cfg) {
+  return cfg->decision_ticks > 1U ? cfg->decision_ticks : 1U;
+}
+
+// The discount of one decision (one learned transition): gamma^decision_ticks. Exactly gamma at 1.
+static double decision_discount(const learn_task_t* task, const learn_config_t* cfg) {
+  const double g = discount(task, cfg);
+  const uint32_t n = decision_ticks(cfg);
+  return n == 1U ? g : pow(g, (double)n);
 }
 
 void learn_learner_config(const learn_task_t* task, const learn_config_t* cfg, learn_learner_config_t* out) {
@@ -134,7 +158,7 @@ void learn_learner_config(const learn_task_t* task, const learn_config_t* cfg, l
   hc->k_max = cfg->k_max;
   hc->bandwidth = cfg->bandwidth;
   hc->alpha = cfg->alpha;
-  hc->gamma = discount(task, cfg);
+  hc->gamma = decision_discount(task, cfg);
   if (cfg->input_scale_n > 0U) {
     for (uint32_t i = 0; i < cfg->input_scale_n && i <= LEARN_MAX_STATE; ++i) {
       hc->input_scale[i] = cfg->input_scale[i];
@@ -213,7 +237,7 @@ void learn_actor_config(const learn_task_t* task, const learn_config_t* cfg, act
   out->action_min = task->action_min;
   out->action_max = task->action_max;
   out->action_scale = lc.hedger.input_scale[dim];
-  out->gamma = discount(task, cfg);
+  out->gamma = decision_discount(task, cfg);
 }
 
 static size_t align_storage(size_t n) {
@@ -339,6 +363,8 @@ void learn_begin_run(learn_t* a) {
   a->have_prev = false;
   a->run_return = 0.0;
   memset(a->steps_by_source, 0, sizeof a->steps_by_source);
+  a->window_reward = 0.0;
+  a->window_discount = 1.0;
 }
 
 bool learn_running(const learn_t* a) { return a->running; }
@@ -405,8 +431,19 @@ static void end_run(learn_t* a, bool goal, bool aborted, learn_run_end_t* end) {
   a->plan = learn_schedule_next(&a->sched);
 }
 
+// A tick where the policy decides: the run's first, then every cfg.decision_ticks-th.
+static bool deciding(const learn_t* a) { return a->actions_taken % (int32_t)decision_ticks(&a->cfg) == 0; }
+
 bool learn_transition(learn_t* a, const learn_outcome_t* o, learn_run_end_t* end) {
   pending_t* p = &a->pending;
+  a->window_reward += a->window_discount * o->reward;
+  a->window_discount *= discount(&a->task, &a->cfg);
+  if (!deciding(a) && !o->terminal && !o->end_run) {
+    // Inside a decision's window: its transition is learned when the window closes.
+    a->steps++;
+    a->run_return += o->reward;
+    return false;
+  }
   p->active = true;
   p->learning = learning(a);
   p->need_greedy = true;
@@ -423,7 +460,7 @@ bool learn_transition(learn_t* a, const learn_outcome_t* o, learn_run_end_t* end
   memcpy(e->s_next, a->s, sizeof e->s_next);
   e->a = a->prev_a;
   e->v = a->prev_v;
-  e->reward = o->reward;
+  e->reward = a->window_reward;  // o->reward at one tick per decision (the same bits)
   e->terminal = o->terminal;
   a->steps++;
   a->run_return += o->reward;
@@ -483,6 +520,14 @@ static bool actor_action(learn_t* a, double* act) {
 }
 
 void learn_act(learn_t* a, double advice, double joystick, double* action, int8_t* source) {
+  if (!deciding(a)) {
+    // Inside a decision's window: its action holds, whoever chose it (the driver's too, so that
+    // every learned transition is one held action).
+    a->source = a->held_source;
+    *action = a->held_action;
+    *source = a->held_source;
+    return;
+  }
   const bool eval = evaluating(a);
   const bool policy = learn_policy_acts(a);
   a->policy_fault = false;
@@ -534,16 +579,25 @@ void learn_act(learn_t* a, double advice, double joystick, double* action, int8_
   a->source = src;
   *action = act;
   *source = src;
+  a->held_action = clamp_action(a, act);  // within the action bounds, as a learned action must be
+  a->held_source = src;
 }
 
 void learn_executed(learn_t* a, double action, double translation) {
   if (!a->running) {
     return;
   }
-  memcpy(a->prev_s, a->s, sizeof a->prev_s);
-  a->prev_a = action;
-  a->prev_v = translation;
-  a->prev_source = a->source;
+  if (deciding(a)) {
+    // A decision's first tick: its transition starts here. With one tick per decision the action
+    // is the executed one (the caller's limits applied); over several, the decision (the ticks'
+    // executed actions differ while an acceleration limit ramps them).
+    memcpy(a->prev_s, a->s, sizeof a->prev_s);
+    a->prev_a = decision_ticks(&a->cfg) == 1U ? action : a->held_action;
+    a->prev_v = translation;
+    a->prev_source = a->source;
+    a->window_reward = 0.0;
+    a->window_discount = 1.0;
+  }
   a->have_prev = true;
   a->actions_taken++;
   if (a->prev_source >= 0 && a->prev_source < LEARN_N_SOURCES) {

@@ -85,6 +85,37 @@ def main():
         fwtest.note("claim 1: the offline learned state equals the controller's after phase one, bit for bit, "
                     "from the experience log and from the full log")
 
+        # Claim 1 with decisions held over two ticks (decision_ticks = 2): the log's experiences are
+        # the decisions; given the setting, the trainer learns them with the session's discount
+        # (gamma^2) and reaches the controller's state; without it, another state.
+        sim = fwtest.Sim(sim_exe, world, d, "decisions", seed=4)
+        online2 = os.path.join(d, "online-decisions.ckpt")
+        explog_d = os.path.join(d, "decisions-experiences.lcmlog")
+        rc, err, _ = fwtest.run_controller(controller, sim, d, "decisions",
+                                           dict(SESSION, phase_one_runs=10, phase_two_runs=0, decision_ticks=2,
+                                                checkpoint_file=online2, experience_log_file=explog_d), timeout=600)
+        if rc != 0:
+            fwtest.fail("decision_ticks = 2 session: exit %d\n%s" % (rc, err))
+        sim.close()
+        trained_d = [m for _, _, m in read_log(explog_d, {"B21R_EXPERIENCE"}) if not m.evaluating]
+        last_of_run = {m.run_id: m.step_id for m in trained_d}
+        if not trained_d or any(m.step_id % 2 != 1 and m.step_id != last_of_run[m.run_id] for m in trained_d):
+            fwtest.fail("decision_ticks = 2: every experience but a run's last must end at an odd step")
+        path = os.path.join(d, "decisions.ckpt")
+        train(trainer, ["--set", "decision_ticks=2", "--set", "phase_one_runs=10", "--quiet", "--out", path, explog_d])
+        if sections(path)[1] != sections(online2)[1]:
+            fwtest.fail("decision_ticks = 2: the trainer given the setting should reach the controller's state")
+        # A log of the other setting is refused, naming the setting it was recorded with.
+        for sets, log, want in (([], explog_d, "--set decision_ticks=2"),
+                                (["--set", "decision_ticks=2"], explog, "--set decision_ticks=1")):
+            _, err = train(trainer, [*sets, "--quiet", "--out", os.path.join(d, "refused.ckpt"), log], expect_rc=1)
+            if want not in err or log not in err or os.path.exists(os.path.join(d, "refused.ckpt")):
+                fwtest.fail("a log of another decision_ticks: expected a refusal naming %r and the log, no output; "
+                            "got:\n%s" % (want, err))
+        fwtest.note("claim 1 with decision_ticks = 2: %d decisions learned; the trainer given the setting reaches "
+                    "the controller's state, bit for bit; a log of the other setting is refused: %s" %
+                    (len(trained_d), err.strip().splitlines()[-1]))
+
         # Claim 2: phase two from the offline checkpoint.
         before_two = os.path.join(d, "before-phase-two.ckpt")
         explog2 = os.path.join(d, "phase2-experiences.lcmlog")

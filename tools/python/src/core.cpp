@@ -759,6 +759,7 @@ const Field<LC> kLearnFields[] = {
     B21R_F64(LC, explore_sigma),
     B21R_F64(LC, explore_probability),
     B21R_U32(LC, explore_hold_steps),
+    B21R_U32(LC, decision_ticks),
     B21R_F64(LC, example_dither_sigma),
     B21R_BOOL(LC, advisor),
     B21R_U32(LC, replay_updates_per_slice),

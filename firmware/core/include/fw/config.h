@@ -245,6 +245,7 @@ typedef struct fw_config {
   bool advisor;                    ///< phase two: example policy acts where the learned policy knows nothing
   double example_noise_radps;      ///< phase one, example driver: std-dev of a dither segment's offset
   bool state_rotation;             ///< the state ends with the rotation the base executes [rad/s] (default)
+  int32_t decision_ticks;          ///< the driver and the policy decide every this many ticks [1, 10]
 
   // Output.
   char lcm_url[FW_CONFIG_STR_MAX]; ///< LCM provider URL; "" = LCM's default; "none" = off

@@ -149,8 +149,12 @@ typedef struct learn_config {
   uint32_t tabular_actions;
   // Acting.
   double explore_sigma;         ///< phase two: standard deviation of an exploration offset [action units]
-  double explore_probability;   ///< per training step: the chance an exploration (or dither) segment starts
-  uint32_t explore_hold_steps;  ///< a segment's length in steps (>= 1)
+  double explore_probability;   ///< per training decision: the chance an exploration (or dither) segment starts
+  uint32_t explore_hold_steps;  ///< a segment's length in decisions (>= 1)
+  /// The policy (and phase one's driver) decides every this many control ticks and the action
+  /// holds in between; each decision is learned as one transition with the discount gamma^N and
+  /// the window's rewards discounted per tick. 1 (0 counts as 1) = every tick, the paper's.
+  uint32_t decision_ticks;
   double example_dither_sigma;  ///< phase one, example driver: a dither segment's offset [action units]
   bool advisor;                 ///< phase two: the advice acts where the learned policy knows no action
                                 ///< (greedy: no known action at the state; actor: nothing learned yet)
@@ -238,7 +242,8 @@ typedef struct learn_run_end {
 } learn_run_end_t;
 
 /// The outcome of the last executed action: queues its transition (learned after the command,
-/// learn_after_command), and when the outcome ends the run, ends it (the schedule counts it; a
+/// learn_after_command; with cfg.decision_ticks > 1 the decision's, when its last tick's outcome
+/// is in or the run ends inside it), and when the outcome ends the run, ends it (the schedule counts it; a
 /// training run's replay waits for learn_after_command). Returns true when the run ended (*end
 /// filled). O(1) (plus O(eval_starts) when a block completes).
 bool learn_transition(learn_t* a, const learn_outcome_t* outcome, learn_run_end_t* end);
@@ -247,7 +252,8 @@ bool learn_transition(learn_t* a, const learn_outcome_t* outcome, learn_run_end_
 /// and is repeated. *end filled; false when no run was under way. O(1).
 bool learn_abort_run(learn_t* a, learn_run_end_t* end);
 
-/// The action of this step: phase one's driver (the advice with dither, or the joystick), or the
+/// The action of this step: inside a decision's window (cfg.decision_ticks > 1) the decision's,
+/// held (no search); else phase one's driver (the advice with dither, or the joystick), or the
 /// learned policy (the actor's action or the greedy action, with exploration in training; the
 /// advice where the learned policy knows nothing and cfg.advisor; 0 in evaluations). *source says
 /// which. Cost: where the learned policy acts, the actor's network (O(state_dim × hidden)) or one

@@ -85,11 +85,31 @@ void harness_drain(harness_t* h) {
         h->exp_state_dim = e->state_dim;
         if (h->cfg.state_rotation && e->state_dim >= 1) {
           const int last = e->state_dim - 1;
-          const double before = e->step_id > 0 && e->run_id == h->exp_prev_run_id ? h->exp_prev_action : 0.0;
+          // The rotation in force before the step: the previous step's at its end (0 at a run's start).
+          const bool same_run = h->exp_count > 1 && e->run_id == h->exp_prev_run_id;
+          const double before = same_run ? h->exp_prev_rotation : 0.0;
+          const double r0 = e->s[last], r1 = e->s_next[last], d = e->action_radps;
+          // After a held decision (decision_ticks > 1) the acceleration limit may still be ramping
+          // towards it: strictly between the rotation before and the decision.
+          const bool ramping = !same_bits(r1, d) && ((r0 < r1 && r1 < d) || (d < r1 && r1 < r0));
           h->rotation_checked++;
-          if (!same_bits(e->s_next[last], e->action_radps) || !same_bits(e->s[last], before)) {
+          if ((!same_bits(r1, d) && !ramping) || !same_bits(r0, before)) {
             h->rotation_mismatches++;
+          } else if (ramping) {
+            h->rotation_ramping++;
           }
+          h->exp_prev_rotation = r1;
+        }
+        {
+          const int32_t ticks = h->cfg.decision_ticks > 1 ? h->cfg.decision_ticks : 1;
+          const bool same_run = h->exp_count > 1 && e->run_id == h->exp_prev_run_id;
+          const int32_t expected = same_run ? h->exp_prev_step_id + ticks : ticks - 1;
+          if (e->step_id > expected || (same_run && e->step_id <= h->exp_prev_step_id) || e->step_id < 0) {
+            h->window_breaks++;
+          } else if (e->step_id < expected) {
+            h->window_early++;
+          }
+          h->exp_prev_step_id = e->step_id;
         }
         if (e->step_id == 0 && e->run_id >= 0 && e->run_id < 64 && e->state_dim >= 3) {
           memcpy(h->run_first_s[e->run_id], e->s, sizeof h->run_first_s[0]);

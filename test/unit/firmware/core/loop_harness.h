@@ -27,11 +27,20 @@ typedef struct harness {
   int64_t exp_gaps;
   int8_t exp_state_dim;     // of the newest experience
   // The executed rotation in the state (cfg.state_rotation): s_next's last entry must be the
-  // experience's action, s's last entry the run's previous action (0 at a run's first step).
+  // experience's action (or, after a decision held over several ticks, ramping towards it under the
+  // acceleration limit: rotation_ramping), s's last entry the previous experience's s_next's last
+  // (0 at a run's first step).
   int64_t rotation_checked;
   int64_t rotation_mismatches;
+  int64_t rotation_ramping;
+  double exp_prev_rotation;
   int32_t exp_prev_run_id;
   double exp_prev_action;
+  // Decisions (cfg.decision_ticks = N): a run's experiences end at its steps N-1, 2N-1, ... (the
+  // last may end a window early: the run ended in it).
+  int32_t exp_prev_step_id;
+  int64_t window_breaks;    // an experience at another step, or not after the previous one
+  int64_t window_early;     // an experience ending a window early
   int64_t goals;
   b21r_eval_t last_eval;
   int evals;

@@ -89,9 +89,55 @@ static void test_loop_state_rotation_is_the_executed_command(void** state) {
     assert_int_equal(g_h.exp_state_dim, on ? 4 : 3);
     assert_int_equal(g_h.rotation_checked, on ? g_h.exp_count : 0);
     assert_int_equal(g_h.rotation_mismatches, 0);
+    assert_int_equal(g_h.rotation_ramping, 0);
     assert_true(g_h.exp_count > 500);
     harness_close(&g_h);
   }
+}
+
+// decision_ticks: the driver and the policy decide every N ticks and the command holds in
+// between (the executed rotation at a decision's last tick, s_next's last entry, is the decision:
+// a fresh action at that tick would differ); each decision is one experience ending at the run's
+// steps N-1, 2N-1, ... (a run's last may end early), learned with the discount gamma^N. At N = 1
+// every step is one.
+static void test_loop_decision_ticks_hold_and_learn_each_decision(void** state) {
+  (void)state;
+  int64_t count[3] = {0, 0, 0};
+  for (int n = 1; n <= 2; ++n) {
+    fw_config_t c;
+    harness_config(&c);
+    c.phase_one_runs = 5;
+    c.phase_two_runs = 3;
+    c.eval_every_runs = 4;
+    c.hedger_replay_passes = 2;
+    c.decision_ticks = n;
+    assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
+    harness_run(&g_h, 100000);
+    fw_loop_stats_t st;
+    fw_loop_get_stats(g_h.loop, &st);
+    print_message("decision_ticks %d: %lld experiences, %lld off the decisions' steps, %lld ending a window "
+                  "early, %lld rotation mismatches, %lld ramping, %d runs\n", n, (long long)g_h.exp_count,
+                  (long long)g_h.window_breaks, (long long)g_h.window_early, (long long)g_h.rotation_mismatches,
+                  (long long)g_h.rotation_ramping, g_h.runs);
+    assert_true(st.done);
+    assert_int_equal(g_h.window_breaks, 0);
+    assert_true(n == 1 ? g_h.window_early == 0 : g_h.window_early <= g_h.runs);
+    assert_int_equal(g_h.rotation_mismatches, 0);
+    assert_true(n == 1 ? g_h.rotation_ramping == 0 : g_h.rotation_ramping < g_h.exp_count / 10);
+    assert_true(g_h.rotation_checked == g_h.exp_count);
+    // The learner's discount per experience.
+    hedger_config_t hc;
+    fw_config_hedger(&c, &hc);
+    const double g = hc.gamma;
+    fw_config_t c1 = c;
+    c1.decision_ticks = 1;
+    fw_config_hedger(&c1, &hc);
+    assert_true(n == 1 ? g == hc.gamma : g == pow(hc.gamma, 2.0));
+    count[n] = g_h.exp_count;
+    harness_close(&g_h);
+  }
+  // About half as many experiences for as many runs of about the same length.
+  assert_true(count[2] < count[1] * 6 / 10 && count[2] > count[1] * 4 / 10);
 }
 
 // Runs c's schedule on a fresh fake robot (fake seed 5; CANopen with its frames can_lag_us behind
@@ -399,6 +445,18 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
   assert_int_equal(st.store_fill, 0);
   harness_close(&g_h);
 
+  // Learned at one tick per decision, loaded with two (another discount per learned step):
+  // refused, the message naming the setting, and nothing loaded.
+  fw_config_t cn = c;
+  cn.decision_ticks = 2;
+  assert_int_equal(harness_open(&g_h, &cn, false, 3), 0);
+  assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), -1);
+  assert_non_null(strstr(err, c.checkpoint_file));
+  assert_non_null(strstr(err, "decision_ticks"));
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.store_fill, 0);
+  harness_close(&g_h);
+
   // A directory given as the checkpoint is named as such (not "truncated").
   fw_config_t cd = c;
   snprintf(cd.checkpoint_file, sizeof cd.checkpoint_file, "%s", dir);
@@ -654,6 +712,7 @@ int main(void) {
       cmocka_unit_test(test_loop_learns_corridor_reaches_goal_from_all_poses),
       cmocka_unit_test(test_loop_same_seed_bit_identical_experiences),
       cmocka_unit_test(test_loop_state_rotation_is_the_executed_command),
+      cmocka_unit_test(test_loop_decision_ticks_hold_and_learn_each_decision),
       cmocka_unit_test(test_loop_canopen_stream_independent_of_answer_lag),
       cmocka_unit_test(test_loop_tick_allocates_nothing),
       cmocka_unit_test(test_loop_checkpoint_restart_resumes),
