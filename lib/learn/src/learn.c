@@ -363,8 +363,6 @@ void learn_begin_run(learn_t* a) {
   a->have_prev = false;
   a->run_return = 0.0;
   memset(a->steps_by_source, 0, sizeof a->steps_by_source);
-  a->window_reward = 0.0;
-  a->window_discount = 1.0;
 }
 
 bool learn_running(const learn_t* a) { return a->running; }

@@ -277,11 +277,12 @@ class Learner:
       (overrides the scales: state, last action, action), ``tabular_bins``, ``tabular_actions``;
     - acting: ``explore_sigma`` (phase two's exploration offset, standard deviation in action
       units; the controller's explore_sigma_radps, 0.1 rad/s of +-1 rad/s: default 0.05 of the
-      action range), ``explore_probability`` (per training step, the chance a segment starts;
-      0.2), ``explore_hold_steps`` (a segment's length in decisions; the controller's
-      explore_hold_s / tick period: 1), ``decision_ticks`` (the policy and the example decide
-      every this many steps, each decision learned as one step of gamma^N; 1), ``example_noise`` (phase one's dither offset, action units; the
-      controller's example_noise_radps, 0.3 rad/s: default 0.15 of the action range),
+      action range), ``explore_probability`` (per training decision, the chance a segment
+      starts; 0.2), ``explore_hold_steps`` (a segment's length in decisions; the controller's
+      explore_hold_s / (tick period x decision_ticks): 1), ``decision_ticks`` (the policy and the
+      example decide every this many steps, each decision learned as one step of gamma^N; 1),
+      ``example_noise`` (phase one's dither offset, action units; the controller's
+      example_noise_radps, 0.3 rad/s: default 0.15 of the action range),
       ``advisor`` (True: in phase two's training runs the example's action where the learner
       knows none);
     - ``learn_updates_per_tick``: backward-replay updates per slice between runs (the results do

@@ -83,10 +83,10 @@ void harness_drain(harness_t* h) {
         h->exp_count++;
         const b21r_experience_t* e = &m->u.experience;
         h->exp_state_dim = e->state_dim;
+        const bool same_run = h->exp_count > 1 && e->run_id == h->exp_prev_run_id;
         if (h->cfg.state_rotation && e->state_dim >= 1) {
           const int last = e->state_dim - 1;
           // The rotation in force before the step: the previous step's at its end (0 at a run's start).
-          const bool same_run = h->exp_count > 1 && e->run_id == h->exp_prev_run_id;
           const double before = same_run ? h->exp_prev_rotation : 0.0;
           const double r0 = e->s[last], r1 = e->s_next[last], d = e->action_radps;
           // After a held decision (decision_ticks > 1) the acceleration limit may still be ramping
@@ -102,7 +102,6 @@ void harness_drain(harness_t* h) {
         }
         {
           const int32_t ticks = h->cfg.decision_ticks > 1 ? h->cfg.decision_ticks : 1;
-          const bool same_run = h->exp_count > 1 && e->run_id == h->exp_prev_run_id;
           const int32_t expected = same_run ? h->exp_prev_step_id + ticks : ticks - 1;
           if (e->step_id > expected || (same_run && e->step_id <= h->exp_prev_step_id) || e->step_id < 0) {
             h->window_breaks++;

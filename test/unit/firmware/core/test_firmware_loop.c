@@ -64,6 +64,16 @@ static void test_loop_learns_corridor_reaches_goal_from_all_poses(void** state) 
   harness_close(&g_h);
 }
 
+// The short schedule of the learner-state tests: 5 phase-one and 3 phase-two runs, an evaluation
+// block every 4 runs, 2 replay passes (the rest the harness's).
+static void short_session_config(fw_config_t* c) {
+  harness_config(c);
+  c->phase_one_runs = 5;
+  c->phase_two_runs = 3;
+  c->eval_every_runs = 4;
+  c->hedger_replay_passes = 2;
+}
+
 // state_rotation: the state ends with the rotation the base executes, i.e. the command in force
 // while the step ran (the previous action, after the acceleration limit), so every transition's
 // s_next ends with its own action and its s with the run's previous action (0 at the start: the
@@ -72,11 +82,7 @@ static void test_loop_state_rotation_is_the_executed_command(void** state) {
   (void)state;
   for (int on = 0; on <= 1; ++on) {
     fw_config_t c;
-    harness_config(&c);
-    c.phase_one_runs = 5;
-    c.phase_two_runs = 3;
-    c.eval_every_runs = 4;
-    c.hedger_replay_passes = 2;
+    short_session_config(&c);
     c.state_rotation = on != 0;
     assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
     harness_run(&g_h, 100000);
@@ -105,11 +111,7 @@ static void test_loop_decision_ticks_hold_and_learn_each_decision(void** state) 
   int64_t count[3] = {0, 0, 0};
   for (int n = 1; n <= 2; ++n) {
     fw_config_t c;
-    harness_config(&c);
-    c.phase_one_runs = 5;
-    c.phase_two_runs = 3;
-    c.eval_every_runs = 4;
-    c.hedger_replay_passes = 2;
+    short_session_config(&c);
     c.decision_ticks = n;
     assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
     harness_run(&g_h, 100000);
