@@ -101,16 +101,20 @@ static void take_experience(session_t* S, const b21r_experience_t* e) {
     S->have_current = true;
   }
   run_rec_t* r = &S->runs[S->n_runs - 1];
+  // Steps are control ticks, the same count as the reference learners' environment steps: an
+  // experience covers the ticks since the run's previous one (one tick, or with decision_ticks = N
+  // a decision's N ticks, fewer where the run ends inside a decision).
+  const int64_t ticks = (int64_t)e->step_id + 1 - r->steps > 0 ? (int64_t)e->step_id + 1 - r->steps : 0;
   r->steps = e->step_id + 1;
   r->ret += e->reward;
   r->last_terminal = e->terminal != 0;
   const int src = e->source >= 0 && e->source < N_SOURCES ? e->source : 0;
-  r->sources[src]++;
+  r->sources[src] += ticks;
   if (r->eval) {
-    S->eval_steps++;
+    S->eval_steps += ticks;
   } else {
-    S->training_steps++;
-    S->training_steps_by_phase_source[e->phase == 2 ? 1 : 0][src]++;
+    S->training_steps += ticks;
+    S->training_steps_by_phase_source[e->phase == 2 ? 1 : 0][src] += ticks;
     if (e->phase == 1) {
       // The phase-one data: identical across learner variants for the same seed (the learner does
       // not act in phase one), which the report checks to call a comparison "same data".

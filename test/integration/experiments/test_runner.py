@@ -17,7 +17,9 @@
   example@0.5; more training steps than at 2,2 from the same starts); the task's own range 0.5,2
   changes nothing (the draw is rescaled, so the same runs bit for bit); at 1,2 the plain example
   drives as example@1.5, in the obstacle task at 0.8,0.8 as example@0.8; a reversed range is
-  refused, also as one variant of experiment.vary, before anything runs.
+  refused, also as one variant of experiment.vary, before anything runs;
+- steps are control ticks with decisions held over two ticks too: the training and evaluation
+  totals, each block's training steps and the steps by source add up the runs' steps.
 usage: test_runner.py B21R_EXPERIMENT CONFIG_DIR"""
 import json
 import os
@@ -181,6 +183,36 @@ def main():
                 fail("a reversed example_gain_range (%s) was not refused (%d): %s" % (args[1], p.returncode, p.stderr))
         if not 70 <= steps[15] - steps[10] <= 100:
             fail("the 15 m corridor should take about 83 more steps than the 10 m one")
+
+        # Steps are control ticks at any decision spacing: with decision_ticks = 2 one experience
+        # covers two ticks, and the totals, each block's training steps and the steps by source
+        # still add up the runs' own steps (the reference learners' table compares them with
+        # environment steps).
+        for ticks in (1, 2):
+            out = os.path.join(d, "ticks%d.json" % ticks)
+            p = run(exe, "--config", os.path.join(configs, "fig4_corridor_examples.conf"), "--seed", "1", "--out", out,
+                    "--set", "decision_ticks=%d" % ticks, "--set", "experiment.references=optimal",
+                    "--set", "phase_one_runs=3", "--set", "phase_two_runs=2", "--set", "eval_starts=2",
+                    "--set", "eval_every_runs=2")
+            if p.returncode != 0:
+                fail("decision_ticks = %d: %s" % (ticks, p.stderr))
+            with open(out) as f:
+                L = json.load(f)["learning"]
+            train = sorted((x for x in L["runs"] if x["kind"] == "train"), key=lambda x: x["training_index"])
+            driven = sum(x["steps"] for x in train)
+            evals = sum(x["steps"] for x in L["runs"] if x["kind"] == "eval")
+            by_source = sum(sum(L["totals"][k].values()) for k in ("phase_one_steps_by_source",
+                                                                   "phase_two_steps_by_source"))
+            if (L["totals"]["training_steps"], by_source, L["totals"]["eval_steps"]) != (driven, driven, evals):
+                fail("decision_ticks = %d: training steps %d, by source %d, evaluation steps %d; the runs drove %d "
+                     "and %d" % (ticks, L["totals"]["training_steps"], by_source, L["totals"]["eval_steps"],
+                                 driven, evals))
+            for b in L["blocks"]:
+                if b["training_steps"] != sum(x["steps"] for x in train[: b["training_runs"]]):
+                    fail("decision_ticks = %d: the block after %d runs counts %d training steps, its runs drove %d" % (
+                        ticks, b["training_runs"], b["training_steps"],
+                        sum(x["steps"] for x in train[: b["training_runs"]])))
+            print("decision_ticks %d: %d training steps, %d evaluation steps, as the runs drove" % (ticks, driven, evals))
     print("PASS")
     return 0
 
