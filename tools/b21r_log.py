@@ -109,12 +109,36 @@ def missing_count(gaps):
     return sum(max(0, got - want) for want, got in gaps)
 
 
+def decision_spacing(experiences):
+    """The ticks between a run's experiences (the controller's decision_ticks: one experience per
+    decision, at its last tick): the most common step_id difference between consecutive
+    experiences of a run, its last one left out (a run may end inside a decision); the smallest of
+    equally common ones (a lost experience makes a larger one); 1 when no run has three
+    experiences."""
+    steps = {}
+    segment = 0
+    prev = None
+    for e in experiences:
+        if prev is not None and e.seq == 0 and prev.seq > 0:
+            segment += 1  # a controller restart: run ids may repeat
+        steps.setdefault((segment, e.run_id), []).append(e.step_id)
+        prev = e
+    counts = {}
+    for ids in steps.values():
+        for a, b in zip(ids[:-2], ids[1:-1]):
+            if b > a:
+                counts[b - a] = counts.get(b - a, 0) + 1
+    return max(sorted(counts), key=lambda d: counts[d]) if counts else 1
+
+
 def runs_from_experiences(experiences):
     """One dict per run, in order of first appearance: run_id, phase, evaluating, steps (actions
     taken: the last step_id seen + 1), received (experiences present), goal, terminal, return,
-    sources (experiences per source), and complete: False when experiences of the run are
-    missing (a hole in its step_ids, or a sequence gap right after it while it had not ended,
-    so that its last steps may be lost); the numbers of an incomplete run are lower bounds."""
+    sources (steps per source: each experience counts the ticks since the run's previous one, at
+    most the log's decision_spacing), and complete: False when experiences of the run are missing
+    (a hole in its step_ids, or a sequence gap right after it while it had not ended, so that its
+    last steps may be lost); the numbers of an incomplete run are lower bounds."""
+    spacing = decision_spacing(experiences)
     runs = []
     by_id = {}
     prev = None
@@ -129,16 +153,17 @@ def runs_from_experiences(experiences):
             if runs and prev is not None and e.seq != prev.seq + 1 and not runs[-1]["terminal"]:
                 runs[-1]["complete"] = False  # the lost experiences may have been its end
             runs.append(r)
+        ticks = min(max(e.step_id + 1 - r["steps"], 0), spacing)
         r["steps"] = max(r["steps"], e.step_id + 1)
         r["received"] += 1
         r["return"] += e.reward
-        r["sources"][e.source] = r["sources"].get(e.source, 0) + 1
+        r["sources"][e.source] = r["sources"].get(e.source, 0) + ticks
         if e.terminal:
             r["terminal"] = True
             r["goal"] = e.reward > 0.0
         prev = e
     for r in runs:
-        if r["received"] != r["steps"]:
+        if r["received"] != -(-r["steps"] // spacing):  # one experience per decision, the last one maybe short
             r["complete"] = False
     return runs
 

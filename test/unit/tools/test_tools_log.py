@@ -2,7 +2,8 @@
 # SPDX-License-Identifier: MIT
 """tools.log: b21r_log reads what the controller and lcm-logger write, finds every kind of loss
 in an experience stream (a hole inside a run, a lost run end, whole runs lost), does not take a
-controller restart for a gap, and its --runs output warns before any per-run number when the
+controller restart for a gap, counts decisions held over several ticks (decision_ticks) as
+complete runs with their steps, and its --runs output warns before any per-run number when the
 log has gaps, with the runs it touches marked."""
 import os
 import subprocess
@@ -25,14 +26,16 @@ def exp(seq, run_id, step_id, terminal=False, reward=0.0, evaluating=False):
     return e
 
 
-def session(lengths, first_seq=0, first_run=0):
-    """Experiences of consecutive runs with the given step counts, each ending at the goal."""
+def session(lengths, first_seq=0, first_run=0, ticks=1):
+    """Experiences of consecutive runs with the given step counts, each ending at the goal; with
+    ticks > 1 one per decision of that many ticks (at its last tick, and at the run's last)."""
     out = []
     seq = first_seq
     for i, n in enumerate(lengths):
         for k in range(n):
-            out.append(exp(seq, first_run + i, k, terminal=k == n - 1, reward=10.0 if k == n - 1 else 0.0))
-            seq += 1
+            if (k + 1) % ticks == 0 or k == n - 1:
+                out.append(exp(seq, first_run + i, k, terminal=k == n - 1, reward=10.0 if k == n - 1 else 0.0))
+                seq += 1
     return out
 
 
@@ -78,6 +81,22 @@ class Runs(unittest.TestCase):
         runs = b21r_log.runs_from_experiences(s)
         self.assertEqual([r["run_id"] for r in runs], [0, 2])
         self.assertTrue(runs[0]["complete"])  # it ended at the goal: nothing of it was lost
+
+    def test_decisions_held_over_ticks(self):
+        # decision_ticks = 3: one experience per decision; runs ending inside a decision included.
+        s = session([7, 9, 2], ticks=3)
+        self.assertEqual(b21r_log.decision_spacing(s), 3)
+        runs = b21r_log.runs_from_experiences(s)
+        self.assertEqual([r["steps"] for r in runs], [7, 9, 2])
+        self.assertEqual([r["received"] for r in runs], [3, 3, 1])
+        self.assertTrue(all(r["complete"] and r["goal"] for r in runs))
+        self.assertEqual([r["sources"] for r in runs], [{0: 7}, {0: 9}, {0: 2}])  # steps, not experiences
+        del s[4]  # run 1's second decision
+        runs = b21r_log.runs_from_experiences(s)
+        self.assertEqual((runs[1]["steps"], runs[1]["received"], runs[1]["sources"]), (9, 2, {0: 6}))
+        self.assertFalse(runs[1]["complete"])
+        self.assertTrue(runs[0]["complete"] and runs[2]["complete"])
+        self.assertEqual(b21r_log.decision_spacing(session([5, 3])), 1)
 
     def test_restart_is_not_a_gap(self):
         s = session([5, 3]) + session([4, 2], first_seq=0, first_run=2)
