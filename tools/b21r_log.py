@@ -104,6 +104,12 @@ def experience_gaps(experiences):
     return gaps
 
 
+def restarted(prev, e):
+    """True when experience e starts a new controller process after prev (its seq is 0 again):
+    run ids and sequence numbers begin anew there."""
+    return prev is not None and e.seq == 0 and prev.seq > 0
+
+
 def missing_count(gaps):
     """Experiences lost in the given gaps (reordered or repeated ones count 0)."""
     return sum(max(0, got - want) for want, got in gaps)
@@ -119,7 +125,7 @@ def decision_spacing(experiences):
     segment = 0
     prev = None
     for e in experiences:
-        if prev is not None and e.seq == 0 and prev.seq > 0:
+        if restarted(prev, e):
             segment += 1  # a controller restart: run ids may repeat
         steps.setdefault((segment, e.run_id), []).append(e.step_id)
         prev = e
@@ -143,7 +149,7 @@ def runs_from_experiences(experiences):
     by_id = {}
     prev = None
     for e in experiences:
-        if prev is not None and e.seq == 0 and prev.seq > 0:
+        if restarted(prev, e):
             by_id = {}  # a controller restart: run ids may repeat
         r = by_id.get(e.run_id)
         if r is None:
@@ -182,7 +188,7 @@ def runs_from_records(records, experiences=()):
     segment = 0
     prev = None
     for e in experiences:
-        if prev is not None and e.seq == 0 and prev.seq > 0:
+        if restarted(prev, e):
             segment += 1
         # Experiences of a run lie in [first_seq, first_seq + experiences): count by seq range.
         present.setdefault(segment, []).append(e.seq)
@@ -227,7 +233,7 @@ def missing_runs(experiences):
     missing = []
     prev = None
     for e in experiences:
-        if prev is not None and not (e.seq == 0 and prev.seq > 0) and e.run_id > prev.run_id + 1:
+        if prev is not None and not restarted(prev, e) and e.run_id > prev.run_id + 1:
             missing.extend(range(prev.run_id + 1, e.run_id))
         prev = e
     return missing

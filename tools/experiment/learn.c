@@ -104,7 +104,8 @@ static void take_experience(session_t* S, const b21r_experience_t* e) {
   // Steps are control ticks, the same count as the reference learners' environment steps: an
   // experience covers the ticks since the run's previous one (one tick, or with decision_ticks = N
   // a decision's N ticks, fewer where the run ends inside a decision).
-  const int64_t ticks = (int64_t)e->step_id + 1 - r->steps > 0 ? (int64_t)e->step_id + 1 - r->steps : 0;
+  const int64_t since = (int64_t)e->step_id + 1 - r->steps;
+  const int64_t ticks = since > 0 ? since : 0;
   r->steps = e->step_id + 1;
   r->ret += e->reward;
   r->last_terminal = e->terminal != 0;
