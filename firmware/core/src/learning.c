@@ -91,6 +91,50 @@ void fw_learning_free(fw_loop_t* L) {
 // HEDGER's instance (NULL for the tabular learner, which keeps no checkpoints).
 static hedger_t* hedger_of(const fw_loop_t* L) { return learn_get_learner(L->agent)->hedger; }
 
+// A learned state refused for its config (hedger_load's CONFIG_MISMATCH): when the setting that
+// differs is one the user can give back, says which and its value, so that the file is kept and
+// the session goes on with it. Returns true with err filled; false when no such setting explains
+// it (the caller's general message then; a store larger than hedger_capacity never gets here:
+// fw_checkpoint_read refuses it first). The discount per learned transition is gamma^N for
+// decisions of N ticks, so a state learned with another decision_ticks is found by trying each.
+static bool explain_mismatch(const fw_loop_t* L, const char* path, const void* payload, size_t n, char* err,
+                             size_t err_cap) {
+  hedger_saved_t saved;
+  if (hedger_saved_config(payload, n, &saved) != HEDGER_OK) {
+    return false;
+  }
+  const hedger_config_t* now = hedger_get_config(hedger_of(L));
+  if (saved.state_dim != now->state_dim || memcmp(&saved.action_min, &now->action_min, sizeof(double)) != 0 ||
+      memcmp(&saved.action_max, &now->action_max, sizeof(double)) != 0) {
+    return false;
+  }
+  if (memcmp(&saved.gamma, &now->gamma, sizeof(double)) == 0) {
+    return false;
+  }
+  learn_task_t task;
+  fw_config_learn_task(&L->cfg, &L->ep, &task);
+  learn_config_t lc;
+  fw_config_learn_settings(&L->cfg, &lc);
+  for (int32_t ticks = 1; ticks <= FW_DECISION_TICKS_MAX; ++ticks) {
+    lc.decision_ticks = (uint32_t)ticks;
+    learn_learner_config_t other;
+    learn_learner_config(&task, &lc, &other);
+    if (memcmp(&other.hedger.gamma, &saved.gamma, sizeof(double)) == 0) {
+      snprintf(err, err_cap,
+               "checkpoint %s was learned with decision_ticks = %d (this configuration: %d); set decision_ticks = "
+               "%d to go on with it, or move the file away to start fresh (e.g. mv '%s' '%s.other')",
+               path, (int)ticks, (int)L->cfg.decision_ticks, (int)ticks, path, path);
+      return true;
+    }
+  }
+  snprintf(err, err_cap,
+           "checkpoint %s was learned with a discount of %.17g per learned step (this configuration: %.17g); "
+           "set gamma and decision_ticks as when it was written to go on with it, or move the file away to "
+           "start fresh (e.g. mv '%s' '%s.other')",
+           path, saved.gamma, now->gamma, path, path);
+  return true;
+}
+
 // The actor (NULL with the greedy policy).
 static actor_t* actor_of(const fw_loop_t* L) { return learn_get_actor(L->agent); }
 
@@ -347,6 +391,10 @@ static int load_checkpoint_file(fw_loop_t* L, char* err, size_t err_cap) {
   // On a refusal from here on the learner is not used: the caller stops (the controller exits).
   const size_t hedger_bytes = payload_size - (size_t)g.actor_bytes;
   const hedger_status_t hs = hedger_load(hedger_of(L), payload, hedger_bytes);
+  if (hs == HEDGER_ERR_CONFIG_MISMATCH && explain_mismatch(L, path, payload, hedger_bytes, err, err_cap)) {
+    free(payload);
+    return -1;
+  }
   if (hs != HEDGER_OK) {
     free(payload);
     snprintf(err, err_cap,

@@ -561,22 +561,53 @@ hedger_status_t hedger_save(const hedger_t* self, void* buf, size_t size, size_t
   return hedger_save_step(self, &c, 0xFFFFFFFFu, written);
 }
 
-hedger_status_t hedger_load(hedger_t* self, const void* buf, size_t size) HEDGER_NOEXCEPT {
-  if (!live(self) || buf == nullptr) return HEDGER_ERR_INVALID_ARG;
-  const uint8_t* p = static_cast<const uint8_t*>(buf);
-  // Magic first (on what is there), then version, then the declared length.
+namespace {
+
+// The checks of a saved buffer before its contents are read: magic first (on what is there), then
+// version, then the declared length, then the CRC-32. On success *version and *total are set.
+hedger_status_t check_saved(const uint8_t* p, size_t size, uint32_t* version, size_t* total) {
   const size_t nm = size < 4 ? size : 4;
   if (std::memcmp(p, kFileMagic, nm) != 0) return HEDGER_ERR_FORMAT;
   if (size < 8) return HEDGER_ERR_TRUNCATED;
-  const uint32_t version = get_u32(p + 4);
-  if (version != HEDGER_FORMAT_VERSION && version != 1u) return HEDGER_ERR_VERSION;
+  const uint32_t v = get_u32(p + 4);
+  if (v != HEDGER_FORMAT_VERSION && v != 1u) return HEDGER_ERR_VERSION;
   if (size < 16) return HEDGER_ERR_TRUNCATED;
-  const uint64_t total = get_u64(p + 8);
-  const size_t head = header_fixed(version);
-  if (total < head + 8u + 4u) return HEDGER_ERR_FORMAT;
-  if (total > size) return HEDGER_ERR_TRUNCATED;
-  const size_t n = static_cast<size_t>(total);
+  const uint64_t t = get_u64(p + 8);
+  if (t < header_fixed(v) + 8u + 4u) return HEDGER_ERR_FORMAT;
+  if (t > size) return HEDGER_ERR_TRUNCATED;
+  const size_t n = static_cast<size_t>(t);
   if (get_u32(p + n - 4) != crc32(p, n - 4)) return HEDGER_ERR_CHECKSUM;
+  *version = v;
+  *total = n;
+  return HEDGER_OK;
+}
+
+}  // namespace
+
+hedger_status_t hedger_saved_config(const void* buf, size_t size, hedger_saved_t* out) HEDGER_NOEXCEPT {
+  if (buf == nullptr || out == nullptr) return HEDGER_ERR_INVALID_ARG;
+  const uint8_t* p = static_cast<const uint8_t*>(buf);
+  uint32_t version = 0;
+  size_t n = 0;
+  const hedger_status_t st = check_saved(p, size, &version, &n);
+  if (st != HEDGER_OK) return st;
+  out->state_dim = get_u32(p + 16);
+  out->count = get_u32(p + 24);
+  out->action_min = get_f64(p + 32);
+  out->action_max = get_f64(p + 40);
+  out->gamma = get_f64(p + 48);
+  return HEDGER_OK;
+}
+
+hedger_status_t hedger_load(hedger_t* self, const void* buf, size_t size) HEDGER_NOEXCEPT {
+  if (!live(self) || buf == nullptr) return HEDGER_ERR_INVALID_ARG;
+  const uint8_t* p = static_cast<const uint8_t*>(buf);
+  uint32_t version = 0;
+  size_t n = 0;
+  const hedger_status_t checked = check_saved(p, size, &version, &n);
+  if (checked != HEDGER_OK) return checked;
+  const uint64_t total = n;
+  const size_t head = header_fixed(version);
   // Compatibility with this instance's config.
   const uint32_t sd = get_u32(p + 16);
   const uint32_t count = get_u32(p + 24);

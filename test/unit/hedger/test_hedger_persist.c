@@ -224,6 +224,20 @@ static void test_persist_config_mismatch_refused(void** state) {
     free(before);
     hedger_destroy(dst);
   }
+  // What the buffer was written for, read back without an instance (the caller's message on a
+  // CONFIG_MISMATCH names the setting from it); a corrupted byte is refused as hedger_load does.
+  hedger_saved_t saved;
+  assert_int_equal(hedger_saved_config(buf, n, &saved), HEDGER_OK);
+  assert_int_equal(saved.state_dim, c.state_dim);
+  assert_int_equal(saved.count, hedger_size(src));
+  assert_memory_equal(&saved.gamma, &c.gamma, sizeof(double));
+  assert_memory_equal(&saved.action_min, &c.action_min, sizeof(double));
+  assert_memory_equal(&saved.action_max, &c.action_max, sizeof(double));
+  assert_int_equal(hedger_saved_config(buf, n - 1, &saved), HEDGER_ERR_TRUNCATED);
+  buf[n / 2] ^= 0x10;
+  assert_int_equal(hedger_saved_config(buf, n, &saved), HEDGER_ERR_CHECKSUM);
+  buf[n / 2] ^= 0x10;
+  assert_int_equal(hedger_saved_config(NULL, n, &saved), HEDGER_ERR_INVALID_ARG);
   // Learning parameters may differ (alpha, k, bandwidth): the data stay meaningful.
   hedger_config_t tuned = c;
   tuned.alpha = 0.5;

@@ -634,6 +634,22 @@ hedger_status_t hedger_save_step(const hedger_t* self, hedger_save_cursor_t* cur
 /// a tick. Bytes after the declared length are ignored.
 hedger_status_t hedger_load(hedger_t* self, const void* buf, size_t size) HEDGER_NOEXCEPT;
 
+/// What a saved learned state was written for (hedger_saved_config()): the fields hedger_load()
+/// checks against the instance's config. Plain data.
+typedef struct hedger_saved {
+  uint32_t state_dim;  ///< state dimension
+  uint32_t count;      ///< stored points (cfg.capacity must be at least this)
+  double action_min;   ///< action bounds, as in hedger_config_t
+  double action_max;
+  double gamma;        ///< discount per learned transition
+} hedger_saved_t;
+
+/// Reads what buf (from hedger_save()) was written for, so that a caller refused with
+/// CONFIG_MISMATCH can say which setting differs. Checks as hedger_load() does up to the CRC-32
+/// (FORMAT, VERSION, TRUNCATED, CHECKSUM), then fills *out. No instance needed; O(size), no
+/// allocation.
+hedger_status_t hedger_saved_config(const void* buf, size_t size, hedger_saved_t* out) HEDGER_NOEXCEPT;
+
 /// A constant English description of a status ("ok", "invalid argument", ...). Never NULL.
 const char* hedger_status_str(hedger_status_t status) HEDGER_NOEXCEPT;
 
