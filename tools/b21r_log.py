@@ -139,7 +139,10 @@ def decision_spacing(experiences):
 
 def runs_from_experiences(experiences):
     """One dict per run, in order of first appearance: run_id, phase, evaluating, steps (actions
-    taken: the last step_id seen + 1), received (experiences present), goal, terminal, return,
+    taken: the last step_id seen + 1), received (experiences present), goal, terminal, return (the
+    experiences' rewards summed: with decisions over several ticks each is its ticks' rewards
+    discounted within the decision, so the run's own return only at one tick per decision; the
+    B21R_RUN records' is exact, runs_from_records),
     sources (steps per source: each experience counts the ticks since the run's previous one, at
     most the log's decision_spacing), and complete: False when experiences of the run are missing
     (a hole in its step_ids, or a sequence gap right after it while it had not ended, so that its

@@ -114,7 +114,8 @@ reference() {
 }
 
 say "reference: the optimal controller from the 10 evaluation poses"
-reference optimal optimal
+# The yardstick decides every tick, whatever decision_ticks the learner and its teachers use.
+reference optimal optimal --set decision_ticks=1
 say "reference: the example policy at its nominal gain (the middle of its training range)"
 reference example example
 # The examples' gains are drawn from [0.5, 2] per run: their best gain is the fair bar to beat.

@@ -34,7 +34,8 @@ typedef struct run_rec {
   int32_t training_index;  // training runs: 0, 1, ... (completed runs only)
   int32_t steps;
   int32_t outcome;
-  double ret;
+  double ret;              // the run's rewards summed, undiscounted (its B21R_RUN record's once it came)
+  bool recorded;           // the run's end record came: ret is the controller's total_reward
   bool last_terminal;
   int64_t sources[N_SOURCES];
   uint32_t store_fill;     // after the run (and its backward replay)
@@ -107,7 +108,11 @@ static void take_experience(session_t* S, const b21r_experience_t* e) {
   const int64_t since = (int64_t)e->step_id + 1 - r->steps;
   const int64_t ticks = since > 0 ? since : 0;
   r->steps = e->step_id + 1;
-  r->ret += e->reward;
+  if (!r->recorded) {
+    // Until the end record: with decisions over several ticks an experience's reward is its
+    // ticks' rewards discounted within the decision, so this sum is exact only at one tick each.
+    r->ret += e->reward;
+  }
   r->last_terminal = e->terminal != 0;
   const int src = e->source >= 0 && e->source < N_SOURCES ? e->source : 0;
   r->sources[src] += ticks;
@@ -131,6 +136,17 @@ static void take_experience(session_t* S, const b21r_experience_t* e) {
 }
 
 // After a tick: a run that ended gets its outcome from the loop's counters.
+// A run's end record (B21R_RUN): its undiscounted return, whatever the decisions' spacing.
+static void take_run_record(session_t* S, const b21r_run_t* m) {
+  for (size_t i = S->n_runs; i-- > 0;) {
+    if (S->runs[i].run_id == m->run_id) {
+      S->runs[i].ret = m->total_reward;
+      S->runs[i].recorded = true;
+      return;
+    }
+  }
+}
+
 static void take_run_end(session_t* S, const fw_loop_stats_t* before, const fw_loop_stats_t* after) {
   if (!S->have_current) {
     return;
@@ -261,6 +277,8 @@ static int run_session(const fw_config_t* cfg, const session_io_t* sio, session_
           b->b.successes = e->successes;
           b->store_fill = now.store_fill;
           b->training_steps = S->training_steps;
+        } else if (m->kind == FW_MSG_RUN) {
+          take_run_record(S, &m->u.run);
         } else if (m->kind == FW_MSG_TEXT && sio->verbose) {
           fprintf(stderr, "%s\n", m->u.text.line);
         }
@@ -470,6 +488,11 @@ int exp_run_learn(const exp_settings_t* s, const fw_config_t* cfg_in, const exp_
       fw_errfmt(err, err_cap, "%s", inner);
       rc = -1;
       break;
+    }
+    // The optimal controller is the yardstick of every variant: its law decides every tick,
+    // whatever decision_ticks the learner (and its teachers, the other references) run with.
+    if (strcmp(s->references[i], "optimal") == 0) {
+      rc_cfg.decision_ticks = 1;
     }
     const session_io_t ref_io = {.world = &world, .sim_seed = task->seed, .verbose = task->verbose};
     if (run_session(&rc_cfg, &ref_io, &refs[i], inner, sizeof inner) != 0 || refs[i].n_blocks != 1) {

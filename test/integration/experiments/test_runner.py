@@ -188,6 +188,7 @@ def main():
         # covers two ticks, and the totals, each block's training steps and the steps by source
         # still add up the runs' own steps (the reference learners' table compares them with
         # environment steps).
+        goal_returns, optimal = {}, {}
         for ticks in (1, 2):
             out = os.path.join(d, "ticks%d.json" % ticks)
             p = run(exe, "--config", os.path.join(configs, "fig4_corridor_examples.conf"), "--seed", "1", "--out", out,
@@ -212,7 +213,18 @@ def main():
                     fail("decision_ticks = %d: the block after %d runs counts %d training steps, its runs drove %d" % (
                         ticks, b["training_runs"], b["training_steps"],
                         sum(x["steps"] for x in train[: b["training_runs"]])))
-            print("decision_ticks %d: %d training steps, %d evaluation steps, as the runs drove" % (ticks, driven, evals))
+            # A run's return is its rewards summed undiscounted (the corridor pays only at the goal),
+            # not its decisions' rewards, which are discounted within each decision.
+            goal_returns[ticks] = sorted({x["return"] for x in L["runs"] if x["outcome"] == "goal"})
+            with open(out) as f:
+                optimal[ticks] = json.load(f)["references"]["optimal"]["steps"]
+            print("decision_ticks %d: %d training steps, %d evaluation steps, as the runs drove; returns of the runs "
+                  "that reached the goal %s" % (ticks, driven, evals, goal_returns[ticks]))
+        if len(goal_returns[1]) != 1 or goal_returns[2] != goal_returns[1]:
+            fail("a run that reached the goal returns the goal's reward at any decision spacing: %s" % goal_returns)
+        # The optimal controller, every variant's yardstick, decides every tick whatever the learner's setting.
+        if optimal[1] != optimal[2]:
+            fail("the optimal controller's evaluation moved with decision_ticks: %s against %s" % (optimal[2], optimal[1]))
     print("PASS")
     return 0
 
