@@ -43,6 +43,7 @@ LASER_Z_M = 0.355
 ROBOT_RADIUS_M = 0.26  # protocols.md C: the base skirt
 TRAJECTORY_EVERY = 10  # poses between two /world/trajectory messages (1 s at 10 Hz)
 TRAJECTORY_MAX = 2000  # poses kept of a run (the step limit is 1000)
+FIRST_DECISION_STEPS = 10  # a run's first decision ends before this step (decision_ticks is at most 10)
 
 TASK_CORRIDOR = b21r.experience_t.TASK_CORRIDOR
 TASK_OBSTACLES = b21r.experience_t.TASK_OBSTACLES
@@ -329,6 +330,7 @@ class Converter:
         self.trajectory = []
         self.poses_since = 0
         self.first_states = {}   # run_id -> (task, first state) of runs whose first pose may come later
+        self.first_exp_run = None  # the run whose first experience was seen last
         self.warned = set()      # reasons already given for a world not drawn
 
     # -- world --
@@ -376,7 +378,11 @@ class Converter:
             out.append(("/command", {"linear": {"x": msg.translation_mps, "y": 0.0, "z": 0.0},
                                      "angular": {"x": 0.0, "y": 0.0, "z": msg.action_radps},
                                      "run_id": msg.run_id, "step_id": msg.step_id}))
-            if msg.step_id == 0:
+            # A run's first experience starts from its first state: with decisions over N ticks it
+            # ends at step N - 1 (decision_ticks is at most 10), its s still the state at step 0.
+            first = msg.run_id != self.first_exp_run and msg.step_id < FIRST_DECISION_STEPS
+            if first:
+                self.first_exp_run = msg.run_id
                 state = (msg.task, list(msg.s[:msg.state_dim]))
                 if msg.run_id == self.run_id:
                     if self.world_odom is None:

@@ -63,6 +63,7 @@ class Run:
         self.phase = None
         self.evaluating = None
         self.first_state = None
+        self.seen_experience = False
         self.start_record = None  # the task-frame start of its B21R_RUN record, where the log has one
         self.task = None
         self.end = None       # "goal", "collision", "limit", "stopped", "shutdown" or None (unknown)
@@ -122,8 +123,11 @@ def load(path):
         else:
             if r.phase is None:
                 r.phase, r.evaluating, r.task = m.phase, bool(m.evaluating), m.task
-            if m.step_id == 0:
+            # The run's first experience starts from its first state: with decisions over N ticks
+            # it ends at step N - 1 (decision_ticks is at most 10), its s the state at step 0.
+            if not r.seen_experience and m.step_id < 10:
                 r.first_state = tuple(m.s[:m.state_dim])
+            r.seen_experience = True
             if m.terminal:
                 r.end = "goal" if m.reward > 0 else "collision"
             elif r.end is None:

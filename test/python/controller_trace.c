@@ -2,7 +2,7 @@
 // The reference side of the environment-equivalence test (test_env_equivalence.py): the
 // unmodified controller loop (fw_loop) against the ODE emulator linked in-process, in lockstep,
 // driven through its joystick input (B21R_TELEOP, deadman held) by a noisy state-feedback policy.
-// Writes every run as JSON: the start pose the controller asked the emulator for, and per step
+// The controller decides every tick (decision_ticks = 1). Writes every run as JSON: the start pose the controller asked the emulator for, and per step
 // the raw joystick command in force, the executed (clamped) action, s, r, s' and terminal as the
 // controller published them in its experiences. Runs after the first collision are not written:
 // a bump stops the controller (safety supervisor) for several periods, so the next runs start
@@ -126,6 +126,9 @@ int main(int argc, char** argv) {
   // Between runs the learner's backward replay keeps the robot standing for some periods (sliced
   // work); the environment's reset repeats only the zero-command periods of a run change.
   c.hedger_replay = false;
+  // A decision every tick: each experience is one control tick, the environment's step (the
+  // environment has no decisions; a Learner holds them over its steps).
+  c.decision_ticks = 1;
   strncpy(c.checkpoint_file, argv[7], sizeof c.checkpoint_file - 1);
   remove(argv[7]);
 

@@ -84,7 +84,7 @@ class EnvironmentEqualsController(unittest.TestCase):
         progress = b21r_learn.read_checkpoint_progress(meta)
         values = payload[:len(payload) - progress["actor_bytes"]]
         self.assertEqual(progress["policy"] == "actor", progress["actor_bytes"] > 0)
-        h = b21r_learn.Hedger(**b21r_learn.controller_learner_config(task))
+        h = b21r_learn.Hedger(**b21r_learn.controller_learner_config(task, {"decision_ticks": 1}))  # the trace's
         h.load(payload)
         self.assertEqual(len(h), trace["store_fill"])
         self.assertEqual(h.save(), values, "save() writes the controller's HEDGER bytes again")

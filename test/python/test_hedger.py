@@ -270,8 +270,11 @@ class BindingContract(unittest.TestCase):
         c3 = b21r_learn.controller_learner_config("corridor", {"state_rotation": False})
         self.assertEqual(c3["state_dim"], 3)
         self.assertEqual(c3["input_scale"][:4], [1.0, 0.5, 0.125, 0.25])
+        # gamma is the discount per learned decision: the task's 0.9 per tick over decision_ticks (2) ticks.
         o = b21r_learn.controller_learner_config("obstacles", {"hedger_capacity": 5000})
-        self.assertEqual((o["state_dim"], o["capacity"], o["gamma"], o["greedy_reach"]), (6, 5000, 0.9, 3.0))
+        self.assertEqual((o["state_dim"], o["capacity"], o["gamma"], o["greedy_reach"]), (6, 5000, 0.9 ** 2, 3.0))
+        o1 = b21r_learn.controller_learner_config("obstacles", {"decision_ticks": 1})
+        self.assertEqual(o1["gamma"], 0.9)
         self.assertEqual(b21r_learn.controller_learner_config("corridor", {"hedger_greedy_reach": 2})["greedy_reach"], 2.0)
         with self.assertRaises(ValueError):
             b21r_learn.controller_learner_config("corridor", {"hedger_capacity": -3})

@@ -110,6 +110,8 @@ class LearnerEqualsController(unittest.TestCase):
 
     def test_phase_one_from_the_controllers_log(self):
         conf, seed, overrides = CASES["corridor"]
+        # A log is replayed step by step: the controller's session decides every tick.
+        overrides = dict(overrides, decision_ticks=1)
         controller_session("corridor_log", conf, seed, overrides, log=True)
         log = read_experience_log(WORK / "corridor_log.lcmlog", task_state_dim=3, phase=1)
         self.assertEqual(len(set(log["run"])), overrides["phase_one_runs"])
@@ -119,6 +121,15 @@ class LearnerEqualsController(unittest.TestCase):
         self.assertEqual([r["steps"] for r in from_log.runs if r["from_log"]],
                          [r["steps"] for r in driven.runs if r["kind"] == "training"])
         self.assertEqual(from_log.save(), driven.save(), "the same learned state after phase one")
+        # A log of decisions held over two ticks is refused, naming the tool that learns it; so is
+        # decision_ticks > 1 with a log.
+        held = dict(CASES["corridor"][2], decision_ticks=2)
+        controller_session("corridor_log2", conf, seed, held, log=True)
+        log2 = read_experience_log(WORK / "corridor_log2.lcmlog", task_state_dim=3, phase=1)
+        with self.assertRaisesRegex(ValueError, "b21r-train --set decision_ticks=2"):
+            learner_session(conf, seed, dict(held, phase_two_runs=0, decision_ticks=1), transitions=log2)
+        with self.assertRaisesRegex(ValueError, "decision_ticks must be 1, not 2"):
+            learner_session(conf, seed, dict(held, phase_two_runs=0), transitions=log)
 
     def test_configuration_errors_name_the_key(self):
         with self.assertRaisesRegex(ValueError, "phase_one_runz"):

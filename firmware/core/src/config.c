@@ -346,12 +346,12 @@ static const key_desc_t k_keys[] = {
   {NULL, "state_rotation", KIND_BOOL, OFF(state_rotation), 0, 0, false, false, NULL, "true",
    "the learner's state ends with the rotation the base executes, the last command sent [rad/s]: the "
    "acceleration limit ties the next rotation to it (false = the paper's task features alone)"},
-  {NULL, "decision_ticks", KIND_INT, OFF(decision_ticks), 1, 10, false, false, NULL, "1",
+  {NULL, "decision_ticks", KIND_INT, OFF(decision_ticks), 1, FW_DECISION_TICKS_MAX, false, false, NULL, "2",
    "the driver and the learned policy decide every this many control ticks and the rotation holds in "
    "between; the learner learns each decision as one step (discount gamma^N): a decision moves the robot "
-   "far enough for the values to rank it (1 = every tick, the paper's; with the greedy policy 2 learned as "
-   "short or shorter paths on every task measured, Fig. 5's human corridor 5 % shorter: docs/LEARNING.md). "
-   "Exploration and dither segments count decisions"},
+   "far enough for the values to rank it (2: with the greedy policy as short or shorter paths than 1 on "
+   "every task measured, Fig. 5's human corridor 5 % shorter; 1 = every tick, the paper's: "
+   "docs/LEARNING.md). Exploration and dither segments count decisions"},
 
   {"Output", "lcm_url", KIND_STRING, OFF(lcm_url), 0, 0, false, false, NULL, "",
    "LCM provider (\"\" = LCM's default or $LCM_DEFAULT_URL; \"none\" = no LCM)"},

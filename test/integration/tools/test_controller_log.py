@@ -109,8 +109,10 @@ def main():
                     fwtest.fail("no B21R_SESSION from the controller")
                 sent["B21R_TELEOP"] += 1
             # PAUSE early in a run: it ends as a safety stop (operator pause), without a terminal state.
+            # From step 4 on at least one decision (decision_ticks = 2, the default) has its outcome,
+            # so the run has an experience; the aborted decision's is never observed.
             pump_until(lc, lambda: w.status is not None and w.status.mode == b21r.status_t.MODE_RUNNING
-                       and 2 <= w.status.step_id <= 8, 30, "an early step of a run", proc)
+                       and 4 <= w.status.step_id <= 8, 30, "an early step of a run", proc)
             n = len(w.runs)
             command(b21r.command_t.PAUSE)
             pump_until(lc, lambda: len(w.runs) > n, 30, "the end record of the paused run", proc)
@@ -122,7 +124,7 @@ def main():
             # A run that has not ended yet (a STATUS of the run whose record just came is stale).
             ended = w.runs[-1].run_id
             pump_until(lc, lambda: w.status is not None and w.status.mode == b21r.status_t.MODE_RUNNING
-                       and w.status.run_id > ended and w.status.step_id >= 2, 30, "a run under way", proc)
+                       and w.status.run_id > ended and w.status.step_id >= 4, 30, "a run under way", proc)
             command(b21r.command_t.SHUTDOWN)
             rc = proc.wait(60)
         finally:

@@ -68,6 +68,11 @@ def main():
         training = [e for e in exps if not e.evaluating]
         if not training or any(e.phase != 1 or e.source != experience_t.SOURCE_EXAMPLE for e in training):
             fwtest.fail("the session's training steps must all be phase-one example steps")
+        # The default decision_ticks = 2: the log's experiences are the decisions, each ending at
+        # an odd step (steps 0-1, 2-3, ...) but a run's last, which may end inside a decision.
+        last_of_run = {e.run_id: e.step_id for e in training}
+        if any(e.step_id % 2 != 1 and e.step_id != last_of_run[e.run_id] for e in training):
+            fwtest.fail("decision_ticks = 2 (the default): every experience but a run's last must end at an odd step")
         fwtest.note("phase one: %d experiences logged, %d of training runs" % (len(exps), len(training)))
 
         offline = os.path.join(d, "offline.ckpt")
@@ -85,36 +90,38 @@ def main():
         fwtest.note("claim 1: the offline learned state equals the controller's after phase one, bit for bit, "
                     "from the experience log and from the full log")
 
-        # Claim 1 with decisions held over two ticks (decision_ticks = 2): the log's experiences are
-        # the decisions; given the setting, the trainer learns them with the session's discount
-        # (gamma^2) and reaches the controller's state; without it, another state.
-        sim = fwtest.Sim(sim_exe, world, d, "decisions", seed=4)
-        online2 = os.path.join(d, "online-decisions.ckpt")
-        explog_d = os.path.join(d, "decisions-experiences.lcmlog")
-        rc, err, _ = fwtest.run_controller(controller, sim, d, "decisions",
-                                           dict(SESSION, phase_one_runs=10, phase_two_runs=0, decision_ticks=2,
-                                                checkpoint_file=online2, experience_log_file=explog_d), timeout=600)
+        # Claim 1 with a decision every tick (decision_ticks = 1, the paper's): given the setting,
+        # the trainer learns the log's experiences with the session's discount (gamma) and reaches
+        # the controller's state; a log of the other setting is refused.
+        sim = fwtest.Sim(sim_exe, world, d, "every-tick", seed=4)
+        online1 = os.path.join(d, "online-every-tick.ckpt")
+        explog_1 = os.path.join(d, "every-tick-experiences.lcmlog")
+        rc, err, _ = fwtest.run_controller(controller, sim, d, "every-tick",
+                                           dict(SESSION, phase_one_runs=10, phase_two_runs=0, decision_ticks=1,
+                                                checkpoint_file=online1, experience_log_file=explog_1), timeout=600)
         if rc != 0:
-            fwtest.fail("decision_ticks = 2 session: exit %d\n%s" % (rc, err))
+            fwtest.fail("decision_ticks = 1 session: exit %d\n%s" % (rc, err))
         sim.close()
-        trained_d = [m for _, _, m in read_log(explog_d, {"B21R_EXPERIENCE"}) if not m.evaluating]
-        last_of_run = {m.run_id: m.step_id for m in trained_d}
-        if not trained_d or any(m.step_id % 2 != 1 and m.step_id != last_of_run[m.run_id] for m in trained_d):
-            fwtest.fail("decision_ticks = 2: every experience but a run's last must end at an odd step")
-        path = os.path.join(d, "decisions.ckpt")
-        train(trainer, ["--set", "decision_ticks=2", "--set", "phase_one_runs=10", "--quiet", "--out", path, explog_d])
-        if sections(path)[1] != sections(online2)[1]:
-            fwtest.fail("decision_ticks = 2: the trainer given the setting should reach the controller's state")
+        trained_1 = [m for _, _, m in read_log(explog_1, {"B21R_EXPERIENCE"}) if not m.evaluating]
+        by_run = {}
+        for m in trained_1:
+            by_run.setdefault(m.run_id, []).append(m.step_id)
+        if not trained_1 or any(steps != list(range(len(steps))) for steps in by_run.values()):
+            fwtest.fail("decision_ticks = 1: a run's experiences must be its steps 0, 1, 2, ...")
+        path = os.path.join(d, "every-tick.ckpt")
+        train(trainer, ["--set", "decision_ticks=1", "--set", "phase_one_runs=10", "--quiet", "--out", path, explog_1])
+        if sections(path)[1] != sections(online1)[1]:
+            fwtest.fail("decision_ticks = 1: the trainer given the setting should reach the controller's state")
         # A log of the other setting is refused, naming the setting it was recorded with.
-        for sets, log, want in (([], explog_d, "--set decision_ticks=2"),
-                                (["--set", "decision_ticks=2"], explog, "--set decision_ticks=1")):
+        for sets, log, want in (([], explog_1, "--set decision_ticks=1"),
+                                (["--set", "decision_ticks=1"], explog, "--set decision_ticks=2")):
             _, err = train(trainer, [*sets, "--quiet", "--out", os.path.join(d, "refused.ckpt"), log], expect_rc=1)
             if want not in err or log not in err or os.path.exists(os.path.join(d, "refused.ckpt")):
                 fwtest.fail("a log of another decision_ticks: expected a refusal naming %r and the log, no output; "
                             "got:\n%s" % (want, err))
-        fwtest.note("claim 1 with decision_ticks = 2: %d decisions learned; the trainer given the setting reaches "
+        fwtest.note("claim 1 with decision_ticks = 1: %d steps learned; the trainer given the setting reaches "
                     "the controller's state, bit for bit; a log of the other setting is refused: %s" %
-                    (len(trained_d), err.strip().splitlines()[-1]))
+                    (len(trained_1), err.strip().splitlines()[-1]))
 
         # Claim 2: phase two from the offline checkpoint.
         before_two = os.path.join(d, "before-phase-two.ckpt")

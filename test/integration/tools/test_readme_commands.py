@@ -172,23 +172,29 @@ def run(cmd, repo, timeout=120):
 
 
 def write_session_log(path):
-    """A short corridor session: two runs of poses and experiences."""
+    """A short corridor session as the controller logs it with its default decision_ticks = 2: two
+    runs of 20 steps, a pose every step and an experience every decision (at its last step)."""
     log = lcm.EventLog(path, "w", overwrite=True)
     seq = 0
+    t = 0
     for run_id in range(2):
         for k in range(20):
             p = pose_t()
             p.run_id, p.step_id, p.x_m = run_id, k + 1, 0.3 * k
-            log.write_event(seq * 10, "B21R_POSE", p.encode())
+            log.write_event(t, "B21R_POSE", p.encode())
+            t += 10
+            if k % 2 == 0:
+                continue
+            d = k // 2  # the decision: steps 2d and 2d + 1
             e = experience_t()
             # The controller's learner state: features, then the executed rotation (state_rotation).
             e.seq, e.run_id, e.step_id, e.phase, e.task, e.state_dim = seq, run_id, k, 1, 0, 4
-            e.s = [9.0 - 0.3 * k, 0.5, 0.0, 0.01 * (k - 1) if k > 0 else 0.0] + [0.0] * 4
-            e.s_next = [8.7 - 0.3 * k, 0.5, 0.0, 0.01 * k] + [0.0] * 4
-            e.action_radps = 0.01 * k
+            e.s = [9.0 - 0.6 * d, 0.5, 0.0, 0.01 * (d - 1) if d > 0 else 0.0] + [0.0] * 4
+            e.s_next = [8.4 - 0.6 * d, 0.5, 0.0, 0.01 * d] + [0.0] * 4
+            e.action_radps = 0.01 * d
             e.terminal = k == 19
             e.reward = 10.0 if k == 19 else 0.0
-            log.write_event(seq * 10 + 5, "B21R_EXPERIENCE", e.encode())
+            log.write_event(t - 5, "B21R_EXPERIENCE", e.encode())
             seq += 1
     log.close()
 

@@ -175,6 +175,15 @@ def _log_runs(transitions):
         if last:
             runs.append((first, i + 1))
             first = i + 1
+    # The steps between a run's transitions where the log says (read_experience_log's ``step``):
+    # the most common difference, each run's last transition left out (it may end a decision early).
+    data["spacing"] = 1
+    if "step" in t:
+        step = np.asarray(t["step"]).reshape(n)
+        gaps = [int(step[i + 1] - step[i]) for a, b in runs for i in range(a, b - 2)]
+        if gaps:
+            values, counts = np.unique(gaps, return_counts=True)
+            data["spacing"] = int(values[np.argmax(counts)])
     return data, runs
 
 
@@ -228,7 +237,9 @@ class Learner:
       and optionally ``end`` (the run ended after this transition) and ``run`` (run ids); or
       :func:`read_experience_log` of a controller's log. Each of its runs is one phase-one
       training run (``phase_one_runs`` defaults to their number); the environment is not stepped
-      for them. A run starts with the last action 0 and ends at a terminal transition, at ``end``,
+      for them. Each transition is learned as one step, so ``decision_ticks`` is 1 with a log
+      (given otherwise, refused), and a controller log recorded with ``decision_ticks`` > 1 (its
+      ``step`` says so) is refused, naming b21r-train, which learns such logs. A run starts with the last action 0 and ends at a terminal transition, at ``end``,
       where ``run`` changes, or where the next ``s`` is not this ``s_next``.
     - ``seed``: the root of every random stream (exploration and dither, HEDGER's eviction
       generator: the controller's derivation fw_config_derive_seeds; the training resets' seeds).
@@ -280,7 +291,8 @@ class Learner:
       action range), ``explore_probability`` (per training decision, the chance a segment
       starts; 0.2), ``explore_hold_steps`` (a segment's length in decisions; the controller's
       explore_hold_s / (tick period x decision_ticks): 1), ``decision_ticks`` (the policy and the
-      example decide every this many steps, each decision learned as one step of gamma^N; 1),
+      example decide every this many steps, each decision learned as one step of gamma^N; on the
+      B21r environments the controller's 2, their step being its 0.1 s tick; elsewhere 1),
       ``example_noise`` (phase one's dither offset, action units; the controller's
       example_noise_radps, 0.3 rad/s: default 0.15 of the action range),
       ``advisor`` (True: in phase two's training runs the example's action where the learner
@@ -322,6 +334,10 @@ class Learner:
         self.step_limit = int(learn_task["step_limit"])
 
         config = controller_defaults()
+        if not self._b21r:
+            # The controller's decision_ticks is for its 0.1 s tick, which the B21r environments'
+            # step is; another environment's step is its own choice: a decision every step.
+            config["decision_ticks"] = 1
         _, explore_seed, learner_seed, _ = _core.controller_seeds(self.seed)
         config.update(explore_seed=explore_seed, learner_seed=learner_seed, eval_starts=len(self._eval_starts),
                       input_scale=[])
@@ -338,6 +354,19 @@ class Learner:
             field, convert = _SETTINGS[key]
             config[field] = convert(value)
         config.update(learn_config or {})
+        if self._log_runs:
+            # A log is replayed one step per transition, so its runs are learned with decisions of
+            # one step; a log of decisions held over N steps is b21r-train's (it learns each as one).
+            if "decision_ticks" not in settings and "decision_ticks" not in (learn_config or {}):
+                config["decision_ticks"] = 1
+            if config["decision_ticks"] > 1:
+                raise ValueError("transitions: a log is replayed one step per transition, so decision_ticks must be 1, "
+                                 "not %d: give decision_ticks=1 (a controller configuration's: settings={..., "
+                                 "\"decision_ticks\": 1})" % config["decision_ticks"])
+            if self._log["spacing"] > 1:
+                raise ValueError("transitions: the log's transitions are %d steps apart (recorded with decision_ticks = "
+                                 "%d: one per decision); the Learner replays steps. Train from such a log with "
+                                 "b21r-train --set decision_ticks=%d" % ((self._log["spacing"],) * 3))
         if config["eval_starts"] > len(self._eval_starts):
             raise ValueError("eval_starts: the schedule's blocks have %d starts, %d given"
                              % (config["eval_starts"], len(self._eval_starts)))

@@ -42,6 +42,8 @@ extern "C" {
 /// Distinct sources (config files, "--set", ...) whose names errors can cite; a key set from a
 /// further source is cited as "an earlier setting".
 #define FW_CONFIG_MAX_SOURCES 8U
+/// Longest decision a configuration can give (decision_ticks: 1 to this many control ticks).
+#define FW_DECISION_TICKS_MAX 10
 
 /// The declared task's name of an id (tasks_decl_t.id) as the task key takes it ("corridor",
 /// "obstacles", ...); "unknown" for an id no declaration has (a log or file written by something
@@ -245,7 +247,7 @@ typedef struct fw_config {
   bool advisor;                    ///< phase two: example policy acts where the learned policy knows nothing
   double example_noise_radps;      ///< phase one, example driver: std-dev of a dither segment's offset
   bool state_rotation;             ///< the state ends with the rotation the base executes [rad/s] (default)
-  int32_t decision_ticks;          ///< the driver and the policy decide every this many ticks [1, 10]
+  int32_t decision_ticks;          ///< the driver and the policy decide every this many ticks [1, FW_DECISION_TICKS_MAX]
 
   // Output.
   char lcm_url[FW_CONFIG_STR_MAX]; ///< LCM provider URL; "" = LCM's default; "none" = off

@@ -84,6 +84,7 @@ static void test_loop_state_rotation_is_the_executed_command(void** state) {
     fw_config_t c;
     short_session_config(&c);
     c.state_rotation = on != 0;
+    c.decision_ticks = 1;  // a fresh command every tick: no ramp towards a held decision (next test)
     assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
     harness_run(&g_h, 100000);
     fw_loop_stats_t st;
@@ -447,17 +448,32 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
   assert_int_equal(st.store_fill, 0);
   harness_close(&g_h);
 
-  // Learned at one tick per decision, loaded with two (another discount per learned step):
-  // refused, the message naming the setting, and nothing loaded.
+  // Learned with one decision_ticks, loaded with another (another discount per learned step):
+  // refused, the message naming the setting that goes on with it, nothing loaded, the file kept.
   fw_config_t cn = c;
-  cn.decision_ticks = 2;
+  cn.decision_ticks = c.decision_ticks == 1 ? 3 : 1;
   assert_int_equal(harness_open(&g_h, &cn, false, 3), 0);
   assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), -1);
   assert_non_null(strstr(err, c.checkpoint_file));
-  assert_non_null(strstr(err, "decision_ticks"));
+  char want[96];
+  snprintf(want, sizeof want, "learned with decision_ticks = %d (this configuration: %d); set decision_ticks = %d",
+           (int)c.decision_ticks, (int)cn.decision_ticks, (int)c.decision_ticks);
+  assert_non_null(strstr(err, want));
   fw_loop_get_stats(g_h.loop, &st);
   assert_int_equal(st.store_fill, 0);
   harness_close(&g_h);
+  // Another gamma that no decision_ticks gives: named as the discount, both settings to check.
+  fw_config_t cg = c;
+  cg.gamma = 0.95;
+  assert_int_equal(harness_open(&g_h, &cg, false, 3), 0);
+  assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), -1);
+  assert_non_null(strstr(err, "set gamma and decision_ticks as when it was written"));
+  harness_close(&g_h);
+  {
+    size_t ms2 = 0, ps2 = 0;
+    assert_int_equal(fw_checkpoint_peek(c.checkpoint_file, &ms2, &ps2, err, sizeof err), 1);
+    assert_int_equal(ps2, ps);  // every refusal kept the file as it was
+  }
 
   // A directory given as the checkpoint is named as such (not "truncated").
   fw_config_t cd = c;

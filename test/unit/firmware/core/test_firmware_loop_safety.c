@@ -523,7 +523,9 @@ static void test_loop_config_and_run_records(void** state) {
     assert_int_equal(r->kind, B21R_RUN_T_KIND_TRAINING);
     assert_int_equal(r->training_index, k);
     assert_int_equal(r->first_seq, next_first);
-    assert_int_equal(r->experiences, r->steps);
+    // One experience per decision (decision_ticks steps; a run's last may end early).
+    const int32_t ticks = g_h.cfg.decision_ticks > 1 ? g_h.cfg.decision_ticks : 1;
+    assert_int_equal(r->experiences, (r->steps + ticks - 1) / ticks);
     assert_int_equal(g_h.run_exp_next_seq[k], r->first_seq + r->experiences);  // after its last experience
     assert_true(fabs(r->total_reward) < 1e-12);  // the corridor pays only at the goal
     next_first = r->first_seq + r->experiences;
