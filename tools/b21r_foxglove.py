@@ -34,6 +34,7 @@ import sys
 from foxglove import messages as fm
 
 import b21r
+from b21r_log import FIRST_DECISION_STEPS
 from b21r_task_world import declared_world, parse_task_params, task_name
 from b21r_trajectories import CORRIDOR, corridor_pose, read_world
 
@@ -43,7 +44,6 @@ LASER_Z_M = 0.355
 ROBOT_RADIUS_M = 0.26  # protocols.md C: the base skirt
 TRAJECTORY_EVERY = 10  # poses between two /world/trajectory messages (1 s at 10 Hz)
 TRAJECTORY_MAX = 2000  # poses kept of a run (the step limit is 1000)
-FIRST_DECISION_STEPS = 10  # a run's first decision ends before this step (decision_ticks is at most 10)
 
 TASK_CORRIDOR = b21r.experience_t.TASK_CORRIDOR
 TASK_OBSTACLES = b21r.experience_t.TASK_OBSTACLES
@@ -379,7 +379,7 @@ class Converter:
                                      "angular": {"x": 0.0, "y": 0.0, "z": msg.action_radps},
                                      "run_id": msg.run_id, "step_id": msg.step_id}))
             # A run's first experience starts from its first state: with decisions over N ticks it
-            # ends at step N - 1 (decision_ticks is at most 10), its s still the state at step 0.
+            # ends at step N - 1, its s still the state at step 0.
             first = msg.run_id != self.first_exp_run and msg.step_id < FIRST_DECISION_STEPS
             if first:
                 self.first_exp_run = msg.run_id

@@ -104,6 +104,11 @@ def experience_gaps(experiences):
     return gaps
 
 
+# A run's first decision ends before this step (decision_ticks is at most 10, the controller's
+# FW_DECISION_TICKS_MAX): its experience is the run's first and starts from the run's first state.
+FIRST_DECISION_STEPS = 10
+
+
 def restarted(prev, e):
     """True when experience e starts a new controller process after prev (its seq is 0 again):
     run ids and sequence numbers begin anew there."""

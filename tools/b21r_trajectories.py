@@ -40,7 +40,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
 from b21r import experience_t  # noqa: E402
-from b21r_log import read_log  # noqa: E402
+from b21r_log import FIRST_DECISION_STEPS, read_log  # noqa: E402
 from b21r_task_world import WorldUnavailable, declared_world, task_name, wall_outline  # noqa: E402
 
 # B21R_RUN end_reason -> the names below ("stopped": a safety stop or pause, "shutdown").
@@ -63,7 +63,6 @@ class Run:
         self.phase = None
         self.evaluating = None
         self.first_state = None
-        self.seen_experience = False
         self.start_record = None  # the task-frame start of its B21R_RUN record, where the log has one
         self.task = None
         self.end = None       # "goal", "collision", "limit", "stopped", "shutdown" or None (unknown)
@@ -121,13 +120,12 @@ def load(path):
         elif ch == "B21R_RUN":
             records[m.run_id] = m
         else:
-            if r.phase is None:
+            if r.phase is None:  # the run's first experience
                 r.phase, r.evaluating, r.task = m.phase, bool(m.evaluating), m.task
-            # The run's first experience starts from its first state: with decisions over N ticks
-            # it ends at step N - 1 (decision_ticks is at most 10), its s the state at step 0.
-            if not r.seen_experience and m.step_id < 10:
-                r.first_state = tuple(m.s[:m.state_dim])
-            r.seen_experience = True
+                # It starts from the run's first state: with decisions over N ticks it ends at
+                # step N - 1, its s the state at step 0 (a later one means the first was lost).
+                if m.step_id < FIRST_DECISION_STEPS:
+                    r.first_state = tuple(m.s[:m.state_dim])
             if m.terminal:
                 r.end = "goal" if m.reward > 0 else "collision"
             elif r.end is None:
