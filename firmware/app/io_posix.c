@@ -451,7 +451,8 @@ static int read_reply(io_posix_t* io, int timeout_ms) {
 
 // Emulator binding of "place the robot": `reset x y theta` on the control socket. Real time: the
 // request is sent in one tick and its answer read in a later one (2 meanwhile). Lockstep: the
-// answer is awaited at once, as the tick waits for the emulator's data anyway.
+// answer is awaited at once and as long as the period's data are (lockstep_timeout_s): a stalled
+// emulator must not turn the request into a retry that starts the run at another tick.
 static int v_request_start_pose(void* user, double x_m, double y_m, double theta_rad, uint64_t run) {
   io_posix_t* io = (io_posix_t*)user;
   const fw_config_t* cfg = io->cfg;
@@ -459,7 +460,8 @@ static int v_request_start_pose(void* user, double x_m, double y_m, double theta
     return 0;  // a person places the robot and confirms over B21R_COMMAND
   }
   const int64_t now = io_posix_now_us();
-  const int64_t timeout_us = (int64_t)(cfg->emulator_reply_timeout_s * 1e6);
+  const int64_t timeout_us =
+      (int64_t)((cfg->lockstep ? cfg->lockstep_timeout_s : cfg->emulator_reply_timeout_s) * 1e6);
   if (io->control_fd < 0) {
     char e[256];
     io->control_fd = connect_control(cfg->emulator_control, e, sizeof e);

@@ -52,6 +52,12 @@ static void rflex_poll(fw_loop_t* L) {
 
 static const char* drive_name(int i) { return i == 0 ? "translation" : "rotation"; }
 
+// The clock the nodes' liveness is judged on [µs]: real time, the monotonic clock; lockstep, the
+// emulator's (the tick's utime for the period whose frames are read), since its nodes send their
+// heartbeats on simulated time. A loaded machine that stops the emulator for seconds, even
+// between two frames of one period, then ages no heartbeat and the run does not depend on it.
+static int64_t bus_clock(const fw_loop_t* L, int64_t now_us) { return L->cfg.lockstep ? L->data_utime : now_us; }
+
 static void can_send_nmt(fw_loop_t* L, uint8_t command, uint8_t node, int* failed_node) {
   canopen_frame_t f;
   (void)canopen_encode_nmt(&f, command, node);
@@ -173,12 +179,13 @@ static void can_handle(fw_loop_t* L, const canopen_frame_t* f, int64_t now_us) {
 }
 
 static void can_poll(fw_loop_t* L, int64_t now_us) {
+  const int64_t t = bus_clock(L, now_us);
   for (int i = 0; i < 256; ++i) {
     canopen_frame_t f;
     if (L->io.vt->can_read(L->io.user, &f) != 1) {
       break;
     }
-    can_handle(L, &f, now_us);
+    can_handle(L, &f, t);
   }
 }
 
@@ -322,6 +329,7 @@ static bool can_node_faults(fw_loop_t* L, int64_t now_us, uint32_t foreign, char
 }
 
 void fw_base_evaluate_faults(fw_loop_t* L, int64_t now_us) {
+  now_us = bus_clock(L, now_us);
   uint32_t foreign = 0;
   if (!is_rflex(L)) {
     L->bump.silent_ticks = L->bump.pdo_new ? 0 : L->bump.silent_ticks + 1;
@@ -512,7 +520,7 @@ void fw_base_restart(fw_loop_t* L) {
     L->sys_status_countdown = SYS_STATUS_PERIOD_TICKS;
     return;
   }
-  L->can_start_us = now(L);
+  L->can_start_us = bus_clock(L, now(L));
   can_supervision_reset(L);
   for (int i = 0; i < 2; ++i) {
     cia402_master_init(&L->drive[i].master);
@@ -543,7 +551,7 @@ int fw_base_start(fw_loop_t* L, char* err, size_t err_cap) {
     snprintf(err, err_cap, "base_protocol = canopen but the I/O binding has no CAN bus");
     return -1;
   }
-  L->can_start_us = now(L);
+  L->can_start_us = bus_clock(L, now(L));
   can_supervision_reset(L);
   int failed_node = -1;
   can_nmt_start(L, &failed_node);

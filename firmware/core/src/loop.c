@@ -453,6 +453,7 @@ bool fw_loop_tick(fw_loop_t* L, int64_t now_us) {
   }
   // In lockstep, time is the emulator's: tick × period, so identical runs log identical times.
   L->utime = L->cfg.lockstep ? L->tick_count * L->period_us : now_us;
+  L->data_utime = L->utime;
 
   const sensed_t in = sense(L, now_us);
   command_t cmd = {0.0, 0.0, true};
@@ -506,6 +507,7 @@ int64_t fw_loop_wait(fw_loop_t* L) {
     // a lockstep run never depends on wall time. Only a device that stays silent for
     // lockstep_timeout_s ends the loop, with its name.
     const int64_t deadline = now + (int64_t)(L->cfg.lockstep_timeout_s * 1e6);
+    L->data_utime = (L->tick_count + 1) * L->period_us;  // the data awaited are the next tick's
     for (;;) {
       poll_inputs(L, now);
       if ((L->scan_new || L->scan_repeat_new) && fw_base_all_reports(L)) {

@@ -62,7 +62,7 @@ typedef struct fw_bump_node {
   bool seen;            // a valid TPDO1 arrived since the (re)start
   bool pdo_new;         // since the last tick
   int32_t silent_ticks; // lockstep: ticks without a valid TPDO1
-  int64_t last_us;      // time of the last valid TPDO1 (real time)
+  int64_t last_us;      // time of the last valid TPDO1 (bus clock, read in real time only)
   uint32_t mask;        // bit p = panel p pressed (as rflex_host_t.bumper_mask)
   uint64_t pdos;        // valid TPDO1 frames
   uint64_t bad_pdos;    // its TPDO1 COB-ID with a DLC below 7 (ignored)
@@ -179,7 +179,7 @@ struct fw_loop {
   fw_drive_t drive[2];
   fw_bump_node_t bump;
   int32_t bump_limit_ticks;    // lockstep: can_bumper_timeout_s in whole ticks
-  int64_t can_start_us;
+  int64_t can_start_us;        // NMT start, on the bus clock (fw_base_*: lockstep, the emulator's)
   uint32_t can_syncs_sent;     // since the NMT start (wraps); every one is answered by a TPDO1 and
                                // a TPDO2 of each operational drive
   int64_t can_unanswered_syncs; // SYNCs still unanswered when the next went out (monotonic)
@@ -254,6 +254,8 @@ struct fw_loop {
   // Output bookkeeping.
   int64_t tick_count;
   int64_t utime;               // of the current tick
+  int64_t data_utime;          // lockstep: utime of the tick whose period's data are being read
+                               // (the coming tick's while they are awaited, then its own)
   int64_t exp_seq;
   int64_t exp_dropped;
   int64_t held_ticks;

@@ -5,10 +5,14 @@ bit-identical experience streams: the controller's --experience-log files are by
 (SHA-256), and a different controller seed gives a different stream. A third run of the same
 seed has its emulator frozen (SIGSTOP) for 2.5 s twice, as a loaded machine may stall it: lockstep
 does not depend on wall time, so the stream is identical again and the laser was never restarted.
+A fourth has every start-pose answer held 0.2 s on its way back (a relay on the control socket)
+with emulator_reply_timeout_s at its least (10 ms): lockstep awaits the answers as it awaits the
+period's data, so the runs start at the same ticks and the stream is identical again.
 usage: test_determinism.py CONTROLLER SIM WORLD rflex|canopen"""
 import hashlib
 import os
 import signal
+import socket
 import sys
 import threading
 import time
@@ -27,16 +31,50 @@ def freeze(proc, stop, times, at_s=1.0, for_s=2.5):
         proc.send_signal(signal.SIGCONT)
 
 
-def one_run(controller, sim_exe, world, base, d, name, seed, stalls=0):
+def slow_relay(listener, target, stop, delay_s=0.2):
+    """Passes the controller's control requests to the emulator's socket `target` and holds each
+    answer delay_s before it goes back."""
+    listener.settimeout(0.2)
+    while not stop.is_set():
+        try:
+            conn, _ = listener.accept()
+        except socket.timeout:
+            continue
+        with conn, socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET) as up:
+            up.connect(target)
+            conn.settimeout(0.2)
+            while not stop.is_set():
+                try:
+                    request = conn.recv(4096)
+                except socket.timeout:
+                    continue
+                if not request:
+                    break
+                up.send(request)
+                reply = up.recv(4096)
+                time.sleep(delay_s)
+                conn.send(reply)
+
+
+def one_run(controller, sim_exe, world, base, d, name, seed, stalls=0, slow_replies=False):
     sim = fwtest.Sim(sim_exe, world, d, name, base=base, seed=1)
     stop = threading.Event()
     staller = threading.Thread(target=freeze, args=(sim.proc, stop, stalls)) if stalls else None
+    extra = {}
+    if slow_replies:
+        relay_path = os.path.join(d, name + ".relay.ctl")
+        listener = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        listener.bind(relay_path)
+        listener.listen(1)
+        staller = threading.Thread(target=slow_relay, args=(listener, sim.ctl, stop))
+        extra = {"emulator_control": relay_path, "emulator_reply_timeout_s": 0.01}
     try:
         if staller is not None:
             staller.start()
         exp = os.path.join(d, name + ".experiences.lcmlog")
         settings = {"phase_one_runs": 3, "phase_two_runs": 2, "eval_every_runs": 5, "eval_starts": 2,
                     "seed": seed, "experience_log_file": exp}
+        settings.update(extra)
         rc, err, log = fwtest.run_controller(controller, sim, d, name, settings, timeout=300)
         if rc != 0:
             fwtest.fail("%s: controller exit status %d:\n%s" % (name, rc, err))
@@ -45,6 +83,8 @@ def one_run(controller, sim_exe, world, base, d, name, seed, stalls=0):
         if staller is not None:
             staller.join()
             sim.proc.send_signal(signal.SIGCONT)
+        if slow_replies:
+            listener.close()
         sim.close()
     status = [m for _, _, m in read_log(log, {"B21R_STATUS"})]
     if not status or status[-1].laser_restarts != 0:
@@ -68,10 +108,13 @@ def main():
         b = one_run(controller, sim_exe, world, base, d, "second", 7)
         c = one_run(controller, sim_exe, world, base, d, "other-seed", 8)
         frozen = one_run(controller, sim_exe, world, base, d, "emulator-frozen", 7, stalls=2)
+        slow = one_run(controller, sim_exe, world, base, d, "slow-replies", 7, slow_replies=True)
         if a != b:
             fwtest.fail("the same run twice gave different experience streams")
         if frozen != a:
             fwtest.fail("freezing the emulator changed the experience stream")
+        if slow != a:
+            fwtest.fail("start-pose answers later than emulator_reply_timeout_s changed the experience stream")
         if a == c:
             fwtest.fail("a different seed gave the same stream (the seed is not used?)")
         ok = True

@@ -21,7 +21,7 @@ static void push_base(fake_robot_t* f, const rflex_packet_t* p) {
 
 static void push_frame(fake_robot_t* f, const canopen_frame_t* fr) {
   if (f->n_frames < FAKE_FRAMES) {
-    f->frame_ready_us[f->n_frames] = f->clock_us + f->can_lag_us;
+    f->frame_ready_us[f->n_frames] = f->clock_us + f->can_lag_us + f->stall_extra_us;
     f->frames[f->n_frames++] = *fr;
   }
 }
@@ -117,6 +117,9 @@ static void emit_bumpers(fake_robot_t* f) {
     (void)canopen_encode_heartbeat(&fr, CANOPEN_NODE_BUMPERS_DEFAULT, CANOPEN_NMT_STATE_OPERATIONAL);
     push_frame(f, &fr);
   }
+  if (f->can_stall_us > 0 && f->ticks == f->can_stall_period) {
+    f->stall_extra_us = f->can_stall_us;
+  }
 }
 
 static void set_bumper(fake_robot_t* f, bool pressed) {
@@ -137,6 +140,7 @@ static void set_bumper(fake_robot_t* f, bool pressed) {
 // One control period: drive, collide, then emit the new period's data.
 static void advance(fake_robot_t* f) {
   f->ticks++;
+  f->stall_extra_us = 0;
   if (!f->paced) {
     f->clock_us += (int64_t)llround(f->dt_s * 1e6);
   }

@@ -74,6 +74,12 @@ typedef struct fake_robot {
   /// laser's bytes are readable at once: the bus reaches the host later than the laser's line,
   /// as separate channels may on a loaded machine.
   int64_t can_lag_us;
+  /// In period can_stall_period (counted like ticks), the frames after the bump-panel node's
+  /// heartbeat become readable can_stall_us later (0 = never): the emulator stalled between two
+  /// frames of one period, as a loaded machine's scheduler may stop it.
+  int64_t can_stall_us;
+  int64_t can_stall_period;
+  int64_t stall_extra_us;  ///< added to the frames pushed now (the stall under way)
   cia402_drive_t drive[2];
   int32_t drive_target[2];
   // CANopen bump-panel node (node 16): TPDO1 on NMT start, on change and once per period.
