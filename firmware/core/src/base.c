@@ -53,9 +53,10 @@ static void rflex_poll(fw_loop_t* L) {
 static const char* drive_name(int i) { return i == 0 ? "translation" : "rotation"; }
 
 // The clock the nodes' liveness is judged on [µs]: real time, the monotonic clock; lockstep, the
-// emulator's (the tick's utime for the period whose frames are read), since its nodes send their
-// heartbeats on simulated time. A loaded machine that stops the emulator for seconds, even
-// between two frames of one period, then ages no heartbeat and the run does not depend on it.
+// ticks' (the utime of the tick whose period's frames are read: tick x period, paced by the
+// emulator's periods), since the emulator's nodes send their heartbeats on simulated time. A
+// loaded machine that stops the emulator for seconds, even between two frames of one period, then
+// ages no heartbeat and the run does not depend on it.
 static int64_t bus_clock(const fw_loop_t* L, int64_t now_us) { return L->cfg.lockstep ? L->data_utime : now_us; }
 
 static void can_send_nmt(fw_loop_t* L, uint8_t command, uint8_t node, int* failed_node) {

@@ -182,8 +182,9 @@ static const key_desc_t k_keys[] = {
   {NULL, "emulator_control", KIND_STRING, OFF(emulator_control), 0, 0, false, false, NULL, "",
    "control socket of the emulator (needed by reposition = emulator)"},
   {NULL, "emulator_reply_timeout_s", KIND_DOUBLE, OFF(emulator_reply_timeout_s), 0.01, 60, false, false, NULL, "5",
-   "reposition = emulator: a start-pose request unanswered this long fails (and is retried); the tick never "
-   "waits for the answer. Lockstep: the answer is awaited as the period's data are, up to lockstep_timeout_s"},
+   "reposition = emulator: a start-pose request unanswered this long fails (and is retried). Real time: the "
+   "tick never waits for the answer; lockstep: the answer is awaited as the period's data are, up to "
+   "lockstep_timeout_s"},
 
   {"Command limits", "max_translation_mps", KIND_DOUBLE, OFF(max_translation_mps), 0, 2, false, false, NULL, "0.8",
    "translation speed limit [m/s]"},

@@ -179,7 +179,7 @@ struct fw_loop {
   fw_drive_t drive[2];
   fw_bump_node_t bump;
   int32_t bump_limit_ticks;    // lockstep: can_bumper_timeout_s in whole ticks
-  int64_t can_start_us;        // NMT start, on the bus clock (fw_base_*: lockstep, the emulator's)
+  int64_t can_start_us;        // NMT start, on the bus clock (base.c: lockstep, the ticks' time)
   uint32_t can_syncs_sent;     // since the NMT start (wraps); every one is answered by a TPDO1 and
                                // a TPDO2 of each operational drive
   int64_t can_unanswered_syncs; // SYNCs still unanswered when the next went out (monotonic)
@@ -255,7 +255,8 @@ struct fw_loop {
   int64_t tick_count;
   int64_t utime;               // of the current tick
   int64_t data_utime;          // lockstep: utime of the tick whose period's data are being read
-                               // (the coming tick's while they are awaited, then its own)
+                               // (the coming tick's while they are awaited and at the start, then
+                               // its own)
   int64_t exp_seq;
   int64_t exp_dropped;
   int64_t held_ticks;

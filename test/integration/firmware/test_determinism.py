@@ -31,9 +31,10 @@ def freeze(proc, stop, times, at_s=1.0, for_s=2.5):
         proc.send_signal(signal.SIGCONT)
 
 
-def slow_relay(listener, target, stop, delay_s=0.2):
+def slow_relay(listener, target, stop, relayed, delay_s=0.2):
     """Passes the controller's control requests to the emulator's socket `target` and holds each
-    answer delay_s before it goes back."""
+    answer delay_s before it goes back; counts them in relayed[0]. Ends with `stop` or when
+    either side goes away (the emulator answers at once, or within 10 s when frozen)."""
     listener.settimeout(0.2)
     while not stop.is_set():
         try:
@@ -42,18 +43,24 @@ def slow_relay(listener, target, stop, delay_s=0.2):
             continue
         with conn, socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET) as up:
             up.connect(target)
+            up.settimeout(10.0)
             conn.settimeout(0.2)
-            while not stop.is_set():
-                try:
-                    request = conn.recv(4096)
-                except socket.timeout:
-                    continue
-                if not request:
-                    break
-                up.send(request)
-                reply = up.recv(4096)
-                time.sleep(delay_s)
-                conn.send(reply)
+            try:
+                while not stop.is_set():
+                    try:
+                        request = conn.recv(4096)
+                    except socket.timeout:
+                        continue
+                    if not request:
+                        break
+                    up.send(request)
+                    reply = up.recv(4096)
+                    time.sleep(delay_s)
+                    conn.send(reply)
+                    relayed[0] += 1
+            except OSError as e:
+                fwtest.note("relay: %s" % e)
+                return
 
 
 def one_run(controller, sim_exe, world, base, d, name, seed, stalls=0, slow_replies=False):
@@ -61,14 +68,16 @@ def one_run(controller, sim_exe, world, base, d, name, seed, stalls=0, slow_repl
     stop = threading.Event()
     staller = threading.Thread(target=freeze, args=(sim.proc, stop, stalls)) if stalls else None
     extra = {}
-    if slow_replies:
-        relay_path = os.path.join(d, name + ".relay.ctl")
-        listener = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
-        listener.bind(relay_path)
-        listener.listen(1)
-        staller = threading.Thread(target=slow_relay, args=(listener, sim.ctl, stop))
-        extra = {"emulator_control": relay_path, "emulator_reply_timeout_s": 0.01}
+    relayed = [0]
+    listener = None
     try:
+        if slow_replies:
+            relay_path = os.path.join(d, name + ".relay.ctl")
+            listener = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+            listener.bind(relay_path)
+            listener.listen(1)
+            staller = threading.Thread(target=slow_relay, args=(listener, sim.ctl, stop, relayed))
+            extra = {"emulator_control": relay_path, "emulator_reply_timeout_s": 0.01}
         if staller is not None:
             staller.start()
         exp = os.path.join(d, name + ".experiences.lcmlog")
@@ -81,11 +90,15 @@ def one_run(controller, sim_exe, world, base, d, name, seed, stalls=0, slow_repl
     finally:
         stop.set()
         if staller is not None:
-            staller.join()
+            staller.join(15)
             sim.proc.send_signal(signal.SIGCONT)
-        if slow_replies:
+        if listener is not None:
             listener.close()
         sim.close()
+    if slow_replies:
+        if relayed[0] == 0:
+            fwtest.fail("%s: no start-pose request went through the relay" % name)
+        fwtest.note("%s: %d start-pose answers held 0.2 s each" % (name, relayed[0]))
     status = [m for _, _, m in read_log(log, {"B21R_STATUS"})]
     if not status or status[-1].laser_restarts != 0:
         fwtest.fail("%s: the laser stream was restarted (%s times)" % (

@@ -112,7 +112,9 @@ static void emit_bumpers(fake_robot_t* f) {
     return;
   }
   push_bumpers(f);
-  if (f->bump_operational && !f->bump_absent) {
+  if (f->bump_hb_silent_ticks > 0) {
+    f->bump_hb_silent_ticks--;
+  } else if (f->bump_operational && !f->bump_absent) {
     canopen_frame_t fr;
     (void)canopen_encode_heartbeat(&fr, CANOPEN_NODE_BUMPERS_DEFAULT, CANOPEN_NMT_STATE_OPERATIONAL);
     push_frame(f, &fr);

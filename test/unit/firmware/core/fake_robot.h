@@ -87,6 +87,7 @@ typedef struct fake_robot {
   bool bump_operational;
   bool bump_absent;          ///< no such node on the bus (start-up must fail naming it)
   int32_t bump_silent_ticks; ///< periods the node sends nothing
+  int32_t bump_hb_silent_ticks; ///< periods the node sends no heartbeat while its PDOs go on (a hung application)
   int64_t bump_pdos;
   // Faults.
   int32_t laser_drop_ticks;

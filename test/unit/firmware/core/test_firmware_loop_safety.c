@@ -288,6 +288,39 @@ static void bump_node_silence(bool lockstep) {
   harness_close(&g_h);
 }
 
+// In lockstep the nodes' heartbeats are judged on the tick's time (tick x period, as the emulator
+// produces them), not on the wall clock: a bump-panel node whose heartbeat stops while its PDOs go
+// on is a base fault on the 6th tick after its last heartbeat (0.6 s > can_heartbeat_timeout_s
+// 0.5 s; the 7th after it falls silent: the period under way had sent its heartbeat), the same
+// tick however late the bus's frames reach the controller.
+static void test_loop_canopen_heartbeat_loss_lockstep_on_tick_time(void** state) {
+  (void)state;
+  const int64_t lags_us[3] = {0, 150000, 450000};
+  for (int i = 0; i < 3; ++i) {
+    fw_config_t c;
+    harness_config(&c);
+    c.phase_one_runs = 50;
+    c.eval_every_runs = 50;
+    c.safety_clear_ticks = 3;
+    c.lockstep_timeout_s = 30.0;
+    assert_true(c.can_heartbeat_timeout_s == 0.5);
+    assert_int_equal(harness_open_can_lag(&g_h, &c, 9, lags_us[i]), 0);
+    harness_run(&g_h, 40);  // a run is under way, the robot moves
+    g_h.fake.bump_hb_silent_ticks = 12;
+    const int ticks = expect_stop_within(FW_STOP_BASE_FAULT, 12);
+    print_message("CAN answers %3lld ms late: heartbeat lost on tick %d\n", (long long)(lags_us[i] / 1000), ticks);
+    assert_int_equal(ticks, 7);
+    assert_non_null(
+        strstr(g_h.last_status_detail, "bump-panel node 16 (CiA 401): heartbeat lost (none for 500 ms), its PDOs still arrive"));
+    fw_loop_stats_t st;
+    fw_loop_get_stats(g_h.loop, &st);
+    assert_int_equal(st.runs_aborted, 1);
+    assert_int_equal(st.stops_by_reason[FW_STOP_BUMPER], 0);
+    expect_resume(60 + REPLAY_TICKS);  // its heartbeats are back
+    harness_close(&g_h);
+  }
+}
+
 static void test_loop_canopen_bumper_node_silence_is_base_fault_lockstep(void** state) {
   (void)state;
   bump_node_silence(true);
@@ -704,6 +737,7 @@ int main(void) {
       cmocka_unit_test(test_loop_bumper_stops_and_ends_run_as_collision),
       cmocka_unit_test(test_loop_canopen_bumper_stops_and_ends_run_as_collision),
       cmocka_unit_test(test_loop_canopen_bumper_node_silence_is_base_fault_lockstep),
+      cmocka_unit_test(test_loop_canopen_heartbeat_loss_lockstep_on_tick_time),
       cmocka_unit_test(test_loop_canopen_bumper_node_silence_is_base_fault_real_time),
       cmocka_unit_test(test_loop_canopen_bumper_node_restart_is_started_again),
       cmocka_unit_test(test_loop_canopen_bumper_node_missing_refuses_start),
