@@ -135,7 +135,6 @@ static void take_experience(session_t* S, const b21r_experience_t* e) {
   }
 }
 
-// After a tick: a run that ended gets its outcome from the loop's counters.
 // A run's end record (B21R_RUN): its undiscounted return, whatever the decisions' spacing.
 static void take_run_record(session_t* S, const b21r_run_t* m) {
   for (size_t i = S->n_runs; i-- > 0;) {
@@ -147,6 +146,7 @@ static void take_run_record(session_t* S, const b21r_run_t* m) {
   }
 }
 
+// After a tick: a run that ended gets its outcome from the loop's counters.
 static void take_run_end(session_t* S, const fw_loop_stats_t* before, const fw_loop_stats_t* after) {
   if (!S->have_current) {
     return;

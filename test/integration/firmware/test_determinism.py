@@ -66,7 +66,7 @@ def slow_relay(listener, target, stop, relayed, delay_s=0.2):
 def one_run(controller, sim_exe, world, base, d, name, seed, stalls=0, slow_replies=False):
     sim = fwtest.Sim(sim_exe, world, d, name, base=base, seed=1)
     stop = threading.Event()
-    staller = threading.Thread(target=freeze, args=(sim.proc, stop, stalls)) if stalls else None
+    helper = threading.Thread(target=freeze, args=(sim.proc, stop, stalls)) if stalls else None
     extra = {}
     relayed = [0]
     listener = None
@@ -76,10 +76,10 @@ def one_run(controller, sim_exe, world, base, d, name, seed, stalls=0, slow_repl
             listener = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
             listener.bind(relay_path)
             listener.listen(1)
-            staller = threading.Thread(target=slow_relay, args=(listener, sim.ctl, stop, relayed))
+            helper = threading.Thread(target=slow_relay, args=(listener, sim.ctl, stop, relayed))
             extra = {"emulator_control": relay_path, "emulator_reply_timeout_s": 0.01}
-        if staller is not None:
-            staller.start()
+        if helper is not None:
+            helper.start()
         exp = os.path.join(d, name + ".experiences.lcmlog")
         settings = {"phase_one_runs": 3, "phase_two_runs": 2, "eval_every_runs": 5, "eval_starts": 2,
                     "seed": seed, "experience_log_file": exp}
@@ -89,8 +89,8 @@ def one_run(controller, sim_exe, world, base, d, name, seed, stalls=0, slow_repl
             fwtest.fail("%s: controller exit status %d:\n%s" % (name, rc, err))
     finally:
         stop.set()
-        if staller is not None:
-            staller.join(15)
+        if helper is not None:
+            helper.join(15)
             sim.proc.send_signal(signal.SIGCONT)
         if listener is not None:
             listener.close()

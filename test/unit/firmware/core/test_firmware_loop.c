@@ -190,7 +190,7 @@ static void test_loop_same_seed_bit_identical_experiences(void** state) {
 // answer in flight that later ticks took for their own, one period stale. The emulator may also
 // stall between two frames of one period (a loaded machine stops it for seconds after it sent the
 // bump-panel node's heartbeat, before the drives' answers): the nodes' heartbeats are judged on the
-// emulator's time, as they are produced, so the stall is no lost heartbeat. (On wall time the
+// ticks' time, which the emulator's periods pace, so the stall is no lost heartbeat. (On wall time the
 // node's heartbeat aged 2.5 s while its PDOs came in: a base fault that aborted the run.)
 static void test_loop_canopen_stream_independent_of_answer_lag(void** state) {
   (void)state;

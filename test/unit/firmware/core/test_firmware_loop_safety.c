@@ -20,7 +20,8 @@
 
 static harness_t g_h;
 
-static void open_running(bool canopen, void (*tweak)(fw_config_t*)) {
+// A run under way on a fresh fake robot (CANopen with its frames can_lag_us behind the laser).
+static void open_running_lag(bool canopen, int64_t can_lag_us, void (*tweak)(fw_config_t*)) {
   fw_config_t c;
   harness_config(&c);
   c.phase_one_runs = 50;
@@ -29,9 +30,11 @@ static void open_running(bool canopen, void (*tweak)(fw_config_t*)) {
   if (tweak != NULL) {
     tweak(&c);
   }
-  assert_int_equal(harness_open(&g_h, &c, canopen, 9), 0);
+  assert_int_equal(canopen ? harness_open_can_lag(&g_h, &c, 9, can_lag_us) : harness_open(&g_h, &c, false, 9), 0);
   harness_run(&g_h, 40);  // a run is under way, the robot moves
 }
+
+static void open_running(bool canopen, void (*tweak)(fw_config_t*)) { open_running_lag(canopen, 0, tweak); }
 
 static int run_source_sum(const b21r_run_t* r) {
   int n = 0;
@@ -44,6 +47,9 @@ static int run_source_sum(const b21r_run_t* r) {
 // Silence and corrupt data are faults of time: they are tested in real time (in lockstep a tick
 // never runs without the period's data, see test_loop_lockstep_silence_ends_loop).
 static void real_time(fw_config_t* c) { c->lockstep = false; }
+
+// Lockstep with the product's patience for the emulator (lockstep_timeout_s 30 s).
+static void lockstep_patient(fw_config_t* c) { c->lockstep_timeout_s = 30.0; }
 
 static double fake_v(void) {
   if (!g_h.fake.canopen) {
@@ -297,15 +303,8 @@ static void test_loop_canopen_heartbeat_loss_lockstep_on_tick_time(void** state)
   (void)state;
   const int64_t lags_us[3] = {0, 150000, 450000};
   for (int i = 0; i < 3; ++i) {
-    fw_config_t c;
-    harness_config(&c);
-    c.phase_one_runs = 50;
-    c.eval_every_runs = 50;
-    c.safety_clear_ticks = 3;
-    c.lockstep_timeout_s = 30.0;
-    assert_true(c.can_heartbeat_timeout_s == 0.5);
-    assert_int_equal(harness_open_can_lag(&g_h, &c, 9, lags_us[i]), 0);
-    harness_run(&g_h, 40);  // a run is under way, the robot moves
+    open_running_lag(true, lags_us[i], lockstep_patient);
+    assert_true(g_h.cfg.can_heartbeat_timeout_s == 0.5);
     g_h.fake.bump_hb_silent_ticks = 12;
     const int ticks = expect_stop_within(FW_STOP_BASE_FAULT, 12);
     print_message("CAN answers %3lld ms late: heartbeat lost on tick %d\n", (long long)(lags_us[i] / 1000), ticks);
