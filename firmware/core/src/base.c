@@ -563,16 +563,34 @@ int fw_base_start(fw_loop_t* L, char* err, size_t err_cap) {
   // Walk both drives to OPERATION ENABLED: one controlword step per SYNC cycle. Each cycle waits
   // for the whole answer (both TPDOs of both drives), so the last one gives the odometry its
   // baseline: the loop's start then needs no SYNC of its own (in lockstep every later SYNC
-  // advances the emulator by one period, see fw_loop_start).
+  // advances the emulator by one period, see fw_loop_start). Real time: a cycle lasts at most
+  // 0.5 s and a drive that does not answer gets the next. Lockstep: a cycle lasts until the answer
+  // (up to lockstep_timeout_s): a cycle cut short by a stalled emulator would send one SYNC more,
+  // one more simulated period, and the run would differ by the machine's load.
+  const int64_t cycle_us = L->cfg.lockstep ? (int64_t)(L->cfg.lockstep_timeout_s * 1e6) : 500000;
   for (int cycle = 0; cycle < 40; ++cycle) {
     can_send_cycle(L, 0.0, 0.0, CIA402_REQ_ENABLE);
-    const int64_t deadline = now(L) + 500000;
+    const int64_t deadline = now(L) + cycle_us;
+    bool answered = false;
     while (now(L) < deadline) {
       can_poll(L, now(L));
-      if (can_all_new(L)) {
+      answered = fw_base_all_reports(L);
+      if (answered) {
         break;
       }
       (void)L->io.vt->wait(L->io.user, deadline);
+    }
+    if (L->cfg.lockstep && !answered) {
+      const fw_drive_t* d = &L->drive[0];
+      const int i = (int32_t)(d->tpdo1_count - L->can_syncs_sent) < 0 || (int32_t)(d->tpdo2_count - L->can_syncs_sent) < 0
+                        ? 0
+                        : 1;
+      snprintf(err, err_cap,
+               "CANopen: drive node %u (%s) did not answer SYNC %u of the start within %.1f s (lockstep_timeout_s); "
+               "check can_node_%s against the emulator's node ids and that the emulator runs (b21r-sim --lockstep)",
+               (unsigned)L->drive[i].node, drive_name(i), (unsigned)L->can_syncs_sent, (double)cycle_us / 1e6,
+               drive_name(i));
+      return -1;
     }
     const bool ok = cia402_operation_enabled(L->drive[0].statusword) && cia402_operation_enabled(L->drive[1].statusword);
     if (fw_base_any_report(L)) {

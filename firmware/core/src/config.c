@@ -113,7 +113,8 @@ static const key_desc_t k_keys[] = {
    "tick when the emulator's data for the next period has arrived instead of on the clock"},
   {NULL, "lockstep_timeout_s", KIND_DOUBLE, OFF(lockstep_timeout_s), 0.01, 600, false, false, NULL, "30",
    "lockstep: a device silent this long (wall clock) ends the loop with status 5; the tick never runs without "
-   "the period's data (generous: a loaded machine may stall the emulator for seconds)"},
+   "the period's data (generous: a loaded machine may stall the emulator for seconds). At start-up each CANopen "
+   "enable cycle waits as long for the drives' answers (status 4 if one stays away)"},
   {NULL, "lockstep_realtime_factor", KIND_DOUBLE, OFF(lockstep_realtime_factor), 0, 10000, false, false, NULL, "0",
    "lockstep: at most this many times real time (1 = real time, 20 = 20 ticks of 0.1 s per second), so that "
    "lcm-spy and lcm-logger over UDP keep up; 0 = as fast as the emulator answers. The experiences do not "

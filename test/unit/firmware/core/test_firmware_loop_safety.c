@@ -377,6 +377,36 @@ static void test_loop_canopen_bumper_node_missing_refuses_start(void** state) {
   assert_non_null(strstr(err, "can_node_bumpers = 2 is also can_node_rotation"));
 }
 
+// Lockstep: a drive that does not answer the start's SYNC (a node id the emulator does not have)
+// ends the start after lockstep_timeout_s, the error naming the node, the key and the emulator. In
+// lockstep each enable cycle waits for its answer (a cycle cut short by a stalled emulator would
+// send one SYNC more: firmware.loop's answer-lag test), so a missing one is an error, not a retry.
+static void test_loop_canopen_lockstep_drive_missing_refuses_start(void** state) {
+  (void)state;
+  fw_config_t c;
+  harness_config(&c);
+  c.base_protocol = FW_BASE_CANOPEN;
+  c.can_node_rotation = 5;  // the fake's drives are nodes 1 and 2
+  fake_robot_t* fake = &g_h.fake;
+  fake_robot_init(fake, true, 1.0 / c.tick_rate_hz, 9);
+  const fw_io_t io = fake_robot_io(fake);
+  fw_pubq_t* q = fw_pubq_create(256);
+  assert_non_null(q);
+  const fw_loop_outputs_t out = {.queue = q, .notify = NULL, .notify_user = NULL, .checkpoints = NULL};
+  char err[FW_LOOP_ERR_MAX];
+  fw_loop_t* loop = fw_loop_create(&c, &io, &out, err, sizeof err);
+  assert_non_null(loop);
+  const int64_t t0 = fake->clock_us;
+  assert_int_not_equal(fw_loop_start(loop, err, sizeof err), 0);
+  print_message("%s (after %.2f s)\n", err, (double)(fake->clock_us - t0) / 1e6);
+  assert_non_null(strstr(err, "drive node 5 (rotation) did not answer SYNC 1 of the start within 1.0 s"));
+  assert_non_null(strstr(err, "can_node_rotation"));
+  assert_true(fake->clock_us - t0 >= 1000000 && fake->clock_us - t0 <= 1200000);  // the SYNC moved it 0.1 s
+  assert_int_equal(fake->ticks, 1);  // one SYNC: no retry advanced the emulator
+  fw_loop_destroy(loop);
+  fw_pubq_destroy(q);
+}
+
 // A CiA 402 drive fault (EMCY + statusword) stops the robot; after the fault condition clears,
 // the loop's fault-reset edge recovers the drive and the loop resumes.
 static void test_loop_drive_fault_stops_and_recovers(void** state) {
@@ -740,6 +770,7 @@ int main(void) {
       cmocka_unit_test(test_loop_canopen_bumper_node_silence_is_base_fault_real_time),
       cmocka_unit_test(test_loop_canopen_bumper_node_restart_is_started_again),
       cmocka_unit_test(test_loop_canopen_bumper_node_missing_refuses_start),
+      cmocka_unit_test(test_loop_canopen_lockstep_drive_missing_refuses_start),
       cmocka_unit_test(test_loop_drive_fault_stops_and_recovers),
       cmocka_unit_test(test_loop_signal_stops_and_ends),
       cmocka_unit_test(test_loop_teleop_deadman_and_validation),
