@@ -348,6 +348,21 @@ static void test_loop_canopen_bumper_node_restart_is_started_again(void** state)
   harness_close(&g_h);
 }
 
+// Starts a loop with c on g_h.fake (initialised by the caller, faults set), expecting the start to
+// fail: returns its error in err; the loop is gone, the fake kept for the caller's checks.
+static void start_refused(const fw_config_t* c, char* err, size_t err_cap) {
+  const fw_io_t io = fake_robot_io(&g_h.fake);
+  fw_pubq_t* q = fw_pubq_create(256);
+  assert_non_null(q);
+  const fw_loop_outputs_t out = {.queue = q, .notify = NULL, .notify_user = NULL, .checkpoints = NULL};
+  fw_loop_t* loop = fw_loop_create(c, &io, &out, err, err_cap);
+  assert_non_null(loop);
+  const int rc = fw_loop_start(loop, err, err_cap);
+  fw_loop_destroy(loop);
+  fw_pubq_destroy(q);
+  assert_int_not_equal(rc, 0);
+}
+
 // A CANopen base whose bump-panel node never answers does not start: the error names the node,
 // its COB-ID and the key. A drive id shared with the node is refused by the configuration.
 static void test_loop_canopen_bumper_node_missing_refuses_start(void** state) {
@@ -358,20 +373,12 @@ static void test_loop_canopen_bumper_node_missing_refuses_start(void** state) {
   fake_robot_t* fake = &g_h.fake;
   fake_robot_init(fake, true, 1.0 / c.tick_rate_hz, 9);
   fake->bump_absent = true;
-  const fw_io_t io = fake_robot_io(fake);
-  fw_pubq_t* q = fw_pubq_create(256);
-  assert_non_null(q);
-  const fw_loop_outputs_t out = {.queue = q, .notify = NULL, .notify_user = NULL, .checkpoints = NULL};
   char err[FW_LOOP_ERR_MAX];
-  fw_loop_t* loop = fw_loop_create(&c, &io, &out, err, sizeof err);
-  assert_non_null(loop);
-  assert_int_not_equal(fw_loop_start(loop, err, sizeof err), 0);
+  start_refused(&c, err, sizeof err);
   assert_non_null(strstr(err, "bump-panel node 16 (CiA 401 digital inputs, TPDO1 COB-ID 0x190)"));
   assert_non_null(strstr(err, "nothing at all from that id"));
   assert_non_null(strstr(err, "can_node_bumpers"));
   assert_true(fake->drive[0].state == CIA402_OPERATION_ENABLED);  // the drives themselves came up
-  fw_loop_destroy(loop);
-  fw_pubq_destroy(q);
   c.can_node_bumpers = c.can_node_rotation;
   assert_int_not_equal(fw_config_validate(&c, err, sizeof err), 0);
   assert_non_null(strstr(err, "can_node_bumpers = 2 is also can_node_rotation"));
@@ -389,22 +396,14 @@ static void test_loop_canopen_lockstep_drive_missing_refuses_start(void** state)
   c.can_node_rotation = 5;  // the fake's drives are nodes 1 and 2
   fake_robot_t* fake = &g_h.fake;
   fake_robot_init(fake, true, 1.0 / c.tick_rate_hz, 9);
-  const fw_io_t io = fake_robot_io(fake);
-  fw_pubq_t* q = fw_pubq_create(256);
-  assert_non_null(q);
-  const fw_loop_outputs_t out = {.queue = q, .notify = NULL, .notify_user = NULL, .checkpoints = NULL};
-  char err[FW_LOOP_ERR_MAX];
-  fw_loop_t* loop = fw_loop_create(&c, &io, &out, err, sizeof err);
-  assert_non_null(loop);
   const int64_t t0 = fake->clock_us;
-  assert_int_not_equal(fw_loop_start(loop, err, sizeof err), 0);
+  char err[FW_LOOP_ERR_MAX];
+  start_refused(&c, err, sizeof err);
   print_message("%s (after %.2f s)\n", err, (double)(fake->clock_us - t0) / 1e6);
   assert_non_null(strstr(err, "drive node 5 (rotation) did not answer SYNC 1 of the start within 1.0 s"));
   assert_non_null(strstr(err, "can_node_rotation"));
   assert_true(fake->clock_us - t0 >= 1000000 && fake->clock_us - t0 <= 1200000);  // the SYNC moved it 0.1 s
   assert_int_equal(fake->ticks, 1);  // one SYNC: no retry advanced the emulator
-  fw_loop_destroy(loop);
-  fw_pubq_destroy(q);
 }
 
 // A CiA 402 drive fault (EMCY + statusword) stops the robot; after the fault condition clears,
