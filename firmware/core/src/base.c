@@ -228,15 +228,12 @@ static bool can_all_new(const fw_loop_t* L) {
 // transmission type is synchronous: one of each per SYNC). Arrival flags alone cannot tell the
 // answer to this period's SYNC from an earlier answer still in flight (the socket and the laser's
 // line are separate channels); counting can.
-static bool can_all_answered(const fw_loop_t* L) {
-  for (int i = 0; i < 2; ++i) {
-    const fw_drive_t* d = &L->drive[i];
-    if ((int32_t)(d->tpdo1_count - L->can_syncs_sent) < 0 || (int32_t)(d->tpdo2_count - L->can_syncs_sent) < 0) {
-      return false;
-    }
-  }
-  return true;
+static bool can_drive_answered(const fw_loop_t* L, int i) {
+  const fw_drive_t* d = &L->drive[i];
+  return (int32_t)(d->tpdo1_count - L->can_syncs_sent) >= 0 && (int32_t)(d->tpdo2_count - L->can_syncs_sent) >= 0;
 }
+
+static bool can_all_answered(const fw_loop_t* L) { return can_drive_answered(L, 0) && can_drive_answered(L, 1); }
 
 // ---- common -------------------------------------------------------------------------------
 
@@ -534,6 +531,30 @@ void fw_base_restart(fw_loop_t* L) {
   can_nmt_start(L, NULL);
 }
 
+// The error of a lockstep start whose SYNC stayed unanswered for wait_s: the drives that did not
+// answer, what came from them, and any frames of ids no can_node_* key names (a typo's hint).
+static void can_start_unanswered(const fw_loop_t* L, double wait_s, char* err, size_t err_cap) {
+  char who[160] = "";
+  size_t used = 0;
+  for (int i = 0; i < 2; ++i) {
+    if (!can_drive_answered(L, i)) {
+      const int n = snprintf(who + used, sizeof who - used, "%sdrive node %u (%s, can_node_%s; %s)",
+                             used > 0 ? " and " : "", (unsigned)L->drive[i].node, drive_name(i), drive_name(i),
+                             L->drive[i].sw_seen ? "its TPDOs stopped" : "nothing from that id");
+      used = n > 0 && (size_t)n < sizeof who - used ? used + (size_t)n : sizeof who - 1;
+    }
+  }
+  char foreign[96] = "";
+  if (L->can_foreign_frames > 0) {
+    snprintf(foreign, sizeof foreign, "; %lld frames came from ids no can_node_* key names (the last COB-ID 0x%03x)",
+             (long long)L->can_foreign_frames, (unsigned)L->can_foreign_id);
+  }
+  snprintf(err, err_cap,
+           "CANopen: SYNC %u of the start unanswered for %g s (lockstep_timeout_s) by %s%s; check the can_node_* "
+           "keys against the emulator's node ids and that the emulator runs (b21r-sim --lockstep)",
+           (unsigned)L->can_syncs_sent, wait_s, who, foreign);
+}
+
 int fw_base_start(fw_loop_t* L, char* err, size_t err_cap) {
   if (is_rflex(L)) {
     if (L->io.vt->base_read == NULL || L->io.vt->base_write == NULL) {
@@ -564,32 +585,25 @@ int fw_base_start(fw_loop_t* L, char* err, size_t err_cap) {
   // for the whole answer (both TPDOs of both drives), so the last one gives the odometry its
   // baseline: the loop's start then needs no SYNC of its own (in lockstep every later SYNC
   // advances the emulator by one period, see fw_loop_start). Real time: a cycle lasts at most
-  // 0.5 s and a drive that does not answer gets the next. Lockstep: a cycle lasts until the answer
-  // (up to lockstep_timeout_s): a cycle cut short by a stalled emulator would send one SYNC more,
-  // one more simulated period, and the run would differ by the machine's load.
+  // 0.5 s and a drive that does not answer gets the next. Lockstep: the emulator answers these
+  // SYNCs at its current time (it streams once the drives are enabled and the laser streams), and
+  // a cycle waits for its answer as a tick waits for the period's data, up to lockstep_timeout_s:
+  // a loaded machine may stall the emulator for longer than the 40 cycles of 0.5 s, and a drive
+  // that does not answer at all is named at once.
   const int64_t cycle_us = L->cfg.lockstep ? (int64_t)(L->cfg.lockstep_timeout_s * 1e6) : 500000;
   for (int cycle = 0; cycle < 40; ++cycle) {
     can_send_cycle(L, 0.0, 0.0, CIA402_REQ_ENABLE);
     const int64_t deadline = now(L) + cycle_us;
-    bool answered = false;
-    while (now(L) < deadline) {
-      can_poll(L, now(L));
-      answered = fw_base_all_reports(L);
-      if (answered) {
+    for (;;) {
+      const int64_t t = now(L);
+      can_poll(L, t);  // before the deadline is judged: frames that came during the last wait count
+      if (fw_base_all_reports(L) || t >= deadline) {
         break;
       }
       (void)L->io.vt->wait(L->io.user, deadline);
     }
-    if (L->cfg.lockstep && !answered) {
-      const fw_drive_t* d = &L->drive[0];
-      const int i = (int32_t)(d->tpdo1_count - L->can_syncs_sent) < 0 || (int32_t)(d->tpdo2_count - L->can_syncs_sent) < 0
-                        ? 0
-                        : 1;
-      snprintf(err, err_cap,
-               "CANopen: drive node %u (%s) did not answer SYNC %u of the start within %.1f s (lockstep_timeout_s); "
-               "check can_node_%s against the emulator's node ids and that the emulator runs (b21r-sim --lockstep)",
-               (unsigned)L->drive[i].node, drive_name(i), (unsigned)L->can_syncs_sent, (double)cycle_us / 1e6,
-               drive_name(i));
+    if (L->cfg.lockstep && !can_all_answered(L)) {
+      can_start_unanswered(L, (double)cycle_us / 1e6, err, err_cap);
       return -1;
     }
     const bool ok = cia402_operation_enabled(L->drive[0].statusword) && cia402_operation_enabled(L->drive[1].statusword);

@@ -578,8 +578,11 @@ int fw_loop_start(fw_loop_t* L, char* err, size_t err_cap) {
   // still on its way would leave a second period's data in flight, which a later tick would take
   // for its own (a tick behind, by the machine's timing). The CANopen base's answers to the
   // start-up SYNCs must all be in.
+  // 20 s for the devices to come up; lockstep waits at least as long as a tick waits for the
+  // emulator (lockstep_timeout_s), as the CANopen enable cycles before this do.
   const int64_t start = io_now(L);
-  const int64_t limit_us = 20000000;
+  const double limit_s = L->cfg.lockstep && L->cfg.lockstep_timeout_s > 20.0 ? L->cfg.lockstep_timeout_s : 20.0;
+  const int64_t limit_us = (int64_t)(limit_s * 1e6);
   int64_t next_cmd = start;
   for (;;) {
     const int64_t now = io_now(L);
@@ -593,8 +596,8 @@ int fw_loop_start(fw_loop_t* L, char* err, size_t err_cap) {
       break;
     }
     if (now - start > limit_us) {
-      snprintf(err, err_cap, "%s: no %s within %d s (device %s); check the cable, the power and the *_device keys",
-               !L->have_scan ? "laser" : "base", !L->have_scan ? "scan" : "odometry", (int)(limit_us / 1000000),
+      snprintf(err, err_cap, "%s: no %s within %g s (device %s); check the cable, the power and the *_device keys",
+               !L->have_scan ? "laser" : "base", !L->have_scan ? "scan" : "odometry", limit_s,
                !L->have_scan ? L->cfg.laser_device
                              : (L->cfg.base_protocol == FW_BASE_RFLEX ? L->cfg.base_device : "CAN bus"));
       return -1;

@@ -274,9 +274,9 @@ static void handle_frame(fake_robot_t* f, const canopen_frame_t* fr) {
         f->bump_operational = true;
         push_bumpers(f);  // a started node sends its inputs at once
       }
-      if (canopen_decode_nmt(fr, &n) == PROTO_OK && n.command == CANOPEN_NMT_START && !f->streaming) {
+      if (canopen_decode_nmt(fr, &n) == PROTO_OK && n.command == CANOPEN_NMT_START && !f->streaming && f->paced) {
         f->streaming = true;
-        emit_scan(f);  // t_0 scan; TPDOs answer the SYNCs
+        emit_scan(f);  // real time: the t_0 scan; TPDOs answer the SYNCs
       }
       break;
     }
@@ -290,9 +290,22 @@ static void handle_frame(fake_robot_t* f, const canopen_frame_t* fr) {
     }
     case CANOPEN_KIND_SYNC:
       f->commands++;
-      if (f->streaming && !f->paced) {
-        advance_timed(f);  // paced: the periods follow the clock (catch_up)
+      if (f->paced) {
+        break;  // the periods follow the clock (catch_up)
       }
+      if (f->streaming) {
+        advance_timed(f);
+        break;
+      }
+      // Lockstep before streaming, as b21r-sim: time stands still and the SYNC is answered at the
+      // current time; streaming starts at the SYNC that finds both drives enabled, with the t_0
+      // scan and inputs first. The start's enable cycles therefore cost no period.
+      if (cia402_drive_enabled(&f->drive[0]) && cia402_drive_enabled(&f->drive[1])) {
+        f->streaming = true;
+        emit_scan(f);
+      }
+      push_bumpers(f);
+      emit_base(f);
       break;
     default:
       break;

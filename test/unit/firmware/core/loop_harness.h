@@ -71,7 +71,7 @@ int harness_open(harness_t* h, const fw_config_t* cfg, bool canopen, uint64_t fa
 int harness_open_can_lag(harness_t* h, const fw_config_t* cfg, uint64_t fake_seed, int64_t can_lag_us);
 
 /// harness_open_can_lag with the emulator stalled once: in the fake's period stall_period (1 = the
-/// answer to the start's first SYNC), the frames after the bump-panel node's heartbeat come
+/// first tick's; the start costs none), the frames after the bump-panel node's heartbeat come
 /// stall_us later (fake_robot_t.can_stall_us).
 int harness_open_can_stall(harness_t* h, const fw_config_t* cfg, uint64_t fake_seed, int64_t can_lag_us,
                            int64_t stall_us, int64_t stall_period);

@@ -400,10 +400,36 @@ static void test_loop_canopen_lockstep_drive_missing_refuses_start(void** state)
   char err[FW_LOOP_ERR_MAX];
   start_refused(&c, err, sizeof err);
   print_message("%s (after %.2f s)\n", err, (double)(fake->clock_us - t0) / 1e6);
-  assert_non_null(strstr(err, "drive node 5 (rotation) did not answer SYNC 1 of the start within 1.0 s"));
-  assert_non_null(strstr(err, "can_node_rotation"));
-  assert_true(fake->clock_us - t0 >= 1000000 && fake->clock_us - t0 <= 1200000);  // the SYNC moved it 0.1 s
-  assert_int_equal(fake->ticks, 1);  // one SYNC: no retry advanced the emulator
+  assert_non_null(strstr(err, "SYNC 1 of the start unanswered for 1 s (lockstep_timeout_s) by drive node 5 "
+                              "(rotation, can_node_rotation; nothing from that id)"));
+  assert_non_null(strstr(err, "from ids no can_node_* key names (the last COB-ID 0x"));
+  assert_null(strstr(err, "translation"));  // the drive that answered is not named
+  assert_true(fake->clock_us - t0 >= 1000000 && fake->clock_us - t0 <= 1100000);
+  assert_int_equal(fake->commands, 1);  // one SYNC: not 40 cycles of retries
+}
+
+// Lockstep: the start waits for the first scan at least as long as a tick waits for the period's
+// data (lockstep_timeout_s, here 30 s; real time and shorter timeouts 20 s), then names the device.
+static void test_loop_lockstep_start_waits_lockstep_timeout_for_first_scan(void** state) {
+  (void)state;
+  const double timeouts_s[2] = {30.0, 1.0};
+  const double expect_s[2] = {30.0, 20.0};
+  for (int k = 0; k < 2; ++k) {
+    fw_config_t c;
+    harness_config(&c);
+    c.lockstep_timeout_s = timeouts_s[k];
+    fake_robot_init(&g_h.fake, false, 1.0 / c.tick_rate_hz, 9);
+    g_h.fake.laser_drop_ticks = 1;  // the t_0 scan is lost; in lockstep no period follows
+    const int64_t t0 = g_h.fake.clock_us;
+    char err[FW_LOOP_ERR_MAX];
+    start_refused(&c, err, sizeof err);
+    const double waited_s = (double)(g_h.fake.clock_us - t0) / 1e6;
+    print_message("lockstep_timeout_s %g: %s (after %.2f s)\n", timeouts_s[k], err, waited_s);
+    char want[64];
+    snprintf(want, sizeof want, "laser: no scan within %g s", expect_s[k]);
+    assert_non_null(strstr(err, want));
+    assert_true(waited_s >= expect_s[k] && waited_s < expect_s[k] + 0.1);
+  }
 }
 
 // A CiA 402 drive fault (EMCY + statusword) stops the robot; after the fault condition clears,
@@ -770,6 +796,7 @@ int main(void) {
       cmocka_unit_test(test_loop_canopen_bumper_node_restart_is_started_again),
       cmocka_unit_test(test_loop_canopen_bumper_node_missing_refuses_start),
       cmocka_unit_test(test_loop_canopen_lockstep_drive_missing_refuses_start),
+      cmocka_unit_test(test_loop_lockstep_start_waits_lockstep_timeout_for_first_scan),
       cmocka_unit_test(test_loop_drive_fault_stops_and_recovers),
       cmocka_unit_test(test_loop_signal_stops_and_ends),
       cmocka_unit_test(test_loop_teleop_deadman_and_validation),
