@@ -32,6 +32,8 @@
 
 extern char** environ;
 
+enum { DEV_LASER, DEV_BASE, DEV_CAN, DEV_COUNT };  // the devices whose bytes are hashed apart
+
 typedef struct sim_proc {
   pid_t pid;
   int laser, base, can, ctl;
@@ -40,7 +42,7 @@ typedef struct sim_proc {
   rflex_decoder_t rflex;
   // FNV-1a of every byte received, one per device (laser, base, CAN): how the reads of two
   // channels interleave depends on the machine's timing, each channel's bytes do not.
-  uint64_t hash[3];
+  uint64_t hash[DEV_COUNT];
   // Totals since the last host_clear().
   int scans, motor_reports, tpdo1, tpdo2, emcy;
 } sim_proc_t;
@@ -77,8 +79,6 @@ static uint64_t now_ms(void) {
   return (uint64_t)ts.tv_sec * 1000U + (uint64_t)ts.tv_nsec / 1000000U;
 }
 
-enum { DEV_LASER, DEV_BASE, DEV_CAN };
-
 static void hash(sim_proc_t* p, int dev, const uint8_t* b, size_t n) {
   for (size_t i = 0; i < n; ++i) {
     p->hash[dev] = (p->hash[dev] ^ b[i]) * 1099511628211ULL;
@@ -88,7 +88,7 @@ static void hash(sim_proc_t* p, int dev, const uint8_t* b, size_t n) {
 // The devices' hashes in one value (for the scenario's result).
 static uint64_t stream_hash(const sim_proc_t* p) {
   uint64_t h = 1469598103934665603ULL;
-  for (int d = 0; d < 3; ++d) {
+  for (int d = 0; d < DEV_COUNT; ++d) {
     h = (h ^ p->hash[d]) * 1099511628211ULL;
   }
   return h;
@@ -217,7 +217,7 @@ static void send_can(sim_proc_t* p, const canopen_frame_t* f) {
 static int start(ctx_t* c, sim_proc_t* p, const char* world, const char* const* extra) {
   memset(p, 0, sizeof(*p));
   p->laser = p->base = p->can = p->ctl = -1;
-  for (int d = 0; d < 3; ++d) {
+  for (int d = 0; d < DEV_COUNT; ++d) {
     p->hash[d] = 1469598103934665603ULL;
   }
   (void)lms_decoder_init(&p->lms, LMS_ROLE_HOST, 0);

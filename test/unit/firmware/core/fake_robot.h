@@ -8,7 +8,8 @@
 /// Lockstep like the emulator's contract: time advances one control period when the rotation
 /// SET_DIR (rFLEX) or SYNC (CANopen) arrives; then the scan and the odometry of the new period
 /// are queued. Streaming (and time) starts with rFLEX's odometry request, on CANopen at the SYNC
-/// that finds both drives enabled; the start's SYNCs before it are answered at the current time. The clock is simulated: `wait` jumps it to the deadline when nothing is pending.
+/// that finds both drives enabled; the start's SYNCs before it are answered at the current time.
+/// The clock is simulated: `wait` jumps it to the deadline when nothing is pending.
 /// Fault injection mirrors the emulator's control socket (laser drop, base silence, drive fault,
 /// bumper, bump-panel node silence, corrupt bytes). No allocation after fake_robot_init. Not thread-safe.
 #ifndef B21R_TEST_FAKE_ROBOT_H

@@ -17,8 +17,7 @@ void harness_config(fw_config_t* cfg) {
   cfg->status_period_ticks = 10;
 }
 
-static int open_fake(harness_t* h, const fw_config_t* cfg, bool canopen, uint64_t fake_seed, int64_t can_lag_us,
-                     int64_t stall_us, int64_t stall_period) {
+static int open_fake(harness_t* h, const fw_config_t* cfg, bool canopen, uint64_t fake_seed, int64_t can_lag_us) {
   memset(h, 0, sizeof *h);
   h->cfg = *cfg;
   if (canopen) {
@@ -27,8 +26,6 @@ static int open_fake(harness_t* h, const fw_config_t* cfg, bool canopen, uint64_
   fake_robot_init(&h->fake, canopen, 1.0 / h->cfg.tick_rate_hz, fake_seed);
   h->fake.paced = !h->cfg.lockstep;  // real time: the fake's periods follow its clock
   h->fake.can_lag_us = can_lag_us;
-  h->fake.can_stall_us = stall_us;
-  h->fake.can_stall_period = stall_period;
   h->q = fw_pubq_create((uint32_t)h->cfg.queue_capacity);
   if (h->q == NULL) {
     return -1;
@@ -50,16 +47,11 @@ static int open_fake(harness_t* h, const fw_config_t* cfg, bool canopen, uint64_
 }
 
 int harness_open(harness_t* h, const fw_config_t* cfg, bool canopen, uint64_t fake_seed) {
-  return open_fake(h, cfg, canopen, fake_seed, 0, 0, 0);
+  return open_fake(h, cfg, canopen, fake_seed, 0);
 }
 
 int harness_open_can_lag(harness_t* h, const fw_config_t* cfg, uint64_t fake_seed, int64_t can_lag_us) {
-  return open_fake(h, cfg, true, fake_seed, can_lag_us, 0, 0);
-}
-
-int harness_open_can_stall(harness_t* h, const fw_config_t* cfg, uint64_t fake_seed, int64_t can_lag_us,
-                           int64_t stall_us, int64_t stall_period) {
-  return open_fake(h, cfg, true, fake_seed, can_lag_us, stall_us, stall_period);
+  return open_fake(h, cfg, true, fake_seed, can_lag_us);
 }
 
 static uint64_t fnv1a(uint64_t h, const uint8_t* p, int n) {

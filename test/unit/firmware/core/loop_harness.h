@@ -70,12 +70,6 @@ int harness_open(harness_t* h, const fw_config_t* cfg, bool canopen, uint64_t fa
 /// harness_open with the fake's CAN frames lagging can_lag_us behind the laser (fake_robot_t.can_lag_us).
 int harness_open_can_lag(harness_t* h, const fw_config_t* cfg, uint64_t fake_seed, int64_t can_lag_us);
 
-/// harness_open_can_lag with the emulator stalled once: in the fake's period stall_period (1 = the
-/// first tick's; the start costs none), the frames after the bump-panel node's heartbeat come
-/// stall_us later (fake_robot_t.can_stall_us).
-int harness_open_can_stall(harness_t* h, const fw_config_t* cfg, uint64_t fake_seed, int64_t can_lag_us,
-                           int64_t stall_us, int64_t stall_period);
-
 /// Drains the queue (hash experiences, track EVAL and STATUS).
 void harness_drain(harness_t* h);
 

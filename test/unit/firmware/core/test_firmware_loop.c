@@ -149,10 +149,10 @@ static void test_loop_decision_ticks_hold_and_learn_each_decision(void** state) 
 // the experience stream.
 static uint64_t run_stream(const fw_config_t* c, bool canopen, int64_t can_lag_us, int64_t stall_us,
                            int64_t stall_period, int64_t* count, fw_loop_stats_t* st) {
-  assert_int_equal(canopen ? harness_open_can_stall(&g_h, c, 5, can_lag_us, stall_us, stall_period)
-                           : harness_open(&g_h, c, false, 5),
-                   0);
+  assert_int_equal(canopen ? harness_open_can_lag(&g_h, c, 5, can_lag_us) : harness_open(&g_h, c, false, 5), 0);
   assert_int_equal(g_h.fake.ticks, 0);  // the start moved the emulator's time by no period
+  g_h.fake.can_stall_us = stall_us;
+  g_h.fake.can_stall_period = stall_period;
   harness_run(&g_h, 100000);
   fw_loop_get_stats(g_h.loop, st);
   *count = g_h.exp_count;
