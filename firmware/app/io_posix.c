@@ -563,6 +563,12 @@ static void notify_tick(void* user) {
   (void)!write(io->tick_fd, &one, sizeof one);
 }
 
+void io_posix_wake(io_posix_t* io) {
+  if (io->tick_fd >= 0) {
+    notify_tick(io);
+  }
+}
+
 // Start-up (not a tick): a serial line opened by its helper thread, waited for.
 static int open_line(drv_serial_link_t* link, const char* path, uint32_t baud, char* err, size_t err_cap) {
   drv_serial_link_open(link, path, baud);

@@ -93,6 +93,10 @@ int io_posix_realtime(io_posix_t* io, int policy, int priority, char* err, size_
 
 void io_posix_close(io_posix_t* io);
 
+/// Wakes the tick thread's wait (the binding's wait() returns). Async-signal-safe (one write to an
+/// eventfd), for a signal handler on any thread; does nothing before io_posix_open.
+void io_posix_wake(io_posix_t* io);
+
 /// Monotonic clock [µs].
 int64_t io_posix_now_us(void);
 

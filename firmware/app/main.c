@@ -28,11 +28,18 @@
 enum { EXIT_USAGE = 2, EXIT_CHECKPOINT = 3, EXIT_DEVICE = 4 };
 
 static fw_loop_t* volatile g_loop;  // for the signal handler only
+static io_posix_t* volatile g_io;   // likewise: its wait is woken, which may be on another thread
+static volatile sig_atomic_t g_signal;  // the last SIGINT/SIGTERM, for the exit status of a start it ended
 
 static void on_signal(int sig) {
   fw_loop_t* loop = g_loop;
   if (loop != NULL) {
+    g_signal = sig;
     fw_loop_signal(loop, sig);
+    io_posix_t* io = g_io;
+    if (io != NULL) {
+      io_posix_wake(io);  // a lockstep wait for a stalled emulator would otherwise run to its timeout
+    }
   } else {
     _exit(128 + sig);  // before the loop exists there is nothing to stop or save
   }
@@ -338,6 +345,7 @@ int main(int argc, char** argv) {
   }
 
   if (status == 0) {
+    g_io = &io;
     g_loop = loop;
     fprintf(stderr, "b21r-controller: starting devices (laser %s, base %s %s)%s\n", cfg.laser_device,
             cfg.base_protocol == FW_BASE_RFLEX ? "rflex" : "canopen",
@@ -345,13 +353,14 @@ int main(int argc, char** argv) {
                                                 : (cfg.can_socket[0] != '\0' ? cfg.can_socket : cfg.can_interface),
             cfg.lockstep ? ", lockstep" : "");
     // Real-time provisions of the tick thread (this one), after the helper threads exist.
+    int start_rc = 0;
     if (apply_realtime(&cfg, loop, &io, err, sizeof err) != 0) {
       fprintf(stderr, "b21r-controller: %s\n", err);
       status = EXIT_USAGE;
       fw_loop_signal(loop, 0);
-    } else if (fw_loop_start(loop, err, sizeof err) != 0) {
+    } else if ((start_rc = fw_loop_start(loop, err, sizeof err)) != 0) {
       fprintf(stderr, "b21r-controller: %s\n", err);
-      status = EXIT_DEVICE;
+      status = start_rc == FW_LOOP_START_SIGNALLED ? 128 + (int)g_signal : EXIT_DEVICE;
       fw_loop_signal(loop, 0);
     } else {
       status = run_ticks(loop, &cfg, &notify, hang_after);
@@ -370,6 +379,7 @@ int main(int argc, char** argv) {
     operator_rx_stop(&rx);
   }
   g_loop = NULL;
+  g_io = NULL;
   fw_publisher_flush(pub);
   fw_publisher_destroy(pub);
   fw_ckpt_writer_destroy(ckpt);

@@ -6,6 +6,7 @@
 #include "base.h"
 
 #include <math.h>
+#include <signal.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -472,6 +473,16 @@ static void can_supervision_reset(fw_loop_t* L) {
   }
 }
 
+bool fw_base_start_signalled(fw_loop_t* L, const char* during, char* err, size_t err_cap) {
+  const int sig = fw_loop_signalled(L);
+  if (sig == 0) {
+    return false;
+  }
+  snprintf(err, err_cap, "stopped by signal %d (%s) during %s", sig,
+           sig == SIGINT ? "SIGINT" : sig == SIGTERM ? "SIGTERM" : "a signal", during);
+  return true;
+}
+
 // Waits (bounded) for the bump-panel node's first TPDO1: it sends one when started and then
 // every event timer, so a node that says nothing is missing, misconfigured or not powered.
 static int can_wait_bumpers(fw_loop_t* L, char* err, size_t err_cap) {
@@ -480,6 +491,9 @@ static int can_wait_bumpers(fw_loop_t* L, char* err, size_t err_cap) {
   int64_t next_cycle = now(L) + L->period_us;
   while (!L->bump.seen) {
     const int64_t t = now(L);
+    if (fw_base_start_signalled(L, "the CANopen start (waiting for the bump-panel node)", err, err_cap)) {
+      return FW_LOOP_START_SIGNALLED;
+    }
     if (t >= deadline) {
       const fw_bump_node_t* b = &L->bump;
       snprintf(err, err_cap,
@@ -597,6 +611,9 @@ int fw_base_start(fw_loop_t* L, char* err, size_t err_cap) {
     for (;;) {
       const int64_t t = now(L);
       can_poll(L, t);  // before the deadline is judged: frames that came during the last wait count
+      if (fw_base_start_signalled(L, "the CANopen start (enabling the drives)", err, err_cap)) {
+        return FW_LOOP_START_SIGNALLED;
+      }
       if (fw_base_all_reports(L) || t >= deadline) {
         break;
       }

@@ -513,6 +513,9 @@ int64_t fw_loop_wait(fw_loop_t* L) {
       if ((L->scan_new || L->scan_repeat_new) && fw_base_all_reports(L)) {
         break;
       }
+      if (fw_loop_signalled(L) != 0) {
+        break;  // SIGINT/SIGTERM: the tick stops the base now, not when a stalled emulator answers
+      }
       if (L->io.vt->health != NULL) {
         // A device that is gone will not deliver: the tick reports it at once.
         fw_io_health_t h;
@@ -568,8 +571,9 @@ int fw_loop_run(fw_loop_t* L) {
 int fw_loop_start(fw_loop_t* L, char* err, size_t err_cap) {
   fw_out_config(L);  // first in every log, even when a device does not start
   L->data_utime = L->cfg.lockstep ? L->period_us : 0;  // the start's data are the first tick's
-  if (fw_base_start(L, err, err_cap) != 0) {
-    return -1;
+  const int base_rc = fw_base_start(L, err, err_cap);
+  if (base_rc != 0) {
+    return base_rc;
   }
   // The first scan (the laser driver may first have to find the LMS200's baud rate) and the
   // first odometry. Real time: zero commands keep the base's watchdog fed meanwhile. Lockstep:
@@ -594,6 +598,11 @@ int fw_loop_start(fw_loop_t* L, char* err, size_t err_cap) {
     // the emulator waits for our first command before it sends more).
     if (L->have_scan && L->base.odometry.baseline && (!L->cfg.lockstep || fw_base_all_reports(L))) {
       break;
+    }
+    if (fw_base_start_signalled(L, L->have_scan ? "the start (waiting for the first odometry)"
+                                                : "the start (waiting for the laser's first scan)",
+                                err, err_cap)) {
+      return FW_LOOP_START_SIGNALLED;
     }
     if (now - start > limit_us) {
       snprintf(err, err_cap, "%s: no %s within %g s (device %s); check the cable, the power and the *_device keys",

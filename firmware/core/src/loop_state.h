@@ -288,4 +288,7 @@ struct fw_loop {
   int64_t pace_ticks;
 };
 
+// The signal fw_loop_signal() recorded (0: none). Any thread; async-signal-safe.
+static inline int fw_loop_signalled(fw_loop_t* L) { return atomic_load(&L->signal_number); }
+
 #endif  // FW_LOOP_STATE_H

@@ -9,6 +9,9 @@ with its reason and detail, and the controller recovers from the transient ones:
 - canopen: laser silence, drive fault (EMCY + statusword), bumper (the CiA 401 bump-panel node's
   TPDO1, the same `fault bumper 3` as on rFLEX), the bump-panel node's silence (a base fault that
   names the node), SIGTERM.
+In lockstep, SIGTERM while the emulator is frozen (SIGSTOP), once during the start and once
+mid-run, ends the controller within 5 s with 128+15 (the start's error names the signal), not
+after lockstep_timeout_s (30 s) as a silent emulator would.
 Under `fault latency 200` the emulator does not spin (its CPU use over 2 s stays below 20 % of a
 core). No STATUS counter that the message definition calls monotonic goes back over the stops.
 usage: test_safety.py CONTROLLER SIM WORLD rflex|canopen"""
@@ -24,6 +27,46 @@ from fwtest import cpu_seconds, wait_for
 from b21r_log import read_log
 
 STOP_NAMES = {1: "laser silent", 2: "base silent", 3: "base fault", 4: "bumper", 6: "deadman released", 7: "signal"}
+
+
+def sigterm_while_frozen(controller, sim_exe, world, base, d, name, during_start):
+    """Lockstep: freezes the emulator (before the controller starts, or once a run is under way),
+    sends the controller SIGTERM and returns the seconds it took to exit; fails unless 128+15."""
+    sim = fwtest.Sim(sim_exe, world, d, name, base=base, seed=3)
+    proc = None
+    try:
+        if during_start:
+            sim.proc.send_signal(signal.SIGSTOP)
+        err_path = os.path.join(d, name + ".controller.log")
+        with open(err_path, "w") as err, open(os.path.join(d, name + ".progress.txt"), "w") as out:
+            proc = subprocess.Popen(fwtest.controller_cmd(controller, sim, d, name, {"phase_one_runs": 1000}),
+                                    stdout=out, stderr=err)
+        wait_for(err_path, "starting devices", 0, 30, proc)
+        time.sleep(1.0)  # the start waits for the frozen emulator, or a run is under way
+        if not during_start:
+            sim.proc.send_signal(signal.SIGSTOP)
+            time.sleep(0.5)  # the tick waits for the period's data
+        t0 = time.time()
+        proc.send_signal(signal.SIGTERM)
+        try:
+            rc = proc.wait(5)
+        except subprocess.TimeoutExpired:
+            fwtest.fail("%s: the controller did not exit within 5 s of SIGTERM with the emulator frozen" % name)
+        took = time.time() - t0
+        if rc != 128 + signal.SIGTERM:
+            fwtest.fail("%s: SIGTERM with the emulator frozen: exit status %d, expected %d" %
+                        (name, rc, 128 + signal.SIGTERM))
+        with open(err_path) as f:
+            text = f.read()
+        want = "stopped by signal 15 (SIGTERM) during the " if during_start else "SAFETY STOP (signal)"
+        if want not in text:
+            fwtest.fail("%s: '%s' is not in the controller's messages:\n%s" % (name, want, text))
+        return took
+    finally:
+        sim.proc.send_signal(signal.SIGCONT)
+        if proc is not None:
+            fwtest.stop_all([proc])
+        sim.close()
 
 
 def main():
@@ -93,6 +136,11 @@ def main():
             fwtest.note("STATUS stop_reason %d (%s): %s" % (r, STOP_NAMES[r], seen[r]))
         if not os.path.exists(ckpt):
             fwtest.fail("no checkpoint after SIGTERM")
+        for during_start in (True, False):
+            took = sigterm_while_frozen(controller, sim_exe, world, base, d,
+                                        "frozen-start" if during_start else "frozen-run", during_start)
+            fwtest.note("SIGTERM, lockstep emulator frozen %s -> exit status 143 after %.2f s" %
+                        ("during the start" if during_start else "mid-run", took))
         if base == "rflex":
             # Joystick phase one without a deadman message: the robot must not move.
             key = os.path.join(d, "operator.key")  # joystick driving needs the operator key

@@ -145,9 +145,15 @@ int fw_loop_load_checkpoint(fw_loop_t* loop, char* err, size_t err_cap);
 
 /// Device start-up: base (rFLEX: odometry and DIO reports on, defaults, brake release, status
 /// request; CANopen: NMT start, CiA 402 enable sequence over SYNC cycles) and the first laser
-/// scan. Blocks up to a few seconds (never inside the tick loop). Returns 0, or -1 with a
-/// message naming the device that did not answer.
+/// scan. Blocks up to a few seconds (never inside the tick loop; in lockstep as long as a stalled
+/// emulator keeps it, up to lockstep_timeout_s per wait). Returns 0; -1 with a message naming the
+/// device that did not answer; FW_LOOP_START_SIGNALLED when fw_loop_signal() came meanwhile (it
+/// is read at every wake-up of the I/O binding's wait: a signal handler should also wake that
+/// wait), err saying so: the caller shuts down as usual and exits 128 + the signal's number.
 int fw_loop_start(fw_loop_t* loop, char* err, size_t err_cap);
+
+/// fw_loop_start()'s result when SIGINT/SIGTERM (fw_loop_signal) ended the start.
+#define FW_LOOP_START_SIGNALLED (-2)
 
 /// Waits for the next tick: lockstep, until the emulator's data for the next period arrived
 /// (or the lockstep timeouts); real time, until the next absolute deadline (reading input as it
@@ -178,7 +184,9 @@ void fw_loop_prefault(fw_loop_t* loop);
 /// Frees everything. NULL is ignored.
 void fw_loop_destroy(fw_loop_t* loop);
 
-/// Records SIGINT/SIGTERM: the next tick stops the base and ends the loop. Async-signal-safe.
+/// Records SIGINT/SIGTERM: the next tick stops the base and ends the loop (in lockstep it does not
+/// wait for a stalled emulator's data first), or fw_loop_start() returns FW_LOOP_START_SIGNALLED.
+/// Async-signal-safe.
 void fw_loop_signal(fw_loop_t* loop, int signal_number);
 
 /// Hands a received B21R_TELEOP to the loop (validated in the tick: NaN, range, repeated or

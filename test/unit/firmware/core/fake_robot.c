@@ -339,6 +339,16 @@ static int v_wait(void* user, int64_t deadline_us) {
   if (f->n_frames > 0 && f->frame_ready_us[0] < deadline_us) {
     deadline_us = f->frame_ready_us[0];  // a lagging frame arrives first
   }
+  if (f->wake != NULL && f->wake_at_us < deadline_us) {
+    if (f->wake_at_us > f->clock_us) {
+      f->clock_us = f->wake_at_us;
+    }
+    void (*wake)(void*) = f->wake;
+    f->wake = NULL;
+    wake(f->wake_user);
+    catch_up(f);
+    return 1;  // interrupted, as poll() by a signal or the handler's eventfd write
+  }
   if (deadline_us > f->clock_us) {
     f->clock_us = deadline_us;  // a blocking wait that nothing interrupts
   }

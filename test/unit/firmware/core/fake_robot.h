@@ -98,6 +98,12 @@ typedef struct fake_robot {
   int32_t bumper_ticks;
   double corrupt_fraction;
   bool nan_odometry;
+  /// A signal handler's wake-up: the first wait whose deadline passes wake_at_us returns at that
+  /// time after calling wake(wake_user) once (which, like the controller's handler, calls
+  /// fw_loop_signal). NULL: none.
+  void (*wake)(void* user);
+  void* wake_user;
+  int64_t wake_at_us;
   // Counters.
   int64_t start_pose_requests;
   uint64_t start_pose_run;        ///< the run id given with the last start-pose request

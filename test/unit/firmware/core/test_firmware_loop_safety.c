@@ -432,6 +432,74 @@ static void test_loop_lockstep_start_waits_lockstep_timeout_for_first_scan(void*
   }
 }
 
+// The controller's signal handler: records the signal in the loop (and wakes its wait).
+static void raise_sigterm(void* user) { fw_loop_signal((fw_loop_t*)user, SIGTERM); }
+
+// SIGTERM during a lockstep start that waits for a stalled or missing device (up to
+// lockstep_timeout_s per wait, here 30 s) ends the start at once: FW_LOOP_START_SIGNALLED, the
+// error naming the signal and the step it ended, the fake's clock 0.4 s on (not 30 s).
+static void test_loop_signal_ends_the_lockstep_start(void** state) {
+  (void)state;
+  for (int k = 0; k < 2; ++k) {
+    const bool canopen = k == 1;
+    fw_config_t c;
+    harness_config(&c);
+    c.lockstep_timeout_s = 30.0;
+    fake_robot_t* fake = &g_h.fake;
+    fake_robot_init(fake, canopen, 1.0 / c.tick_rate_hz, 9);
+    if (canopen) {
+      c.base_protocol = FW_BASE_CANOPEN;
+      c.can_node_rotation = 5;  // a drive that never answers: the enable cycle waits
+    } else {
+      fake->laser_drop_ticks = 1;  // the t_0 scan is lost: the first-scan wait
+    }
+    const fw_io_t io = fake_robot_io(fake);
+    fw_pubq_t* q = fw_pubq_create(256);
+    assert_non_null(q);
+    const fw_loop_outputs_t out = {.queue = q, .notify = NULL, .notify_user = NULL, .checkpoints = NULL};
+    char err[FW_LOOP_ERR_MAX];
+    fw_loop_t* loop = fw_loop_create(&c, &io, &out, err, sizeof err);
+    assert_non_null(loop);
+    const int64_t t0 = fake->clock_us;
+    fake->wake = raise_sigterm;
+    fake->wake_user = loop;
+    fake->wake_at_us = t0 + 400000;
+    const int rc = fw_loop_start(loop, err, sizeof err);
+    const double waited_s = (double)(fake->clock_us - t0) / 1e6;
+    print_message("%s: rc %d, %s (after %.2f s)\n", canopen ? "canopen" : "rflex", rc, err, waited_s);
+    assert_int_equal(rc, FW_LOOP_START_SIGNALLED);
+    assert_non_null(strstr(err, "stopped by signal 15 (SIGTERM) during the "));
+    assert_non_null(strstr(err, canopen ? "CANopen start (enabling the drives)" : "laser's first scan"));
+    assert_true(waited_s >= 0.4 && waited_s < 0.5);
+    assert_int_equal(fw_loop_shutdown(loop), 0);
+    fw_loop_destroy(loop);
+    fw_pubq_destroy(q);
+  }
+}
+
+// SIGTERM while a lockstep tick waits for a stalled emulator's data ends the loop at once (128 +
+// 15, the robot commanded to stand), not after lockstep_timeout_s (30 s) as a silent device would.
+static void test_loop_signal_ends_a_lockstep_wait(void** state) {
+  (void)state;
+  open_running(false, lockstep_patient);
+  g_h.fake.laser_drop_ticks = 1000000;  // the emulator sends nothing more
+  const int64_t t0 = g_h.fake.clock_us;
+  g_h.fake.wake = raise_sigterm;
+  g_h.fake.wake_user = g_h.loop;
+  g_h.fake.wake_at_us = t0 + 500000;
+  const int64_t ticks = harness_run(&g_h, 10);
+  const double waited_s = (double)(g_h.fake.clock_us - t0) / 1e6;
+  fw_loop_stats_t st;
+  fw_loop_get_stats(g_h.loop, &st);
+  print_message("%lld ticks, ended after %.2f s, exit status %d\n", (long long)ticks, waited_s, st.exit_status);
+  assert_true(st.done);
+  assert_int_equal(st.stop_reason, FW_STOP_SIGNAL);
+  assert_int_equal(st.exit_status, 128 + SIGTERM);
+  assert_true(waited_s >= 0.5 && waited_s < 1.0);
+  assert_true(fabs(g_h.fake.v_cmd) < 1e-9 && fabs(g_h.fake.w_cmd) < 1e-9);
+  harness_close(&g_h);
+}
+
 // A CiA 402 drive fault (EMCY + statusword) stops the robot; after the fault condition clears,
 // the loop's fault-reset edge recovers the drive and the loop resumes.
 static void test_loop_drive_fault_stops_and_recovers(void** state) {
@@ -797,6 +865,8 @@ int main(void) {
       cmocka_unit_test(test_loop_canopen_bumper_node_missing_refuses_start),
       cmocka_unit_test(test_loop_canopen_lockstep_drive_missing_refuses_start),
       cmocka_unit_test(test_loop_lockstep_start_waits_lockstep_timeout_for_first_scan),
+      cmocka_unit_test(test_loop_signal_ends_the_lockstep_start),
+      cmocka_unit_test(test_loop_signal_ends_a_lockstep_wait),
       cmocka_unit_test(test_loop_drive_fault_stops_and_recovers),
       cmocka_unit_test(test_loop_signal_stops_and_ends),
       cmocka_unit_test(test_loop_teleop_deadman_and_validation),
