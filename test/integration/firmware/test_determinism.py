@@ -5,6 +5,9 @@ bit-identical experience streams: the controller's --experience-log files are by
 (SHA-256), and a different controller seed gives a different stream. A third run of the same
 seed has its emulator frozen (SIGSTOP) for 2.5 s twice, as a loaded machine may stall it: lockstep
 does not depend on wall time, so the stream is identical again and the laser was never restarted.
+Another has it frozen for 4 s from before the controller starts, so the laser's start-up requests
+outlive the driver's reply timeouts (1 s, 3 s for a mode change) and the CANopen start's first
+cycles wait: the stream is identical again, again with no restart of the laser.
 A fourth has every start-pose answer held 0.2 s on its way back (a relay on the control socket)
 with emulator_reply_timeout_s at its least (10 ms): lockstep awaits the answers as it awaits the
 period's data, so the runs start at the same ticks and the stream is identical again.
@@ -63,10 +66,12 @@ def slow_relay(listener, target, stop, relayed, delay_s=0.2):
                 return
 
 
-def one_run(controller, sim_exe, world, base, d, name, seed, stalls=0, slow_replies=False):
+def one_run(controller, sim_exe, world, base, d, name, seed, stalls=0, stall_at_s=1.0, stall_s=2.5,
+            slow_replies=False):
     sim = fwtest.Sim(sim_exe, world, d, name, base=base, seed=1)
     stop = threading.Event()
-    helper = threading.Thread(target=freeze, args=(sim.proc, stop, stalls)) if stalls else None
+    helper = (threading.Thread(target=freeze, args=(sim.proc, stop, stalls, stall_at_s, stall_s))
+              if stalls else None)
     extra = {}
     relayed = [0]
     listener = None
@@ -121,11 +126,15 @@ def main():
         b = one_run(controller, sim_exe, world, base, d, "second", 7)
         c = one_run(controller, sim_exe, world, base, d, "other-seed", 8)
         frozen = one_run(controller, sim_exe, world, base, d, "emulator-frozen", 7, stalls=2)
+        frozen_start = one_run(controller, sim_exe, world, base, d, "emulator-frozen-at-start", 7, stalls=1,
+                               stall_at_s=0.0, stall_s=4.0)
         slow = one_run(controller, sim_exe, world, base, d, "slow-replies", 7, slow_replies=True)
         if a != b:
             fwtest.fail("the same run twice gave different experience streams")
         if frozen != a:
             fwtest.fail("freezing the emulator changed the experience stream")
+        if frozen_start != a:
+            fwtest.fail("freezing the emulator during the devices' start changed the experience stream")
         if slow != a:
             fwtest.fail("start-pose answers later than emulator_reply_timeout_s changed the experience stream")
         if a == c:
