@@ -248,6 +248,10 @@ static int64_t v_now(void* user) {
 // terminal: see drivers/serial.h).
 static int v_wait(void* user, int64_t deadline_us) {
   io_posix_t* io = (io_posix_t*)user;
+  if (io->tick_note_taken) {
+    io->tick_note_taken = false;  // a helper's news came during a start-pose wait: read it now
+    return 1;
+  }
   int64_t now = io_posix_now_us();
   flush_output(io, now);
   int64_t wake_us = deadline_us;
@@ -423,11 +427,33 @@ static void drop_control(io_posix_t* io) {
   io->stale_replies = 0;
 }
 
-// Reads one answer if there is one (timeout_ms 0: never waits). 1 "ok", 0 none yet, < 0 error.
+enum { REPLY_WOKEN = 2 };  // read_reply: a stop signal ended the wait (io_posix_wake)
+
+// Reads one answer if there is one, waiting up to timeout_ms for it (0: never waits). 1 "ok",
+// 0 none yet, REPLY_WOKEN a stop signal came first, < 0 error. The wait also watches the tick's
+// eventfd, so that a signal handler on any thread ends it; a helper's news read there meanwhile
+// is handed on to the next v_wait (tick_note_taken).
 static int read_reply(io_posix_t* io, int timeout_ms) {
+  const int64_t end_us = io_posix_now_us() + (int64_t)timeout_ms * 1000;
   for (;;) {
-    struct pollfd pfd = {.fd = io->control_fd, .events = POLLIN};
-    const int pr = poll(&pfd, 1, timeout_ms);
+    if (timeout_ms > 0 && io->woken) {
+      return REPLY_WOKEN;
+    }
+    const int64_t left_us = end_us - io_posix_now_us();
+    struct pollfd pfd[2] = {{.fd = io->control_fd, .events = POLLIN},
+                            {.fd = timeout_ms > 0 ? io->tick_fd : -1, .events = POLLIN}};
+    const int pr = poll(pfd, 2, left_us > 0 ? (int)((left_us + 999) / 1000) : 0);
+    if (pr < 0 && errno == EINTR) {
+      continue;  // a signal: io->woken says whether it was a stop
+    }
+    if ((pfd[1].revents & POLLIN) != 0) {
+      uint64_t v = 0;
+      (void)!read(io->tick_fd, &v, sizeof v);
+      io->tick_note_taken = true;
+    }
+    if (pr > 0 && (pfd[0].revents & (POLLIN | POLLHUP | POLLERR)) == 0) {
+      continue;  // only the eventfd: wait on for the answer (or see the stop above)
+    }
     if (pr == 0) {
       return 0;
     }
@@ -452,7 +478,8 @@ static int read_reply(io_posix_t* io, int timeout_ms) {
 // Emulator binding of "place the robot": `reset x y theta` on the control socket. Real time: the
 // request is sent in one tick and its answer read in a later one (2 meanwhile). Lockstep: the
 // answer is awaited at once and as long as the period's data are (lockstep_timeout_s): a stalled
-// emulator must not turn the request into a retry that starts the run at another tick.
+// emulator must not turn the request into a retry that starts the run at another tick. A stop
+// signal ends that wait (2: under way; the tick then stops).
 static int v_request_start_pose(void* user, double x_m, double y_m, double theta_rad, uint64_t run) {
   io_posix_t* io = (io_posix_t*)user;
   const fw_config_t* cfg = io->cfg;
@@ -489,6 +516,9 @@ static int v_request_start_pose(void* user, double x_m, double y_m, double theta
     io->request_sent_us = now;
   }
   const int r = read_reply(io, cfg->lockstep ? (int)((timeout_us + 999) / 1000) : 0);
+  if (r == REPLY_WOKEN) {
+    return 2;  // still under way: the tick that comes stops for the signal, no retry is logged
+  }
   if (r != 0) {
     io->request_pending = false;
     return r;
@@ -564,6 +594,7 @@ static void notify_tick(void* user) {
 }
 
 void io_posix_wake(io_posix_t* io) {
+  io->woken = 1;
   if (io->tick_fd >= 0) {
     notify_tick(io);
   }

@@ -27,6 +27,7 @@
 #include <drivers/lms200.h>
 #include <drivers/serial.h>
 
+#include <signal.h>
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -75,6 +76,9 @@ typedef struct io_posix {
   double request_pose[3];
   int64_t request_sent_us;
   uint32_t stale_replies;         ///< answers of timed-out requests still to be discarded
+  volatile sig_atomic_t woken;    ///< io_posix_wake() came (a stop signal): waits end, for good
+  bool tick_note_taken;           ///< a wait other than v_wait read a helper's notification: the
+                                  ///< next v_wait returns at once instead of sleeping on it
 } io_posix_t;
 
 /// Prepares the binding for cfg (borrowed: it must outlive io) without touching any device.
@@ -93,8 +97,11 @@ int io_posix_realtime(io_posix_t* io, int policy, int priority, char* err, size_
 
 void io_posix_close(io_posix_t* io);
 
-/// Wakes the tick thread's wait (the binding's wait() returns). Async-signal-safe (one write to an
-/// eventfd), for a signal handler on any thread; does nothing before io_posix_open.
+/// A stop signal came: the tick thread's waits end now and for the rest of the process (the
+/// binding's wait() returns; a lockstep start-pose request stops awaiting its answer and reports
+/// it under way). Async-signal-safe (a flag and one write to an eventfd), for a signal handler on
+/// any thread; the eventfd write is skipped before io_posix_open. Not concurrently with
+/// io_posix_close (the handler's caller clears its pointer first).
 void io_posix_wake(io_posix_t* io);
 
 /// Monotonic clock [µs].

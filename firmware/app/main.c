@@ -28,21 +28,25 @@
 enum { EXIT_USAGE = 2, EXIT_CHECKPOINT = 3, EXIT_DEVICE = 4 };
 
 static fw_loop_t* volatile g_loop;  // for the signal handler only
-static io_posix_t* volatile g_io;   // likewise: its wait is woken, which may be on another thread
+static io_posix_t* volatile g_io;   // likewise: the tick thread's waits it ends
 static volatile sig_atomic_t g_signal;  // the last SIGINT/SIGTERM, for the exit status of a start it ended
 
 static void on_signal(int sig) {
+  const int saved_errno = errno;  // the wake-up is a write(): the interrupted code's errno stays
   fw_loop_t* loop = g_loop;
   if (loop != NULL) {
     g_signal = sig;
     fw_loop_signal(loop, sig);
     io_posix_t* io = g_io;
     if (io != NULL) {
-      io_posix_wake(io);  // a lockstep wait for a stalled emulator would otherwise run to its timeout
+      // The handler may run on a helper thread, or on the tick thread just before it blocks: the
+      // eventfd ends a lockstep wait for a stalled emulator that would otherwise last lockstep_timeout_s.
+      io_posix_wake(io);
     }
   } else {
     _exit(128 + sig);  // before the loop exists there is nothing to stop or save
   }
+  errno = saved_errno;
 }
 
 static void usage(FILE* f) {
@@ -262,6 +266,8 @@ int main(int argc, char** argv) {
   memset(&sa, 0, sizeof sa);
   sa.sa_handler = on_signal;
   sigemptyset(&sa.sa_mask);
+  sigaddset(&sa.sa_mask, SIGINT);  // one handler at a time: g_signal and the loop's record agree
+  sigaddset(&sa.sa_mask, SIGTERM);
   sigaction(SIGINT, &sa, NULL);
   sigaction(SIGTERM, &sa, NULL);
   signal(SIGPIPE, SIG_IGN);
@@ -357,11 +363,9 @@ int main(int argc, char** argv) {
     if (apply_realtime(&cfg, loop, &io, err, sizeof err) != 0) {
       fprintf(stderr, "b21r-controller: %s\n", err);
       status = EXIT_USAGE;
-      fw_loop_signal(loop, 0);
     } else if ((start_rc = fw_loop_start(loop, err, sizeof err)) != 0) {
       fprintf(stderr, "b21r-controller: %s\n", err);
       status = start_rc == FW_LOOP_START_SIGNALLED ? 128 + (int)g_signal : EXIT_DEVICE;
-      fw_loop_signal(loop, 0);
     } else {
       status = run_ticks(loop, &cfg, &notify, hang_after);
     }

@@ -571,6 +571,9 @@ int fw_loop_run(fw_loop_t* L) {
 int fw_loop_start(fw_loop_t* L, char* err, size_t err_cap) {
   fw_out_config(L);  // first in every log, even when a device does not start
   L->data_utime = L->cfg.lockstep ? L->period_us : 0;  // the start's data are the first tick's
+  if (fw_base_start_signalled(L, "the start (before any device was started)", err, err_cap)) {
+    return FW_LOOP_START_SIGNALLED;  // e.g. during the real-time set-up: the brake stays on
+  }
   const int base_rc = fw_base_start(L, err, err_cap);
   if (base_rc != 0) {
     return base_rc;

@@ -2,15 +2,16 @@
 # SPDX-License-Identifier: MIT
 """firmware.determinism_<base>: the same run twice (fresh emulator, same seeds, lockstep) gives
 bit-identical experience streams: the controller's --experience-log files are byte-identical
-(SHA-256), and a different controller seed gives a different stream. A third run of the same
-seed has its emulator frozen (SIGSTOP) for 2.5 s twice, as a loaded machine may stall it: lockstep
-does not depend on wall time, so the stream is identical again and the laser was never restarted.
-Another has it frozen for 4 s from before the controller starts, so the laser's start-up requests
-outlive the driver's reply timeouts (1 s, 3 s for a mode change) and the CANopen start's first
-cycles wait: the stream is identical again, again with no restart of the laser.
-A fourth has every start-pose answer held 0.2 s on its way back (a relay on the control socket)
-with emulator_reply_timeout_s at its least (10 ms): lockstep awaits the answers as it awaits the
-period's data, so the runs start at the same ticks and the stream is identical again.
+(SHA-256), and a different controller seed gives a different stream. Three more runs of the same
+seed must give the same stream again, each with the laser never restarted:
+- the emulator frozen (SIGSTOP) for 2.5 s twice mid-run, as a loaded machine may stall it:
+  lockstep does not depend on wall time;
+- the emulator frozen for 4 s from before the controller starts, so the laser's start-up requests
+  outlive the driver's reply timeouts (1 s, 3 s for a mode change) and the CANopen start's first
+  cycles wait;
+- every start-pose answer held 0.2 s on its way back (a relay on the control socket) with
+  emulator_reply_timeout_s at its least (10 ms): lockstep awaits the answers as it awaits the
+  period's data, so the runs start at the same ticks.
 usage: test_determinism.py CONTROLLER SIM WORLD rflex|canopen"""
 import hashlib
 import os

@@ -10,15 +10,18 @@ with its reason and detail, and the controller recovers from the transient ones:
   TPDO1, the same `fault bumper 3` as on rFLEX), the bump-panel node's silence (a base fault that
   names the node), SIGTERM.
 In lockstep, SIGTERM while the emulator is frozen (SIGSTOP), once during the start and once
-mid-run, ends the controller within 5 s with 128+15 (the start's error names the signal), not
-after lockstep_timeout_s (30 s) as a silent emulator would.
+mid-run, and while a start-pose answer is held back (a relay on the control socket), ends the
+controller within 5 s with 128+15 (the start's error names the signal; the held request is not
+reported as failed), not after lockstep_timeout_s (30 s) as a silent emulator would.
 Under `fault latency 200` the emulator does not spin (its CPU use over 2 s stays below 20 % of a
 core). No STATUS counter that the message definition calls monotonic goes back over the stops.
 usage: test_safety.py CONTROLLER SIM WORLD rflex|canopen"""
 import os
 import signal
+import socket
 import subprocess
 import sys
+import threading
 import time
 
 import b21r_opauth
@@ -42,8 +45,10 @@ def sigterm_while_frozen(controller, sim_exe, world, base, d, name, during_start
             proc = subprocess.Popen(fwtest.controller_cmd(controller, sim, d, name, {"phase_one_runs": 1000}),
                                     stdout=out, stderr=err)
         wait_for(err_path, "starting devices", 0, 30, proc)
-        time.sleep(1.0)  # the start waits for the frozen emulator, or a run is under way
-        if not during_start:
+        if during_start:
+            time.sleep(1.0)  # the start waits for the frozen emulator
+        else:
+            wait_for(os.path.join(d, name + ".progress.txt"), "run ", 0, 60, proc)  # the first run ended
             sim.proc.send_signal(signal.SIGSTOP)
             time.sleep(0.5)  # the tick waits for the period's data
         t0 = time.time()
@@ -66,6 +71,80 @@ def sigterm_while_frozen(controller, sim_exe, world, base, d, name, during_start
         sim.proc.send_signal(signal.SIGCONT)
         if proc is not None:
             fwtest.stop_all([proc])
+        sim.close()
+
+
+def hold_answers(listener, target, stop, held, passed=1):
+    """Relays the controller's control requests to the emulator's socket `target`; answers the
+    first `passed` and holds every later one back (sets `held` when the first is held)."""
+    listener.settimeout(0.2)
+    while not stop.is_set():
+        try:
+            conn, _ = listener.accept()
+        except socket.timeout:
+            continue
+        with conn, socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET) as up:
+            up.connect(target)
+            up.settimeout(10.0)
+            conn.settimeout(0.2)
+            n = 0
+            while not stop.is_set():
+                try:
+                    request = conn.recv(4096)
+                except socket.timeout:
+                    continue
+                if not request:
+                    return
+                up.send(request)
+                reply = up.recv(4096)
+                if n < passed:
+                    conn.send(reply)
+                else:
+                    held.set()
+                n += 1
+
+
+def sigterm_awaiting_start_pose(controller, sim_exe, world, base, d, name):
+    """Lockstep: the second start-pose answer is held back; SIGTERM while the controller awaits it
+    (up to lockstep_timeout_s) must end it within 5 s, without a 'request failed' report."""
+    sim = fwtest.Sim(sim_exe, world, d, name, base=base, seed=3)
+    relay_path = os.path.join(d, name + ".relay.ctl")
+    listener = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+    listener.bind(relay_path)
+    listener.listen(1)
+    stop, held = threading.Event(), threading.Event()
+    relay = threading.Thread(target=hold_answers, args=(listener, sim.ctl, stop, held))
+    relay.start()
+    proc = None
+    try:
+        err_path = os.path.join(d, name + ".controller.log")
+        with open(err_path, "w") as err, open(os.path.join(d, name + ".progress.txt"), "w") as out:
+            proc = subprocess.Popen(fwtest.controller_cmd(controller, sim, d, name,
+                                                          {"phase_one_runs": 1000, "emulator_control": relay_path}),
+                                    stdout=out, stderr=err)
+        if not held.wait(60):
+            fwtest.fail("%s: no second start-pose request reached the relay" % name)
+        time.sleep(0.5)  # the controller awaits the answer
+        t0 = time.time()
+        proc.send_signal(signal.SIGTERM)
+        try:
+            rc = proc.wait(5)
+        except subprocess.TimeoutExpired:
+            fwtest.fail("%s: the controller did not exit within 5 s of SIGTERM while it awaited a start pose" % name)
+        took = time.time() - t0
+        with open(err_path) as f:
+            text = f.read()
+        if rc != 128 + signal.SIGTERM or "SAFETY STOP (signal)" not in text:
+            fwtest.fail("%s: SIGTERM while a start pose was awaited: exit status %d:\n%s" % (name, rc, text))
+        if "start pose request failed" in text:
+            fwtest.fail("%s: the request the signal cut short was reported as failed:\n%s" % (name, text))
+        return took
+    finally:
+        stop.set()
+        if proc is not None:
+            fwtest.stop_all([proc])
+        relay.join(15)
+        listener.close()
         sim.close()
 
 
@@ -141,6 +220,8 @@ def main():
                                         "frozen-start" if during_start else "frozen-run", during_start)
             fwtest.note("SIGTERM, lockstep emulator frozen %s -> exit status 143 after %.2f s" %
                         ("during the start" if during_start else "mid-run", took))
+        took = sigterm_awaiting_start_pose(controller, sim_exe, world, base, d, "held-answer")
+        fwtest.note("SIGTERM, lockstep start-pose answer held back -> exit status 143 after %.2f s" % took)
         if base == "rflex":
             # Joystick phase one without a deadman message: the robot must not move.
             key = os.path.join(d, "operator.key")  # joystick driving needs the operator key

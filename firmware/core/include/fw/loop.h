@@ -156,7 +156,8 @@ int fw_loop_start(fw_loop_t* loop, char* err, size_t err_cap);
 #define FW_LOOP_START_SIGNALLED (-2)
 
 /// Waits for the next tick: lockstep, until the emulator's data for the next period arrived
-/// (or the lockstep timeouts); real time, until the next absolute deadline (reading input as it
+/// (or the lockstep timeouts, or fw_loop_signal() came: that tick then runs without the period's
+/// data and ends the loop); real time, until the next absolute deadline (reading input as it
 /// comes). Returns the tick time [µs].
 int64_t fw_loop_wait(fw_loop_t* loop);
 

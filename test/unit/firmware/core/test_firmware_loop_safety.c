@@ -437,11 +437,13 @@ static void raise_sigterm(void* user) { fw_loop_signal((fw_loop_t*)user, SIGTERM
 
 // SIGTERM during a lockstep start that waits for a stalled or missing device (up to
 // lockstep_timeout_s per wait, here 30 s) ends the start at once: FW_LOOP_START_SIGNALLED, the
-// error naming the signal and the step it ended, the fake's clock 0.4 s on (not 30 s).
+// error naming the signal and the step it ended, the fake's clock 0.4 s on (not 30 s). One that
+// came before the start (during the real-time set-up) starts no device at all.
 static void test_loop_signal_ends_the_lockstep_start(void** state) {
   (void)state;
-  for (int k = 0; k < 2; ++k) {
+  for (int k = 0; k < 3; ++k) {
     const bool canopen = k == 1;
+    const bool before = k == 2;
     fw_config_t c;
     harness_config(&c);
     c.lockstep_timeout_s = 30.0;
@@ -461,16 +463,28 @@ static void test_loop_signal_ends_the_lockstep_start(void** state) {
     fw_loop_t* loop = fw_loop_create(&c, &io, &out, err, sizeof err);
     assert_non_null(loop);
     const int64_t t0 = fake->clock_us;
-    fake->wake = raise_sigterm;
-    fake->wake_user = loop;
-    fake->wake_at_us = t0 + 400000;
+    if (before) {
+      fw_loop_signal(loop, SIGTERM);
+    } else {
+      fake->wake = raise_sigterm;
+      fake->wake_user = loop;
+      fake->wake_at_us = t0 + 400000;
+    }
     const int rc = fw_loop_start(loop, err, sizeof err);
     const double waited_s = (double)(fake->clock_us - t0) / 1e6;
-    print_message("%s: rc %d, %s (after %.2f s)\n", canopen ? "canopen" : "rflex", rc, err, waited_s);
+    print_message("%s: rc %d, %s (after %.2f s)\n", before ? "before" : canopen ? "canopen" : "rflex", rc, err,
+                  waited_s);
     assert_int_equal(rc, FW_LOOP_START_SIGNALLED);
     assert_non_null(strstr(err, "stopped by signal 15 (SIGTERM) during the "));
-    assert_non_null(strstr(err, canopen ? "CANopen start (enabling the drives)" : "laser's first scan"));
-    assert_true(waited_s >= 0.4 && waited_s < 0.5);
+    assert_non_null(strstr(err, before    ? "start (before any device was started)"
+                                : canopen ? "CANopen start (enabling the drives)"
+                                          : "laser's first scan"));
+    if (before) {
+      assert_true(fake->clock_us == t0);
+      assert_false(fake->streaming);  // no odometry request: the base was not started
+    } else {
+      assert_true(waited_s >= 0.4 && waited_s < 0.5);
+    }
     assert_int_equal(fw_loop_shutdown(loop), 0);
     fw_loop_destroy(loop);
     fw_pubq_destroy(q);
@@ -491,11 +505,12 @@ static void test_loop_signal_ends_a_lockstep_wait(void** state) {
   const double waited_s = (double)(g_h.fake.clock_us - t0) / 1e6;
   fw_loop_stats_t st;
   fw_loop_get_stats(g_h.loop, &st);
-  print_message("%lld ticks, ended after %.2f s, exit status %d\n", (long long)ticks, waited_s, st.exit_status);
+  print_message("%lld ticks, ended after %.3f s, exit status %d\n", (long long)ticks, waited_s, st.exit_status);
   assert_true(st.done);
   assert_int_equal(st.stop_reason, FW_STOP_SIGNAL);
   assert_int_equal(st.exit_status, 128 + SIGTERM);
-  assert_true(waited_s >= 0.5 && waited_s < 1.0);
+  // The stop tick's zero command moves the fake on one period (0.1 s) after the signal's 0.5 s.
+  assert_true(waited_s >= 0.5 && waited_s < 0.61);
   assert_true(fabs(g_h.fake.v_cmd) < 1e-9 && fabs(g_h.fake.w_cmd) < 1e-9);
   harness_close(&g_h);
 }
