@@ -74,6 +74,41 @@ class Sim:
         self.log.close()
 
 
+def relay_control(listener, target, stop, answer):
+    """Relays the controller's emulator-control requests arriving at `listener` (a bound, listening
+    SOCK_SEQPACKET socket) to the emulator's control socket `target`, until `stop` is set.
+    answer(n, reply) decides the fate of answer n (from 0 on each connection): True passes it back
+    (after whatever it waited), False holds it back for good. A frozen emulator's answer is awaited
+    up to 10 s."""
+    listener.settimeout(0.2)
+    while not stop.is_set():
+        try:
+            conn, _ = listener.accept()
+        except socket.timeout:
+            continue
+        with conn, socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET) as up:
+            up.connect(target)
+            up.settimeout(10.0)
+            conn.settimeout(0.2)
+            n = 0
+            try:
+                while not stop.is_set():
+                    try:
+                        request = conn.recv(4096)
+                    except socket.timeout:
+                        continue
+                    if not request:
+                        break  # the controller closed it: it may connect again
+                    up.send(request)
+                    reply = up.recv(4096)
+                    if answer(n, reply):
+                        conn.send(reply)
+                    n += 1
+            except OSError as e:
+                note("relay: %s" % e)
+                return
+
+
 def controller_cmd(exe, sim, workdir, name, settings):
     cmd = [*TARGET, exe, "--endpoints", sim.endpoints, "--set", "lockstep=true", "--set", "lcm_url=none",
            "--set", "progress=true", "--log", os.path.join(workdir, name + ".lcmlog")]

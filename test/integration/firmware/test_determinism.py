@@ -37,34 +37,12 @@ def freeze(proc, stop, times, at_s=1.0, for_s=2.5):
 
 def slow_relay(listener, target, stop, relayed, delay_s=0.2):
     """Passes the controller's control requests to the emulator's socket `target` and holds each
-    answer delay_s before it goes back; counts them in relayed[0]. Ends with `stop` or when
-    either side goes away (the emulator answers at once, or within 10 s when frozen)."""
-    listener.settimeout(0.2)
-    while not stop.is_set():
-        try:
-            conn, _ = listener.accept()
-        except socket.timeout:
-            continue
-        with conn, socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET) as up:
-            up.connect(target)
-            up.settimeout(10.0)
-            conn.settimeout(0.2)
-            try:
-                while not stop.is_set():
-                    try:
-                        request = conn.recv(4096)
-                    except socket.timeout:
-                        continue
-                    if not request:
-                        break
-                    up.send(request)
-                    reply = up.recv(4096)
-                    time.sleep(delay_s)
-                    conn.send(reply)
-                    relayed[0] += 1
-            except OSError as e:
-                fwtest.note("relay: %s" % e)
-                return
+    answer delay_s before it goes back; counts them in relayed[0]."""
+    def answer(n, reply):
+        time.sleep(delay_s)
+        relayed[0] += 1
+        return True
+    fwtest.relay_control(listener, target, stop, answer)
 
 
 def one_run(controller, sim_exe, world, base, d, name, seed, stalls=0, stall_at_s=1.0, stall_s=2.5,

@@ -51,18 +51,7 @@ def sigterm_while_frozen(controller, sim_exe, world, base, d, name, during_start
             wait_for(os.path.join(d, name + ".progress.txt"), "run ", 0, 60, proc)  # the first run ended
             sim.proc.send_signal(signal.SIGSTOP)
             time.sleep(0.5)  # the tick waits for the period's data
-        t0 = time.time()
-        proc.send_signal(signal.SIGTERM)
-        try:
-            rc = proc.wait(5)
-        except subprocess.TimeoutExpired:
-            fwtest.fail("%s: the controller did not exit within 5 s of SIGTERM with the emulator frozen" % name)
-        took = time.time() - t0
-        if rc != 128 + signal.SIGTERM:
-            fwtest.fail("%s: SIGTERM with the emulator frozen: exit status %d, expected %d" %
-                        (name, rc, 128 + signal.SIGTERM))
-        with open(err_path) as f:
-            text = f.read()
+        took, text = sigterm_within(proc, err_path, name, "with the emulator frozen")
         want = "stopped by signal 15 (SIGTERM) during the " if during_start else "SAFETY STOP (signal)"
         if want not in text:
             fwtest.fail("%s: '%s' is not in the controller's messages:\n%s" % (name, want, text))
@@ -77,31 +66,30 @@ def sigterm_while_frozen(controller, sim_exe, world, base, d, name, during_start
 def hold_answers(listener, target, stop, held, passed=1):
     """Relays the controller's control requests to the emulator's socket `target`; answers the
     first `passed` and holds every later one back (sets `held` when the first is held)."""
-    listener.settimeout(0.2)
-    while not stop.is_set():
-        try:
-            conn, _ = listener.accept()
-        except socket.timeout:
-            continue
-        with conn, socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET) as up:
-            up.connect(target)
-            up.settimeout(10.0)
-            conn.settimeout(0.2)
-            n = 0
-            while not stop.is_set():
-                try:
-                    request = conn.recv(4096)
-                except socket.timeout:
-                    continue
-                if not request:
-                    return
-                up.send(request)
-                reply = up.recv(4096)
-                if n < passed:
-                    conn.send(reply)
-                else:
-                    held.set()
-                n += 1
+    def answer(n, reply):
+        if n < passed:
+            return True
+        held.set()
+        return False
+    fwtest.relay_control(listener, target, stop, answer)
+
+
+def sigterm_within(proc, err_path, name, while_what, limit_s=5.0):
+    """Sends SIGTERM; fails unless the controller exits within limit_s with 128+15. Returns the
+    seconds it took and the controller's messages."""
+    t0 = time.time()
+    proc.send_signal(signal.SIGTERM)
+    try:
+        rc = proc.wait(limit_s)
+    except subprocess.TimeoutExpired:
+        fwtest.fail("%s: the controller did not exit within %g s of SIGTERM %s" % (name, limit_s, while_what))
+    took = time.time() - t0
+    with open(err_path) as f:
+        text = f.read()
+    if rc != 128 + signal.SIGTERM:
+        fwtest.fail("%s: SIGTERM %s: exit status %d, expected %d:\n%s" %
+                    (name, while_what, rc, 128 + signal.SIGTERM, text))
+    return took, text
 
 
 def sigterm_awaiting_start_pose(controller, sim_exe, world, base, d, name):
@@ -125,17 +113,9 @@ def sigterm_awaiting_start_pose(controller, sim_exe, world, base, d, name):
         if not held.wait(60):
             fwtest.fail("%s: no second start-pose request reached the relay" % name)
         time.sleep(0.5)  # the controller awaits the answer
-        t0 = time.time()
-        proc.send_signal(signal.SIGTERM)
-        try:
-            rc = proc.wait(5)
-        except subprocess.TimeoutExpired:
-            fwtest.fail("%s: the controller did not exit within 5 s of SIGTERM while it awaited a start pose" % name)
-        took = time.time() - t0
-        with open(err_path) as f:
-            text = f.read()
-        if rc != 128 + signal.SIGTERM or "SAFETY STOP (signal)" not in text:
-            fwtest.fail("%s: SIGTERM while a start pose was awaited: exit status %d:\n%s" % (name, rc, text))
+        took, text = sigterm_within(proc, err_path, name, "while it awaited a start pose")
+        if "SAFETY STOP (signal)" not in text:
+            fwtest.fail("%s: no 'SAFETY STOP (signal)' after SIGTERM:\n%s" % (name, text))
         if "start pose request failed" in text:
             fwtest.fail("%s: the request the signal cut short was reported as failed:\n%s" % (name, text))
         return took
