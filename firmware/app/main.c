@@ -29,13 +29,11 @@ enum { EXIT_USAGE = 2, EXIT_CHECKPOINT = 3, EXIT_DEVICE = 4 };
 
 static fw_loop_t* volatile g_loop;  // for the signal handler only
 static io_posix_t* volatile g_io;   // likewise: the tick thread's waits it ends
-static volatile sig_atomic_t g_signal;  // the last SIGINT/SIGTERM, for the exit status of a start it ended
 
 static void on_signal(int sig) {
   const int saved_errno = errno;  // the wake-up is a write(): the interrupted code's errno stays
   fw_loop_t* loop = g_loop;
   if (loop != NULL) {
-    g_signal = sig;
     fw_loop_signal(loop, sig);
     io_posix_t* io = g_io;
     if (io != NULL) {
@@ -266,8 +264,6 @@ int main(int argc, char** argv) {
   memset(&sa, 0, sizeof sa);
   sa.sa_handler = on_signal;
   sigemptyset(&sa.sa_mask);
-  sigaddset(&sa.sa_mask, SIGINT);  // one handler at a time: g_signal and the loop's record agree
-  sigaddset(&sa.sa_mask, SIGTERM);
   sigaction(SIGINT, &sa, NULL);
   sigaction(SIGTERM, &sa, NULL);
   signal(SIGPIPE, SIG_IGN);
@@ -365,7 +361,9 @@ int main(int argc, char** argv) {
       status = EXIT_USAGE;
     } else if ((start_rc = fw_loop_start(loop, err, sizeof err)) != 0) {
       fprintf(stderr, "b21r-controller: %s\n", err);
-      status = start_rc == FW_LOOP_START_SIGNALLED ? 128 + (int)g_signal : EXIT_DEVICE;
+      fw_loop_stats_t st;
+      fw_loop_get_stats(loop, &st);
+      status = start_rc == FW_LOOP_START_SIGNALLED ? st.exit_status : EXIT_DEVICE;
     } else {
       status = run_ticks(loop, &cfg, &notify, hang_after);
     }

@@ -480,6 +480,7 @@ bool fw_base_start_signalled(fw_loop_t* L, const char* during, char* err, size_t
   }
   snprintf(err, err_cap, "stopped by signal %d (%s) during %s", sig,
            sig == SIGINT ? "SIGINT" : sig == SIGTERM ? "SIGTERM" : "a signal", during);
+  L->exit_status = 128 + sig;  // as a tick that sees the signal sets it
   return true;
 }
 

@@ -8,7 +8,8 @@
 /// 0, -1 (err names the device), or FW_LOOP_START_SIGNALLED (fw_base_start_signalled).
 int fw_base_start(fw_loop_t* L, char* err, size_t err_cap);
 /// True when fw_loop_signal() came during the start: err then says which signal ended it and in
-/// which step (`during` ends "... during <during>"). Read at every wake-up of a start's wait.
+/// which step (`during` ends "... during <during>"), and the loop's exit status is 128 + its
+/// number. Read at every wake-up of a start's wait.
 bool fw_base_start_signalled(fw_loop_t* L, const char* during, char* err, size_t err_cap);
 void fw_base_poll(fw_loop_t* L, int64_t now_us);
 bool fw_base_all_reports(const fw_loop_t* L);

@@ -122,7 +122,8 @@ typedef struct fw_loop_stats {
   int64_t late_starts;           ///< ticks started later than late_start_threshold_s
   int64_t missed_periods;        ///< scheduled starts that passed without a tick of their own
   int32_t gap_max_ever_us;       ///< longest interval between consecutive tick starts [µs]
-  int exit_status;               ///< what fw_loop_run returns once done
+  int exit_status;               ///< what fw_loop_run returns once done (128 + N also after a
+                                 ///< start that signal N ended: FW_LOOP_START_SIGNALLED)
 } fw_loop_stats_t;
 
 /// Builds a loop: validates cfg, sizes and allocates HEDGER and every buffer, seeds the
@@ -149,7 +150,8 @@ int fw_loop_load_checkpoint(fw_loop_t* loop, char* err, size_t err_cap);
 /// emulator keeps it, up to lockstep_timeout_s per wait). Returns 0; -1 with a message naming the
 /// device that did not answer; FW_LOOP_START_SIGNALLED when fw_loop_signal() came meanwhile (it
 /// is read at every wake-up of the I/O binding's wait: a signal handler should also wake that
-/// wait), err saying so: the caller shuts down as usual and exits 128 + the signal's number.
+/// wait), err saying so: the caller shuts down as usual and exits with the stats' exit_status
+/// (128 + the signal's number).
 int fw_loop_start(fw_loop_t* loop, char* err, size_t err_cap);
 
 /// fw_loop_start()'s result when SIGINT/SIGTERM (fw_loop_signal) ended the start.

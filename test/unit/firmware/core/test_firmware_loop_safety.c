@@ -475,6 +475,9 @@ static void test_loop_signal_ends_the_lockstep_start(void** state) {
     print_message("%s: rc %d, %s (after %.2f s)\n", before ? "before" : canopen ? "canopen" : "rflex", rc, err,
                   waited_s);
     assert_int_equal(rc, FW_LOOP_START_SIGNALLED);
+    fw_loop_stats_t st;
+    fw_loop_get_stats(loop, &st);
+    assert_int_equal(st.exit_status, 128 + SIGTERM);  // the caller's exit status
     assert_non_null(strstr(err, "stopped by signal 15 (SIGTERM) during the "));
     assert_non_null(strstr(err, before    ? "start (before any device was started)"
                                 : canopen ? "CANopen start (enabling the drives)"
