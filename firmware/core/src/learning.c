@@ -97,6 +97,23 @@ static hedger_t* hedger_of(const fw_loop_t* L) { return learn_get_learner(L->age
 // it (the caller's general message then; a store larger than hedger_capacity never gets here:
 // fw_checkpoint_read refuses it first). The discount per learned transition is gamma^N for
 // decisions of N ticks, so a state learned with another decision_ticks is found by trying each.
+// The input scales (hedger_input_scale, or the task's and the executed rotation's when it is
+// empty) are given back as a list that reads back to the same bits: the stored points are in
+// scaled units, so only the very scales they were written with find the same neighbours.
+static int format_scales(char* out, size_t cap, const double* scale, uint32_t n) {
+  size_t at = 0;
+  for (uint32_t i = 0; i < n && at < cap; ++i) {
+    char one[32];
+    snprintf(one, sizeof one, "%.15g", scale[i]);
+    const double back = strtod(one, NULL);
+    if (memcmp(&back, &scale[i], sizeof back) != 0) snprintf(one, sizeof one, "%.17g", scale[i]);
+    const int w = snprintf(out + at, cap - at, "%s%s", i > 0 ? "," : "", one);
+    if (w < 0) return -1;
+    at += (size_t)w;
+  }
+  return at < cap ? 0 : -1;
+}
+
 static bool explain_mismatch(const fw_loop_t* L, const char* path, const void* payload, size_t n, char* err,
                              size_t err_cap) {
   hedger_saved_t saved;
@@ -109,7 +126,20 @@ static bool explain_mismatch(const fw_loop_t* L, const char* path, const void* p
     return false;
   }
   if (memcmp(&saved.gamma, &now->gamma, sizeof(double)) == 0) {
-    return false;
+    const uint32_t d = now->state_dim + 1U;
+    if (memcmp(saved.input_scale, now->input_scale, sizeof(double) * d) == 0) {
+      return false;
+    }
+    char then_s[HEDGER_MAX_INPUT_DIM * 26U], now_s[HEDGER_MAX_INPUT_DIM * 26U];
+    if (format_scales(then_s, sizeof then_s, saved.input_scale, d) != 0 ||
+        format_scales(now_s, sizeof now_s, now->input_scale, d) != 0) {
+      return false;
+    }
+    snprintf(err, err_cap,
+             "checkpoint %s was learned with the input scales %s (this configuration: %s); set hedger_input_scale "
+             "= %s to go on with it, or move the file away to start fresh (e.g. mv '%s' '%s.other')",
+             path, then_s, now_s, then_s, path, path);
+    return true;
   }
   learn_task_t task;
   fw_config_learn_task(&L->cfg, &L->ep, &task);

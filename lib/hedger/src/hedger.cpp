@@ -591,11 +591,15 @@ hedger_status_t hedger_saved_config(const void* buf, size_t size, hedger_saved_t
   size_t n = 0;
   const hedger_status_t st = check_saved(p, size, &version, &n);
   if (st != HEDGER_OK) return st;
+  const uint64_t d = static_cast<uint64_t>(get_u32(p + 16)) + 1u;
+  const size_t head = header_fixed(version);
+  if (n < head + 8u * d + 4u) return HEDGER_ERR_FORMAT;  // the input scales must be inside, as for hedger_load()
   out->state_dim = get_u32(p + 16);
   out->count = get_u32(p + 24);
   out->action_min = get_f64(p + 32);
   out->action_max = get_f64(p + 40);
   out->gamma = get_f64(p + 48);
+  for (uint32_t i = 0; i < HEDGER_MAX_INPUT_DIM; ++i) out->input_scale[i] = i < d ? get_f64(p + head + 8u * i) : 0.0;
   return HEDGER_OK;
 }
 

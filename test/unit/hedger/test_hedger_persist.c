@@ -233,6 +233,8 @@ static void test_persist_config_mismatch_refused(void** state) {
   assert_memory_equal(&saved.gamma, &c.gamma, sizeof(double));
   assert_memory_equal(&saved.action_min, &c.action_min, sizeof(double));
   assert_memory_equal(&saved.action_max, &c.action_max, sizeof(double));
+  assert_memory_equal(saved.input_scale, c.input_scale, sizeof(double) * (c.state_dim + 1U));
+  for (uint32_t i = c.state_dim + 1U; i < HEDGER_MAX_INPUT_DIM; ++i) assert_true(saved.input_scale[i] == 0.0);
   assert_int_equal(hedger_saved_config(buf, n - 1, &saved), HEDGER_ERR_TRUNCATED);
   buf[n / 2] ^= 0x10;
   assert_int_equal(hedger_saved_config(buf, n, &saved), HEDGER_ERR_CHECKSUM);

@@ -642,11 +642,15 @@ typedef struct hedger_saved {
   double action_min;   ///< action bounds, as in hedger_config_t
   double action_max;
   double gamma;        ///< discount per learned transition
+  /// Raw units per scaled unit of each input (the state's dimensions, then the action) as the
+  /// points were stored; entries past state_dim + 1 (or past HEDGER_MAX_INPUT_DIM) are 0.
+  double input_scale[HEDGER_MAX_INPUT_DIM];
 } hedger_saved_t;
 
 /// Reads what buf (from hedger_save()) was written for, so that a caller refused with
 /// CONFIG_MISMATCH can say which setting differs. Checks as hedger_load() does up to the CRC-32
-/// (FORMAT, VERSION, TRUNCATED, CHECKSUM), then fills *out. No instance needed; O(size), no
+/// (FORMAT, VERSION, TRUNCATED, CHECKSUM) and that the input scales are inside (FORMAT), then
+/// fills *out. No instance needed; O(size), no
 /// allocation.
 hedger_status_t hedger_saved_config(const void* buf, size_t size, hedger_saved_t* out) HEDGER_NOEXCEPT;
 

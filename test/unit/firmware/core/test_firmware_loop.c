@@ -488,6 +488,32 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
   assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), -1);
   assert_non_null(strstr(err, "set gamma and decision_ticks as when it was written"));
   harness_close(&g_h);
+  // Other input scales (the stored points are in scaled units): refused, naming the scales it was
+  // written with; the value named, set as given, loads it.
+  assert_int_equal(c.hedger_input_scale_n, 0);  // the task's scales and the executed rotation's
+  fw_config_t cs = c;
+  const double other_scales[5] = {1.0, 0.5, 0.125, 2.0, 0.25};
+  memcpy(cs.hedger_input_scale, other_scales, sizeof other_scales);
+  cs.hedger_input_scale_n = 5;
+  assert_int_equal(harness_open(&g_h, &cs, false, 3), 0);
+  assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), -1);
+  assert_non_null(strstr(err, "(this configuration: 1,0.5,0.125,2,0.25); set hedger_input_scale = "));
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.store_fill, 0);
+  harness_close(&g_h);
+  const char* named = strstr(err, "set hedger_input_scale = ") + strlen("set hedger_input_scale = ");
+  cs.hedger_input_scale_n = 0;
+  for (char* end = NULL;; named = end + 1) {
+    cs.hedger_input_scale[cs.hedger_input_scale_n++] = strtod(named, &end);
+    assert_true(end != named);
+    if (*end != ',') break;
+  }
+  assert_int_equal(cs.hedger_input_scale_n, 5);
+  assert_int_equal(harness_open(&g_h, &cs, false, 3), 0);
+  assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), 1);
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_true(st.store_fill > 0);
+  harness_close(&g_h);
   {
     size_t ms2 = 0, ps2 = 0;
     assert_int_equal(fw_checkpoint_peek(c.checkpoint_file, &ms2, &ps2, err, sizeof err), 1);
