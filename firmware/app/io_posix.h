@@ -25,7 +25,7 @@
 
 #include <drivers/can.h>
 #include <drivers/lms200.h>
-#include <drivers/serial.h>
+#include <drivers/serial_link.h>
 
 #include <signal.h>
 #include <stdbool.h>

@@ -4,7 +4,6 @@
 #include <drivers/serial.h>
 
 #include "fd_wait.h"
-#include "serial_link.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -152,7 +151,7 @@ int drv_serial_set_baud(drv_serial_t* port, uint32_t baud) {
   }
   if (port->link != NULL) {
     // The helper thread drains the output and changes the rate, after the requests before it.
-    const int rc = drv_serial_link_set_baud(port->link, baud);
+    const int rc = port->link_ops->set_baud(port->link, baud);
     if (rc == 0) {
       port->baud = baud;
       port->counters.baud_changes++;
@@ -188,7 +187,7 @@ ssize_t drv_serial_read(drv_serial_t* port, uint8_t* buf, size_t cap) {
     return -EINVAL;
   }
   if (port->link != NULL) {
-    const ssize_t n = drv_serial_link_take(port->link, &port->link_flushes, buf, cap);
+    const ssize_t n = port->link_ops->take(port->link, &port->link_flushes, buf, cap);
     if (n > 0) {
       port->counters.bytes_read += (uint64_t)n;
     } else if (n < 0) {
@@ -268,7 +267,7 @@ int drv_serial_write(drv_serial_t* port, const uint8_t* data, size_t n, int time
   }
   if (port->link != NULL) {
     // Written by the helper thread, with this port's pacing, after the requests before it.
-    const int rc = drv_serial_link_write(port->link, data, n, port->chunk_gap_us, port->byte_gap_us);
+    const int rc = port->link_ops->write(port->link, data, n, port->chunk_gap_us, port->byte_gap_us);
     if (rc == 0) {
       port->counters.bytes_written += (uint64_t)n;
     } else {
@@ -386,7 +385,7 @@ int drv_serial_flush_input(drv_serial_t* port) {
     return -EINVAL;
   }
   if (port->link != NULL) {
-    return drv_serial_link_flush_input(port->link, &port->link_flushes);
+    return port->link_ops->flush_input(port->link, &port->link_flushes);
   }
   return tcflush(port->fd, TCIFLUSH) == 0 ? 0 : -errno;
 }
@@ -400,6 +399,7 @@ void drv_serial_close(drv_serial_t* port) {
   }
   port->fd = -1;
   port->owns_fd = false;
+  port->link_ops = NULL;
   port->link = NULL;  // link mode: the owner asks the helper thread to close (drv_serial_link_close)
   memset(&port->out, 0, sizeof port->out);
 }

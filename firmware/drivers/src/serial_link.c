@@ -12,7 +12,7 @@
 //   the owner waits at most for a few copies;
 // - wake-ups: an eventfd wakes the helper; the helper calls the owner's notify callback.
 #define _GNU_SOURCE
-#include "serial_link.h"
+#include <drivers/serial_link.h>
 
 #include <errno.h>
 #include <poll.h>
@@ -395,7 +395,7 @@ static void apply_flush(drv_serial_link_t* l, uint32_t* flushes) {
   }
 }
 
-ssize_t drv_serial_link_take(drv_serial_link_t* l, uint32_t* flushes, uint8_t* buf, size_t cap) {
+static ssize_t link_take(drv_serial_link_t* l, uint32_t* flushes, uint8_t* buf, size_t cap) {
   apply_flush(l, flushes);
   const uint32_t tail = atomic_load_explicit(&l->rx_tail, memory_order_relaxed);
   const uint32_t head = atomic_load_explicit(&l->rx_head, memory_order_acquire);
@@ -430,8 +430,8 @@ static int request(drv_serial_link_t* l, const link_op_t* op) {
   return 0;
 }
 
-int drv_serial_link_write(drv_serial_link_t* l, const uint8_t* data, size_t n, uint32_t chunk_gap_us,
-                          uint32_t byte_gap_us) {
+static int link_write(drv_serial_link_t* l, const uint8_t* data, size_t n, uint32_t chunk_gap_us,
+                      uint32_t byte_gap_us) {
   if (n > DRV_SERIAL_LINK_OP_BYTES) {
     pthread_mutex_lock(&l->mu);
     l->counters.requests_refused++;
@@ -448,7 +448,7 @@ int drv_serial_link_write(drv_serial_link_t* l, const uint8_t* data, size_t n, u
   return request(l, &op);
 }
 
-int drv_serial_link_set_baud(drv_serial_link_t* l, uint32_t baud) {
+static int link_set_baud(drv_serial_link_t* l, uint32_t baud) {
   link_op_t op;
   memset(&op, 0, sizeof op);
   op.kind = OP_BAUD;
@@ -456,7 +456,7 @@ int drv_serial_link_set_baud(drv_serial_link_t* l, uint32_t baud) {
   return request(l, &op);
 }
 
-int drv_serial_link_flush_input(drv_serial_link_t* l, uint32_t* flushes) {
+static int link_flush_input(drv_serial_link_t* l, uint32_t* flushes) {
   apply_flush(l, flushes);
   atomic_store_explicit(&l->rx_tail, atomic_load_explicit(&l->rx_head, memory_order_acquire), memory_order_release);
   link_op_t op;
@@ -464,6 +464,10 @@ int drv_serial_link_flush_input(drv_serial_link_t* l, uint32_t* flushes) {
   op.kind = OP_FLUSH_INPUT;
   return request(l, &op);
 }
+
+// What a port in link mode calls (drivers/serial.h): the owner's side of the ring and requests.
+static const drv_serial_link_ops_t k_link_ops = {
+    .take = link_take, .write = link_write, .flush_input = link_flush_input, .set_baud = link_set_baud};
 
 int drv_serial_use_link(drv_serial_t* port, drv_serial_link_t* l) {
   if (port == NULL || l == NULL) {
@@ -483,6 +487,7 @@ int drv_serial_use_link(drv_serial_t* port, drv_serial_link_t* l) {
   port->owns_fd = false;
   port->baud = baud;
   port->link = l;
+  port->link_ops = &k_link_ops;
   port->link_flushes = atomic_load_explicit(&l->flush_seq, memory_order_acquire);
   // Input that arrived before is not the new owner's.
   atomic_store_explicit(&l->rx_tail, atomic_load_explicit(&l->rx_head, memory_order_acquire), memory_order_release);

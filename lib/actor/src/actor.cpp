@@ -210,7 +210,7 @@ Layout make_layout(const actor_config_t& c) {
 
 bool positive_finite(double x) { return x > 0.0 && std::isfinite(x); }
 
-bool valid(const actor_config_t* c) {
+bool config_valid(const actor_config_t* c) {
   if (c == nullptr || c->state_dim < 1u || c->state_dim > ACTOR_MAX_STATE_DIM) return false;
   for (uint32_t i = 0; i < c->state_dim; ++i) {
     if (!std::isfinite(c->state_min[i]) || !std::isfinite(c->state_max[i]) || !(c->state_min[i] <= c->state_max[i]) ||
@@ -886,15 +886,15 @@ actor_config_t actor_config_default(void) ACTOR_NOEXCEPT {
 }
 
 actor_status_t actor_config_validate(const actor_config_t* cfg) ACTOR_NOEXCEPT {
-  return valid(cfg) ? ACTOR_OK : ACTOR_ERR_INVALID_ARG;
+  return config_valid(cfg) ? ACTOR_OK : ACTOR_ERR_INVALID_ARG;
 }
 
 size_t actor_storage_size(const actor_config_t* cfg) ACTOR_NOEXCEPT {
-  return valid(cfg) ? make_layout(*cfg).total : 0u;
+  return config_valid(cfg) ? make_layout(*cfg).total : 0u;
 }
 
 actor_status_t actor_init(actor_t** out, void* storage, size_t storage_size, const actor_config_t* cfg) ACTOR_NOEXCEPT {
-  if (out == nullptr || storage == nullptr || !valid(cfg)) return ACTOR_ERR_INVALID_ARG;
+  if (out == nullptr || storage == nullptr || !config_valid(cfg)) return ACTOR_ERR_INVALID_ARG;
   if (reinterpret_cast<uintptr_t>(storage) % ACTOR_STORAGE_ALIGN != 0u) return ACTOR_ERR_ALIGNMENT;
   const Layout l = make_layout(*cfg);
   if (storage_size < l.total) return ACTOR_ERR_CAPACITY;
@@ -1078,7 +1078,7 @@ size_t actor_serialized_size(const actor_t* self) ACTOR_NOEXCEPT {
 }
 
 size_t actor_serialized_max_size(const actor_config_t* cfg) ACTOR_NOEXCEPT {
-  return valid(cfg) ? format_size(cfg->state_dim, params_of(cfg->state_dim, cfg->hidden), cfg->capacity) : 0u;
+  return config_valid(cfg) ? format_size(cfg->state_dim, params_of(cfg->state_dim, cfg->hidden), cfg->capacity) : 0u;
 }
 
 actor_status_t actor_save_begin(const actor_t* self, void* buf, size_t size, actor_save_cursor_t* cursor) ACTOR_NOEXCEPT {

@@ -17,7 +17,7 @@
 /// whole and counted (out_overflows): the caller treats it as a fault of the device. The queue
 /// honours chunk_gap_us (after each packet), not byte_gap_us.
 ///
-/// Link mode (drv_serial_use_link): the port's owner, the real-time control thread, then makes
+/// Link mode (drivers/serial_link.h): the port's owner, the real-time control thread, makes
 /// no system call on the terminal that can wait for the kernel. A terminal's poll() and read()
 /// wait, whenever no input is buffered in the line discipline, for the kernel's work item that
 /// moves received bytes out of the driver's flip buffer (n_tty_poll / n_tty_read call
@@ -27,7 +27,7 @@
 /// milliseconds, and its priority does not help it (priority inversion). tcflush and tcsetattr
 /// contend for the same buffer lock. A real UART (its interrupt pushes the flip buffer) and a
 /// pseudo-terminal (the writer pushes it) behave alike. In link mode one helper thread per
-/// device (drv_serial_link_run) opens and closes the descriptor, waits for input with poll(),
+/// device (drv_serial_link_start) opens and closes the descriptor, waits for input with poll(),
 /// reads it into a lock-free ring the owner takes it from, and carries out the rate changes,
 /// input flushes and paced request writes (drv_serial_write) in order; the owner still writes
 /// its queued packets itself (drv_serial_queue / drv_serial_flush: a write() to a terminal does
@@ -82,8 +82,22 @@ typedef struct drv_serial_out {
   uint64_t quiet_until_us; ///< chunk gap: no byte before this time (monotonic clock)
 } drv_serial_out_t;
 
-/// A device's helper thread and the rings between it and the port's owner (link mode).
+/// A device's helper thread and the rings between it and the port's owner (link mode,
+/// drivers/serial_link.h).
 typedef struct drv_serial_link drv_serial_link_t;
+
+/// What a port in link mode calls instead of the terminal: drv_serial_use_link (drivers/
+/// serial_link.h) installs the link's own. take: up to cap input bytes, 0 when none, or the
+/// link's error (< 0); *flushes is the port's count of input flushes applied. The rest are
+/// requests to the helper thread: a paced write, an input flush, a rate change after the
+/// output drained. Each returns 0 or a negative errno.
+typedef struct drv_serial_link_ops {
+  ssize_t (*take)(drv_serial_link_t* link, uint32_t* flushes, uint8_t* buf, size_t cap);
+  int (*write)(drv_serial_link_t* link, const uint8_t* data, size_t n, uint32_t chunk_gap_us,
+               uint32_t byte_gap_us);
+  int (*flush_input)(drv_serial_link_t* link, uint32_t* flushes);
+  int (*set_baud)(drv_serial_link_t* link, uint32_t baud);
+} drv_serial_link_ops_t;
 
 /// An open serial port. Fields are read-only for callers.
 typedef struct drv_serial {
@@ -97,6 +111,7 @@ typedef struct drv_serial {
   drv_serial_counters_t counters;
   drv_serial_out_t out;
   drv_serial_link_t* link; ///< link mode (NULL: the port calls the terminal itself).
+  const drv_serial_link_ops_t* link_ops; ///< link mode: the link's calls.
   uint32_t link_flushes;   ///< link mode: input flushes of the helper thread applied to the ring.
 } drv_serial_t;
 
@@ -155,79 +170,6 @@ int drv_serial_flush_input(drv_serial_t* port);
 /// from the link, and the owner asks the helper thread to close it (drv_serial_link_close).
 void drv_serial_close(drv_serial_t* port);
 
-/// @name Link mode (see the file comment)
-/// The owner (one thread) calls drv_serial_link_open / _close / _state and the drv_serial_*
-/// functions of a port in link mode; the helper thread runs drv_serial_link_run; nothing else
-/// touches the link. Sizes: input ring DRV_SERIAL_LINK_RX_BYTES, DRV_SERIAL_LINK_OPS requests of
-/// at most DRV_SERIAL_LINK_OP_BYTES bytes each.
-/// @{
-#define DRV_SERIAL_LINK_RX_BYTES 65536U  ///< about 1.3 s of input at 500 kBd
-#define DRV_SERIAL_LINK_OPS 16U
-#define DRV_SERIAL_LINK_OP_BYTES 128U
-
-/// State of a link's descriptor (drv_serial_link_state).
-typedef enum drv_serial_link_state {
-  DRV_SERIAL_LINK_CLOSED = 0,   ///< no descriptor
-  DRV_SERIAL_LINK_OPENING = 1,  ///< an open request is under way
-  DRV_SERIAL_LINK_OPEN = 2,     ///< open (a hang-up or I/O error shows as the link's error)
-  DRV_SERIAL_LINK_FAILED = 3,   ///< the last open failed (drv_serial_link_state's *error and message)
-} drv_serial_link_state_t;
-
-/// Creates a link (the input ring and the request slots, allocated here once) whose helper
-/// thread calls notify(user) after input arrived, an error appeared, the state changed or a
-/// request finished (from the helper thread; it must not block, e.g. an eventfd write).
-/// NULL when out of memory or the wake-up descriptor cannot be made.
-drv_serial_link_t* drv_serial_link_create(void (*notify)(void* user), void* user);
-
-/// Stops the helper thread (drv_serial_link_stop), then frees. NULL is ignored.
-void drv_serial_link_destroy(drv_serial_link_t* link);
-
-/// Starts the helper thread (time-shared; drv_serial_link_set_scheduler changes that).
-/// @return 0 or a negative errno.
-int drv_serial_link_start(drv_serial_link_t* link);
-
-/// Gives the helper thread a scheduling policy (SCHED_FIFO, SCHED_RR, SCHED_OTHER) and priority.
-/// @return 0 or a negative errno (EPERM without the privilege).
-int drv_serial_link_set_scheduler(drv_serial_link_t* link, int policy, int priority);
-
-/// Ends the helper thread (it closes the descriptor) and waits for it. Idempotent.
-void drv_serial_link_stop(drv_serial_link_t* link);
-
-/// Owner: asks the helper thread to open path at baud (raw 8N1, as drv_serial_open), closing a
-/// descriptor it still holds first. Never waits; the result shows in drv_serial_link_state.
-void drv_serial_link_open(drv_serial_link_t* link, const char* path, uint32_t baud);
-
-/// Owner: asks the helper thread to close the descriptor. Never waits. The owner must not use
-/// the descriptor (its port) any more: detach the port first (drv_serial_close).
-void drv_serial_link_close(drv_serial_link_t* link);
-
-/// Owner: the link's state; with DRV_SERIAL_LINK_OPEN *fd receives the descriptor (for the
-/// owner's own writes), with DRV_SERIAL_LINK_FAILED *error the open's negative errno and msg (if
-/// not NULL, capacity msg_cap) its message. O(1), a short lock.
-drv_serial_link_state_t drv_serial_link_state(drv_serial_link_t* link, int* fd, int* error, char* msg,
-                                              size_t msg_cap);
-
-/// Owner: puts port in link mode on link's open descriptor (as drv_serial_attach would set it up,
-/// at the rate of the open): reads take the input ring, drv_serial_write / _set_baud /
-/// _flush_input become requests to the helper thread, drv_serial_queue / _flush write the
-/// descriptor directly. Input that arrived before is dropped. @return 0, or -ENOTCONN when the
-/// link is not open.
-int drv_serial_use_link(drv_serial_t* port, drv_serial_link_t* link);
-
-/// Owner: true while requests (writes, rate changes, flushes) wait for the helper thread.
-bool drv_serial_link_busy(drv_serial_link_t* link);
-
-/// Counters of the helper thread's side (never decrease; a short lock).
-typedef struct drv_serial_link_counters_s {
-  uint64_t bytes_in;        ///< bytes read into the input ring
-  uint64_t rx_full;         ///< times the input ring was full (input left in the kernel meanwhile)
-  uint64_t requests;        ///< requests carried out
-  uint64_t requests_refused;///< requests refused: no free slot, too long, or the link not open
-  uint64_t opens;           ///< successful opens
-  uint64_t open_failures;
-} drv_serial_link_counters_t;
-drv_serial_link_counters_t drv_serial_link_counters(drv_serial_link_t* link);
-/// @}
 
 #ifdef __cplusplus
 }

@@ -3,7 +3,7 @@
 // pacing, error messages, rFLEX packets end to end through a pty, and link mode (a helper
 // thread makes the terminal calls; the owner never waits for them).
 #define _GNU_SOURCE
-#include <drivers/serial.h>
+#include <drivers/serial_link.h>
 #include <proto/rflex.h>
 
 #include <errno.h>
