@@ -1386,15 +1386,33 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
   return 0;
 }
 
-// The shortest of %.15g and %.17g that reads back as the same double: a file written by
-// --print-config says 0.1, not 0.10000000000000001, and still round-trips exactly.
+int fw_config_format_doubles(const double* v, uint32_t n, char* out, size_t cap) {
+  if (cap == 0U) {
+    return -1;
+  }
+  out[0] = '\0';
+  size_t at = 0;
+  for (uint32_t i = 0; i < n; ++i) {
+    char one[32];
+    snprintf(one, sizeof one, "%.15g", v[i]);
+    const double back = strtod(one, NULL);
+    if (memcmp(&back, &v[i], sizeof back) != 0) {
+      snprintf(one, sizeof one, "%.17g", v[i]);
+    }
+    const int w = snprintf(out + at, cap - at, "%s%s", i > 0 ? "," : "", one);
+    if (w < 0 || (size_t)w >= cap - at) {
+      return -1;
+    }
+    at += (size_t)w;
+  }
+  return 0;
+}
+
+// A file written by --print-config says 0.1, not 0.10000000000000001, and still round-trips
+// exactly.
 static void print_double(FILE* out, double d) {
   char buf[32];
-  snprintf(buf, sizeof buf, "%.15g", d);
-  const double back = strtod(buf, NULL);
-  if (memcmp(&back, &d, sizeof d) != 0) {
-    snprintf(buf, sizeof buf, "%.17g", d);
-  }
+  (void)fw_config_format_doubles(&d, 1U, buf, sizeof buf);
   fputs(buf, out);
 }
 
@@ -1431,14 +1449,12 @@ static void print_value(const key_desc_t* k, const fw_config_t* cfg, FILE* out) 
     case KIND_DLIST: {
       int32_t n = 0;
       memcpy(&n, field + FW_CONFIG_MAX_SCALES * sizeof(double), sizeof n);
-      fputc('"', out);
-      for (int32_t i = 0; i < n; ++i) {
-        double d = 0.0;
-        memcpy(&d, field + (size_t)i * sizeof(double), sizeof d);
-        fputs(i == 0 ? "" : ",", out);
-        print_double(out, d);
-      }
-      fputc('"', out);
+      double v[FW_CONFIG_MAX_SCALES];
+      memcpy(v, field, sizeof v);
+      char list[FW_CONFIG_MAX_SCALES * 26];
+      (void)fw_config_format_doubles(v, n > 0 && n <= (int32_t)FW_CONFIG_MAX_SCALES ? (uint32_t)n : 0U, list,
+                                     sizeof list);
+      fprintf(out, "\"%s\"", list);
       break;
     }
     case KIND_CPUS: {

@@ -100,20 +100,6 @@ static hedger_t* hedger_of(const fw_loop_t* L) { return learn_get_learner(L->age
 // The input scales (hedger_input_scale, or the task's and the executed rotation's when it is
 // empty) are given back as a list that reads back to the same bits: the stored points are in
 // scaled units, so only the very scales they were written with find the same neighbours.
-static int format_scales(char* out, size_t cap, const double* scale, uint32_t n) {
-  size_t at = 0;
-  for (uint32_t i = 0; i < n && at < cap; ++i) {
-    char one[32];
-    snprintf(one, sizeof one, "%.15g", scale[i]);
-    const double back = strtod(one, NULL);
-    if (memcmp(&back, &scale[i], sizeof back) != 0) snprintf(one, sizeof one, "%.17g", scale[i]);
-    const int w = snprintf(out + at, cap - at, "%s%s", i > 0 ? "," : "", one);
-    if (w < 0) return -1;
-    at += (size_t)w;
-  }
-  return at < cap ? 0 : -1;
-}
-
 static bool explain_mismatch(const fw_loop_t* L, const char* path, const void* payload, size_t n, char* err,
                              size_t err_cap) {
   hedger_saved_t saved;
@@ -131,8 +117,8 @@ static bool explain_mismatch(const fw_loop_t* L, const char* path, const void* p
       return false;
     }
     char then_s[HEDGER_MAX_INPUT_DIM * 26U], now_s[HEDGER_MAX_INPUT_DIM * 26U];
-    if (format_scales(then_s, sizeof then_s, saved.input_scale, d) != 0 ||
-        format_scales(now_s, sizeof now_s, now->input_scale, d) != 0) {
+    if (fw_config_format_doubles(saved.input_scale, d, then_s, sizeof then_s) != 0 ||
+        fw_config_format_doubles(now->input_scale, d, now_s, sizeof now_s) != 0) {
       return false;
     }
     snprintf(err, err_cap,

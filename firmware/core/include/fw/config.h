@@ -332,6 +332,11 @@ void fw_config_print(const fw_config_t* cfg, FILE* out);
 /// NUL-terminated, truncated if too small). O(FW_CONFIG_MAX_CPUS).
 void fw_config_format_cpus(uint64_t mask, char* out, size_t cap);
 
+/// Writes n numbers as a list key reads them (hedger_input_scale: "1,0.5,0.125"), each the
+/// shorter of %.15g and %.17g that reads back as the same double (0.1, not 0.10000000000000001),
+/// into out (cap bytes, NUL-terminated). Returns 0, or -1 when it does not fit. O(n).
+int fw_config_format_doubles(const double* v, uint32_t n, char* out, size_t cap);
+
 /// Calls fn(user, name, value) for each parameter of task_params, in order, after checking that
 /// the task declares it and the value is in its range (fn may be NULL: checks only). Returns 0,
 /// or -1 with a message naming the parameter, the task's parameters or the range. O(length).

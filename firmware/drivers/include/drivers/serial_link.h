@@ -19,8 +19,8 @@ extern "C" {
 
 /// @name Link mode
 /// The owner (one thread) calls drv_serial_link_open / _close / _state and the drv_serial_*
-/// functions of a port in link mode; the helper thread (drv_serial_link_start) runs the rest; nothing else
-/// touches the link. Sizes: input ring DRV_SERIAL_LINK_RX_BYTES, DRV_SERIAL_LINK_OPS requests of
+/// functions of a port in link mode; the helper thread (drv_serial_link_start) runs the rest;
+/// nothing else touches the link. Sizes: input ring DRV_SERIAL_LINK_RX_BYTES, DRV_SERIAL_LINK_OPS requests of
 /// at most DRV_SERIAL_LINK_OP_BYTES bytes each.
 /// @{
 #define DRV_SERIAL_LINK_RX_BYTES 65536U  ///< about 1.3 s of input at 500 kBd

@@ -650,8 +650,7 @@ typedef struct hedger_saved {
 /// Reads what buf (from hedger_save()) was written for, so that a caller refused with
 /// CONFIG_MISMATCH can say which setting differs. Checks as hedger_load() does up to the CRC-32
 /// (FORMAT, VERSION, TRUNCATED, CHECKSUM) and that the input scales are inside (FORMAT), then
-/// fills *out. No instance needed; O(size), no
-/// allocation.
+/// fills *out. No instance needed; O(size), no allocation.
 hedger_status_t hedger_saved_config(const void* buf, size_t size, hedger_saved_t* out) HEDGER_NOEXCEPT;
 
 /// A constant English description of a status ("ok", "invalid argument", ...). Never NULL.
