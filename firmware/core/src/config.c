@@ -240,6 +240,9 @@ static const key_desc_t k_keys[] = {
   {NULL, "actor_trust_radius", KIND_DOUBLE, OFF(actor_trust_radius), 0, 4, false, false, NULL, "0",
    "policy = actor: largest distance of its target action from the action the runs took at that state [rad/s] "
    "(0: no bound)"},
+  {NULL, "actor_guard_se", KIND_DOUBLE, OFF(actor_guard_se), 0, 100, false, false, NULL, "1",
+   "policy = actor: its action is replaced by HEDGER's greedy action where the learned values put it more "
+   "than this many standard errors below (0: never; docs/LEARNING.md)"},
   {NULL, "actor_slope_min_t", KIND_DOUBLE, OFF(actor_slope_min_t), 0, 100, false, false, NULL, "3",
    "policy = actor: it steps only where the slope of the return in the action is at least this many standard "
    "errors (clustered by run) from 0 (0: every slope)"},

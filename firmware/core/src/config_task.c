@@ -150,6 +150,7 @@ void fw_config_learn_settings(const fw_config_t* cfg, learn_config_t* c) {
   c->actor.clone_steps = (uint32_t)cfg->actor_clone_steps;
   c->actor.learning_rate = cfg->actor_learning_rate;
   c->actor_work_per_slice = (uint32_t)cfg->actor_work_per_tick;
+  c->actor_guard_se = cfg->actor_guard_se;
   c->learner = cfg->learner;
   c->alpha = cfg->alpha;
   c->gamma = cfg->gamma;

@@ -557,6 +557,16 @@ struct GreedyResult {
   hedger_kind_t kind;
 };
 
+/// The state model's judgement of one given action against the greedy action (hedger_judge()).
+struct Judgement {
+  double action;  ///< the action asked (raw)
+  int judged;     ///< 1: the fields below hold; 0: no state model answered at the state
+  double lo, hi;  ///< actions the data hold at the state (raw): the anchor ± the residuals' range
+  double kept;    ///< the action asked, clamped into [lo, hi]
+  double gap;     ///< q(greedy action) − q(kept) by the state model
+  double gap_se;  ///< its standard error
+};
+
 /// Rank of an evaluation in the greedy search: (support, score), compared lexicographically.
 /// Support: 2 = a local regression (LWR), 1 = an average (LWA), 0 = unknown; an unknown value
 /// never beats a known one, and an average never beats a regression: an average's value belongs
@@ -891,7 +901,7 @@ void model_alt(ModelGeom<D>& g) noexcept {
 /// action search, value of the chosen action. False when the model fails. O(n D + D² per
 /// candidate), no allocation (forms g's fit without u² once if the values ask for it).
 template <int D>
-bool model_value(hedger& h, const double* x, ModelGeom<D>& g, GreedyResult& out) noexcept {
+bool model_value(hedger& h, const double* x, ModelGeom<D>& g, GreedyResult& out, Judgement* judge = nullptr) noexcept {
   constexpr int P = D + 2;
   using Vec = Eigen::Matrix<double, P, 1>;
   using Mat = Eigen::Matrix<double, P, P>;
@@ -953,6 +963,26 @@ bool model_value(hedger& h, const double* x, ModelGeom<D>& g, GreedyResult& out)
     return GreedyRank{2, q - kappa * std::sqrt(s2 * quad)};
   });
   if (res.status != HEDGER_OK) return false;
+  if (judge != nullptr) {
+    // The asked action within the data's actions at the state, and how far below the greedy
+    // action the model puts it: the difference of the two design rows has only the action's two
+    // entries, so its error is that of β_u Δu + β_uu Δ(u²) alone (the state part cancels).
+    const double scale = h.cfg.input_scale[D - 1];
+    double u = judge->action / scale - g.abar;
+    u = u < umin ? umin : (u > umax ? umax : u);
+    Vec eg, ek, d;
+    model_design<D>(h, g.abar, u_anchor, res.action, eg, d);
+    model_design<D>(h, g.abar, u_anchor, (u + g.abar) * scale, ek, d);
+    const double d1 = eg[D - 1] - ek[D - 1], d2 = eg[D] - ek[D];
+    const Mat& c = *cov;
+    const double quad = d1 * (c(D - 1, D - 1) * d1 + c(D - 1, D) * d2) + d2 * (c(D, D - 1) * d1 + c(D, D) * d2);
+    judge->judged = 1;
+    judge->lo = (umin + g.abar) * scale;
+    judge->hi = (umax + g.abar) * scale;
+    judge->kept = (u + g.abar) * scale;
+    judge->gap = d1 * beta[D - 1] + d2 * beta[D];
+    judge->gap_se = std::sqrt(s2 * quad);
+  }
   // The value of the chosen action: the regression where it interpolates, else the average.
   bool lwr = false;
   if (g.v_ok && res.value >= q_min(h) && res.value <= q_max(h)) {
@@ -990,7 +1020,7 @@ struct GreedyGeom {
 /// Greedy search at a scaled state x (x[D-1] is overwritten). With a cache (the replay's record),
 /// the state model's geometry is taken from it while it is valid, else formed into it.
 template <int D>
-GreedyResult greedy_x(hedger& h, double* x, GreedyGeom<D>* cache) noexcept {
+GreedyResult greedy_x(hedger& h, double* x, GreedyGeom<D>* cache, Judgement* judge = nullptr) noexcept {
   ++h.counters.greedy_calls;
   GreedyResult g;
   if (h.cfg.greedy_method == static_cast<uint32_t>(HEDGER_GREEDY_STATE_MODEL) &&
@@ -1015,7 +1045,7 @@ GreedyResult greedy_x(hedger& h, double* x, GreedyGeom<D>* cache) noexcept {
     }
     if (cache == nullptr) {
       model_geometry<D>(h, x, 1.0, local);
-      if (model_value<D>(h, x, local, g)) {
+      if (model_value<D>(h, x, local, g, judge)) {
         ++h.counters.greedy_state_model;
         return g;
       }
@@ -1034,7 +1064,7 @@ GreedyResult greedy_x(hedger& h, double* x, GreedyGeom<D>* cache) noexcept {
     }
     if (!tried_wide && reach > 1.0) {
       model_geometry<D>(h, x, reach, local);
-      if (model_value<D>(h, x, local, g)) {
+      if (model_value<D>(h, x, local, g, judge)) {
         ++h.counters.greedy_state_model;
         ++h.counters.greedy_reached;
         return g;
@@ -1046,13 +1076,16 @@ GreedyResult greedy_x(hedger& h, double* x, GreedyGeom<D>* cache) noexcept {
   return g;
 }
 
-/// Greedy search at a raw state (see hedger_greedy()).
+/// Greedy search at a raw state (see hedger_greedy()); with judge, also its judgement of
+/// judge->action (judged = 0 where no state model answers).
 template <int D>
-GreedyResult greedy_at(hedger& h, const double* state, GreedyGeom<D>* cache = nullptr) noexcept {
+GreedyResult greedy_at(hedger& h, const double* state, GreedyGeom<D>* cache = nullptr,
+                       Judgement* judge = nullptr) noexcept {
   double x[static_cast<size_t>(D)];
   for (int i = 0; i < D - 1; ++i) x[i] = state[i] / h.cfg.input_scale[i];
   x[D - 1] = 0.0;
-  return greedy_x<D>(h, x, cache);
+  if (judge != nullptr) judge->judged = 0;
+  return greedy_x<D>(h, x, cache, judge);
 }
 
 // ---- Store maintenance ---------------------------------------------------------------------

@@ -16,6 +16,7 @@
 namespace hg {
 
 struct GreedyResult;
+struct Judgement;
 
 /// The entry points of one D. Every pointer is non-null; arguments are checked (non-null,
 /// finite) by the C API before a call. Cost and memory are those of the core functions named.
@@ -26,6 +27,8 @@ struct DimOps {
                   double* weights, uint32_t cap) noexcept;
   /// hg::greedy_at.
   void (*greedy)(hedger_t& h, const double* state, GreedyResult& out) noexcept;
+  /// hg::greedy_at with a judgement of judge.action.
+  void (*judge)(hedger_t& h, const double* state, GreedyResult& out, Judgement& judge) noexcept;
   /// hg::update.
   void (*update)(hedger_t& h, const double* s, double a, double r, const double* sn, int terminal,
                  hedger_update_info_t& info) noexcept;

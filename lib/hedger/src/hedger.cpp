@@ -343,6 +343,26 @@ hedger_status_t hedger_greedy(hedger_t* self, const double* state, double* actio
   return g.status;
 }
 
+hedger_status_t hedger_judge(hedger_t* self, const double* state, double action, hedger_judgement_t* out)
+    HEDGER_NOEXCEPT {
+  if (!live(self) || state == nullptr || out == nullptr) return HEDGER_ERR_INVALID_ARG;
+  if (!finite_all(state, self->cfg.state_dim) || !std::isfinite(action)) return reject_non_finite(self);
+  hg::GreedyResult g;
+  hg::Judgement j{};
+  j.action = action;
+  hg::dim_ops(self->dim).judge(*self, state, g, j);
+  out->greedy_action = g.action;
+  out->greedy_value = g.value;
+  out->greedy_kind = g.kind;
+  out->judged = j.judged;
+  out->action_lo = j.judged ? j.lo : action;
+  out->action_hi = j.judged ? j.hi : action;
+  out->kept_action = j.judged ? j.kept : action;
+  out->gap = j.judged ? j.gap : 0.0;
+  out->gap_se = j.judged ? j.gap_se : 0.0;
+  return g.status;
+}
+
 hedger_status_t hedger_update(hedger_t* self, const double* state, double action, double reward,
                               const double* state_next, int terminal, hedger_update_info_t* info) HEDGER_NOEXCEPT {
   if (!live(self) || state == nullptr || (!terminal && state_next == nullptr)) return HEDGER_ERR_INVALID_ARG;

@@ -63,6 +63,7 @@ struct learn {
   bool replaying;
   bool actor_due;              // the actor's learning follows the replay
   bool policy_fault;           // the last learn_act's learned policy gave a non-finite action
+  uint64_t guard_replaced;     // actor decisions replaced by the greedy action (actor_guard_se)
   uint64_t policy_faults;
   int64_t steps;
   // The decision under way (cfg.decision_ticks > 1): its action, held until the next decision,
@@ -517,6 +518,24 @@ static bool actor_action(learn_t* a, double* act) {
   return true;
 }
 
+// The values' guard of the actor's action act at s (actor_guard_se). The search's greedy value
+// is the q' of the transition into s, as on the greedy policy's path.
+static void guard_actor(learn_t* a, double* act) {
+  hedger_judgement_t j;
+  const bool known = learn_learner_judge(&a->learner, a->s, *act, &j);
+  if (a->pending.active) {
+    a->pending.need_greedy = false;
+    a->pending.q_next = j.greedy_value;  // the default value when no action is known
+  }
+  if (!known || !j.judged) {
+    return;
+  }
+  if (j.gap > a->cfg.actor_guard_se * j.gap_se) {
+    *act = clamp_action(a, j.greedy_action);
+    a->guard_replaced++;
+  }
+}
+
 void learn_act(learn_t* a, double advice, double joystick, double* action, int8_t* source) {
   if (!deciding(a)) {
     // Inside a decision's window: its action holds, whoever chose it (the driver's too, so that
@@ -536,6 +555,9 @@ void learn_act(learn_t* a, double advice, double joystick, double* action, int8_
   double greedy_action = 0.0;
   if (policy && a->actor != NULL) {
     greedy_known = actor_action(a, &greedy_action);
+    if (greedy_known && !a->policy_fault && a->cfg.actor_guard_se > 0.0) {
+      guard_actor(a, &greedy_action);
+    }
   } else if (policy) {
     double value = 0.0;
     greedy_known = learn_learner_greedy(&a->learner, a->s, &greedy_action, &value);
@@ -785,6 +807,8 @@ const actor_t* learn_get_actor_const(const learn_t* a) { return a->actor; }
 bool learn_policy_fault(const learn_t* a) { return a->policy_fault; }
 
 uint64_t learn_policy_faults(const learn_t* a) { return a->policy_faults; }
+
+uint64_t learn_guard_replaced(const learn_t* a) { return a->guard_replaced; }
 
 // The stored points of HEDGER as cloning samples (state, action).
 static int stored_point(void* user, uint32_t index, double* state, double* action) {

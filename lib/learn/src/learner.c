@@ -54,6 +54,15 @@ bool learn_learner_greedy(learn_learner_t* lr, const double* s, double* action, 
   return hedger_greedy(lr->hedger, s, action, value, NULL) == HEDGER_OK;
 }
 
+bool learn_learner_judge(learn_learner_t* lr, const double* s, double action, hedger_judgement_t* j) {
+  if (lr->tabq != NULL) {
+    memset(j, 0, sizeof *j);
+    j->kept_action = action;
+    return tabq_greedy(lr->tabq, s, &j->greedy_action, &j->greedy_value) == TABQ_OK;
+  }
+  return hedger_judge(lr->hedger, s, action, j) == HEDGER_OK;
+}
+
 // A tabular value is a visited cell or unknown: reported as kind LWA (an average of the updates
 // the cell received) or UNKNOWN, so that the experience message keeps one meaning of "unknown".
 static hedger_kind_t tabular_kind(int known) { return known ? HEDGER_KIND_LWA : HEDGER_KIND_UNKNOWN; }

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 // Run tags and anchor weights: the greedy state model's neighbours' policy (the anchor) follows
 // the runs weighted up, fades old runs with anchor_recency_runs, and the values never see
-// either; tags and weights obey their contracts.
+// either; tags and weights obey their contracts. hedger_judge(): the same model judges another
+// policy's action against the greedy one, within the actions the data hold at the state.
 #include <math.h>
 #include <setjmp.h>
 #include <stdarg.h>
@@ -188,6 +189,65 @@ static void test_anchor_tag_and_weight_contracts(void** state) {
   assert_int_equal(hedger_config_validate(&c), HEDGER_ERR_INVALID_ARG);
 }
 
+// A teacher that turns too gently: actions a = 0.5 s + dither, values peaked at a = 0.8 s.
+// hedger_judge() returns hedger_greedy()'s answer, puts the teacher's action significantly below
+// the greedy one, clamps an action beyond the data into their range at the state, and judges
+// nothing without a state model.
+static void test_judge_against_greedy(void** state) {
+  (void)state;
+  hedger_config_t c = anchor_config();
+  c.greedy_pessimism = 4.0;
+  hedger_t* h = ht_create(&c);
+  uint64_t rs = 23;
+  for (int i = 0; i < 600; ++i) {
+    const double s = ht_uniform(&rs, -1.0, 1.0);
+    const double a = 0.5 * s + 0.2 * ht_normal(&rs);
+    const double q = 2.0 + 0.2 * s - (a - 0.8 * s) * (a - 0.8 * s) + 0.005 * ht_normal(&rs);
+    assert_int_equal(hedger_insert(h, &s, a, q, 0, NULL), HEDGER_OK);
+  }
+  assert_int_equal(hedger_observe_reward(h, 1.0), HEDGER_OK);
+  const double s = 0.5;
+  double ga = 0.0, gv = 0.0;
+  hedger_kind_t gk = HEDGER_KIND_UNKNOWN;
+  assert_int_equal(hedger_greedy(h, &s, &ga, &gv, &gk), HEDGER_OK);
+  hedger_judgement_t j;
+  assert_int_equal(hedger_judge(h, &s, 0.25, &j), HEDGER_OK);
+  assert_true(j.greedy_action == ga && j.greedy_value == gv && j.greedy_kind == gk);
+  assert_int_equal(j.judged, 1);
+  assert_true(fabs(ga - 0.4) < 0.05);  // the values' peak, not the teacher's 0.25
+  assert_true(j.action_lo < 0.25 && 0.25 < ga && ga < j.action_hi);
+  assert_true(j.kept_action == 0.25);
+  // Q(0.4) − Q(0.25) = 0.15² = 0.0225, many standard errors from 0.
+  assert_true(fabs(j.gap - 0.0225) < 0.005);
+  assert_true(j.gap > 4.0 * j.gap_se && j.gap_se > 0.0);
+  // The greedy action itself: no gap.
+  assert_int_equal(hedger_judge(h, &s, ga, &j), HEDGER_OK);
+  assert_true(j.gap == 0.0 && j.gap_se == 0.0 && j.kept_action == ga);
+  // Beyond the data's actions at the state: judged at the largest they hold.
+  assert_int_equal(hedger_judge(h, &s, 5.0, &j), HEDGER_OK);
+  assert_true(j.action_hi < 1.5 && j.kept_action == j.action_hi);
+  assert_true(j.gap > 4.0 * j.gap_se);  // the edge of the data turns too hard
+  // Contracts.
+  assert_int_equal(hedger_judge(h, NULL, 0.0, &j), HEDGER_ERR_INVALID_ARG);
+  assert_int_equal(hedger_judge(h, &s, 0.0, NULL), HEDGER_ERR_INVALID_ARG);
+  assert_int_equal(hedger_judge(h, &s, NAN, &j), HEDGER_ERR_NON_FINITE);
+  hedger_destroy(h);
+  // The per-action search has no state model: nothing judged, the action kept as given.
+  c.greedy_method = HEDGER_GREEDY_PER_ACTION;
+  h = ht_create(&c);
+  rs = 23;
+  for (int i = 0; i < 600; ++i) {
+    const double x = ht_uniform(&rs, -1.0, 1.0);
+    const double a = 0.5 * x + 0.2 * ht_normal(&rs);
+    assert_int_equal(hedger_insert(h, &x, a, 1.0 - a * a, 0, NULL), HEDGER_OK);
+  }
+  assert_int_equal(hedger_observe_reward(h, 1.0), HEDGER_OK);
+  assert_int_equal(hedger_judge(h, &s, 0.3, &j), HEDGER_OK);
+  assert_int_equal(j.judged, 0);
+  assert_true(j.kept_action == 0.3 && j.gap == 0.0 && j.gap_se == 0.0);
+  hedger_destroy(h);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_anchor_follows_weighted_run),
@@ -195,6 +255,7 @@ int main(void) {
       cmocka_unit_test(test_anchor_recency_fades_old_runs),
       cmocka_unit_test(test_anchor_all_zero_weights_fall_back),
       cmocka_unit_test(test_anchor_tag_and_weight_contracts),
+      cmocka_unit_test(test_judge_against_greedy),
   };
   return cmocka_run_group_tests_name("hedger.anchor", tests, NULL, NULL);
 }

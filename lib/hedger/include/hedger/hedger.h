@@ -478,6 +478,33 @@ hedger_status_t hedger_predict_ex(hedger_t* self, const double* state, double ac
 hedger_status_t hedger_greedy(hedger_t* self, const double* state, double* action, double* value,
                               hedger_kind_t* kind) HEDGER_NOEXCEPT;
 
+/// A given action judged against the greedy action by the same state model (a policy other than
+/// the greedy one, e.g. an actor, guarded by the values): the greedy search of hedger_greedy()
+/// (outputs, status and counters identical), and where its answer came from a state model
+/// (cfg.greedy_method HEDGER_GREEDY_STATE_MODEL, at either reach), judged = 1 with
+/// - action_lo, action_hi: the actions the data hold at the state (raw; the neighbours' policy
+///   at the state plus the range of their residuals, the range the greedy search keeps to);
+/// - kept_action: the given action clamped into [action_lo, action_hi];
+/// - gap, gap_se: Q(greedy action) − Q(kept_action) by that model (reward units; >= 0 up to
+///   the pessimism's choice, since the greedy ranks by value − κ·SE) and its standard error (of
+///   the difference: the state part cancels).
+/// Where no state model answers (too few neighbours, per-action search, or no known action),
+/// judged = 0, kept_action = action, gap = gap_se = 0. Cost: as hedger_greedy() plus O(1).
+/// Errors: INVALID_ARG (NULL), NON_FINITE (state or action).
+typedef struct hedger_judgement {
+  double greedy_action;     ///< as hedger_greedy()'s action
+  double greedy_value;      ///< as hedger_greedy()'s value
+  hedger_kind_t greedy_kind;///< as hedger_greedy()'s kind
+  int judged;               ///< 1: the fields below come from the state model; 0: not judged
+  double action_lo;         ///< smallest action the data hold at the state (raw)
+  double action_hi;         ///< largest action the data hold at the state (raw)
+  double kept_action;       ///< the given action clamped into [action_lo, action_hi] (raw)
+  double gap;               ///< Q(greedy action) − Q(kept_action) (reward units)
+  double gap_se;            ///< standard error of gap, >= 0
+} hedger_judgement_t;
+
+hedger_status_t hedger_judge(hedger_t* self, const double* state, double action, hedger_judgement_t* out) HEDGER_NOEXCEPT;
+
 /// One training update with experience (s, a, r, s_next, terminal) (hedger.md steps 1–6):
 /// 1. q' = 0 if terminal, else greedy value at s_next (default_value if all unknown);
 /// 2. q = Q(s, a) with neighbourhood K and kernel weights κ;

@@ -124,6 +124,11 @@ typedef struct learn_config {
   /// method's (actor_config_default()) unless set.
   actor_config_t actor;
   uint32_t actor_work_per_slice; ///< the actor's between-run work per slice [actor work units, actor/actor.h]
+  /// The values guard the actor (HEDGER only; hedger_judge()): where a state model answers at
+  /// the state, the actor's action is replaced by the greedy action where the values put it more
+  /// than actor_guard_se standard errors below it (0 = never, the library's default; the
+  /// controller's is 1). Costs one greedy search per decision, as policy = greedy does.
+  double actor_guard_se;
   // The value-function learner.
   int32_t learner;              ///< learn_learner_kind_t
   double alpha;                 ///< learning rate (0, 1]
@@ -265,6 +270,9 @@ void learn_act(learn_t* a, double advice, double joystick, double* action, int8_
 /// was 0); learn_policy_faults() counts them since init.
 bool learn_policy_fault(const learn_t* a);
 uint64_t learn_policy_faults(const learn_t* a);
+
+/// Actor decisions the values' guard replaced by the greedy action (actor_guard_se), since init.
+uint64_t learn_guard_replaced(const learn_t* a);
 
 /// Whether the operator's joystick drives the run under way (phase one, joystick driver).
 bool learn_joystick_drives(const learn_t* a);

@@ -74,6 +74,11 @@ int learn_learner_init(learn_learner_t* lr, void* storage, size_t storage_size, 
 /// Greedy action and its value at s; false when no action is known there (value = the default).
 bool learn_learner_greedy(learn_learner_t* lr, const double* s, double* action, double* value);
 
+/// The greedy action and value at s (as learn_learner_greedy) and HEDGER's judgement of action
+/// there (hedger_judge()) into *j; false when no action is known at s. Tabular Q: the greedy
+/// action, j->judged = 0.
+bool learn_learner_judge(learn_learner_t* lr, const double* s, double action, hedger_judgement_t* j);
+
 /// One update of (s, a, r, s', terminal) with q' given; *q_old / *kind: Q(s, a) before it.
 bool learn_learner_learn(learn_learner_t* lr, const double* s, double a, double r, const double* s_next, bool terminal,
                          double q_next, double* q_old, hedger_kind_t* kind);

@@ -1,0 +1,118 @@
+// SPDX-License-Identifier: MIT
+// The values' guard of the actor (actor_guard_se): an actor cloned from a teacher that turns too
+// gently acts as the teacher where the guard is off; with it, where HEDGER's values put the
+// teacher's action significantly below their greedy action, the greedy action acts instead, bit
+// for bit the one hedger_greedy() gives, and the replacement is counted.
+#include "learn/learn.h"
+#include "learn/learner.h"
+
+#include <math.h>
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <cmocka.h>
+
+static uint64_t next_u64(uint64_t* s) {
+  *s += 0x9E3779B97F4A7C15ULL;
+  uint64_t z = *s;
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+  return z ^ (z >> 31);
+}
+
+static double uniform(uint64_t* s) { return (double)(next_u64(s) >> 11) * 0x1.0p-53; }
+
+static double normal(uint64_t* s) {
+  const double u = uniform(s) + 0x1.0p-54, v = uniform(s);
+  return sqrt(-2.0 * log(u)) * cos(6.283185307179586 * v);
+}
+
+static learn_task_t line_task(void) {
+  learn_task_t t;
+  memset(&t, 0, sizeof t);
+  t.state_dim = 1;
+  t.state_scale[0] = 1.0;
+  t.state_min[0] = -1.0;
+  t.state_max[0] = 1.0;
+  t.action_min = -1.0;
+  t.action_max = 1.0;
+  t.action_scale = 1.0;
+  t.gamma = 0.9;
+  t.step_limit = 100;
+  t.greedy_reach = 1.0;
+  return t;
+}
+
+// The actor's action at s after cloning the teacher's stored points, with the guard at se.
+static double act_at(double s, double se, double* greedy, uint64_t* replaced) {
+  const learn_task_t task = line_task();
+  learn_config_t cfg = learn_config_default();
+  cfg.mode = LEARN_MODE_EVALUATE;
+  cfg.policy = LEARN_POLICY_ACTOR;
+  cfg.state_last_action = false;
+  cfg.k_max = 64;
+  cfg.bandwidth = 0.6;
+  cfg.merge_radius = 1e-4;
+  cfg.capacity = 2000;
+  cfg.actor.capacity = 2000;
+  cfg.actor.max_queries = 1000;
+  cfg.actor_guard_se = se;
+  const size_t bytes = learn_storage_size(&task, &cfg);
+  assert_true(bytes > 0);
+  void* mem = aligned_alloc(LEARN_STORAGE_ALIGN, (bytes + LEARN_STORAGE_ALIGN - 1) / LEARN_STORAGE_ALIGN *
+                                                     LEARN_STORAGE_ALIGN);
+  assert_non_null(mem);
+  char err[LEARN_ERR_MAX];
+  learn_t* a = learn_init(mem, bytes, &task, &cfg, err, sizeof err);
+  assert_non_null(a);
+  // The teacher turns as 0.5 s (with dither); the values peak at 0.8 s.
+  hedger_t* h = learn_get_learner(a)->hedger;
+  uint64_t rs = 23;
+  for (int i = 0; i < 600; ++i) {
+    const double x = 2.0 * uniform(&rs) - 1.0;
+    const double u = 0.5 * x + 0.2 * normal(&rs);
+    const double q = 2.0 + 0.2 * x - (u - 0.8 * x) * (u - 0.8 * x) + 0.005 * normal(&rs);
+    assert_int_equal(hedger_insert(h, &x, u, q, 0, NULL), HEDGER_OK);
+  }
+  assert_int_equal(hedger_observe_reward(h, 1.0), HEDGER_OK);
+  assert_true(learn_actor_from_values(a) >= 590);
+  assert_int_equal(hedger_greedy(h, &s, greedy, NULL, NULL), HEDGER_OK);
+  learn_begin_run(a);
+  assert_true(learn_observe(a, &s, 0.0));
+  double act = 0.0;
+  int8_t src = -1;
+  learn_act(a, 0.0, 0.0, &act, &src);
+  assert_int_equal(src, LEARN_SOURCE_GREEDY);
+  *replaced = learn_guard_replaced(a);
+  free(mem);
+  return act;
+}
+
+static void test_guard_replaces_an_action_the_values_reject(void** state) {
+  (void)state;
+  const double s = 0.5;
+  double greedy = 0.0;
+  uint64_t replaced = 0;
+  const double off = act_at(s, 0.0, &greedy, &replaced);
+  assert_true(fabs(off - 0.25) < 0.08);  // the clone of the teacher
+  assert_true(fabs(greedy - 0.4) < 0.05);  // the values' peak
+  assert_int_equal(replaced, 0);
+  const double on = act_at(s, 1.0, &greedy, &replaced);
+  assert_memory_equal(&on, &greedy, sizeof on);
+  assert_int_equal(replaced, 1);
+  // A guard too lax to be sure (Q(0.4) − Q(0.25) = 0.0225 is tens of standard errors): the actor.
+  const double lax = act_at(s, 1e6, &greedy, &replaced);
+  assert_memory_equal(&lax, &off, sizeof lax);
+  assert_int_equal(replaced, 0);
+}
+
+int main(void) {
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_guard_replaces_an_action_the_values_reject),
+  };
+  return cmocka_run_group_tests_name("learn.guard", tests, NULL, NULL);
+}
