@@ -243,6 +243,9 @@ static const key_desc_t k_keys[] = {
   {NULL, "actor_guard_se", KIND_DOUBLE, OFF(actor_guard_se), 0, 100, false, false, NULL, "1",
    "policy = actor: its action is replaced by HEDGER's greedy action where the learned values put it more "
    "than this many standard errors below (0: never; docs/LEARNING.md)"},
+  {NULL, "actor_guard_range", KIND_BOOL, OFF(actor_guard_range), 0, 0, false, false, NULL, "true",
+   "policy = actor: its action is kept within the actions the learned data hold at the state, where the "
+   "values judge it (docs/LEARNING.md)"},
   {NULL, "actor_slope_min_t", KIND_DOUBLE, OFF(actor_slope_min_t), 0, 100, false, false, NULL, "3",
    "policy = actor: it steps only where the slope of the return in the action is at least this many standard "
    "errors (clustered by run) from 0 (0: every slope)"},

@@ -151,6 +151,7 @@ void fw_config_learn_settings(const fw_config_t* cfg, learn_config_t* c) {
   c->actor.learning_rate = cfg->actor_learning_rate;
   c->actor_work_per_slice = (uint32_t)cfg->actor_work_per_tick;
   c->actor_guard_se = cfg->actor_guard_se;
+  c->actor_guard_range = cfg->actor_guard_range;
   c->learner = cfg->learner;
   c->alpha = cfg->alpha;
   c->gamma = cfg->gamma;

@@ -967,19 +967,20 @@ bool model_value(hedger& h, const double* x, ModelGeom<D>& g, GreedyResult& out,
     // The asked action within the data's actions at the state, and how far below the greedy
     // action the model puts it: the difference of the two design rows has only the action's two
     // entries, so its error is that of β_u Δu + β_uu Δ(u²) alone (the state part cancels).
+    // u is formed as model_design forms it, so that the greedy action itself differs by exact
+    // zeros (no round trip through raw units).
     const double scale = h.cfg.input_scale[D - 1];
-    double u = judge->action / scale - g.abar;
-    u = u < umin ? umin : (u > umax ? umax : u);
-    Vec eg, ek, d;
+    const double u_asked = judge->action / scale - g.abar;
+    const double u = u_asked < umin ? umin : (u_asked > umax ? umax : u_asked);
+    Vec eg, d;
     model_design<D>(h, g.abar, u_anchor, res.action, eg, d);
-    model_design<D>(h, g.abar, u_anchor, (u + g.abar) * scale, ek, d);
-    const double d1 = eg[D - 1] - ek[D - 1], d2 = eg[D] - ek[D];
+    const double d1 = eg[D - 1] - u, d2 = eg[D] - u * u;
     const Mat& c = *cov;
     const double quad = d1 * (c(D - 1, D - 1) * d1 + c(D - 1, D) * d2) + d2 * (c(D, D - 1) * d1 + c(D, D) * d2);
     judge->judged = 1;
     judge->lo = (umin + g.abar) * scale;
     judge->hi = (umax + g.abar) * scale;
-    judge->kept = (u + g.abar) * scale;
+    judge->kept = u_asked < umin ? judge->lo : (u_asked > umax ? judge->hi : judge->action);
     judge->gap = d1 * beta[D - 1] + d2 * beta[D];
     judge->gap_se = std::sqrt(s2 * quad);
   }

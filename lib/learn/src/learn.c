@@ -518,8 +518,8 @@ static bool actor_action(learn_t* a, double* act) {
   return true;
 }
 
-// The values' guard of the actor's action act at s (actor_guard_se). The search's greedy value
-// is the q' of the transition into s, as on the greedy policy's path.
+// The values' guard of the actor's action act at s (actor_guard_se, actor_guard_range). The
+// search's greedy value is the q' of the transition into s, as on the greedy policy's path.
 static void guard_actor(learn_t* a, double* act) {
   hedger_judgement_t j;
   const bool known = learn_learner_judge(&a->learner, a->s, *act, &j);
@@ -530,9 +530,12 @@ static void guard_actor(learn_t* a, double* act) {
   if (!known || !j.judged) {
     return;
   }
-  if (j.gap > a->cfg.actor_guard_se * j.gap_se) {
+  if (a->cfg.actor_guard_se > 0.0 && j.gap > a->cfg.actor_guard_se * j.gap_se) {
     *act = clamp_action(a, j.greedy_action);
     a->guard_replaced++;
+  } else if (a->cfg.actor_guard_range) {
+    // Beyond the data's actions the values judged the nearest one they hold: that one acts.
+    *act = clamp_action(a, j.kept_action);
   }
 }
 
@@ -555,7 +558,7 @@ void learn_act(learn_t* a, double advice, double joystick, double* action, int8_
   double greedy_action = 0.0;
   if (policy && a->actor != NULL) {
     greedy_known = actor_action(a, &greedy_action);
-    if (greedy_known && !a->policy_fault && a->cfg.actor_guard_se > 0.0) {
+    if (greedy_known && !a->policy_fault && (a->cfg.actor_guard_se > 0.0 || a->cfg.actor_guard_range)) {
       guard_actor(a, &greedy_action);
     }
   } else if (policy) {

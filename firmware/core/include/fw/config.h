@@ -202,6 +202,7 @@ typedef struct fw_config {
   double actor_step_max;           ///< actor: largest target step per run [rad/s]
   double actor_trust_radius;       ///< actor: largest distance of a target from the recorded action [rad/s]; 0 none
   double actor_guard_se;           ///< actor: replaced by the greedy action where the values put it this many SE below; 0 never
+  bool actor_guard_range;          ///< actor: kept within the actions the learned data hold at the state
   double actor_slope_min_t;        ///< actor: steps only where |slope| >= this many standard errors; 0 every slope
   bool actor_rewarded_window;      ///< actor: the value window reaches back to actor_runs rewarded runs
   int32_t actor_fit_steps;         ///< actor: Adam steps per fit

@@ -127,8 +127,11 @@ typedef struct learn_config {
   /// The values guard the actor (HEDGER only; hedger_judge()): where a state model answers at
   /// the state, the actor's action is replaced by the greedy action where the values put it more
   /// than actor_guard_se standard errors below it (0 = never, the library's default; the
-  /// controller's is 1). Costs one greedy search per decision, as policy = greedy does.
+  /// controller's is 1), and otherwise kept within the actions the data hold at the state
+  /// (actor_guard_range; the library's default false, the controller's true). Costs one greedy
+  /// search per decision, as policy = greedy does.
   double actor_guard_se;
+  bool actor_guard_range;
   // The value-function learner.
   int32_t learner;              ///< learn_learner_kind_t
   double alpha;                 ///< learning rate (0, 1]
