@@ -55,9 +55,11 @@ bool learn_learner_greedy(learn_learner_t* lr, const double* s, double* action, 
 }
 
 bool learn_learner_judge(learn_learner_t* lr, const double* s, double action, hedger_judgement_t* j) {
+  // Where a call refuses its inputs it writes nothing: then judged 0 and the greedy value 0, the
+  // value the greedy policy's path starts from.
+  memset(j, 0, sizeof *j);
+  j->kept_action = action;
   if (lr->tabq != NULL) {
-    memset(j, 0, sizeof *j);
-    j->kept_action = action;
     return tabq_greedy(lr->tabq, s, &j->greedy_action, &j->greedy_value) == TABQ_OK;
   }
   return hedger_judge(lr->hedger, s, action, j) == HEDGER_OK;
