@@ -355,11 +355,11 @@ hedger_status_t hedger_judge(hedger_t* self, const double* state, double action,
   out->greedy_value = g.value;
   out->greedy_kind = g.kind;
   out->judged = j.judged;
-  out->action_lo = j.judged ? j.lo : action;
-  out->action_hi = j.judged ? j.hi : action;
-  out->kept_action = j.judged ? j.kept : action;
-  out->gap = j.judged ? j.gap : 0.0;
-  out->gap_se = j.judged ? j.gap_se : 0.0;
+  out->action_lo = j.lo;
+  out->action_hi = j.hi;
+  out->kept_action = j.kept;
+  out->gap = j.gap;
+  out->gap_se = j.gap_se;
   return g.status;
 }
 
