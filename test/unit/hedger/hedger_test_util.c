@@ -22,3 +22,13 @@ int ht_same_saved(const hedger_t* a, const hedger_t* b) {
   free(bb);
   return same;
 }
+
+void ht_insert_gentle_teacher(hedger_t* h, int n, uint64_t* rs) {
+  for (int i = 0; i < n; ++i) {
+    const double s = ht_uniform(rs, -1.0, 1.0);
+    const double a = 0.5 * s + 0.2 * ht_normal(rs);
+    const double q = 2.0 + 0.2 * s - (a - 0.8 * s) * (a - 0.8 * s) + 0.005 * ht_normal(rs);
+    if (hedger_insert(h, &s, a, q, 0, NULL) != HEDGER_OK) abort();
+  }
+  if (hedger_observe_reward(h, 1.0) != HEDGER_OK) abort();
+}

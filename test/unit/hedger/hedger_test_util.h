@@ -27,6 +27,12 @@ double ht_normal(uint64_t* s);
 /// from hedger_save() (the tests' bit-for-bit comparison of two instances).
 int ht_same_saved(const hedger_t* a, const hedger_t* b);
 
+/// A teacher that turns too gently, on one state dimension: n points at s uniform in [-1, 1]
+/// with actions a = 0.5 s + 0.2 N(0, 1) and values 2 + 0.2 s − (a − 0.8 s)² + 0.005 N(0, 1)
+/// (peaked at a = 0.8 s), inserted from the stream at *rs; then a reward of 1 observed (the
+/// values' bounds). Aborts if HEDGER refuses a point.
+void ht_insert_gentle_teacher(hedger_t* h, int n, uint64_t* rs);
+
 /// hedger_create() that must succeed.
 static inline hedger_t* ht_create(const hedger_config_t* cfg) {
   hedger_t* h = NULL;

@@ -199,13 +199,7 @@ static void test_judge_against_greedy(void** state) {
   c.greedy_pessimism = 4.0;
   hedger_t* h = ht_create(&c);
   uint64_t rs = 23;
-  for (int i = 0; i < 600; ++i) {
-    const double s = ht_uniform(&rs, -1.0, 1.0);
-    const double a = 0.5 * s + 0.2 * ht_normal(&rs);
-    const double q = 2.0 + 0.2 * s - (a - 0.8 * s) * (a - 0.8 * s) + 0.005 * ht_normal(&rs);
-    assert_int_equal(hedger_insert(h, &s, a, q, 0, NULL), HEDGER_OK);
-  }
-  assert_int_equal(hedger_observe_reward(h, 1.0), HEDGER_OK);
+  ht_insert_gentle_teacher(h, 600, &rs);
   const double s = 0.5;
   double ga = 0.0, gv = 0.0;
   hedger_kind_t gk = HEDGER_KIND_UNKNOWN;

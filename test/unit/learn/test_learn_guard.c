@@ -8,6 +8,7 @@
 #include "learn/learn.h"
 #include "learn/learner.h"
 #include "actor/actor.h"
+#include "hedger_test_util.h"
 
 #include <math.h>
 #include <stdbool.h>
@@ -19,21 +20,6 @@
 #include <string.h>
 
 #include <cmocka.h>
-
-static uint64_t next_u64(uint64_t* s) {
-  *s += 0x9E3779B97F4A7C15ULL;
-  uint64_t z = *s;
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-  return z ^ (z >> 31);
-}
-
-static double uniform(uint64_t* s) { return (double)(next_u64(s) >> 11) * 0x1.0p-53; }
-
-static double normal(uint64_t* s) {
-  const double u = uniform(s) + 0x1.0p-54, v = uniform(s);
-  return sqrt(-2.0 * log(u)) * cos(6.283185307179586 * v);
-}
 
 static learn_task_t line_task(void) {
   learn_task_t t;
@@ -92,13 +78,7 @@ static double act_at(double s, double se, bool range, bool steep, seen_t* seen) 
   // The teacher turns as 0.5 s (with dither); the values peak at 0.8 s.
   hedger_t* h = learn_get_learner(a)->hedger;
   uint64_t rs = 23;
-  for (int i = 0; i < 600; ++i) {
-    const double x = 2.0 * uniform(&rs) - 1.0;
-    const double u = 0.5 * x + 0.2 * normal(&rs);
-    const double q = 2.0 + 0.2 * x - (u - 0.8 * x) * (u - 0.8 * x) + 0.005 * normal(&rs);
-    assert_int_equal(hedger_insert(h, &x, u, q, 0, NULL), HEDGER_OK);
-  }
-  assert_int_equal(hedger_observe_reward(h, 1.0), HEDGER_OK);
+  ht_insert_gentle_teacher(h, 600, &rs);
   if (steep) {
     assert_int_equal(actor_clone(learn_get_actor(a), 200, steep_policy, NULL), ACTOR_OK);
   } else {
