@@ -206,6 +206,22 @@ def wait_for_any(path, texts, start, timeout, proc=None):
     return None, start
 
 
+def settled(path, start, proc=None):
+    """The offset of the controller's log `path` from which a first injected fault's stop is read:
+    its end once no stop is in force after `start`. A stop that came before the fault (a machine too
+    busy to pass on the laser's 10 scans a second in time stops the base, as it would on the robot)
+    is waited out first, so that it is not read as the fault's answer."""
+    while True:
+        with open(path) as f:
+            f.seek(start)
+            data = f.read()
+        stop = data.rfind("SAFETY STOP")
+        if stop <= data.rfind("safety stop cleared"):  # none, or cleared since
+            return start + len(data)
+        start = wait_for(path, "safety stop cleared", start + stop, 60, proc)
+        time.sleep(1.0)  # a run drives again
+
+
 def cpu_seconds(pid):
     """User + system CPU time of a process [s] (/proc/<pid>/stat)."""
     with open("/proc/%d/stat" % pid) as f:

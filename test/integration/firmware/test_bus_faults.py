@@ -39,21 +39,6 @@ def stops_between(path, start, end):
     return re.findall(r"SAFETY STOP \(([^)]*)\)[^\n]*", text)
 
 
-def settled(path, start, proc):
-    """The log offset from which the first fault's stop is read. A stop that came before it (a
-    machine too busy to pass on the laser's 10 scans a second in time stops the base, as it would
-    on the robot) is waited out first, so that it is not read as the fault's answer."""
-    while True:
-        with open(path) as f:
-            f.seek(start)
-            data = f.read()
-        stop = data.rfind("SAFETY STOP")
-        if stop <= data.rfind("safety stop cleared"):  # none, or cleared since
-            return start + len(data)
-        start = wait_for(path, "safety stop cleared", start + stop, 60, proc)
-        time.sleep(1.0)  # a run drives again
-
-
 def main():
     controller, sim_exe, world, base = sys.argv[1:5]
     d = fwtest.workdir("bus-faults-" + base)
@@ -70,7 +55,7 @@ def main():
             procs.append(proc)
         off = wait_for(err_path, "starting devices", 0, 30, proc)
         time.sleep(1.5)  # the first run is under way: the robot drives
-        off = settled(err_path, off, proc)
+        off = fwtest.settled(err_path, off, proc)
 
         def cpu_during(seconds):
             c0, w0 = cpu_seconds(sim.proc.pid), time.time()

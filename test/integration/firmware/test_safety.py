@@ -144,6 +144,7 @@ def main():
             procs.append(proc)
         off = wait_for(err_path, "starting devices", 0, 30, proc)
         time.sleep(1.0)  # the first run is under way
+        off = fwtest.settled(err_path, off, proc)
         faults = [("fault laser_drop 1500", "SAFETY STOP (laser silent)", None)]
         if base == "rflex":
             faults += [("fault base_silent 1500", "SAFETY STOP (base silent)", "fault clear"),
