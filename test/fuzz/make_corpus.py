@@ -112,6 +112,16 @@ def progress(task: int, state_dim: int, phase: int, p1: int, p2: int, blocks: in
     return body
 
 
+def progress_v4(task: int, state_dim: int, phase: int, p1: int, p2: int, blocks: int, ex_runs: int,
+                ex_sum: float, best: int, run_id: int, policy: int, actor_bytes: int, saved: float,
+                pairs: int) -> bytes:
+    """Revision 4 (the controller's today): policy 0 actor, 1 greedy, 2 select with its ranked pairs."""
+    body = progress(task, state_dim, phase, p1, p2, blocks, ex_runs, ex_sum, best, run_id)
+    body = b"FWMETA04" + body[8:] + struct.pack("<IIQdII", policy, 0, actor_bytes, saved, pairs, 0)
+    assert len(body) == 88
+    return body
+
+
 def progress_v1(task: int, state_dim: int, phase: int, p1: int, p2: int, blocks: int, ex_runs: int,
                 ex_sum: float, best: int, run_id: int, shift=(0.0, 0.0, 0), terms: int = 1,
                 imitation: float = 0.0, clearance: float = 0.0, pass_hold=None) -> bytes:
@@ -154,6 +164,9 @@ def more_seeds() -> None:
     write("progress", "fresh", progress(0, 3, 1, 0, 0, 0, 0, 0.0, 0, -1))
     write("progress", "phase_two", progress(1, 4, 2, 30, 12, 9, 27, 27 * 130.0 + 17, 126, 130))
     write("progress", "bad_phase", progress(0, 3, 7, 3, 0, 1, 2, 300.0, 140, 5))
+    write("progress", "v4_select", progress_v4(1, 5, 2, 30, 12, 9, 27, 27 * 130.0 + 17, 126, 130, 2, 5484992,
+                                               -37.0, 6))
+    write("progress", "v4_greedy", progress_v4(0, 4, 2, 30, 35, 13, 30, 30 * 139.0, 127, 194, 1, 0, 0.0, 0))
     write("progress", "v1_phase_two", progress_v1(1, 4, 2, 30, 12, 9, 27, 27 * 130.0 + 17, 126, 130))
     write("progress", "v1_shifted", progress_v1(0, 4, 2, 30, 35, 13, 30, 30 * 139.0, 127, 194, (1.0625, 1.5, 17)))
     write("progress", "v1_obstacle_pass_hold", progress_v1(1, 5, 2, 30, 35, 13, 30, 30 * 139.0, 127, 194,

@@ -413,6 +413,9 @@ static void write_learning(json_writer_t* w, const session_t* S, double dt_s) {
   json_int(w, "runs_aborted", S->final.runs_aborted);
   json_int(w, "safety_stops", S->final.safety_stops);
   json_int(w, "held_ticks", S->final.held_ticks);
+  // policy = select: the ranked pairs, and so which policy acted in the last evaluations.
+  json_int(w, "ranked_pairs", S->final.selection.pairs);
+  json_num(w, "greedy_saved_steps", S->final.selection.greedy_saved_steps);
   json_end_object(w);
   char hex[24];
   snprintf(hex, sizeof hex, "%016llx", (unsigned long long)S->phase_one_digest);

@@ -129,10 +129,10 @@ static int load_actor(trainer_t* t, const char* path, const fw_progress_t* g, co
                       size_t err_cap) {
   actor_t* actor = learn_get_actor(t->agent);
   if (actor == NULL) {
-    t->stats.init_actor_dropped = g->policy == LEARN_POLICY_ACTOR;
+    t->stats.init_actor_dropped = g->actor_bytes > 0U;
     return 0;
   }
-  if (g->policy != LEARN_POLICY_ACTOR) {
+  if (g->actor_bytes == 0U) {
     t->stats.init_actor_cloned = learn_actor_from_values(t->agent);
     return 0;
   }
@@ -180,6 +180,10 @@ int trainer_load_checkpoint(trainer_t* t, const char* path, char* err, size_t er
     } else if ((hs = hedger_load(t->hedger, payload, payload_size - (size_t)g.actor_bytes)) == HEDGER_OK) {
       rc = load_actor(t, path, &g, (const uint8_t*)payload + (payload_size - (size_t)g.actor_bytes), err, err_cap);
       t->stats.init_legacy_shift = g.legacy_shift;
+      if (g.policy == LEARN_POLICY_SELECT) {
+        // The ranked pairs go on into the written checkpoint (a log's runs are not paired: none is added).
+        (void)learn_resume_selection(t->agent, &g.selection);
+      }
     } else {
       fw_errfmt(err, err_cap,
           "%s: the learned state does not fit these settings (%s): train with the configuration it was "
@@ -342,8 +346,9 @@ int trainer_write_checkpoint(trainer_t* t, const char* path, bool overwrite, cha
                            .state_dim = t->state_dim,
                            .schedule = learn_schedule(t->agent)->p,
                            .run_id = -1,
-                           .policy = actor != NULL ? LEARN_POLICY_ACTOR : LEARN_POLICY_GREEDY,
-                           .actor_bytes = actor_cap};
+                           .policy = t->cfg.policy,
+                           .actor_bytes = actor_cap,
+                           .selection = learn_selection_get(t->agent)};
   uint8_t meta[FW_PROGRESS_BYTES];
   const size_t meta_size = fw_progress_encode(&g, meta);
   const size_t hedger_cap = hedger_serialized_size(t->hedger);

@@ -79,7 +79,8 @@ static const choice_t k_rt_scheduler[] = {
 static const choice_t k_learner[] = {
     {"hedger", FW_LEARNER_HEDGER}, {"lwa", FW_LEARNER_LWA}, {"tabular", FW_LEARNER_TABULAR}, {NULL, 0}};
 static const choice_t k_lcm_scope[] = {{"host", FW_LCM_SCOPE_HOST}, {"network", FW_LCM_SCOPE_NETWORK}, {NULL, 0}};
-static const choice_t k_policy[] = {{"actor", FW_POLICY_ACTOR}, {"greedy", FW_POLICY_GREEDY}, {NULL, 0}};
+static const choice_t k_policy[] = {
+    {"actor", FW_POLICY_ACTOR}, {"greedy", FW_POLICY_GREEDY}, {"select", FW_POLICY_SELECT}, {NULL, 0}};
 static const choice_t k_switch[] = {
     {"runs", FW_SWITCH_RUNS}, {"operator", FW_SWITCH_OPERATOR}, {"auto", FW_SWITCH_AUTO}, {NULL, 0}};
 
@@ -222,42 +223,44 @@ static const key_desc_t k_keys[] = {
   {NULL, "policy", KIND_ENUM, OFF(policy), 0, 0, false, false, k_policy, "greedy",
    "who acts where the learned policy acts: greedy = HEDGER's greedy action (the paper's, which imitates "
    "its teachers); actor = a policy learned between runs from the rewards of every training run (the "
-   "slope of the return in the action, through local models of the dynamics and of the state value; "
-   "docs/LEARNING.md; not the default: some Fig. 4 seeds lose every pose after phase one, and its "
-   "between-run work costs about 0.94 billion instructions a run). HEDGER learns either way"},
+   "slope of the return in the action, through local models of the dynamics and of the state value), "
+   "guarded by HEDGER's values; select = both: phase two's training runs come in pairs from one start "
+   "pose, one run each, and the one that saved more steps over the pairs acts in every other run "
+   "(docs/LEARNING.md: what each gains and loses; the actor's between-run work costs about 0.94 billion "
+   "instructions a run). HEDGER learns either way"},
   {NULL, "actor_capacity", KIND_INT, OFF(actor_capacity), 16, 4194304, false, false, NULL, "20000",
-   "policy = actor: recorded transitions it keeps (fixed memory, about 270 bytes each with its models)"},
+   "policy = actor or select: recorded transitions it keeps (fixed memory, about 270 bytes each with its models)"},
   {NULL, "actor_hidden", KIND_INT, OFF(actor_hidden), 1, 64, false, false, NULL, "16",
-   "policy = actor: tanh units of its one hidden layer"},
+   "policy = actor or select: tanh units of its one hidden layer"},
   {NULL, "actor_runs", KIND_INT, OFF(actor_runs), 1, 100000, false, false, NULL, "10",
-   "policy = actor: the recent runs whose returns give the state value and whose states it is improved at"},
+   "policy = actor or select: the recent runs whose returns give the state value and whose states it is improved at"},
   {NULL, "actor_queries", KIND_INT, OFF(actor_queries), 1, 4194304, false, false, NULL, "4000",
-   "policy = actor: largest set of recent states it is improved at after a run (at most actor_capacity)"},
+   "policy = actor or select: largest set of recent states it is improved at after a run (at most actor_capacity)"},
   {NULL, "actor_step_gain", KIND_DOUBLE, OFF(actor_step_gain), 0, 100, false, false, NULL, "0.3",
-   "policy = actor: target step [rad/s] per tick of discounting that one rad/s gains"},
+   "policy = actor or select: target step [rad/s] per tick of discounting that one rad/s gains"},
   {NULL, "actor_step_max", KIND_DOUBLE, OFF(actor_step_max), 0, 4, false, false, NULL, "0.1",
-   "policy = actor: largest change of its target action after one run [rad/s]"},
+   "policy = actor or select: largest change of its target action after one run [rad/s]"},
   {NULL, "actor_trust_radius", KIND_DOUBLE, OFF(actor_trust_radius), 0, 4, false, false, NULL, "0",
-   "policy = actor: largest distance of its target action from the action the runs took at that state [rad/s] "
+   "policy = actor or select: largest distance of its target action from the action the runs took at that state [rad/s] "
    "(0: no bound)"},
   {NULL, "actor_guard_se", KIND_DOUBLE, OFF(actor_guard_se), 0, 100, false, false, NULL, "1",
-   "policy = actor: its action is replaced by HEDGER's greedy action where the learned values put it more "
+   "policy = actor or select: its action is replaced by HEDGER's greedy action where the learned values put it more "
    "than this many standard errors below (0: never; docs/LEARNING.md)"},
   {NULL, "actor_guard_range", KIND_BOOL, OFF(actor_guard_range), 0, 0, false, false, NULL, "true",
-   "policy = actor: its action is kept within the actions the learned data hold at the state, where the "
+   "policy = actor or select: its action is kept within the actions the learned data hold at the state, where the "
    "values judge it (docs/LEARNING.md)"},
   {NULL, "actor_slope_min_t", KIND_DOUBLE, OFF(actor_slope_min_t), 0, 100, false, false, NULL, "3",
-   "policy = actor: it steps only where the slope of the return in the action is at least this many standard "
+   "policy = actor or select: it steps only where the slope of the return in the action is at least this many standard "
    "errors (clustered by run) from 0 (0: every slope)"},
   {NULL, "actor_rewarded_window", KIND_BOOL, OFF(actor_rewarded_window), 0, 0, false, false, NULL, "true",
-   "policy = actor: the value window reaches back until it holds actor_runs runs that collected a reward "
+   "policy = actor or select: the value window reaches back until it holds actor_runs runs that collected a reward "
    "(false: the last actor_runs runs)"},
   {NULL, "actor_fit_steps", KIND_INT, OFF(actor_fit_steps), 0, 100000, false, false, NULL, "200",
-   "policy = actor: Adam steps of each fit to its targets"},
+   "policy = actor or select: Adam steps of each fit to its targets"},
   {NULL, "actor_clone_steps", KIND_INT, OFF(actor_clone_steps), 0, 100000, false, false, NULL, "300",
-   "policy = actor: Adam steps of the behaviour cloning after the first training run"},
+   "policy = actor or select: Adam steps of the behaviour cloning after the first training run"},
   {NULL, "actor_learning_rate", KIND_DOUBLE, OFF(actor_learning_rate), 0, 1, true, false, NULL, "0.003",
-   "policy = actor: Adam's learning rate"},
+   "policy = actor or select: Adam's learning rate"},
   {NULL, "actor_work_per_tick", KIND_INT, OFF(actor_work_per_tick), 1, 100000000, false, false, NULL, "1500",
    "between runs (the robot stands): the actor's learning per tick in work units of at most 2000 "
    "instructions (a slice may pass it by one query's 200 units); the default costs about what "
@@ -1336,7 +1339,7 @@ int fw_config_validate(const fw_config_t* cfg, char* err, size_t err_cap) {
         origin_of(cfg, "learner").text, origin_of(cfg, "checkpoint_file").text);
     return -1;
   }
-  if (cfg->policy == FW_POLICY_ACTOR && cfg->actor_queries > cfg->actor_capacity) {
+  if (cfg->policy != FW_POLICY_GREEDY && cfg->actor_queries > cfg->actor_capacity) {
     fw_errfmt(err, err_cap, "%s: actor_queries = %d exceeds actor_capacity = %d (set at %s); the query set is drawn "
         "from the recorded transitions", origin_of(cfg, "actor_queries").text, (int)cfg->actor_queries,
         (int)cfg->actor_capacity, origin_of(cfg, "actor_capacity").text);

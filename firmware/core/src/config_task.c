@@ -12,7 +12,8 @@
 _Static_assert((int)FW_SWITCH_RUNS == (int)LEARN_SWITCH_RUNS && (int)FW_SWITCH_OPERATOR == (int)LEARN_SWITCH_OPERATOR &&
                    (int)FW_SWITCH_AUTO == (int)LEARN_SWITCH_AUTO,
                "the phase_switch key's values are the framework's");
-_Static_assert((int)FW_POLICY_ACTOR == (int)LEARN_POLICY_ACTOR && (int)FW_POLICY_GREEDY == (int)LEARN_POLICY_GREEDY,
+_Static_assert((int)FW_POLICY_ACTOR == (int)LEARN_POLICY_ACTOR && (int)FW_POLICY_GREEDY == (int)LEARN_POLICY_GREEDY &&
+                   (int)FW_POLICY_SELECT == (int)LEARN_POLICY_SELECT,
                "the policy key's values are the framework's");
 _Static_assert((int)FW_LEARNER_HEDGER == (int)LEARN_LEARNER_HEDGER && (int)FW_LEARNER_LWA == (int)LEARN_LEARNER_LWA &&
                    (int)FW_LEARNER_TABULAR == (int)LEARN_LEARNER_TABULAR,

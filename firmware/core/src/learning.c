@@ -160,8 +160,9 @@ static size_t encode_meta(const fw_loop_t* L, uint8_t* p) {
                            .state_dim = learn_agent_state_dim(L->agent),
                            .schedule = learn_schedule(L->agent)->p,
                            .run_id = learn_run_id(L->agent),
-                           .policy = actor != NULL ? LEARN_POLICY_ACTOR : LEARN_POLICY_GREEDY,
-                           .actor_bytes = actor != NULL ? actor_serialized_size(actor) : 0U};
+                           .policy = L->cfg.policy,
+                           .actor_bytes = actor != NULL ? actor_serialized_size(actor) : 0U,
+                           .selection = learn_selection_get(L->agent)};
   return fw_progress_encode(&g, p);
 }
 
@@ -421,7 +422,7 @@ static int load_checkpoint_file(fw_loop_t* L, char* err, size_t err_cap) {
   }
   actor_t* actor = actor_of(L);
   char note[FW_CHECKPOINT_ERR_MAX] = "";
-  if (actor != NULL && g.policy == LEARN_POLICY_ACTOR) {
+  if (actor != NULL && g.actor_bytes > 0U) {
     const actor_status_t as = actor_load(actor, (const uint8_t*)payload + hedger_bytes, (size_t)g.actor_bytes);
     if (as != ACTOR_OK) {
       free(payload);
@@ -439,14 +440,17 @@ static int load_checkpoint_file(fw_loop_t* L, char* err, size_t err_cap) {
              "values are kept and the actor starts as the policy of their %u stored points (behaviour cloning); "
              "it learns from the rewards from the next run on",
              path, cloned);
-  } else if (g.policy == LEARN_POLICY_ACTOR) {
+  } else if (g.actor_bytes > 0U) {
     snprintf(note, sizeof note,
-             "note: checkpoint %s also holds an actor (policy = actor); with policy = greedy the values' greedy "
+             "note: checkpoint %s also holds an actor (policy = %s); with policy = greedy the values' greedy "
              "action drives and the next checkpoint no longer holds the actor (keep a copy of the file to go back)",
-             path);
+             path, g.policy == LEARN_POLICY_SELECT ? "select" : "actor");
   }
   free(payload);
   learn_resume(L->agent, &g.schedule, g.run_id);
+  if (g.policy == LEARN_POLICY_SELECT) {
+    (void)learn_resume_selection(L->agent, &g.selection);  // false (ignored) unless policy = select now
+  }
   err[0] = '\0';
   if (g.legacy_shift) {
     snprintf(err, err_cap,

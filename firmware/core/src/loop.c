@@ -679,6 +679,7 @@ void fw_loop_get_stats(const fw_loop_t* L, fw_loop_stats_t* out) {
   out->done = L->done;
   out->last_block = L->last_block;
   out->best_example_steps = sp->best_example_steps;
+  out->selection = learn_selection_get(L->agent);
   out->mean_example_steps = sp->example_runs > 0 ? sp->example_steps_sum / (double)sp->example_runs : 0.0;
   out->last_run_steps = L->last_run_steps;
   out->last_run_goal = L->last_run_goal;

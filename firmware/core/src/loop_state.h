@@ -243,6 +243,7 @@ struct fw_loop {
   bool start_pose_chosen;      // start_pose is the next run's (drawn once per run: the pose sequence
                                // of a seed does not depend on stops between runs)
   features_pose_t start_pose;
+  features_pose_t training_start;  // the last training run's start pose (a ranked pair's second run repeats it)
   int64_t run_first_seq;       // exp_seq when the run began
   b21r_run_t run_end;          // the end record of the run that ended, published after its last experience
   bool run_end_ready;

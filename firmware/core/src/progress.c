@@ -14,14 +14,15 @@
 #include <stdio.h>
 #include <string.h>
 
-#define MAGIC "FWMETA03"
+#define MAGIC "FWMETA04"
+#define MAGIC_3 "FWMETA03"
 #define MAGIC_2 "FWMETA02"
 #define MAGIC_1 "FWMETA01"
 // Revision 1's sizes: without and with the hold past the obstacle.
 #define BYTES_1 96U
 #define BYTES_1_HOLD 104U
 
-_Static_assert(FW_PROGRESS_BYTES == 72U, "fw_progress_encode fills bytes 0-71");
+_Static_assert(FW_PROGRESS_BYTES == 88U, "fw_progress_encode fills bytes 0-87");
 // The largest actor section a decoder accepts (the payload's own size is checked by the loader).
 #define ACTOR_BYTES_MAX ((uint64_t)1 << 40)
 _Static_assert(FW_PROGRESS_READ_MAX >= BYTES_1_HOLD, "the largest section read fits the buffer");
@@ -44,6 +45,9 @@ size_t fw_progress_encode(const fw_progress_t* p, uint8_t out[FW_PROGRESS_BYTES]
   fw_put_u32(out + 56, (uint32_t)p->policy);
   fw_put_u32(out + 60, 0U);
   fw_put_u64(out + 64, p->actor_bytes);
+  fw_put_f64(out + 72, p->selection.greedy_saved_steps);
+  fw_put_u32(out + 80, (uint32_t)p->selection.pairs);
+  fw_put_u32(out + 84, 0U);
   return FW_PROGRESS_BYTES;
 }
 
@@ -61,13 +65,14 @@ static bool counter(const uint8_t* b, size_t off, const char* name, int32_t* v, 
 }
 
 int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why, size_t cap) {
-  const bool rev3 = n == FW_PROGRESS_BYTES && memcmp(b, MAGIC, 8) == 0;
+  const bool rev4 = n == FW_PROGRESS_BYTES && memcmp(b, MAGIC, 8) == 0;
+  const bool rev3 = rev4 || (n == FW_PROGRESS_BYTES_3 && memcmp(b, MAGIC_3, 8) == 0);  // bytes 0-71 alike
   const bool rev2 = n == FW_PROGRESS_BYTES_2 && memcmp(b, MAGIC_2, 8) == 0;
   const bool rev1 = (n == BYTES_1 || n == BYTES_1_HOLD) && memcmp(b, MAGIC_1, 8) == 0;
   if (!rev3 && !rev2 && !rev1) {
-    fw_errfmt(why, cap, "unknown format (%zu bytes, expected %u starting with " MAGIC ", %u starting with " MAGIC_2
-              " or %u or %u starting with " MAGIC_1 ")", n, FW_PROGRESS_BYTES, FW_PROGRESS_BYTES_2, BYTES_1,
-              BYTES_1_HOLD);
+    fw_errfmt(why, cap, "unknown format (%zu bytes, expected %u starting with " MAGIC ", %u starting with " MAGIC_3
+              ", %u starting with " MAGIC_2 " or %u or %u starting with " MAGIC_1 ")", n, FW_PROGRESS_BYTES,
+              FW_PROGRESS_BYTES_3, FW_PROGRESS_BYTES_2, BYTES_1, BYTES_1_HOLD);
     return -1;
   }
   fw_progress_t p;
@@ -131,13 +136,15 @@ int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why
     return -1;
   }
   p.run_id = run_id_plus_1 - 1;
-  p.revision = rev3 ? 3U : (rev2 ? 2U : 1U);
+  p.revision = rev4 ? 4U : (rev3 ? 3U : (rev2 ? 2U : 1U));
   p.policy = LEARN_POLICY_GREEDY;  // revisions 1 and 2: HEDGER's values alone
   if (rev3) {
     const uint32_t policy = fw_get_u32(b + 56);
     const uint64_t actor_bytes = fw_get_u64(b + 64);
-    if (policy != (uint32_t)LEARN_POLICY_ACTOR && policy != (uint32_t)LEARN_POLICY_GREEDY) {
-      fw_errfmt(why, cap, "policy %u, expected 0 (actor) or 1 (greedy)", (unsigned)policy);
+    if (policy != (uint32_t)LEARN_POLICY_ACTOR && policy != (uint32_t)LEARN_POLICY_GREEDY &&
+        !(rev4 && policy == (uint32_t)LEARN_POLICY_SELECT)) {
+      fw_errfmt(why, cap, "policy %u, expected 0 (actor), 1 (greedy)%s", (unsigned)policy,
+                rev4 ? " or 2 (select)" : "");
       return -1;
     }
     if (fw_get_u32(b + 60) != 0U) {
@@ -146,11 +153,33 @@ int fw_progress_decode(const uint8_t* b, size_t n, fw_progress_t* out, char* why
     }
     if ((policy == (uint32_t)LEARN_POLICY_GREEDY) != (actor_bytes == 0U) || actor_bytes > ACTOR_BYTES_MAX) {
       fw_errfmt(why, cap, "actor section of %llu bytes with the %s policy", (unsigned long long)actor_bytes,
-                policy == (uint32_t)LEARN_POLICY_GREEDY ? "greedy" : "actor");
+                policy == (uint32_t)LEARN_POLICY_GREEDY ? "greedy" : (policy == 0U ? "actor" : "select"));
       return -1;
     }
     p.policy = (int32_t)policy;
     p.actor_bytes = actor_bytes;
+  }
+  if (rev4) {
+    const double saved = fw_get_f64(b + 72);
+    int32_t pairs = 0;
+    if (!counter(b, 80, "ranked pairs", &pairs, why, cap)) {
+      return -1;
+    }
+    if (fw_get_u32(b + 84) != 0U) {
+      fw_errfmt(why, cap, "reserved field %u, expected 0", (unsigned)fw_get_u32(b + 84));
+      return -1;
+    }
+    const bool select = p.policy == LEARN_POLICY_SELECT;
+    const bool ok = select ? isfinite(saved) && !(fabs(saved) > floor(fabs(saved))) &&
+                                 fabs(saved) <= (double)pairs * (double)INT32_MAX
+                           : pairs == 0 && is_zero(saved);
+    if (!ok) {
+      fw_errfmt(why, cap, "ranked pairs inconsistent (%d pairs, %.17g steps saved, policy %d)", (int)pairs, saved,
+                (int)p.policy);
+      return -1;
+    }
+    p.selection.greedy_saved_steps = saved;
+    p.selection.pairs = pairs;
   }
   // Revision 1's policy shift (its a, b and imitation weight as doubles at 56, 64 and 80): not
   // used any more; the operator is told when it had moved.

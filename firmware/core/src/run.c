@@ -62,7 +62,11 @@ static features_pose_t next_start_pose(fw_loop_t* L, const learn_plan_t* plan) {
   if (plan->kind == LEARN_RUN_EVAL) {
     return tasks_episode_eval_start(&L->ep, (uint32_t)plan->eval_index);
   }
-  return tasks_episode_training_start(&L->ep, &L->pose_rng);
+  if (learn_run_repeats_start(L->agent)) {
+    return L->training_start;  // a ranked pair's second run (policy = select): its first's pose
+  }
+  L->training_start = tasks_episode_training_start(&L->ep, &L->pose_rng);
+  return L->training_start;
 }
 
 // The id the next run gets (B21R_RUN.run_id), as the start-pose request passes it on.

@@ -72,6 +72,14 @@ struct learn {
   int8_t held_source;
   double window_reward;
   double window_discount;      // gamma^(ticks of the window so far)
+  // policy = select: the pairs of phase-two training runs and the choice they rank.
+  learn_selection_t selection;
+  bool run_greedy;             // the greedy action acts in this run (else the actor)
+  int8_t pair_role;            // this run in its pair: 0 none, 1 first, 2 second
+  bool pair_first_greedy;      // the pair's first run was the greedy policy's
+  bool pair_first_done;        // its first run ended (not aborted): a second run is due
+  int32_t pair_first_steps;    // its steps, a miss at the step limit
+  rng_t pair_explore_rng;      // the exploration stream at the first run's start
 };
 
 _Static_assert(LEARN_SOURCE_ADVISOR + 1 == LEARN_N_SOURCES, "the sources are counted in steps_by_source");
@@ -248,8 +256,16 @@ static size_t align_storage(size_t n) {
 static size_t agent_bytes(void) { return align_storage(sizeof(learn_t)); }
 
 // The actor's storage (0 with the greedy policy; SIZE_MAX when its configuration is invalid).
+static bool has_actor(const learn_config_t* cfg) {
+  return cfg->policy == LEARN_POLICY_ACTOR || cfg->policy == LEARN_POLICY_SELECT;
+}
+
+static bool policy_valid(int32_t policy) {
+  return policy == LEARN_POLICY_ACTOR || policy == LEARN_POLICY_GREEDY || policy == LEARN_POLICY_SELECT;
+}
+
 static size_t actor_bytes(const learn_task_t* task, const learn_config_t* cfg) {
-  if (cfg->policy != LEARN_POLICY_ACTOR) {
+  if (!has_actor(cfg)) {
     return 0;
   }
   actor_config_t ac;
@@ -276,7 +292,7 @@ size_t learn_storage_size(const learn_task_t* task, const learn_config_t* cfg) {
   if (!task_valid(task)) {
     return 0;
   }
-  if (cfg->policy != LEARN_POLICY_ACTOR && cfg->policy != LEARN_POLICY_GREEDY) {
+  if (!policy_valid(cfg->policy)) {
     return 0;
   }
   learn_learner_config_t lc;
@@ -297,8 +313,8 @@ learn_t* learn_init(void* storage, size_t storage_size, const learn_task_t* task
     snprintf(err, err_cap, "the learner's storage is missing or not aligned to %u bytes", LEARN_STORAGE_ALIGN);
     return NULL;
   }
-  if (cfg->policy != LEARN_POLICY_ACTOR && cfg->policy != LEARN_POLICY_GREEDY) {
-    snprintf(err, err_cap, "unknown policy %d (actor or greedy)", (int)cfg->policy);
+  if (!policy_valid(cfg->policy)) {
+    snprintf(err, err_cap, "unknown policy %d (actor, greedy or select)", (int)cfg->policy);
     return NULL;
   }
   if (actor_bytes(task, cfg) == SIZE_MAX) {
@@ -334,7 +350,7 @@ learn_t* learn_init(void* storage, size_t storage_size, const learn_task_t* task
   if (learn_learner_init(&a->learner, (uint8_t*)storage + agent_bytes(), learner_bytes, &lc, err, err_cap) != 0) {
     return NULL;
   }
-  if (cfg->policy == LEARN_POLICY_ACTOR) {
+  if (has_actor(cfg)) {
     actor_config_t ac;
     learn_actor_config(task, cfg, &ac);
     const size_t at = agent_bytes() + learner_bytes;
@@ -349,11 +365,88 @@ learn_t* learn_init(void* storage, size_t storage_size, const learn_task_t* task
   learn_schedule_init(&a->sched, &sc, NULL);
   a->plan = learn_schedule_next(&a->sched);
   rng_seed(&a->explore_rng, cfg->explore_seed);
+  a->run_greedy = cfg->policy != LEARN_POLICY_ACTOR;
   a->run_id = -1;
   return a;
 }
 
 learn_plan_t learn_plan(const learn_t* a) { return learn_schedule_next(&a->sched); }
+
+// policy = select: which learned policy acts in the run now beginning. Phase two's training runs
+// come in pairs: the pair's second run starts where its first did (learn_run_repeats_start), with
+// the same exploration stream, and the other policy acts; the first run's policy alternates from
+// pair to pair. Every other run (the evaluations, phase one's, a second run whose first was cut
+// short) has the policy the ranked pairs favour: the greedy one while it has saved at least as
+// many steps as the actor.
+static bool pair_run(const learn_t* a) {
+  return a->cfg.policy == LEARN_POLICY_SELECT && a->plan.kind == LEARN_RUN_TRAINING && a->plan.phase == 2 &&
+         a->cfg.mode == LEARN_MODE_LEARN;
+}
+
+// The planned run (a->plan: the run under way, or the next one between runs) is a pair's second.
+static bool pair_second(const learn_t* a) {
+  return pair_run(a) && a->sched.p.phase_two_runs % 2 == 1 && a->pair_first_done;
+}
+
+static void begin_pair(learn_t* a) {
+  a->pair_role = 0;
+  if (a->cfg.policy != LEARN_POLICY_SELECT) {
+    a->run_greedy = a->cfg.policy == LEARN_POLICY_GREEDY;
+    return;
+  }
+  a->run_greedy = a->selection.greedy_saved_steps >= 0.0;
+  if (!pair_run(a)) {
+    return;
+  }
+  // The run's place in phase two: an aborted run does not count, so its replacement has the same.
+  const int32_t j = a->sched.p.phase_two_runs;
+  if (j % 2 == 0) {
+    a->pair_role = 1;
+    a->pair_first_greedy = (j / 2) % 2 == 0;
+    a->pair_first_done = false;
+    a->pair_explore_rng = a->explore_rng;
+    a->run_greedy = a->pair_first_greedy;
+  } else if (pair_second(a)) {
+    a->pair_role = 2;
+    a->explore_rng = a->pair_explore_rng;
+    a->run_greedy = !a->pair_first_greedy;
+  }
+}
+
+// The end of a pair's run: the first's steps are kept; the second's rank the pair. A miss counts
+// at the step limit (as the schedule counts it). An aborted second run is repeated, so the pair
+// stays open.
+static void end_pair(learn_t* a, bool goal, bool aborted) {
+  if (a->pair_role == 0 || aborted) {
+    return;
+  }
+  const int32_t steps = goal ? a->actions_taken : (int32_t)a->task.step_limit;
+  if (a->pair_role == 1) {
+    a->pair_first_done = true;
+    a->pair_first_steps = steps;
+    return;
+  }
+  const int32_t greedy_steps = a->pair_first_greedy ? a->pair_first_steps : steps;
+  const int32_t actor_steps = a->pair_first_greedy ? steps : a->pair_first_steps;
+  a->selection.greedy_saved_steps += (double)actor_steps - (double)greedy_steps;
+  a->selection.pairs++;
+  a->pair_first_done = false;
+}
+
+bool learn_run_repeats_start(const learn_t* a) { return pair_second(a); }
+
+bool learn_run_greedy(const learn_t* a) { return a->run_greedy; }
+
+learn_selection_t learn_selection_get(const learn_t* a) { return a->selection; }
+
+bool learn_resume_selection(learn_t* a, const learn_selection_t* s) {
+  if (a->cfg.policy != LEARN_POLICY_SELECT || !isfinite(s->greedy_saved_steps) || s->pairs < 0) {
+    return false;
+  }
+  a->selection = *s;
+  a->pair_first_done = false;  // a pair cut by the restart is not ranked
+  return true;
+}
 
 void learn_begin_run(learn_t* a) {
   a->plan = learn_schedule_next(&a->sched);
@@ -364,6 +457,7 @@ void learn_begin_run(learn_t* a) {
   a->have_prev = false;
   a->run_return = 0.0;
   memset(a->steps_by_source, 0, sizeof a->steps_by_source);
+  begin_pair(a);
 }
 
 bool learn_running(const learn_t* a) { return a->running; }
@@ -420,6 +514,8 @@ static void end_run(learn_t* a, bool goal, bool aborted, learn_run_end_t* end) {
   memcpy(end->steps_by_source, a->steps_by_source, sizeof end->steps_by_source);
   end->eval_block = evaluating(a) ? a->sched.p.eval_blocks : -1;  // blocks finished so far = this block's number
   end->learning = a->plan.kind == LEARN_RUN_TRAINING && a->cfg.mode == LEARN_MODE_LEARN;
+  end->policy = (int8_t)(a->run_greedy ? LEARN_POLICY_GREEDY : LEARN_POLICY_ACTOR);
+  end_pair(a, goal, aborted);
   // A run that missed the goal counts at the step limit.
   const int32_t steps = goal ? a->actions_taken : (int32_t)a->task.step_limit;
   end->block_done = learn_schedule_finish_run(&a->sched, steps, goal, aborted, &end->block);
@@ -556,7 +652,7 @@ void learn_act(learn_t* a, double advice, double joystick, double* action, int8_
   // search: the update finds q' itself.
   bool greedy_known = false;
   double greedy_action = 0.0;
-  if (policy && a->actor != NULL) {
+  if (policy && a->actor != NULL && !a->run_greedy) {
     greedy_known = actor_action(a, &greedy_action);
     if (greedy_known && !a->policy_fault && (a->cfg.actor_guard_se > 0.0 || a->cfg.actor_guard_range)) {
       guard_actor(a, &greedy_action);

@@ -6,6 +6,7 @@
 // An actor that turns harder than any action the data hold at the state is held to the largest
 // of them (the one the values judged) with actor_guard_range.
 #include "learn/learn.h"
+#include "learn_test_task.h"
 #include "learn/learner.h"
 #include "actor/actor.h"
 #include "hedger_test_util.h"
@@ -21,21 +22,6 @@
 
 #include <cmocka.h>
 
-static learn_task_t line_task(void) {
-  learn_task_t t;
-  memset(&t, 0, sizeof t);
-  t.state_dim = 1;
-  t.state_scale[0] = 1.0;
-  t.state_min[0] = -1.0;
-  t.state_max[0] = 1.0;
-  t.action_min = -1.0;
-  t.action_max = 1.0;
-  t.action_scale = 1.0;
-  t.gamma = 0.9;
-  t.step_limit = 100;
-  t.greedy_reach = 1.0;
-  return t;
-}
 
 // Cloning samples of the policy a = 2 s on a grid of s in [-1, 1].
 static int steep_policy(void* user, uint32_t index, double* state, double* action) {
@@ -54,7 +40,7 @@ typedef struct {
 // The actor's action at s after cloning the teacher's stored points (steep: the policy 2 s
 // instead), with the guard at se and range.
 static double act_at(double s, double se, bool range, bool steep, seen_t* seen) {
-  const learn_task_t task = line_task();
+  const learn_task_t task = learn_test_line_task();
   learn_config_t cfg = learn_config_default();
   cfg.mode = LEARN_MODE_EVALUATE;
   cfg.policy = LEARN_POLICY_ACTOR;

@@ -1207,7 +1207,9 @@ nb::dict read_checkpoint_progress(const nb::bytes& meta) {
   d["run_id"] = p.run_id;
   d["legacy_shift"] = p.legacy_shift;
   d["revision"] = p.revision;
-  d["policy"] = p.policy == LEARN_POLICY_ACTOR ? "actor" : "greedy";
+  d["policy"] = p.policy == LEARN_POLICY_ACTOR ? "actor" : (p.policy == LEARN_POLICY_SELECT ? "select" : "greedy");
+  d["greedy_saved_steps"] = p.selection.greedy_saved_steps;
+  d["ranked_pairs"] = p.selection.pairs;
   d["actor_bytes"] = p.actor_bytes;
   return d;
 }

@@ -95,6 +95,7 @@ typedef enum fw_learner_kind {
 typedef enum fw_policy {
   FW_POLICY_ACTOR = 0,   ///< the actor learned from the rewards between runs (lib/actor)
   FW_POLICY_GREEDY = 1,  ///< HEDGER's greedy action (the paper's; the default)
+  FW_POLICY_SELECT = 2,  ///< either, as ranked pairs of phase-two runs favour (learn/learn.h)
 } fw_policy_t;
 /// Policy evaluated in FW_MODE_EVALUATE.
 typedef enum fw_eval_policy {

@@ -46,7 +46,7 @@
 #include "fw/publisher.h"
 #include "fw/pubq.h"
 #include "fw/safety.h"
-#include "learn/schedule.h"
+#include "learn/learn.h"
 
 #include <hedger/hedger.h>
 
@@ -111,6 +111,7 @@ typedef struct fw_loop_stats {
   learn_eval_block_t last_block;    ///< newest finished evaluation block (block < 0: none yet)
   int32_t best_example_steps;
   double mean_example_steps;
+  learn_selection_t selection;   ///< policy = select: the ranked pairs so far (zero otherwise)
   int32_t last_run_steps;
   bool last_run_goal;
   int64_t learn_ticks;           ///< ticks that did between-run learning work (replay, checkpoint)

@@ -1,8 +1,8 @@
 // SPDX-License-Identifier: MIT
 /// learn/learn.h — The two-phase learning framework of Smart & Kaelbling (ICRA 2002) as a pure
 /// library: the schedule (phase one's driver, the switch, phase two, evaluation blocks), the
-/// learner's update of every step, the learned policy (the actor of lib/actor by default, or the
-/// value function's greedy action), the between-run work (backward replay, the actor's learning)
+/// learner's update of every step, the learned policy (the value function's greedy action by
+/// default, the actor of lib/actor, or either as ranked pairs of runs favour), the between-run work (backward replay, the actor's learning)
 /// in bounded slices, exploration, and the advisor.
 ///
 /// The policy (cfg.policy). LEARN_POLICY_ACTOR: the actor (actor/actor.h) acts wherever the
@@ -11,6 +11,13 @@
 /// learns every step: the experience records carry its Q(s, a), and a checkpoint keeps its values
 /// for LEARN_POLICY_GREEDY; the actor does not use it. LEARN_POLICY_GREEDY: the value function's
 /// greedy action, as in the paper (measured: it imitates its teachers; docs/LEARNING.md).
+/// LEARN_POLICY_SELECT: both, chosen by ranked pairs of runs. Phase two's training runs come in
+/// pairs from one start pose (learn_run_repeats_start) with one exploration stream; one run of
+/// each pair is the greedy policy's, the other the actor's (the order alternates), and the pair's
+/// steps (a miss at the step limit) add to learn_selection_t. Every other run (the evaluations
+/// included) is the greedy policy's while it has saved at least as many steps as the actor over
+/// the pairs, else the actor's. Nothing here knows the task: the ranking is the runs' measured
+/// length, the schedule's own measure.
 ///
 /// It sees a task only through learn_task_t: the state's dimension, declared scales and ranges,
 /// the action's bounds, the discount and the step limit. It never sees a task's name, its
@@ -81,7 +88,14 @@ typedef enum learn_source {
 typedef enum learn_policy {
   LEARN_POLICY_ACTOR = 0,   ///< the actor of lib/actor, learned between runs from the rewards
   LEARN_POLICY_GREEDY = 1,  ///< the value function's greedy action (the paper's; the default)
+  LEARN_POLICY_SELECT = 2,  ///< the greedy action or the actor, as ranked pairs of runs favour
 } learn_policy_t;
+
+/// What the ranked pairs of LEARN_POLICY_SELECT have measured (kept in a checkpoint).
+typedef struct learn_selection {
+  double greedy_saved_steps;  ///< Σ over ranked pairs: the actor's run's steps − the greedy's (whole numbers)
+  int32_t pairs;              ///< ranked pairs, >= 0
+} learn_selection_t;
 
 /// Who drives phase one's training runs.
 typedef enum learn_phase_one_driver {
@@ -205,6 +219,21 @@ learn_plan_t learn_plan(const learn_t* a);
 /// Starts the planned run: a new run id (the previous + 1), no transition yet. O(1).
 void learn_begin_run(learn_t* a);
 
+/// True when the planned run (learn_plan; between runs, the next one) or the run under way is the
+/// second of a ranked pair (policy = select): the caller starts it where the previous training
+/// run started (the pair's first). O(1).
+bool learn_run_repeats_start(const learn_t* a);
+
+/// True when the greedy action acts in the run under way or the next one (else the actor). O(1).
+bool learn_run_greedy(const learn_t* a);
+
+/// The ranked pairs' measurements (all zero unless policy = select). O(1).
+learn_selection_t learn_selection_get(const learn_t* a);
+
+/// Restores them from a checkpoint (policy = select; a pair cut by the restart is not ranked).
+/// False (nothing changed) for another policy or a non-finite sum or negative count. O(1).
+bool learn_resume_selection(learn_t* a, const learn_selection_t* s);
+
 /// True while a run is under way (between learn_begin_run and its end).
 bool learn_running(const learn_t* a);
 
@@ -247,6 +276,7 @@ typedef struct learn_run_end {
   bool block_done;              ///< the run completed an evaluation block ...
   learn_eval_block_t block;     ///< ... this one
   bool learning;                ///< a training run of the learn mode: its replay follows between runs
+  int8_t policy;                ///< who acted where the learned policy acted: LEARN_POLICY_GREEDY or _ACTOR
 } learn_run_end_t;
 
 /// The outcome of the last executed action: queues its transition (learned after the command,

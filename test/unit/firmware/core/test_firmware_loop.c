@@ -23,6 +23,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include <cmocka.h>
 
@@ -268,6 +269,99 @@ static void test_loop_tick_allocates_nothing(void** state) {
 // The learned state and the schedule's progress survive a restart: a new loop loading the
 // checkpoint written at the end of each training run continues with the same counts, phase and
 // samples; a corrupt checkpoint is refused with the "start fresh" hint and changes nothing.
+// Attaches a checkpoint writer for c's checkpoint_file to the open harness; *meta_cap and
+// *payload_cap receive the loop's capacities.
+static fw_ckpt_writer_t* attach_checkpoints(const fw_config_t* c, size_t* meta_cap, size_t* payload_cap) {
+  fw_loop_checkpoint_capacity(g_h.loop, meta_cap, payload_cap);
+  char err[FW_LOOP_ERR_MAX];
+  fw_ckpt_writer_t* w = fw_ckpt_writer_create(c->checkpoint_file, *meta_cap, *payload_cap, err, sizeof err);
+  assert_non_null(w);
+  fw_loop_attach_checkpoints(g_h.loop, w);
+  return w;
+}
+
+// The controller section of the checkpoint at path (its payload read and dropped).
+static fw_progress_t checkpoint_progress(const char* path, size_t payload_cap) {
+  uint8_t meta[FW_PROGRESS_READ_MAX];
+  size_t ms = 0;
+  size_t ps = 0;
+  uint8_t* payload = malloc(payload_cap);
+  assert_non_null(payload);
+  char err[FW_LOOP_ERR_MAX];
+  assert_int_equal(fw_checkpoint_read(path, meta, sizeof meta, &ms, payload, payload_cap, &ps, err, sizeof err), 1);
+  free(payload);
+  fw_progress_t g;
+  assert_int_equal(fw_progress_decode(meta, ms, &g, NULL, 0), 0);
+  return g;
+}
+
+// policy = select: phase two's training runs come in pairs that start from one pose (the second
+// run repeats the first's start pose, whatever evaluation block comes between), and the ranked
+// pairs go into the checkpoint (revision 4), from which a restart takes them up.
+static void test_loop_select_pairs_share_start_and_checkpoint(void** state) {
+  (void)state;
+  char dir[] = "/tmp/b21r-loopselect-XXXXXX";
+  assert_non_null(mkdtemp(dir));
+  fw_config_t c;
+  harness_config(&c);
+  c.phase_one_runs = 2;
+  c.phase_two_runs = 5;
+  c.eval_every_runs = 3;
+  c.eval_starts = 1;
+  c.policy = FW_POLICY_SELECT;
+  snprintf(c.checkpoint_file, sizeof c.checkpoint_file, "%s/hedger.ckpt", dir);
+  assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
+  size_t meta_cap = 0;
+  size_t payload_cap = 0;
+  fw_ckpt_writer_t* w = attach_checkpoints(&c, &meta_cap, &payload_cap);
+  harness_run(&g_h, 200000);
+  fw_loop_stats_t st;
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_true(st.done);
+  fw_ckpt_writer_flush(w);
+  // Phase two's training runs, in order: pairs (0, 1) and (2, 3) share their start; the pairs and
+  // the unpaired last run start elsewhere (the training starts are drawn, jittered).
+  const b21r_run_t* two[8];
+  int n = 0;
+  for (int i = 0; i < g_h.runs && i < 64; ++i) {
+    const b21r_run_t* r = &g_h.run[i];
+    if (r->kind == B21R_RUN_T_KIND_TRAINING && r->phase == 2 && r->end_reason != B21R_RUN_T_END_SAFETY_STOP) {
+      assert_true(n < 8);
+      two[n++] = r;
+    }
+  }
+  assert_int_equal(n, 5);
+  for (int k = 0; k < 2; ++k) {
+    const b21r_run_t* a = two[2 * k];
+    const b21r_run_t* b = two[2 * k + 1];
+    assert_true(a->start_x_m == b->start_x_m && a->start_y_m == b->start_y_m &&
+                a->start_theta_rad == b->start_theta_rad);
+  }
+  assert_true(two[0]->start_x_m != two[2]->start_x_m || two[0]->start_y_m != two[2]->start_y_m);
+  assert_true(two[2]->start_x_m != two[4]->start_x_m || two[2]->start_y_m != two[4]->start_y_m);
+  harness_close(&g_h);
+  fw_ckpt_writer_destroy(w);
+  // The checkpoint holds the actor and the two ranked pairs: the steps the greedy policy saved are
+  // the actor's runs' steps minus the greedy policy's (pair 0 greedy first, pair 1 the actor first).
+  const fw_progress_t g = checkpoint_progress(c.checkpoint_file, payload_cap);
+  assert_int_equal(g.revision, 4);
+  assert_int_equal(g.policy, LEARN_POLICY_SELECT);
+  assert_true(g.actor_bytes > 0);
+  assert_int_equal(g.selection.pairs, 2);
+  const double saved = ((double)two[1]->steps - (double)two[0]->steps) + ((double)two[2]->steps - (double)two[3]->steps);
+  assert_true(g.selection.greedy_saved_steps == saved);
+  // A restart takes the ranking up.
+  char err[FW_LOOP_ERR_MAX];
+  assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
+  assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), 1);
+  fw_loop_get_stats(g_h.loop, &st);
+  assert_int_equal(st.selection.pairs, 2);
+  assert_true(st.selection.greedy_saved_steps == saved);
+  harness_close(&g_h);
+  remove(c.checkpoint_file);
+  rmdir(dir);
+}
+
 static void test_loop_checkpoint_restart_resumes(void** state) {
   (void)state;
   char dir[] = "/tmp/b21r-loopckpt-XXXXXX";
@@ -283,11 +377,8 @@ static void test_loop_checkpoint_restart_resumes(void** state) {
   assert_int_equal(harness_open(&g_h, &c, false, 3), 0);
   size_t meta_cap = 0;
   size_t payload_cap = 0;
-  fw_loop_checkpoint_capacity(g_h.loop, &meta_cap, &payload_cap);
+  fw_ckpt_writer_t* w = attach_checkpoints(&c, &meta_cap, &payload_cap);
   char err[FW_LOOP_ERR_MAX];
-  fw_ckpt_writer_t* w = fw_ckpt_writer_create(c.checkpoint_file, meta_cap, payload_cap, err, sizeof err);
-  assert_non_null(w);
-  fw_loop_attach_checkpoints(g_h.loop, w);
   // Run until the checkpoint of the third training run is handed over (it is written in slices
   // while the robot stands after the run), then stop as after a power cut.
   fw_loop_stats_t st;
@@ -779,6 +870,7 @@ int main(void) {
       cmocka_unit_test(test_loop_canopen_stream_independent_of_answer_lag),
       cmocka_unit_test(test_loop_tick_allocates_nothing),
       cmocka_unit_test(test_loop_checkpoint_restart_resumes),
+      cmocka_unit_test(test_loop_select_pairs_share_start_and_checkpoint),
       cmocka_unit_test(test_loop_old_obstacle_checkpoint_refused),
       cmocka_unit_test(test_loop_journal_resumes_reported_runs_exactly),
   };

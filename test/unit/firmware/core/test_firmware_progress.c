@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: MIT
-// The checkpoint's controller section: exact round trips, the byte layout of revision 3 (72
-// bytes), every field out of its documented range refused with the field named, revision 2 (56
-// bytes) read as the greedy policy without an actor, and revision 1 (96 or 104 bytes, with the
+// The checkpoint's controller section: exact round trips, the byte layout of revision 4 (88
+// bytes), every field out of its documented range refused with the field named, revision 3 (72
+// bytes) read without ranked pairs, revision 2 (56 bytes) read as the greedy policy without an actor, and revision 1 (96 or 104 bytes, with the
 // policy shift of older controllers) read with its shift reported.
 #include <learn/learn.h>
 #include <tasks/decl.h>
@@ -33,7 +33,7 @@ static fw_progress_t sample(void) {
   p.run_id = 130;
   p.policy = LEARN_POLICY_ACTOR;
   p.actor_bytes = 123456;
-  p.revision = 3;
+  p.revision = 4;
   return p;
 }
 
@@ -58,7 +58,8 @@ static void put_f64(uint8_t* b, size_t off, double v) {
 static bool same(const fw_progress_t* a, const fw_progress_t* b) {
   return a->task == b->task && a->state_dim == b->state_dim && a->run_id == b->run_id &&
          a->legacy_shift == b->legacy_shift && a->policy == b->policy && a->actor_bytes == b->actor_bytes &&
-         a->revision == b->revision && memcmp(&a->schedule, &b->schedule, sizeof a->schedule) == 0;
+         a->revision == b->revision && memcmp(&a->schedule, &b->schedule, sizeof a->schedule) == 0 &&
+         memcmp(&a->selection, &b->selection, sizeof a->selection) == 0;
 }
 
 // p encoded, with the u32 at off replaced by v, is refused with `what` in the reason; the output
@@ -81,13 +82,20 @@ static uint64_t get_u64(const uint8_t* b, size_t off) {
   return (uint64_t)get_u32(b, off) | (uint64_t)get_u32(b, off + 4) << 32;
 }
 
-// Revision 3 round-trips exactly; the layout is the documented one.
+static double get_f64(const uint8_t* b, size_t off) {
+  const uint64_t u = get_u64(b, off);
+  double d;
+  memcpy(&d, &u, sizeof d);
+  return d;
+}
+
+// Revision 4 round-trips exactly; the layout is the documented one.
 static void test_progress_round_trip_and_layout(void** state) {
   (void)state;
   const fw_progress_t p = sample();
   uint8_t b[FW_PROGRESS_BYTES];
   assert_int_equal(fw_progress_encode(&p, b), FW_PROGRESS_BYTES);
-  assert_memory_equal(b, "FWMETA03", 8);
+  assert_memory_equal(b, "FWMETA04", 8);
   assert_int_equal(get_u32(b, 8), (int32_t)tasks_obstacles_decl.id);
   assert_int_equal(get_u32(b, 12), 4);
   assert_int_equal(get_u32(b, 16), 2);
@@ -108,10 +116,25 @@ static void test_progress_round_trip_and_layout(void** state) {
   assert_int_equal(get_u32(b, 56), LEARN_POLICY_ACTOR);
   assert_int_equal(get_u32(b, 60), 0);
   assert_int_equal(get_u64(b, 64), 123456);
+  assert_true(get_f64(b, 72) == 0.0);
+  assert_int_equal(get_u32(b, 80), 0);
+  assert_int_equal(get_u32(b, 84), 0);
   fw_progress_t q;
   memset(&q, 0xA5, sizeof q);
   assert_int_equal(fw_progress_decode(b, FW_PROGRESS_BYTES, &q, NULL, 0), 0);
   assert_true(same(&p, &q));
+  // policy = select: the ranked pairs at 72 and 80.
+  fw_progress_t sel = p;
+  sel.policy = LEARN_POLICY_SELECT;
+  sel.selection.greedy_saved_steps = -1234.0;
+  sel.selection.pairs = 6;
+  assert_int_equal(fw_progress_encode(&sel, b), FW_PROGRESS_BYTES);
+  assert_int_equal(get_u32(b, 56), LEARN_POLICY_SELECT);
+  assert_true(get_f64(b, 72) == -1234.0);
+  assert_int_equal(get_u32(b, 80), 6);
+  memset(&q, 0xA5, sizeof q);
+  assert_int_equal(fw_progress_decode(b, FW_PROGRESS_BYTES, &q, NULL, 0), 0);
+  assert_true(same(&sel, &q));
   // A fresh start: no run yet, phase 1, nothing counted.
   fw_progress_t fresh;
   memset(&fresh, 0, sizeof fresh);
@@ -120,7 +143,7 @@ static void test_progress_round_trip_and_layout(void** state) {
   fresh.schedule.phase = 1;
   fresh.run_id = -1;
   fresh.policy = LEARN_POLICY_GREEDY;
-  fresh.revision = 3;
+  fresh.revision = 4;
   assert_int_equal(fw_progress_encode(&fresh, b), FW_PROGRESS_BYTES);
   assert_int_equal(get_u32(b, 52), 0);
   assert_int_equal(fw_progress_decode(b, FW_PROGRESS_BYTES, &q, NULL, 0), 0);
@@ -143,13 +166,27 @@ static void test_progress_out_of_range_refused(void** state) {
   expect_refused(&p, 36, 31, "successful phase-one runs 31 > phase-one runs 30");
   expect_refused(&p, 48, 200, "phase-one statistics");  // shortest × runs > sum
   expect_refused(&p, 52, 41, "run id 40 below the 42 training runs");
-  expect_refused(&p, 56, 2, "policy 2");
+  expect_refused(&p, 56, 3, "policy 3");
   expect_refused(&p, 60, 1, "reserved field 1");
   expect_refused(&p, 68, 1U << 9, "actor section of");  // 2^41 bytes
   fw_progress_t g = p;
   g.policy = LEARN_POLICY_GREEDY;
   expect_refused(&g, 64, 5, "actor section of 5 bytes with the greedy policy");
   expect_refused(&p, 64, 0, "actor section of 0 bytes with the actor policy");
+  expect_refused(&p, 80, 1, "ranked pairs inconsistent (1 pairs");  // ranked pairs without policy = select
+  expect_refused(&p, 80, 0x80000000U, "ranked pairs 2147483648");
+  expect_refused(&p, 84, 1, "reserved field 1");
+  fw_progress_t sel = p;
+  sel.policy = LEARN_POLICY_SELECT;
+  sel.selection.pairs = 2;
+  sel.selection.greedy_saved_steps = 2.5;  // not a whole number of steps
+  expect_refused(&sel, 8, 1, "ranked pairs inconsistent");
+  sel.selection.greedy_saved_steps = NAN;
+  expect_refused(&sel, 8, 1, "ranked pairs inconsistent");
+  sel.selection.greedy_saved_steps = 3.0 * (double)INT32_MAX;  // more than 2 pairs can save
+  expect_refused(&sel, 8, 1, "ranked pairs inconsistent");
+  sel.selection.greedy_saved_steps = -10.0;
+  expect_refused(&sel, 64, 0, "actor section of 0 bytes with the select policy");
   fw_progress_t q = p;
   q.schedule.phase = 1;
   expect_refused(&q, 16, 1, "phase 1 with 12 phase-two runs");
@@ -172,17 +209,38 @@ static void test_progress_out_of_range_refused(void** state) {
   fw_progress_t out;
   char why[FW_PROGRESS_WHY_MAX];
   assert_int_equal(fw_progress_decode(b, bn - 1U, &out, why, sizeof why), -1);
-  assert_non_null(strstr(why, "unknown format (71 bytes"));
-  assert_int_equal(fw_progress_decode(b, 96, &out, why, sizeof why), -1);  // revision 3's magic, revision 1's size
+  assert_non_null(strstr(why, "unknown format (87 bytes"));
+  assert_int_equal(fw_progress_decode(b, 96, &out, why, sizeof why), -1);  // revision 4's magic, revision 1's size
   assert_non_null(strstr(why, "unknown format (96 bytes"));
   assert_int_equal(fw_progress_decode(b, FW_PROGRESS_BYTES_2, &out, why, sizeof why), -1);  // and revision 2's size
-  b[7] = '4';
+  assert_int_equal(fw_progress_decode(b, FW_PROGRESS_BYTES_3, &out, why, sizeof why), -1);  // and revision 3's size
+  b[7] = '5';
   assert_int_equal(fw_progress_decode(b, bn, &out, why, sizeof why), -1);
-  assert_non_null(strstr(why, "FWMETA03"));
+  assert_non_null(strstr(why, "FWMETA04"));
 }
 
-// Revision 2 (56 bytes, bytes 0-55 as revision 3) is read as the greedy policy with no actor: its
-// payload is HEDGER's alone. Its magic with revision 3's size is refused.
+// Revision 3 (72 bytes: bytes 0-71 as revision 4, policy 0 or 1) is read without ranked pairs;
+// policy 2 (select) did not exist then, and its magic with revision 4's size is refused.
+static void test_progress_revision_3_read(void** state) {
+  (void)state;
+  const fw_progress_t p = sample();
+  uint8_t b[FW_PROGRESS_BYTES];
+  fw_progress_encode(&p, b);
+  memcpy(b, "FWMETA03", 8);
+  fw_progress_t q;
+  assert_int_equal(fw_progress_decode(b, FW_PROGRESS_BYTES_3, &q, NULL, 0), 0);
+  fw_progress_t want = p;
+  want.revision = 3;
+  assert_true(same(&want, &q));
+  char why[FW_PROGRESS_WHY_MAX];
+  assert_int_equal(fw_progress_decode(b, FW_PROGRESS_BYTES, &q, why, sizeof why), -1);
+  put_u32(b, 56, LEARN_POLICY_SELECT);
+  assert_int_equal(fw_progress_decode(b, FW_PROGRESS_BYTES_3, &q, why, sizeof why), -1);
+  assert_non_null(strstr(why, "policy 2, expected 0 (actor), 1 (greedy)"));
+}
+
+// Revision 2 (56 bytes, bytes 0-55 as revision 4) is read as the greedy policy with no actor: its
+// payload is HEDGER's alone. Its magic with revision 4's size is refused.
 static void test_progress_revision_2_read(void** state) {
   (void)state;
   const fw_progress_t p = sample();
@@ -198,7 +256,7 @@ static void test_progress_revision_2_read(void** state) {
   assert_true(same(&want, &q));
   char why[FW_PROGRESS_WHY_MAX];
   assert_int_equal(fw_progress_decode(b, FW_PROGRESS_BYTES, &q, why, sizeof why), -1);
-  assert_non_null(strstr(why, "unknown format (72 bytes"));
+  assert_non_null(strstr(why, "unknown format (88 bytes"));
   put_u32(b, 16, 7U);
   assert_int_equal(fw_progress_decode(b, FW_PROGRESS_BYTES_2, &q, why, sizeof why), -1);
   assert_non_null(strstr(why, "phase 7"));
@@ -253,6 +311,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_progress_round_trip_and_layout),
       cmocka_unit_test(test_progress_out_of_range_refused),
+      cmocka_unit_test(test_progress_revision_3_read),
       cmocka_unit_test(test_progress_revision_2_read),
       cmocka_unit_test(test_progress_revision_1_read),
   };
