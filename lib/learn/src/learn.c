@@ -78,6 +78,8 @@ struct learn {
   int8_t pair_role;            // this run in its pair: 0 none, 1 first, 2 second
   bool pair_first_greedy;      // the pair's first run was the greedy policy's
   bool pair_first_done;        // its first run ended (not aborted): a second run is due
+  bool pair_first_resumed;     // ... as a run resumed from a journal (learn_resume_run)
+  bool resuming;               // learn_resume_run is ending a recorded run
   int32_t pair_first_steps;    // its steps, a miss at the step limit
   rng_t pair_explore_rng;      // the exploration stream at the first run's start
 };
@@ -385,7 +387,10 @@ static bool pair_run(const learn_t* a) {
 
 // The planned run (a->plan: the run under way, or the next one between runs) is a pair's second.
 static bool pair_second(const learn_t* a) {
-  return pair_run(a) && a->sched.p.phase_two_runs % 2 == 1 && a->pair_first_done;
+  // A first run resumed from a journal pairs only with a resumed second: its start pose is not
+  // the caller's to repeat after a restart.
+  return pair_run(a) && a->sched.p.phase_two_runs % 2 == 1 && a->pair_first_done &&
+         (!a->pair_first_resumed || a->resuming);
 }
 
 static void begin_pair(learn_t* a) {
@@ -423,6 +428,7 @@ static void end_pair(learn_t* a, bool goal, bool aborted) {
   const int32_t steps = goal ? a->actions_taken : (int32_t)a->task.step_limit;
   if (a->pair_role == 1) {
     a->pair_first_done = true;
+    a->pair_first_resumed = a->resuming;
     a->pair_first_steps = steps;
     return;
   }
@@ -886,10 +892,12 @@ bool learn_resume_run(learn_t* a, const learn_plan_t* plan, int32_t steps, bool 
       (next.kind == LEARN_RUN_TRAINING && plan->training_index != next.training_index)) {
     return false;
   }
+  a->resuming = true;
   learn_begin_run(a);
   a->actions_taken = steps;
   learn_run_end_t e;
   end_run(a, goal, aborted, &e);
+  a->resuming = false;
   a->replay_pending = false;  // the caller has done the run's learning
   if (end != NULL) {
     *end = e;

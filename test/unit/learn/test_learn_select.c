@@ -154,6 +154,34 @@ static void test_pairs_alternate_repeat_and_rank(void** state) {
   free(g.mem);
 }
 
+// A pair's first run resumed from a journal after a restart (learn_resume_run): the caller cannot
+// repeat its start pose, so the next live run is no pair's second; two resumed runs still pair.
+static void test_resumed_first_run_opens_no_pair(void** state) {
+  (void)state;
+  agent_t g = make_agent(LEARN_POLICY_SELECT);
+  learn_t* a = g.a;
+  int8_t scratch[MAX_STEPS];
+  for (int r = 0; r < 2; ++r) {
+    (void)drive(a, 30, false, scratch);
+  }
+  learn_plan_t p = learn_plan(a);
+  assert_true(learn_resume_run(a, &p, 10, true, false, NULL));  // pair 0's first, the greedy policy's
+  p = learn_plan(a);
+  assert_false(learn_run_repeats_start(a));
+  const learn_run_end_t e = drive(a, 20, false, scratch);
+  assert_int_equal(e.policy, LEARN_POLICY_GREEDY);  // not a second: the policy in force (none ranked)
+  assert_int_equal(learn_selection_get(a).pairs, 0);
+  // Both runs of pair 1 resumed: ranked as they ran (the actor first, 30 steps; the greedy 50).
+  p = learn_plan(a);
+  assert_true(learn_resume_run(a, &p, 30, true, false, NULL));
+  p = learn_plan(a);
+  assert_true(learn_run_repeats_start(a) == false);  // (asked live: a resumed first)
+  assert_true(learn_resume_run(a, &p, 50, true, false, NULL));
+  assert_int_equal(learn_selection_get(a).pairs, 1);
+  assert_true(learn_selection_get(a).greedy_saved_steps == -20.0);
+  free(g.mem);
+}
+
 static void test_resume_selection(void** state) {
   (void)state;
   agent_t g = make_agent(LEARN_POLICY_SELECT);
@@ -191,6 +219,7 @@ static void test_storage_as_the_actor(void** state) {
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_pairs_alternate_repeat_and_rank),
+      cmocka_unit_test(test_resumed_first_run_opens_no_pair),
       cmocka_unit_test(test_resume_selection),
       cmocka_unit_test(test_storage_as_the_actor),
   };
