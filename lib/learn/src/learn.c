@@ -257,7 +257,6 @@ static size_t align_storage(size_t n) {
 
 static size_t agent_bytes(void) { return align_storage(sizeof(learn_t)); }
 
-// The actor's storage (0 with the greedy policy; SIZE_MAX when its configuration is invalid).
 static bool has_actor(const learn_config_t* cfg) {
   return cfg->policy == LEARN_POLICY_ACTOR || cfg->policy == LEARN_POLICY_SELECT;
 }
@@ -266,6 +265,7 @@ static bool policy_valid(int32_t policy) {
   return policy == LEARN_POLICY_ACTOR || policy == LEARN_POLICY_GREEDY || policy == LEARN_POLICY_SELECT;
 }
 
+// The actor's storage (0 with the greedy policy; SIZE_MAX when its configuration is invalid).
 static size_t actor_bytes(const learn_task_t* task, const learn_config_t* cfg) {
   if (!has_actor(cfg)) {
     return 0;
@@ -418,14 +418,13 @@ static void begin_pair(learn_t* a) {
   }
 }
 
-// The end of a pair's run: the first's steps are kept; the second's rank the pair. A miss counts
-// at the step limit (as the schedule counts it). An aborted second run is repeated, so the pair
-// stays open.
-static void end_pair(learn_t* a, bool goal, bool aborted) {
+// The end of a pair's run with its steps as the schedule counts them (a miss at the step limit):
+// the first's are kept; the second's rank the pair. An aborted second run is repeated, so the
+// pair stays open.
+static void end_pair(learn_t* a, int32_t steps, bool aborted) {
   if (a->pair_role == 0 || aborted) {
     return;
   }
-  const int32_t steps = goal ? a->actions_taken : (int32_t)a->task.step_limit;
   if (a->pair_role == 1) {
     a->pair_first_done = true;
     a->pair_first_resumed = a->resuming;
@@ -521,9 +520,9 @@ static void end_run(learn_t* a, bool goal, bool aborted, learn_run_end_t* end) {
   end->eval_block = evaluating(a) ? a->sched.p.eval_blocks : -1;  // blocks finished so far = this block's number
   end->learning = a->plan.kind == LEARN_RUN_TRAINING && a->cfg.mode == LEARN_MODE_LEARN;
   end->policy = (int8_t)(a->run_greedy ? LEARN_POLICY_GREEDY : LEARN_POLICY_ACTOR);
-  end_pair(a, goal, aborted);
   // A run that missed the goal counts at the step limit.
   const int32_t steps = goal ? a->actions_taken : (int32_t)a->task.step_limit;
+  end_pair(a, steps, aborted);
   end->block_done = learn_schedule_finish_run(&a->sched, steps, goal, aborted, &end->block);
   if (end->learning) {
     a->replay_pending = true;

@@ -2,8 +2,8 @@
 /// learn/learn.h — The two-phase learning framework of Smart & Kaelbling (ICRA 2002) as a pure
 /// library: the schedule (phase one's driver, the switch, phase two, evaluation blocks), the
 /// learner's update of every step, the learned policy (the value function's greedy action by
-/// default, the actor of lib/actor, or either as ranked pairs of runs favour), the between-run work (backward replay, the actor's learning)
-/// in bounded slices, exploration, and the advisor.
+/// default, the actor of lib/actor, or either as ranked pairs of runs favour), the between-run
+/// work (backward replay, the actor's learning) in bounded slices, exploration, and the advisor.
 ///
 /// The policy (cfg.policy). LEARN_POLICY_ACTOR: the actor (actor/actor.h) acts wherever the
 /// learned policy acts; it learns between runs from the transitions of every training run (phase

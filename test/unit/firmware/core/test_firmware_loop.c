@@ -749,10 +749,7 @@ static void journal_kill_after(int32_t kill_run, int32_t training_runs) {
   size_t payload_cap = 0;
 
   assert_int_equal(harness_open(&g_h, &c, false, 5), 0);
-  fw_loop_checkpoint_capacity(g_h.loop, &meta_cap, &payload_cap);
-  fw_ckpt_writer_t* w = fw_ckpt_writer_create(c.checkpoint_file, meta_cap, payload_cap, err, sizeof err);
-  assert_non_null(w);
-  fw_loop_attach_checkpoints(g_h.loop, w);
+  fw_ckpt_writer_t* w = attach_checkpoints(&c, &meta_cap, &payload_cap);
   // Runs 0, 1 train, 2 evaluates, 3, 4 train. Until the report of kill_run; the writer is flushed
   // after every tick so that what is on disk does not depend on its speed.
   fw_loop_stats_t st;
@@ -812,9 +809,7 @@ static void journal_kill_after(int32_t kill_run, int32_t training_runs) {
   fw_loop_get_stats(g_h.loop, &st);
   assert_int_equal(st.run_id, kill_run);
   assert_int_equal(st.training_runs, training_runs);
-  w = fw_ckpt_writer_create(c.checkpoint_file, meta_cap, payload_cap, err, sizeof err);
-  assert_non_null(w);
-  fw_loop_attach_checkpoints(g_h.loop, w);
+  w = attach_checkpoints(&c, &meta_cap, &payload_cap);
   // The torn tail is cut, the resumed records kept.
   size_t kept = 0;
   free(slurp(journal, &kept));
@@ -834,9 +829,7 @@ static void journal_kill_after(int32_t kill_run, int32_t training_runs) {
   assert_int_equal(kept, 0);
   assert_int_equal(harness_open(&g_h, &c, false, 5), 0);
   assert_int_equal(fw_loop_load_checkpoint(g_h.loop, err, sizeof err), 1);
-  w = fw_ckpt_writer_create(c.checkpoint_file, meta_cap, payload_cap, err, sizeof err);
-  assert_non_null(w);
-  fw_loop_attach_checkpoints(g_h.loop, w);
+  w = attach_checkpoints(&c, &meta_cap, &payload_cap);
   harness_run(&g_h, 100000);
   fw_loop_get_stats(g_h.loop, &st);
   assert_true(st.done);
